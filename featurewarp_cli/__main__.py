@@ -1,0 +1,5 @@
+"""``python -m featurewarp_cli``: the same as the ``featurewarp`` command."""
+
+from .cli import main
+
+main()

@@ -1,0 +1,55 @@
+"""The JSON report of one run: what was done, how long it took, and its quality."""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from . import __version__
+
+
+def image_summary(path: str, image: np.ndarray) -> dict:
+    """Path, size, channels and depth of an image."""
+    return {
+        "path": os.path.abspath(path) if path != "-" else "-",
+        "width": int(image.shape[1]),
+        "height": int(image.shape[0]),
+        "channels": 1 if image.ndim == 2 else int(image.shape[2]),
+        "bits": 8 * image.dtype.itemsize,
+    }
+
+
+def build_report(input_path, output_path, image, result, warp, mesh, timings) -> dict:
+    """Assemble the report dictionary (JSON-ready).
+
+    Parameters
+    ----------
+    input_path, output_path : str
+    image, result : ndarray
+        Input and output images.
+    warp : warps.Warp
+    mesh : featurewarp_cli.api.Mesh
+    timings : dict
+        Seconds per stage.
+
+    Returns
+    -------
+    dict
+    """
+    info = mesh.info
+    stages = ("load", "grid", "assemble", "factor", "rhs", "solve", "render", "write")
+    return {
+        "version": __version__,
+        "preset": warp.name,
+        "params": warp.values,
+        "mode": info["mode"],
+        "input": image_summary(input_path, image),
+        "output": image_summary(output_path, result),
+        "canvas": {"width": mesh.canvas[0], "height": mesh.canvas[1], "offset": list(warp.offset)},
+        "grid": info["grid"],
+        "components": {"count": len(info["components"]), "items": info["components"]},
+        "solver": info["solver"],
+        "seconds": {k: round(float(timings.get(k, 0.0)), 6) for k in stages},
+        "flipped_triangles": info["flipped_triangles"],
+    }

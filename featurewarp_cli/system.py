@@ -1,0 +1,83 @@
+"""The least-squares system of Eqs. (3)-(5): normal matrix and right-hand side.
+
+Each quad contributes four edge equations ``w (v_b - v_a) = w t`` (edges taken
+cyclically: top, right, bottom, left). The normal matrix A^T A is then a
+weighted 5-point graph Laplacian whose edge weights are the sums of w^2 over
+the (one or two) quads sharing the edge; it depends on the grid and the
+weights only, never on the warp.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+from .grid import Grid
+
+
+def normal_matrix(grid: Grid, weights: np.ndarray) -> sp.csc_matrix:
+    """A^T A for quad weights ``weights`` ((K,) ndarray): an (N, N) sparse matrix."""
+    qy, qx = grid.quad_shape
+    w2 = (weights * weights).reshape(qy, qx)
+    horizontal = np.zeros((grid.ny, qx))          # edge (j, i) -- (j, i+1)
+    horizontal[:-1] += w2
+    horizontal[1:] += w2
+    vertical = np.zeros((qy, grid.nx))            # edge (j, i) -- (j+1, i)
+    vertical[:, :-1] += w2
+    vertical[:, 1:] += w2
+
+    n = grid.n_nodes
+    right = np.zeros((grid.ny, grid.nx))          # weight to the right neighbour
+    right[:, :-1] = horizontal
+    down = vertical.ravel()                       # weight to the node below
+    diagonal = np.zeros((grid.ny, grid.nx))
+    diagonal[:, :-1] += horizontal
+    diagonal[:, 1:] += horizontal
+    diagonal[:-1, :] += vertical
+    diagonal[1:, :] += vertical
+    right = right.ravel()[:-1]
+    matrix = sp.diags(
+        [diagonal.ravel(), -right, -right, -down, -down],
+        [0, 1, -1, grid.nx, -grid.nx], shape=(n, n), format="csc")
+    return matrix
+
+
+def edge_vectors(grid: Grid, quad_maps: np.ndarray) -> np.ndarray:
+    """Target vectors t of the four edges of each quad under per-quad linear maps.
+
+    Parameters
+    ----------
+    grid : Grid
+    quad_maps : (K, 2, 2) ndarray
+        Linear map M_Q applied to each source edge (Eq. 3).
+
+    Returns
+    -------
+    (K, 4, 2) ndarray
+        Edges top, right, bottom, left.
+    """
+    sx, sy = grid.spacing
+    col_x, col_y = quad_maps[:, :, 0], quad_maps[:, :, 1]
+    return np.stack([sx * col_x, sy * col_y, -sx * col_x, -sy * col_y], axis=1)
+
+
+def warp_edge_vectors(grid: Grid, warped: np.ndarray) -> np.ndarray:
+    """Edge vectors of each quad under the warp itself (Eq. 4): (K, 4, 2)."""
+    corners = warped[grid.quads()]
+    return np.roll(corners, -1, axis=1) - corners
+
+
+def right_hand_side(grid: Grid, weights: np.ndarray, edges: np.ndarray) -> np.ndarray:
+    """A^T b for edge targets ``edges`` ((K, 4, 2) ndarray); returns (N, 2)."""
+    qy, qx = grid.quad_shape
+    we = (weights * weights)[:, None, None] * edges
+    we = we.reshape(qy, qx, 4, 2)
+    rhs = np.zeros((grid.ny, grid.nx, 2))
+    # Edge k runs from corner k to corner k+1 (corners: tl, tr, br, bl).
+    corner_slices = [(slice(0, -1), slice(0, -1)), (slice(0, -1), slice(1, None)),
+                     (slice(1, None), slice(1, None)), (slice(1, None), slice(0, -1))]
+    for k in range(4):
+        start, end = corner_slices[k], corner_slices[(k + 1) % 4]
+        rhs[end] += we[:, :, k]
+        rhs[start] -= we[:, :, k]
+    return rhs.reshape(-1, 2)

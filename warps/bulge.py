@@ -1,0 +1,38 @@
+"""Bulge: magnify (or pinch) the centre, joining the outside smoothly."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import Param, Warp, centre
+
+
+class Bulge(Warp):
+    """Radial map d -> R * g(d / R) inside radius R, identity outside.
+
+    g(t) = t * (1 + S (1 - t)**2): g(0) = 0, g(1) = 1, g'(1) = 1 (smooth at R) and
+    g'(0) = 1 + S (the magnification at the centre). g' > 0 on [0, 1], so the map
+    is injective, exactly when -1 < S < 3; the declared range stays inside that.
+    """
+
+    name = "bulge"
+    summary = "Magnify (S > 0) or pinch (S < 0) the centre, smooth at the radius."
+    params = (
+        Param("strength", float, 0.5,
+              "Centre magnification minus 1 (0.5: 1.5x). Injective only for -1 < S < 3, hence the range.",
+              min=-0.95, max=2.95, metavar="S"),
+        Param("radius", float, 0.5, "Radius of the effect as a fraction of min(width, height).",
+              min=0, min_open=True, max=10),
+    )
+
+    def _setup(self, strength, radius):
+        self.centre = centre(self.width, self.height)
+        self.r = radius * min(self.width, self.height)
+        self.s = strength
+
+    def forward(self, points):
+        d = points - self.centre
+        t = np.hypot(d[:, 0], d[:, 1]) / self.r
+        inside = np.clip(1.0 - t, 0.0, None)
+        gain = 1.0 + self.s * inside * inside      # g(t) / t, = 1 outside R
+        return d * gain[:, None] + self.centre

@@ -1,0 +1,37 @@
+"""Swirl: rotation that is strongest at the centre and fades out at a radius."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import Param, Warp, centre
+
+
+class Swirl(Warp):
+    """Rotate each point about the centre by angle * (1 - d/R)^2 for d < R.
+
+    R = radius * min(w, h). The rotation and its derivative fall to zero at R,
+    so the swirl joins the unmoved outside smoothly. Each circle about the centre
+    maps onto itself, so the map is injective for every angle. Canvas = input size.
+    """
+
+    name = "swirl"
+    summary = "Twist the centre by an angle, fading smoothly to zero at a radius."
+    params = (
+        Param("angle", float, 90.0, "Rotation at the centre in degrees, any real number "
+              "(positive: clockwise on screen).", metavar="DEG"),
+        Param("radius", float, 0.5, "Radius of the swirl as a fraction of min(width, height).",
+              min=0, min_open=True, max=10),
+    )
+
+    def _setup(self, angle, radius):
+        self.centre = centre(self.width, self.height)
+        self.r = radius * min(self.width, self.height)
+        self.theta = np.deg2rad(angle)
+
+    def forward(self, points):
+        d = points - self.centre
+        t = np.clip(1.0 - np.hypot(d[:, 0], d[:, 1]) / self.r, 0.0, None)
+        a = self.theta * t * t
+        c, s = np.cos(a), np.sin(a)
+        return np.stack([c * d[:, 0] - s * d[:, 1], s * d[:, 0] + c * d[:, 1]], axis=1) + self.centre
