@@ -75,6 +75,10 @@ def shared_options() -> list[click.Option]:
         click.Option(["--decay"], type=Number(float, 0, open_min=True), default=2.0, show_default=True,
                      metavar="CELLS", help="Width of the band around features where the weight "
                                            "falls smoothly from W to 1 (the paper's rho), in cells."),
+        click.Option(["--formulation"], type=click.Choice(("exact", "paper")), default="exact",
+                     show_default=True,
+                     help="exact: each feature moves as one similarity, held exactly; paper: the "
+                          "paper's soft per-quad targets (w_F-weighted), for comparison."),
         click.Option(["--background"], metavar="COLOR",
                      help="Fill where no source pixel lands: #rrggbb, a colour name, or transparent. "
                           "Default: transparent for PNG, WebP and TIFF output, white otherwise."),
@@ -139,7 +143,8 @@ def preset_command(preset) -> click.Command:
 
     def callback(input, output, **kwargs):
         shared = {k: kwargs.pop(k) for k in
-                  ("mask", "mode", "cell", "feature_weight", "decay", "background", "interp", "report")}
+                  ("mask", "mode", "cell", "feature_weight", "decay", "formulation", "background",
+                   "interp", "report")}
         run_warp(preset, input, output, preset_params=kwargs, **shared)
 
     return click.Command(preset.name, params=options, callback=callback, help=doc,
@@ -164,8 +169,8 @@ def check_output_path(path: str, param: str, image: bool = True) -> None:
         fail_usage(f"{path} is a directory", param)
 
 
-def run_warp(preset, input, output, *, mask, mode, cell, feature_weight, decay, background,
-             interp, report, preset_params):
+def run_warp(preset, input, output, *, mask, mode, cell, feature_weight, decay, formulation,
+             background, interp, report, preset_params):
     """Load, warp, render and write one image (the body of ``featurewarp warp PRESET``)."""
     from . import imageio
     from .api import FeatureWarper
@@ -211,7 +216,8 @@ def run_warp(preset, input, output, *, mask, mode, cell, feature_weight, decay, 
         warp = preset(width, height, **preset_params)
     except ValueError as err:
         fail_usage(str(err))
-    warper = FeatureWarper(width, height, feature_mask, cell=cell, feature_weight=feature_weight, decay=decay)
+    warper = FeatureWarper(width, height, feature_mask, cell=cell, feature_weight=feature_weight,
+                           decay=decay, formulation=formulation)
     mesh = warper.solve(warp, mode)
     result = warper.render(image, mesh, interp, background_rgb)
     timings.update(mesh.info["timings"])

@@ -131,7 +131,7 @@ class Warp:
     summary: ClassVar[str] = ""
     params: ClassVar[tuple[Param, ...]] = ()
 
-    def __init__(self, width: int, height: int, **values):
+    def __init__(self, width: int, height: int, /, **values):
         if width < 1 or height < 1:
             raise ValueError(f"image size {width}x{height} is empty")
         known = {p.name for p in self.params}

@@ -1,0 +1,50 @@
+# featurewarp: the README's commands.
+#   make install   system packages (SuiteSparse/CHOLMOD, OpenBLAS) + a venv with the package and test extras
+#   make test      the test suite
+#   make demo      every sample warped with every preset into out/ (make -j works)
+#   make bench     benchmarks (not part of make test)
+
+PYTHON ?= python3
+VENV   ?= .venv
+BIN    := $(VENV)/bin
+SUDO   := $(shell [ "$$(id -u)" -eq 0 ] || echo sudo)
+APT_PACKAGES := python3-venv libsuitesparse-dev libopenblas0-pthread libopenblas-dev
+
+SAMPLES := astronaut coins shapes
+PRESETS := stretch arc swirl bulge
+stretch_ARGS := --sx 1.6
+arc_ARGS     := --angle 120
+swirl_ARGS   := --angle 120
+bulge_ARGS   := --strength 0.8
+DEMO := $(foreach s,$(SAMPLES),$(foreach p,$(PRESETS),out/$(s)-$(p).png))
+
+.PHONY: install test demo bench clean
+
+install:
+	@if command -v apt-get >/dev/null 2>&1; then \
+	  $(SUDO) apt-get update -qq && \
+	  $(SUDO) env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends $(APT_PACKAGES); \
+	else echo "make install: no apt-get here; install SuiteSparse (CHOLMOD) headers and OpenBLAS first"; fi
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install -q --upgrade pip
+	$(BIN)/python -m pip install -q -e '.[cholmod,test]'
+	$(BIN)/python -c "import sksparse.cholmod; print('featurewarp installed; CHOLMOD in use')"
+
+test:
+	$(BIN)/python -m pytest
+
+demo: $(DEMO)
+
+out:
+	mkdir -p out
+
+# out/SAMPLE-PRESET.png <- samples/SAMPLE.png with samples/SAMPLE_mask.png
+out/%.png: | out
+	$(BIN)/featurewarp warp $(word 2,$(subst -, ,$*)) samples/$(word 1,$(subst -, ,$*)).png $@ \
+	  --mask samples/$(word 1,$(subst -, ,$*))_mask.png $($(word 2,$(subst -, ,$*))_ARGS)
+
+bench:
+	$(BIN)/python benchmarks/run.py
+
+clean:
+	rm -rf out .pytest_cache
