@@ -29,30 +29,19 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import features as feat
+from . import fidelity, injectivity, system, targets
 from . import render as rnd
-from . import system, targets
 from .grid import Grid, signed_areas
 from .solver import ReducedSystem
 
 MODES = ("similarity", "rigid", "plain")
 FORMULATIONS = ("exact", "paper")
 
-#: Target node count of the automatic grid (see :func:`auto_cell`).
-AUTO_NODES = 250_000
-
-
-def auto_cell(width: int, height: int) -> int:
-    """Automatic cell size: 4 px, or larger so that the grid keeps about 250 000 nodes.
-
-    Parameters
-    ----------
-    width, height : int
-
-    Returns
-    -------
-    int
-    """
-    return max(4, math.ceil(math.sqrt(width * height / AUTO_NODES)))
+#: Bisection steps on how far released features go from the warp's shape to their own.
+BLEND_BISECTIONS = 8
+UNTANGLED_BISECTIONS = 4
+#: Fraction of its area under the warp that the fold-over guard asks each triangle to keep.
+UNTANGLE_FLOOR = 0.05
 
 
 def load_warp(name: str):
@@ -89,6 +78,19 @@ class Mesh:
         return int(np.count_nonzero(signed_areas(self.target, self.triangles) <= 0))
 
 
+@dataclass
+class _GridState:
+    """What depends on the grid and the mask but not on the warp (one per cell size)."""
+
+    grid: Grid
+    nodes: np.ndarray
+    triangles: np.ndarray
+    fixed: np.ndarray
+    features: feat.Features
+    tied: np.ndarray
+    system: ReducedSystem | None = None
+
+
 class FeatureWarper:
     """Feature-aware warping of one image size and one mask, factoring once.
 
@@ -98,8 +100,10 @@ class FeatureWarper:
         Source image size in pixels.
     mask : (height, width) bool ndarray or None
         True where a pixel belongs to a feature. None: no features.
-    cell : int, optional
-        Grid cell size in pixels; default :func:`auto_cell`.
+    cell : float, optional
+        Grid cell size in pixels. Default: automatic (:func:`fidelity.auto_cell`):
+        4 px or larger for big images, finer where the warp curves so much that
+        the grid would stray more than 0.5 px from it.
     feature_weight : float
         w_F: each side of the feature equations is multiplied by it (default 10).
     decay : float
@@ -110,92 +114,98 @@ class FeatureWarper:
         component and whose scale follows :func:`targets.intuitive_scales`.
         A component that touches a fixed border node keeps soft constraints.
         paper: the paper's soft per-quad targets (lambda R_Q, weight w_F).
+    injective : bool
+        Guard against fold-overs (default True); see :meth:`solve`.
 
     Attributes
     ----------
     factorizations : int
-        How many times the system matrix was factored (1 after any number of solves).
+        How many times a system matrix was factored. Solves that share a grid
+        reuse its factorization; only the fold-over guard factors again.
     timings : dict
-        Seconds spent in each stage by the last solve (grid, assemble, factor, rhs, solve).
+        Seconds spent in each stage by the last solve.
     """
 
     def __init__(self, width: int, height: int, mask: np.ndarray | None = None, *,
-                 cell: int | None = None, feature_weight: float = 10.0, decay: float = 2.0,
-                 formulation: str = "exact"):
+                 cell: float | None = None, feature_weight: float = 10.0, decay: float = 2.0,
+                 formulation: str = "exact", injective: bool = True):
         if mask is not None and mask.shape != (height, width):
             raise ValueError(f"mask is {mask.shape[1]}x{mask.shape[0]}, image is {width}x{height}")
         if not (feature_weight > 0 and math.isfinite(feature_weight)):
             raise ValueError(f"feature_weight must be a positive number, not {feature_weight}")
-        if formulation not in FORMULATIONS:
-            raise ValueError(f"formulation must be one of {', '.join(FORMULATIONS)}, not {formulation!r}")
         if not (decay > 0 and math.isfinite(decay)):
             raise ValueError(f"decay must be a positive number, not {decay}")
+        if formulation not in FORMULATIONS:
+            raise ValueError(f"formulation must be one of {', '.join(FORMULATIONS)}, not {formulation!r}")
+        if cell is not None and not (cell >= 1 and math.isfinite(cell)):
+            raise ValueError(f"cell must be at least 1 px, not {cell}")
         self.width, self.height = int(width), int(height)
         self.mask = np.zeros((height, width), bool) if mask is None else np.asarray(mask, bool)
         self.feature_weight = float(feature_weight)
         self.decay = float(decay)
         self.formulation = formulation
-        self.cell = int(cell) if cell else auto_cell(width, height)
-        if self.cell < 2:
-            raise ValueError(f"cell must be at least 2 px, not {self.cell}")
+        self.injective = injective
+        self.cell = cell
         self.factorizations = 0
         self.timings: dict[str, float] = {}
+        self._states: dict[float, _GridState] = {}
+
+    def _state(self, cell: float) -> _GridState:
+        """Grid, features and ties for ``cell`` (built once per cell size)."""
+        if cell not in self._states:
+            grid = Grid.for_image(self.width, self.height, cell)
+            features = feat.analyse(self.mask, grid, self.feature_weight, self.decay)
+            fixed = grid.boundary()
+            tied = (system.tie_features(grid, features, fixed) if self.formulation == "exact"
+                    else np.full(grid.n_nodes, -1))
+            self._states[cell] = _GridState(grid, grid.nodes(), grid.triangles(), fixed, features, tied)
+        return self._states[cell]
+
+    def _factor(self, state: _GridState, weights: np.ndarray, tied: np.ndarray) -> ReducedSystem:
+        """Assemble and factor the normal equations for these weights and ties."""
         t0 = time.perf_counter()
-        self.grid = Grid.for_image(self.width, self.height, self.cell)
-        self.nodes = self.grid.nodes()
-        self.triangles = self.grid.triangles()
-        self.fixed = self.grid.boundary()
-        self.features = feat.analyse(self.mask, self.grid, self.feature_weight, self.decay)
-        self.rigid_component, self.unknown = self._parametrize()
-        self._grid_seconds = time.perf_counter() - t0
-        self._system: ReducedSystem | None = None
+        matrix = system.normal_matrix(state.grid, weights)
+        t1 = time.perf_counter()
+        reduced = ReducedSystem(matrix, system.number_unknowns(state.fixed, tied))
+        self.factorizations += 1
+        self.timings["assemble"] = self.timings.get("assemble", 0.0) + t1 - t0
+        self.timings["factor"] = self.timings.get("factor", 0.0) + time.perf_counter() - t1
+        return reduced
 
-    @property
-    def solver(self) -> str:
-        """Name of the factorization in use ('cholmod' or 'scipy-splu'), once factored."""
-        return self._system.method if self._system else "none"
-
-    def _parametrize(self) -> tuple[np.ndarray, np.ndarray]:
-        """Which component each node is tied to (-1: none) and the unknown of each node.
-
-        Border nodes are fixed (unknown -1). With the exact formulation the
-        nodes of a component that touches no fixed node share one unknown
-        (the component's translation); all other nodes get their own.
-        """
-        n = self.grid.n_nodes
-        tied = np.full(n, -1)
-        if self.formulation == "exact" and self.features.n_components:
-            quads = self.grid.quads()
-            own = self.features.is_feature
-            tied[quads[own].ravel()] = np.repeat(self.features.component[own], 4)
-            touching = np.unique(tied[self.fixed & (tied >= 0)])
-            tied[np.isin(tied, touching)] = -1
-        free = ~self.fixed & (tied < 0)
-        unknown = np.full(n, -1)
-        unknown[free] = np.arange(np.count_nonzero(free))
-        used = np.unique(tied[tied >= 0])
-        renumber = np.zeros(self.features.n_components + 1, dtype=np.int64)
-        renumber[used] = np.count_nonzero(free) + np.arange(used.size)
-        unknown[tied >= 0] = renumber[tied[tied >= 0]]
-        return tied, unknown
-
-    def _factor(self) -> ReducedSystem:
-        if self._system is None:
-            t0 = time.perf_counter()
-            matrix = system.normal_matrix(self.grid, self.features.weight)
-            t1 = time.perf_counter()
-            self._system = ReducedSystem(matrix, self.unknown)
-            self.factorizations += 1
-            self.timings.update(assemble=t1 - t0, factor=time.perf_counter() - t1)
-        return self._system
+    def _linear_solve(self, state, reduced, weights, edges, tied, component_maps, warped,
+                      force=None) -> np.ndarray:
+        """Least-squares node positions for edge targets, fixed border and tied features
+        (plus an optional external ``force`` per node, (N, 2))."""
+        t0 = time.perf_counter()
+        rhs = system.right_hand_side(state.grid, weights, edges)
+        if force is not None:
+            rhs = rhs + force
+        offset = np.zeros_like(warped)
+        offset[state.fixed] = warped[state.fixed]
+        on = tied >= 0
+        offset[on] = np.einsum("nij,nj->ni", component_maps[tied[on]], state.nodes[on])
+        t1 = time.perf_counter()
+        result = reduced.solve(rhs, offset)
+        self.timings["rhs"] = self.timings.get("rhs", 0.0) + t1 - t0
+        self.timings["solve"] = self.timings.get("solve", 0.0) + time.perf_counter() - t1
+        return result
 
     def solve(self, warp, mode: str = "similarity") -> Mesh:
         """Feature-aware mesh for ``warp`` (a :class:`warps.Warp` instance).
 
+        The least-squares solution is returned when it has no fold-over. When
+        it has, the guard releases the constraints around the folds (the
+        components there lose their exact tie, and the quads there are pulled
+        towards the warp with doubling weight) and solves again; it keeps the
+        furthest point on the way from the warp itself (injective on a grid that
+        follows it) to each solution at which no triangle degenerates, so the
+        result never folds.
+
         Parameters
         ----------
         warp : callable
-            Maps (N, 2) source positions to (N, 2) canvas positions; has ``canvas``.
+            Maps (N, 2) source positions to (N, 2) canvas positions; has
+            ``width``, ``height`` and ``canvas``.
         mode : {'similarity', 'rigid', 'plain'}
             similarity: features rotate and scale uniformly; rigid: they keep
             their size; plain: the warp itself, mask ignored.
@@ -208,48 +218,123 @@ class FeatureWarper:
             raise ValueError(f"mode must be one of {', '.join(MODES)}, not {mode!r}")
         if (warp.width, warp.height) != (self.width, self.height):
             raise ValueError(f"warp is for {warp.width}x{warp.height}, warper for {self.width}x{self.height}")
-        self.timings = {"grid": self._grid_seconds}
-        warped = warp(self.nodes)
+        self.timings = {}
+        t0 = time.perf_counter()
+        if self.cell is None:
+            cell, error = fidelity.auto_cell(self.width, self.height, warp)
+        else:
+            cell = float(self.cell)
+            error = fidelity.pl_error(Grid.for_image(self.width, self.height, cell), warp)
+        state = self._state(cell)
+        warped = warp(state.nodes)
+        self.timings["grid"] = time.perf_counter() - t0
         info = {
             "mode": mode,
-            "grid": {"cell": self.cell, "spacing": list(self.grid.spacing),
-                     "nodes": self.grid.n_nodes, "quads": int(self.features.weight.size)},
+            "formulation": self.formulation,
+            "grid": {"cell": cell, "spacing": list(state.grid.spacing), "nodes": state.grid.n_nodes,
+                     "quads": int(state.features.weight.size), "pl_error_px": error},
             "components": [],
             "solver": "none",
+            "release_rounds": 0,
         }
-        if mode == "plain" or self.features.n_components == 0:
+        if mode == "plain" or state.features.n_components == 0:
             target = warped
+            info["flipped_before_guard"] = int(np.count_nonzero(injectivity.flipped(target, state.triangles)))
         else:
-            reduced = self._factor()
-            self.timings.setdefault("assemble", 0.0)
-            self.timings.setdefault("factor", 0.0)
-            t0 = time.perf_counter()
-            jac = targets.quad_jacobians(self.grid, warped)
-            quad_maps, component_maps = targets.quad_targets(jac, self.features, mode, self.formulation)
-            edges = np.where(self.features.is_constrained[:, None, None],
-                             system.edge_vectors(self.grid, quad_maps),
-                             system.warp_edge_vectors(self.grid, warped))
-            rhs = system.right_hand_side(self.grid, self.features.weight, edges)
-            offset = np.zeros_like(warped)
-            offset[self.fixed] = warped[self.fixed]
-            tied = self.rigid_component >= 0
-            offset[tied] = np.einsum("nij,nj->ni", component_maps[self.rigid_component[tied]], self.nodes[tied])
-            t1 = time.perf_counter()
-            target = reduced.solve(rhs, offset)
-            self.timings.update(rhs=t1 - t0, solve=time.perf_counter() - t1)
-            info["components"] = self._describe_components(component_maps)
-            info["solver"] = reduced.method
-        mesh = Mesh(self.nodes, target, self.triangles, tuple(warp.canvas), info)
+            target, component_maps = self._feature_aware(state, warped, mode, info)
+            info["components"] = self._describe_components(state, component_maps)
+        mesh = Mesh(state.nodes, target, state.triangles, tuple(warp.canvas), info)
         info["flipped_triangles"] = mesh.flips()
         info["timings"] = dict(self.timings)
         return mesh
 
-    def _describe_components(self, component_maps: np.ndarray) -> list[dict]:
+    def _feature_aware(self, state: _GridState, warped: np.ndarray, mode: str, info: dict):
+        """Solve with the fold-over guard; returns node positions and component maps."""
+        features, tris = state.features, state.triangles
+        jac = targets.quad_jacobians(state.grid, warped)
+        quad_maps, component_maps = targets.quad_targets(jac, features, mode, self.formulation)
+        edges = np.where(features.is_constrained[:, None, None],
+                         system.edge_vectors(state.grid, quad_maps),
+                         system.warp_edge_vectors(state.grid, warped))
+        if state.system is None:
+            state.system = self._factor(state, features.weight, state.tied)
+        info["solver"] = state.system.method
+        x = self._linear_solve(state, state.system, features.weight, edges, state.tied, component_maps, warped)
+        info["flipped_before_guard"] = int(np.count_nonzero(injectivity.flipped(x, tris)))
+        if not self.injective or info["flipped_before_guard"] == 0:
+            return x, component_maps
+        warp_areas = signed_areas(warped, tris)
+        if warp_areas.min() <= 0:
+            return x, component_maps          # the grid cannot follow the warp: nothing injective to keep
+        floor = UNTANGLE_FLOOR * warp_areas
+        stiffness = system.node_stiffness(state.grid, features.weight)
+
+        def untangled(reduced, edges, tied, start):
+            def solve(force):
+                return self._linear_solve(state, reduced, features.weight, edges, tied, component_maps,
+                                          warped, force=force)
+
+            def energy(points):
+                return 0.5 * system.energy(state.grid, features.weight, edges, points)
+
+            x, iterations = injectivity.untangle(solve, energy, start, tris, floor, stiffness)
+            info["untangle_iterations"] = info.get("untangle_iterations", 0) + iterations
+            return x, not injectivity.flipped(x, tris).any()
+
+        x, ok = untangled(state.system, edges, state.tied, x)
+        if ok:
+            return x, component_maps
+        # Some features cannot keep their shape: untie those near the folds and blend
+        # their targets towards the warp's, as little as injectivity allows.
+        warp_edges = system.warp_edge_vectors(state.grid, warped)
+        released = np.unique(features.component[injectivity.trouble_quads(state.grid, x, tris)
+                                                & features.is_constrained])
+        for round_ in (1, 2):
+            info["release_rounds"] = round_
+            if round_ == 2:
+                released = np.arange(features.n_components)
+            tied = np.where(np.isin(state.tied, released), -1, state.tied)
+            reduced = self._factor(state, features.weight, tied)
+            blend = np.isin(features.component, released) & features.is_constrained
+
+            def blended(s):
+                return np.where(blend[:, None, None], s * edges + (1.0 - s) * warp_edges, edges)
+
+            def solve_at(s):
+                return self._linear_solve(state, reduced, features.weight, blended(s), tied, component_maps,
+                                          warped)
+
+            lo, hi = 0.0, 1.0
+            best = solve_at(0.0)
+            if injectivity.flipped(best, tris).any():
+                continue                      # folds come from features not released yet
+            for _ in range(BLEND_BISECTIONS):        # cheap: plain solves
+                mid = 0.5 * (lo + hi)
+                x = solve_at(mid)
+                if injectivity.flipped(x, tris).any():
+                    hi = mid
+                else:
+                    lo, best = mid, x
+            hi = 1.0
+            for _ in range(UNTANGLED_BISECTIONS):    # further, where untangling opens the folds
+                mid = 0.5 * (lo + hi)
+                x, ok = untangled(reduced, blended(mid), tied, solve_at(mid))
+                if ok:
+                    lo, best = mid, x
+                else:
+                    hi = mid
+            info["feature_blend"] = lo
+            info["released_components"] = [int(c) for c in released]
+            return best, component_maps
+        info["fallback"] = True
+        return warped + injectivity.max_step(warped, x, tris) * 0.95 * (x - warped), component_maps
+
+    def _describe_components(self, state: _GridState, component_maps: np.ndarray) -> list[dict]:
         """Per component: quads, target scale and rotation, and whether it is held exactly."""
-        counts = np.bincount(self.features.component[self.features.is_feature],
-                             minlength=self.features.n_components)
-        exact = np.zeros(self.features.n_components, bool)
-        exact[self.rigid_component[self.rigid_component >= 0]] = True
+        features = state.features
+        counts = np.bincount(features.component[features.is_feature], minlength=features.n_components)
+        exact = np.zeros(features.n_components, bool)
+        exact[state.tied[state.tied >= 0]] = True
         scales = np.hypot(component_maps[:, 0, 0], component_maps[:, 1, 0])
         angles = np.degrees(np.arctan2(component_maps[:, 1, 0], component_maps[:, 0, 0]))
         return [{"quads": int(c), "scale": float(s), "rotation_deg": float(a), "exact": bool(e)}

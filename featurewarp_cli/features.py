@@ -65,11 +65,18 @@ def analyse(mask: np.ndarray, grid: Grid, feature_weight: float = 10.0, rho: flo
     if not mask.any():
         return Features(np.zeros(n_quads, bool), np.full(n_quads, -1), np.ones(n_quads), 0)
 
-    # A quad is a feature quad when any of its pixels is a feature pixel (max-pool).
-    rows, cols = grid.quad_of_pixel()
-    row_starts = np.searchsorted(rows, np.arange(qy))
-    col_starts = np.searchsorted(cols, np.arange(qx))
-    pooled = np.maximum.reduceat(np.maximum.reduceat(mask.view(np.uint8), row_starts, axis=0), col_starts, axis=1)
+    sx, sy = grid.spacing
+    cx = np.clip(np.round((np.arange(qx) + 0.5) * sx - 0.5).astype(int), 0, grid.width - 1)
+    cy = np.clip(np.round((np.arange(qy) + 0.5) * sy - 0.5).astype(int), 0, grid.height - 1)
+    if min(sx, sy) >= 1.0:
+        # A quad is a feature quad when any of its pixels is a feature pixel (max-pool).
+        rows, cols = grid.quad_of_pixel()
+        row_starts = np.searchsorted(rows, np.arange(qy))
+        col_starts = np.searchsorted(cols, np.arange(qx))
+        pooled = np.maximum.reduceat(np.maximum.reduceat(mask.view(np.uint8), row_starts, axis=0),
+                                     col_starts, axis=1)
+    else:  # sub-pixel cells: the pixel under the quad's centre decides
+        pooled = np.ascontiguousarray(mask[np.ix_(cy, cx)]).view(np.uint8)
     is_feature = pooled.astype(bool)
 
     n_labels, labels = cv2.connectedComponents(pooled, connectivity=8)
@@ -82,9 +89,6 @@ def analyse(mask: np.ndarray, grid: Grid, feature_weight: float = 10.0, rho: flo
 
     # Distance from each quad centre to the nearest feature pixel, in cells.
     pixel_distance = cv2.distanceTransform((~mask).view(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
-    sx, sy = grid.spacing
-    cx = np.clip(np.round((np.arange(qx) + 0.5) * sx - 0.5).astype(int), 0, grid.width - 1)
-    cy = np.clip(np.round((np.arange(qy) + 0.5) * sy - 0.5).astype(int), 0, grid.height - 1)
     distance = pixel_distance[np.ix_(cy, cx)] / ((sx + sy) / 2.0)
 
     f = np.where(is_feature, 1.0, decay(distance, rho))

@@ -42,6 +42,17 @@ def normal_matrix(grid: Grid, weights: np.ndarray) -> sp.csc_matrix:
     return matrix
 
 
+def node_stiffness(grid: Grid, weights: np.ndarray) -> np.ndarray:
+    """Diagonal of the normal matrix: the summed squared weight of each node's edges, (N,)."""
+    qy, qx = grid.quad_shape
+    w2 = (weights * weights).reshape(qy, qx)
+    diagonal = np.zeros((grid.ny, grid.nx))
+    for rows, cols in ((slice(0, -1), slice(0, -1)), (slice(0, -1), slice(1, None)),
+                       (slice(1, None), slice(0, -1)), (slice(1, None), slice(1, None))):
+        diagonal[rows, cols] += 2.0 * w2          # each corner has two edges in the quad
+    return diagonal.ravel()
+
+
 def edge_vectors(grid: Grid, quad_maps: np.ndarray) -> np.ndarray:
     """Target vectors t of the four edges of each quad under per-quad linear maps.
 
@@ -67,6 +78,12 @@ def warp_edge_vectors(grid: Grid, warped: np.ndarray) -> np.ndarray:
     return np.roll(corners, -1, axis=1) - corners
 
 
+def energy(grid: Grid, weights: np.ndarray, edges: np.ndarray, points: np.ndarray) -> float:
+    """Least-squares energy |A x - b|^2 = sum over quads of w^2 |edge(x) - target|^2."""
+    residual = warp_edge_vectors(grid, points) - edges
+    return float(((weights * weights)[:, None, None] * residual * residual).sum())
+
+
 def right_hand_side(grid: Grid, weights: np.ndarray, edges: np.ndarray) -> np.ndarray:
     """A^T b for edge targets ``edges`` ((K, 4, 2) ndarray); returns (N, 2)."""
     qy, qx = grid.quad_shape
@@ -81,3 +98,43 @@ def right_hand_side(grid: Grid, weights: np.ndarray, edges: np.ndarray) -> np.nd
         rhs[end] += we[:, :, k]
         rhs[start] -= we[:, :, k]
     return rhs.reshape(-1, 2)
+
+
+def tie_features(grid: Grid, features, fixed: np.ndarray, released=()) -> np.ndarray:
+    """Component each node is tied to as part of one rigid piece, or -1.
+
+    The nodes of a component's feature quads move together (x = M_c X + t_c).
+    Components that touch a fixed node, or are listed in ``released``, stay untied
+    (they keep soft, weighted constraints instead).
+
+    Parameters
+    ----------
+    grid : Grid
+    features : features.Features
+    fixed : (N,) bool ndarray
+    released : sequence of int
+
+    Returns
+    -------
+    (N,) int ndarray
+    """
+    tied = np.full(grid.n_nodes, -1)
+    if features.n_components == 0:
+        return tied
+    own = features.is_feature
+    tied[grid.quads()[own].ravel()] = np.repeat(features.component[own], 4)
+    loose = np.union1d(np.unique(tied[fixed & (tied >= 0)]), np.asarray(released, dtype=np.int64))
+    tied[np.isin(tied, loose)] = -1
+    return tied
+
+
+def number_unknowns(fixed: np.ndarray, tied: np.ndarray) -> np.ndarray:
+    """Unknown index per node: -1 when fixed, one shared index per tied component,
+    otherwise its own (free nodes first, in node order, then the components)."""
+    free = ~fixed & (tied < 0)
+    unknown = np.full(fixed.size, -1)
+    n_free = int(np.count_nonzero(free))
+    unknown[free] = np.arange(n_free)
+    components, inverse = np.unique(tied[tied >= 0], return_inverse=True)
+    unknown[tied >= 0] = n_free + inverse
+    return unknown

@@ -1,0 +1,107 @@
+"""How closely a grid follows a warp, and the automatic cell size that makes it follow.
+
+The rendered mapping is piecewise linear on the grid's triangles. Where the warp
+curves faster than the cells are small, the triangles cut its corners; the
+largest gap sits near the midpoints of the triangle edges, where it is
+|W(midpoint) - (W(a) + W(b)) / 2|.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .grid import Grid, signed_areas
+
+#: Largest piecewise-linear deviation from the warp the automatic cell allows, in pixels.
+MAX_PL_ERROR = 0.5
+#: Largest grid the automatic rule builds (memory and time stay bounded).
+MAX_NODES = 4_000_000
+#: Node count the automatic rule aims for when the warp is gentle.
+BASE_NODES = 250_000
+
+
+def pl_error(grid: Grid, warp) -> float:
+    """Largest distance between the warp and its piecewise-linear grid version, in pixels.
+
+    Measured at the midpoints of every horizontal, vertical and diagonal triangle edge.
+
+    Parameters
+    ----------
+    grid : Grid
+    warp : callable
+        (N, 2) source points -> (N, 2) canvas points.
+
+    Returns
+    -------
+    float
+    """
+    nodes = grid.nodes().reshape(grid.ny, grid.nx, 2)
+    warped = warp(nodes.reshape(-1, 2)).reshape(grid.ny, grid.nx, 2)
+    worst = 0.0
+    for a, b, wa, wb in (
+        (nodes[:, :-1], nodes[:, 1:], warped[:, :-1], warped[:, 1:]),        # horizontal edges
+        (nodes[:-1, :], nodes[1:, :], warped[:-1, :], warped[1:, :]),        # vertical edges
+        (nodes[:-1, :-1], nodes[1:, 1:], warped[:-1, :-1], warped[1:, 1:]),  # diagonals
+    ):
+        middle = warp(((a + b) / 2.0).reshape(-1, 2))
+        gap = np.linalg.norm(middle - ((wa + wb) / 2.0).reshape(-1, 2), axis=1)
+        worst = max(worst, float(gap.max(initial=0.0)))
+    return worst
+
+
+def base_cell(width: int, height: int) -> float:
+    """Cell size for a gentle warp: 4 px, or larger so the grid keeps about 250 000 nodes."""
+    return max(4.0, math.sqrt(width * height / BASE_NODES))
+
+
+def follows(grid: Grid, warp) -> tuple[bool, float]:
+    """Whether ``grid`` follows ``warp``: error <= 0.5 px and no triangle folded by W.
+
+    Returns
+    -------
+    ok : bool
+    error : float
+        Piecewise-linear error in pixels.
+    """
+    error = pl_error(grid, warp)
+    if error > MAX_PL_ERROR:
+        return False, error
+    areas = signed_areas(warp(grid.nodes()), grid.triangles())
+    return bool(areas.min() > 0), error
+
+
+def auto_cell(width: int, height: int, warp=None) -> tuple[float, float]:
+    """Automatic cell size: the base cell, made finer until the grid follows ``warp``.
+
+    Rule: start from :func:`base_cell` (4 px, or larger so the grid keeps about
+    250 000 nodes); while the piecewise-linear grid strays more than 0.5 px from
+    the warp, or folds a triangle the warp itself does not fold, divide the
+    cell by sqrt(2) (sub-pixel cells included), down to the size at which the
+    grid would pass 4 million nodes. The sizes are a fixed ladder, so warps that
+    need the same fineness share one grid (and one factorization).
+
+    Parameters
+    ----------
+    width, height : int
+    warp : callable, optional
+        Without it, the base cell is returned.
+
+    Returns
+    -------
+    cell : float
+    error : float
+        Piecewise-linear error at that cell in pixels (nan without a warp).
+    """
+    cell = base_cell(width, height)
+    if warp is None:
+        return cell, float("nan")
+    smallest = math.sqrt(width * height / MAX_NODES)
+    ok, error = follows(Grid.for_image(width, height, cell), warp)
+    while not ok and cell / math.sqrt(2.0) >= smallest:
+        # The error scales with the cell's square: skip rungs that cannot suffice.
+        rungs = max(1, math.floor(math.log(max(error, 1e-9) / MAX_PL_ERROR, 2.0)))
+        cell = max(cell / math.sqrt(2.0) ** rungs, smallest)
+        ok, error = follows(Grid.for_image(width, height, cell), warp)
+    return cell, error

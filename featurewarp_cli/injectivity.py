@@ -1,0 +1,158 @@
+"""Keeping the mapping free of fold-overs.
+
+The solver keeps a mapping known to be injective (every triangle positively
+oriented: at first the warp itself on a grid that follows it) and only ever
+moves it along straight segments as far as no triangle degenerates. These are
+the geometric pieces of that scheme.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from .grid import Grid, signed_areas
+
+
+def max_step(start: np.ndarray, end: np.ndarray, triangles: np.ndarray) -> float:
+    """Largest t in [0, 1] such that no triangle degenerates on start -> start + t (end - start).
+
+    Each triangle's signed area along the segment is a quadratic in t; the step
+    stops at the first root in (0, 1] of any of them. ``start`` must have every
+    triangle positively oriented.
+
+    Parameters
+    ----------
+    start, end : (N, 2) ndarray
+        Node positions.
+    triangles : (M, 3) ndarray of int
+
+    Returns
+    -------
+    float
+        1.0 when the whole segment is fold-over free.
+    """
+    a0, b0, c0 = (start[triangles[:, k]] for k in range(3))
+    d = end - start
+    da, db, dc = (d[triangles[:, k]] for k in range(3))
+    u0, v0, du, dv = b0 - a0, c0 - a0, db - da, dc - da
+
+    def cross(p, q):
+        return p[:, 0] * q[:, 1] - p[:, 1] * q[:, 0]
+
+    c = cross(u0, v0)                       # area * 2 at t = 0 (> 0)
+    b = cross(u0, dv) + cross(du, v0)
+    a = cross(du, dv)
+    roots = np.full(c.shape, np.inf)
+    linear = np.abs(a) <= 1e-12 * (np.abs(b) + np.abs(c))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r = -c / b
+        roots = np.where(linear & (r > 0), r, roots)
+        disc = b * b - 4.0 * a * c
+        sq = np.sqrt(np.where(disc >= 0, disc, np.nan))
+        for root in ((-b - sq) / (2.0 * a), (-b + sq) / (2.0 * a)):
+            roots = np.where(~linear & (disc >= 0) & (root > 0) & (root < roots), root, roots)
+    first = float(roots.min(initial=np.inf))
+    return 1.0 if first > 1.0 else first
+
+
+def flipped(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """(M,) bool: triangles whose signed area is <= 0."""
+    return signed_areas(points, triangles) <= 0
+
+
+def trouble_quads(grid: Grid, points: np.ndarray, triangles: np.ndarray, radius: int = 2) -> np.ndarray:
+    """Quads holding a flipped triangle, grown by ``radius`` quads: (K,) bool."""
+    n_quads = (grid.nx - 1) * (grid.ny - 1)
+    bad = flipped(points, triangles)
+    quads = np.zeros(n_quads, np.uint8)
+    quads[np.flatnonzero(bad) % n_quads] = 1      # triangles t and t + K share quad t
+    quads = quads.reshape(grid.quad_shape)
+    if radius > 0:
+        quads = cv2.dilate(quads, np.ones((2 * radius + 1, 2 * radius + 1), np.uint8))
+    return quads.ravel().astype(bool)
+
+
+def area_gradients(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """Gradient of each triangle's signed area with respect to its three corners.
+
+    Returns
+    -------
+    (M, 3, 2) ndarray
+    """
+    a, b, c = (points[triangles[:, k]] for k in range(3))
+
+    def half_perp(p, q):  # d area / d r for the corner r opposite to the edge p -> q
+        return 0.5 * np.stack([p[:, 1] - q[:, 1], q[:, 0] - p[:, 0]], axis=1)
+
+    return np.stack([half_perp(b, c), half_perp(c, a), half_perp(a, b)], axis=1)
+
+
+def untangle(solve, energy, x: np.ndarray, triangles: np.ndarray, floor: np.ndarray,
+             stiffness: np.ndarray, max_iterations: int = 80) -> tuple[np.ndarray, int]:
+    """Open folded or crushed triangles while staying near the least-squares optimum.
+
+    Minimises phi(x) = energy(x) + sum_t kappa_t max(0, floor_t - area_t(x))^2
+    by gradient descent preconditioned with the factored quadratic energy: the
+    direction is ``solve(force) - x`` with ``force = -grad(penalty)``, followed by a
+    backtracking line search on phi (starting from twice the last accepted step), so phi never increases. kappa starts where
+    the penalty is as stiff as the quadratic energy at each triangle and grows
+    4-fold (at most 8 times) whenever ten steps pass with folds left. Tied features stay exact
+    (every iterate is a solution of the same parametrized system). Stops as
+    soon as no triangle is folded and none is below half its floor.
+
+    Parameters
+    ----------
+    solve : callable
+        ``solve(force)`` -> (N, 2) minimiser of energy(x) - force . x.
+    energy : callable
+        ``energy(x)`` -> float, the quadratic energy (consistent with ``solve``).
+    x : (N, 2) ndarray
+        Starting point: the unconstrained optimum ``solve(0)``.
+    triangles : (M, 3) ndarray of int
+    floor : (M,) ndarray
+        Area each triangle should keep (> 0).
+    stiffness : (N,) ndarray
+        Diagonal of the quadratic energy's Hessian per node.
+    max_iterations : int
+
+    Returns
+    -------
+    x : (N, 2) ndarray
+        The last iterate (check it for folds).
+    iterations : int
+    """
+    grads = area_gradients(x, triangles)
+    kappa = stiffness[triangles].mean(axis=1) / np.maximum(2.0 * (grads * grads).sum(axis=(1, 2)), 1e-12)
+
+    def penalty(points):
+        deficit = np.maximum(0.0, floor - signed_areas(points, triangles))
+        return float((kappa * deficit * deficit).sum()), deficit
+
+    stalled = boosts = 0
+    alpha = 0.5
+    for iteration in range(max_iterations):
+        areas = signed_areas(x, triangles)
+        if areas.min() > 0 and np.all(areas >= 0.5 * floor):
+            return x, iteration
+        pen, deficit = penalty(x)
+        phi = energy(x) + pen
+        active = np.flatnonzero(deficit > 0)
+        grads = area_gradients(x, triangles[active])
+        contributions = (2.0 * kappa[active] * deficit[active])[:, None, None] * grads
+        corners = triangles[active].ravel()
+        force = np.stack([np.bincount(corners, contributions[:, :, d].ravel(), minlength=x.shape[0])
+                          for d in range(2)], axis=1)
+        direction = solve(force) - x
+        alpha = min(1.0, 2.0 * alpha)
+        while alpha > 1e-6:
+            candidate = x + alpha * direction
+            if energy(candidate) + penalty(candidate)[0] < phi:
+                x = candidate
+                break
+            alpha *= 0.5
+        stalled += 1
+        if (stalled >= 10 or alpha <= 1e-6) and boosts < 8:
+            kappa *= 4.0
+            stalled, boosts = 0, boosts + 1
+    return x, max_iterations
