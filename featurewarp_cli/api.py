@@ -29,13 +29,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import features as feat
-from . import fidelity, injectivity, system, targets
+from . import fidelity, injectivity, quality, system, targets
 from . import render as rnd
 from .grid import Grid, signed_areas
 from .solver import ReducedSystem
 
 MODES = ("similarity", "rigid", "plain")
 FORMULATIONS = ("exact", "paper")
+BOUNDARIES = ("fixed", "slide")
 
 #: Bisection steps on how far released features go from the warp's shape to their own.
 BLEND_BISECTIONS = 8
@@ -77,6 +78,21 @@ class Mesh:
         """Number of triangles whose signed area on the canvas is <= 0."""
         return int(np.count_nonzero(signed_areas(self.target, self.triangles) <= 0))
 
+    def to_npz(self) -> bytes:
+        """The mapping as ``.npz`` bytes (for ``--save-grid``).
+
+        Arrays: ``source`` (N, 2) source pixel positions of the nodes, ``target``
+        (N, 2) their positions on the output canvas, ``triangles`` (M, 3) node
+        indices, counter-clockwise in source coordinates (positive signed area
+        with x and y as pixel coordinates; on screen, where y points down, they
+        appear clockwise).
+        """
+        import io
+
+        buffer = io.BytesIO()
+        np.savez(buffer, source=self.source, target=self.target, triangles=self.triangles.astype(np.int32))
+        return buffer.getvalue()
+
 
 @dataclass
 class _GridState:
@@ -85,10 +101,41 @@ class _GridState:
     grid: Grid
     nodes: np.ndarray
     triangles: np.ndarray
-    fixed: np.ndarray
+    fixed_x: np.ndarray
+    fixed_y: np.ndarray
     features: feat.Features
     tied: np.ndarray
-    system: ReducedSystem | None = None
+    system: "AxisSystems | None" = None
+
+    @property
+    def fixed(self) -> np.ndarray:
+        """Nodes with any coordinate held."""
+        return self.fixed_x | self.fixed_y
+
+
+class AxisSystems:
+    """The factored system for x and for y: one shared factorization when both
+    coordinates hold the same nodes, two when a sliding border frees one of them.
+
+    Parameters
+    ----------
+    matrix : (N, N) sparse matrix
+    unknown_x, unknown_y : (N,) int ndarray
+        Unknown numbering per coordinate (see :class:`solver.ReducedSystem`).
+    """
+
+    def __init__(self, matrix, unknown_x: np.ndarray, unknown_y: np.ndarray):
+        self.x = ReducedSystem(matrix, unknown_x)
+        self.y = self.x if np.array_equal(unknown_x, unknown_y) else ReducedSystem(matrix, unknown_y)
+        self.method = self.x.method
+        self.factorizations = 1 if self.y is self.x else 2
+
+    def solve(self, rhs: np.ndarray, offset: np.ndarray) -> np.ndarray:
+        """Node positions (N, 2); see :meth:`solver.ReducedSystem.solve`."""
+        if self.y is self.x:
+            return self.x.solve(rhs, offset)
+        return np.concatenate([self.x.solve(rhs[:, :1], offset[:, :1]),
+                               self.y.solve(rhs[:, 1:], offset[:, 1:])], axis=1)
 
 
 class FeatureWarper:
@@ -116,6 +163,11 @@ class FeatureWarper:
         paper: the paper's soft per-quad targets (lambda R_Q, weight w_F).
     injective : bool
         Guard against fold-overs (default True); see :meth:`solve`.
+    boundary : {'fixed', 'slide'} or None
+        fixed: border nodes stay where W puts them (the paper). slide: on a side
+        that W maps onto an axis-parallel line, nodes may slide along it, so a
+        feature cut by the border can keep its shape while the canvas stays
+        exact. None (default): the preset's own choice (``warp.boundary``).
 
     Attributes
     ----------
@@ -128,7 +180,9 @@ class FeatureWarper:
 
     def __init__(self, width: int, height: int, mask: np.ndarray | None = None, *,
                  cell: float | None = None, feature_weight: float = 10.0, decay: float = 2.0,
-                 formulation: str = "exact", injective: bool = True):
+                 formulation: str = "exact", injective: bool = True, boundary: str | None = None):
+        if boundary not in (None,) + BOUNDARIES:
+            raise ValueError(f"boundary must be one of {', '.join(BOUNDARIES)}, not {boundary!r}")
         if mask is not None and mask.shape != (height, width):
             raise ValueError(f"mask is {mask.shape[1]}x{mask.shape[0]}, image is {width}x{height}")
         if not (feature_weight > 0 and math.isfinite(feature_weight)):
@@ -145,29 +199,36 @@ class FeatureWarper:
         self.decay = float(decay)
         self.formulation = formulation
         self.injective = injective
+        self.boundary = boundary
         self.cell = cell
         self.factorizations = 0
         self.timings: dict[str, float] = {}
         self._states: dict[float, _GridState] = {}
 
-    def _state(self, cell: float) -> _GridState:
-        """Grid, features and ties for ``cell`` (built once per cell size)."""
-        if cell not in self._states:
-            grid = Grid.for_image(self.width, self.height, cell)
+    def _state(self, cell: float, warp, boundary: str) -> _GridState:
+        """Grid, features, border conditions and ties (built once per cell and border)."""
+        grid = Grid.for_image(self.width, self.height, cell)
+        sides = (False,) * 4
+        if boundary == "slide":
+            sides = system.sliding_sides(grid, warp(grid.nodes()))
+        key = (cell, sides)
+        if key not in self._states:
             features = feat.analyse(self.mask, grid, self.feature_weight, self.decay)
-            fixed = grid.boundary()
-            tied = (system.tie_features(grid, features, fixed) if self.formulation == "exact"
+            fixed_x, fixed_y = system.border_conditions(grid, sides)
+            tied = (system.tie_features(grid, features, fixed_x | fixed_y) if self.formulation == "exact"
                     else np.full(grid.n_nodes, -1))
-            self._states[cell] = _GridState(grid, grid.nodes(), grid.triangles(), fixed, features, tied)
-        return self._states[cell]
+            self._states[key] = _GridState(grid, grid.nodes(), grid.triangles(), fixed_x, fixed_y,
+                                           features, tied)
+        return self._states[key]
 
-    def _factor(self, state: _GridState, weights: np.ndarray, tied: np.ndarray) -> ReducedSystem:
+    def _factor(self, state: _GridState, weights: np.ndarray, tied: np.ndarray) -> AxisSystems:
         """Assemble and factor the normal equations for these weights and ties."""
         t0 = time.perf_counter()
         matrix = system.normal_matrix(state.grid, weights)
         t1 = time.perf_counter()
-        reduced = ReducedSystem(matrix, system.number_unknowns(state.fixed, tied))
-        self.factorizations += 1
+        reduced = AxisSystems(matrix, system.number_unknowns(state.fixed_x, tied),
+                              system.number_unknowns(state.fixed_y, tied))
+        self.factorizations += reduced.factorizations
         self.timings["assemble"] = self.timings.get("assemble", 0.0) + t1 - t0
         self.timings["factor"] = self.timings.get("factor", 0.0) + time.perf_counter() - t1
         return reduced
@@ -181,7 +242,8 @@ class FeatureWarper:
         if force is not None:
             rhs = rhs + force
         offset = np.zeros_like(warped)
-        offset[state.fixed] = warped[state.fixed]
+        offset[state.fixed_x, 0] = warped[state.fixed_x, 0]
+        offset[state.fixed_y, 1] = warped[state.fixed_y, 1]
         on = tied >= 0
         offset[on] = np.einsum("nij,nj->ni", component_maps[tied[on]], state.nodes[on])
         t1 = time.perf_counter()
@@ -225,12 +287,14 @@ class FeatureWarper:
         else:
             cell = float(self.cell)
             error = fidelity.pl_error(Grid.for_image(self.width, self.height, cell), warp)
-        state = self._state(cell)
+        boundary = self.boundary or getattr(warp, "boundary", "fixed")
+        state = self._state(cell, warp, boundary)
         warped = warp(state.nodes)
         self.timings["grid"] = time.perf_counter() - t0
         info = {
             "mode": mode,
             "formulation": self.formulation,
+            "boundary": boundary,
             "grid": {"cell": cell, "spacing": list(state.grid.spacing), "nodes": state.grid.n_nodes,
                      "quads": int(state.features.weight.size), "pl_error_px": error},
             "components": [],
@@ -244,7 +308,13 @@ class FeatureWarper:
             target, component_maps = self._feature_aware(state, warped, mode, info)
             info["components"] = self._describe_components(state, component_maps)
         mesh = Mesh(state.nodes, target, state.triangles, tuple(warp.canvas), info)
-        info["flipped_triangles"] = mesh.flips()
+        features = state.features
+        transition = np.tile(features.is_constrained & ~features.is_feature, 2)
+        info["quality"] = quality.mesh_quality(
+            state.nodes, target, warped, state.triangles, state.grid.quads(),
+            system.feature_nodes(state.grid, features), features.n_components,
+            ~features.is_constrained, transition)
+        info["flipped_triangles"] = info["quality"]["flipped_triangles"]
         info["timings"] = dict(self.timings)
         return mesh
 
@@ -353,7 +423,8 @@ class FeatureWarper:
 
 def warp(image: np.ndarray, mask: np.ndarray | None, preset: str, *, mode: str = "similarity",
          cell: int | None = None, feature_weight: float = 10.0, decay: float = 2.0,
-         formulation: str = "exact", interp: str = "cubic", background=None, **params) -> np.ndarray:
+         formulation: str = "exact", boundary: str | None = None, interp: str = "cubic",
+         background=None, **params) -> np.ndarray:
     """Warp ``image`` with a preset while the features in ``mask`` keep their shape.
 
     Parameters
@@ -362,7 +433,7 @@ def warp(image: np.ndarray, mask: np.ndarray | None, preset: str, *, mode: str =
     mask : (h, w) bool ndarray or None
     preset : str
         Registered preset name ('stretch', 'arc', 'swirl', 'bulge', or a plugin's).
-    mode, cell, feature_weight, decay, formulation
+    mode, cell, feature_weight, decay, formulation, boundary
         See :class:`FeatureWarper`.
     interp : {'linear', 'cubic', 'lanczos'}
     background : tuple or None
@@ -379,5 +450,5 @@ def warp(image: np.ndarray, mask: np.ndarray | None, preset: str, *, mode: str =
     height, width = image.shape[:2]
     w = load_warp(preset)(width, height, **params)
     warper = FeatureWarper(width, height, mask, cell=cell, feature_weight=feature_weight, decay=decay,
-                           formulation=formulation)
+                           formulation=formulation, boundary=boundary)
     return warper.render(image, warper.solve(w, mode), interp, background)

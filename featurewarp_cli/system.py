@@ -100,6 +100,14 @@ def right_hand_side(grid: Grid, weights: np.ndarray, edges: np.ndarray) -> np.nd
     return rhs.reshape(-1, 2)
 
 
+def feature_nodes(grid: Grid, features) -> np.ndarray:
+    """Component of each node that is a corner of a feature quad, else -1: (N,) int."""
+    nodes = np.full(grid.n_nodes, -1)
+    own = features.is_feature
+    nodes[grid.quads()[own].ravel()] = np.repeat(features.component[own], 4)
+    return nodes
+
+
 def tie_features(grid: Grid, features, fixed: np.ndarray, released=()) -> np.ndarray:
     """Component each node is tied to as part of one rigid piece, or -1.
 
@@ -112,20 +120,48 @@ def tie_features(grid: Grid, features, fixed: np.ndarray, released=()) -> np.nda
     grid : Grid
     features : features.Features
     fixed : (N,) bool ndarray
+        Nodes with any coordinate held.
     released : sequence of int
 
     Returns
     -------
     (N,) int ndarray
     """
-    tied = np.full(grid.n_nodes, -1)
-    if features.n_components == 0:
-        return tied
-    own = features.is_feature
-    tied[grid.quads()[own].ravel()] = np.repeat(features.component[own], 4)
+    tied = feature_nodes(grid, features)
     loose = np.union1d(np.unique(tied[fixed & (tied >= 0)]), np.asarray(released, dtype=np.int64))
     tied[np.isin(tied, loose)] = -1
     return tied
+
+
+def sliding_sides(grid: Grid, warped: np.ndarray, tolerance: float = 1e-6) -> tuple[bool, ...]:
+    """Sides (top, bottom, left, right) that W maps onto an axis-parallel straight line.
+
+    Nodes on such a side may slide along that line without changing the canvas.
+    """
+    nodes = warped.reshape(grid.ny, grid.nx, 2)
+    return (bool(np.ptp(nodes[0, :, 1]) <= tolerance), bool(np.ptp(nodes[-1, :, 1]) <= tolerance),
+            bool(np.ptp(nodes[:, 0, 0]) <= tolerance), bool(np.ptp(nodes[:, -1, 0]) <= tolerance))
+
+
+def border_conditions(grid: Grid, sides: tuple[bool, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """Which coordinates of each node are held at W: (fixed_x, fixed_y), each (N,) bool.
+
+    All border nodes are held, except that on a sliding side (see
+    :func:`sliding_sides`) the coordinate along the side is free; corners stay held.
+    """
+    fixed_x = grid.boundary().reshape(grid.ny, grid.nx)
+    fixed_y = fixed_x.copy()
+    top, bottom, left, right = sides
+    inner_row, inner_col = slice(1, -1), slice(1, -1)
+    if top:
+        fixed_x[0, inner_col] = False
+    if bottom:
+        fixed_x[-1, inner_col] = False
+    if left:
+        fixed_y[inner_row, 0] = False
+    if right:
+        fixed_y[inner_row, -1] = False
+    return fixed_x.ravel(), fixed_y.ravel()
 
 
 def number_unknowns(fixed: np.ndarray, tied: np.ndarray) -> np.ndarray:

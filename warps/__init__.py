@@ -130,6 +130,9 @@ class Warp:
     name: ClassVar[str] = ""
     summary: ClassVar[str] = ""
     params: ClassVar[tuple[Param, ...]] = ()
+    #: Default border handling: 'fixed' (border nodes at W) or 'slide' (nodes on a
+    #: side that W keeps straight and axis-parallel may move along it).
+    boundary: ClassVar[str] = "fixed"
 
     def __init__(self, width: int, height: int, /, **values):
         if width < 1 or height < 1:

@@ -15,6 +15,9 @@ class Stretch(Warp):
 
     name = "stretch"
     summary = "Non-uniform scale to a new size or aspect ratio."
+    # The canvas edges stay straight lines, so border nodes may slide along them:
+    # a feature cut by the border keeps its shape and the canvas stays exact.
+    boundary = "slide"
     params = (
         Param("sx", float, 1.0, "Horizontal scale factor.", min=0, min_open=True, max=100),
         Param("sy", float, 1.0, "Vertical scale factor.", min=0, min_open=True, max=100),

@@ -1,0 +1,85 @@
+"""Pictures that explain a warp: the deformed grid drawn over a result, and labelled panels."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+GRID_COLOUR = (255, 200, 0)        # BGR: light blue
+MASK_TINT = (60, 60, 255)          # BGR: red
+
+
+def as_bgr8(image: np.ndarray) -> np.ndarray:
+    """An 8-bit BGR version of any gray/BGR/BGRA, 8/16-bit image (alpha over a checkerboard)."""
+    if image.dtype == np.uint16:
+        image = (image // 257).astype(np.uint8)
+    if image.ndim == 2:
+        return cv2.cvtColor(image, cv2.COLOR_GRAY2BGR)
+    if image.shape[2] == 4:
+        y, x = np.mgrid[0 : image.shape[0], 0 : image.shape[1]]
+        checker = np.where(((x // 8) + (y // 8)) % 2 == 0, 200, 150).astype(np.float32)[:, :, None]
+        alpha = image[:, :, 3:4].astype(np.float32) / 255.0
+        return (image[:, :, :3] * alpha + checker * (1.0 - alpha)).astype(np.uint8)
+    return image
+
+
+def draw_grid(image: np.ndarray, mesh, spacing_px: float = 16.0) -> np.ndarray:
+    """Draw the deformed grid lines over ``image`` (a copy, 8-bit BGR).
+
+    Every k-th grid line is drawn so that lines are about ``spacing_px`` apart
+    in the source (the paper's Fig. 3).
+
+    Parameters
+    ----------
+    image : ndarray
+        The warped image (on the mesh's canvas).
+    mesh : api.Mesh
+    spacing_px : float
+
+    Returns
+    -------
+    (H, W, 3) uint8 ndarray
+    """
+    out = as_bgr8(image).copy()
+    grid_x = np.unique(mesh.source[:, 0])
+    grid_y = np.unique(mesh.source[:, 1])
+    nx, ny = grid_x.size, grid_y.size
+    nodes = mesh.target.reshape(ny, nx, 2)
+    step_x = max(1, round(spacing_px / max(grid_x[1] - grid_x[0], 1e-9))) if nx > 1 else 1
+    step_y = max(1, round(spacing_px / max(grid_y[1] - grid_y[0], 1e-9))) if ny > 1 else 1
+    rows = list(range(0, ny, step_y)) + [ny - 1]
+    cols = list(range(0, nx, step_x)) + [nx - 1]
+    lines = [nodes[j, :, :] for j in rows] + [nodes[:, i, :] for i in cols]
+    shift = 4                                       # sub-pixel precision for polylines
+    polylines = [np.round(line * (1 << shift)).astype(np.int32) for line in lines]
+    cv2.polylines(out, polylines, False, GRID_COLOUR, 1, cv2.LINE_AA, shift)
+    return out
+
+
+def tint(image: np.ndarray, mask: np.ndarray | None, strength: float = 0.45) -> np.ndarray:
+    """``image`` (8-bit BGR copy) with the feature ``mask`` tinted red."""
+    out = as_bgr8(image).copy()
+    if mask is not None and mask.any():
+        tinted = out[mask].astype(np.float32) * (1.0 - strength) + np.array(MASK_TINT) * strength
+        out[mask] = tinted.astype(np.uint8)
+    return out
+
+
+def labelled_panel(images: list[np.ndarray], labels: list[str], height: int = 360) -> np.ndarray:
+    """Side-by-side panel of ``images`` scaled to ``height``, each with a caption bar.
+
+    Returns
+    -------
+    (height + bar, W, 3) uint8 ndarray
+    """
+    bar, gap = 28, 8
+    tiles = []
+    for image, label in zip(images, labels):
+        image = as_bgr8(image)
+        width = max(1, round(image.shape[1] * height / image.shape[0]))
+        tile = cv2.resize(image, (width, height), interpolation=cv2.INTER_AREA)
+        caption = np.full((bar, width, 3), 255, np.uint8)
+        cv2.putText(caption, label, (6, bar - 9), cv2.FONT_HERSHEY_SIMPLEX, 0.55, (30, 30, 30), 1, cv2.LINE_AA)
+        tiles.append(np.vstack([caption, tile]))
+        tiles.append(np.full((height + bar, gap, 3), 255, np.uint8))
+    return np.hstack(tiles[:-1])

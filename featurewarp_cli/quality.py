@@ -1,0 +1,113 @@
+"""Measures of a solved mesh: how well features kept their shape, how the rest followed W."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .grid import signed_areas
+
+
+def similarity_fits(source: np.ndarray, target: np.ndarray, labels: np.ndarray, count: int) -> dict:
+    """Best-fit similarity (least squares) from ``source`` to ``target`` per label.
+
+    Parameters
+    ----------
+    source, target : (n, 2) ndarray
+        Corresponding points.
+    labels : (n,) int ndarray
+        Group of each point, 0 .. count-1.
+    count : int
+
+    Returns
+    -------
+    dict of (count,) ndarrays
+        ``scale``, ``rotation_deg``, ``rms_px`` (residual after the fit) and
+        ``diameter_px`` (diagonal of the group's source bounding box).
+    """
+    def per_label(values):
+        return np.bincount(labels, weights=values, minlength=count)
+
+    n = np.maximum(per_label(np.ones(labels.size)), 1)
+    centre_s = np.stack([per_label(source[:, k]) / n for k in range(2)], axis=1)
+    centre_t = np.stack([per_label(target[:, k]) / n for k in range(2)], axis=1)
+    p, q = source - centre_s[labels], target - centre_t[labels]
+    norm = np.maximum(per_label((p * p).sum(axis=1)), 1e-12)
+    a = per_label(p[:, 0] * q[:, 0] + p[:, 1] * q[:, 1]) / norm
+    b = per_label(p[:, 0] * q[:, 1] - p[:, 1] * q[:, 0]) / norm
+    fitted = np.stack([a[labels] * p[:, 0] - b[labels] * p[:, 1],
+                       b[labels] * p[:, 0] + a[labels] * p[:, 1]], axis=1)
+    rms = np.sqrt(per_label(((fitted - q) ** 2).sum(axis=1)) / n)
+    lo = np.full((count, 2), np.inf)
+    hi = np.full((count, 2), -np.inf)
+    np.minimum.at(lo, labels, source)
+    np.maximum.at(hi, labels, source)
+    return {"scale": np.hypot(a, b), "rotation_deg": np.degrees(np.arctan2(b, a)), "rms_px": rms,
+            "diameter_px": np.hypot(*(hi - lo).T)}
+
+
+def triangle_anisotropy(source: np.ndarray, target: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """Ratio of the larger to the smaller singular value of each triangle's affine map, (M,)."""
+    s = source[triangles]
+    t = target[triangles]
+    ds = np.stack([s[:, 1] - s[:, 0], s[:, 2] - s[:, 0]], axis=2)      # (M, 2, 2) columns = edges
+    dt = np.stack([t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]], axis=2)
+    jac = dt @ np.linalg.inv(ds)
+    sv = np.linalg.svd(jac, compute_uv=False)
+    return sv[:, 0] / np.maximum(sv[:, 1], 1e-12)
+
+
+def mesh_quality(source, target, warped, triangles, quads, node_component, n_components,
+                 background_quads, near_feature_triangles) -> dict:
+    """Quality figures of a solved mesh (JSON-ready).
+
+    Parameters
+    ----------
+    source, target, warped : (N, 2) ndarray
+        Node positions: source, solution, and the warp W itself.
+    triangles : (M, 3) ndarray of int
+    quads : (K, 4) ndarray of int
+    node_component : (N,) int ndarray
+        Feature component of each node, -1 outside features.
+    n_components : int
+    background_quads : (K,) bool ndarray
+        Quads with plain (W) equations.
+    near_feature_triangles : (M,) bool ndarray
+        Background triangles in the transition band around features.
+
+    Returns
+    -------
+    dict
+        ``components`` (per component: scale, rotation, residual RMS in px and in %
+        of its diameter), ``background_rms_px`` (edge vectors against W's),
+        ``area_ratio`` (min, max of solution area / W area), ``flipped_triangles``,
+        ``max_anisotropy_near_features`` and the same for W there (for reference).
+    """
+    report = {"components": []}
+    on = node_component >= 0
+    if n_components and on.any():
+        fits = similarity_fits(source[on], target[on], node_component[on], n_components)
+        for k in range(n_components):
+            report["components"].append({
+                "scale": float(fits["scale"][k]),
+                "rotation_deg": float(fits["rotation_deg"][k]),
+                "residual_rms_px": float(fits["rms_px"][k]),
+                "residual_percent": float(100.0 * fits["rms_px"][k] / max(fits["diameter_px"][k], 1e-12)),
+            })
+    edges = quads[background_quads]
+    if edges.size:
+        got = np.roll(target[edges], -1, axis=1) - target[edges]
+        want = np.roll(warped[edges], -1, axis=1) - warped[edges]
+        report["background_rms_px"] = float(np.sqrt(((got - want) ** 2).sum(axis=2).mean()))
+    else:
+        report["background_rms_px"] = 0.0
+    area = signed_areas(target, triangles)
+    reference = signed_areas(warped, triangles)
+    valid = np.abs(reference) > 1e-12
+    ratio = area[valid] / reference[valid]
+    report["area_ratio"] = {"min": float(ratio.min(initial=1.0)), "max": float(ratio.max(initial=1.0))}
+    report["flipped_triangles"] = int(np.count_nonzero(area <= 0))
+    if near_feature_triangles.any():
+        tri = triangles[near_feature_triangles]
+        report["max_anisotropy_near_features"] = float(triangle_anisotropy(source, target, tri).max())
+        report["warp_anisotropy_near_features"] = float(triangle_anisotropy(source, warped, tri).max())
+    return report
