@@ -18,7 +18,7 @@ swirl_ARGS   := --angle 120
 bulge_ARGS   := --strength 0.8
 DEMO := $(foreach s,$(SAMPLES),$(foreach p,$(PRESETS),out/$(s)-$(p).png))
 
-.PHONY: install test demo bench clean
+.PHONY: install test demo bench gallery clean
 
 install:
 	@if command -v apt-get >/dev/null 2>&1; then \
@@ -45,6 +45,16 @@ out/%.png: | out
 
 bench:
 	$(BIN)/python benchmarks/run.py
+
+# The README's pictures: plain vs featurewarp panels on the astronaut sample.
+gallery:
+	mkdir -p docs/gallery
+	$(BIN)/featurewarp compare swirl samples/astronaut.png docs/gallery/swirl.jpg -m samples/astronaut_mask.png --angle 120
+	$(BIN)/featurewarp compare arc samples/astronaut.png docs/gallery/arc.jpg -m samples/astronaut_mask.png --angle 120 --background "#f0f0f0"
+	$(BIN)/featurewarp compare bulge samples/astronaut.png docs/gallery/bulge.jpg -m samples/astronaut_mask.png --strength 0.8
+	$(BIN)/featurewarp compare stretch samples/astronaut.png docs/gallery/stretch.jpg -m samples/astronaut_mask.png --sx 1.6
+	$(BIN)/featurewarp compare stretch samples/coins.png docs/gallery/coins-stretch.jpg -m samples/coins_mask.png --sx 0.6 --sy 1.2
+	$(BIN)/featurewarp compare swirl samples/shapes.png docs/gallery/shapes-swirl-grid.jpg -m samples/shapes_mask.png --angle 150 --grid
 
 clean:
 	rm -rf out .pytest_cache

@@ -40,7 +40,7 @@ BOUNDARIES = ("fixed", "slide")
 
 #: Bisection steps on how far released features go from the warp's shape to their own.
 BLEND_BISECTIONS = 8
-UNTANGLED_BISECTIONS = 4
+UNTANGLED_BISECTIONS = 3
 #: Fraction of its area under the warp that the fold-over guard asks each triangle to keep.
 UNTANGLE_FLOOR = 0.05
 
@@ -233,24 +233,29 @@ class FeatureWarper:
         self.timings["factor"] = self.timings.get("factor", 0.0) + time.perf_counter() - t1
         return reduced
 
-    def _linear_solve(self, state, reduced, weights, edges, tied, component_maps, warped,
-                      force=None) -> np.ndarray:
-        """Least-squares node positions for edge targets, fixed border and tied features
-        (plus an optional external ``force`` per node, (N, 2))."""
+    def _solver(self, state, reduced, weights, edges, tied, component_maps, warped):
+        """``solve(force=None)``: least-squares node positions for these edge targets, the
+        fixed border and tied features, plus an optional external force per node (N, 2)."""
         t0 = time.perf_counter()
         rhs = system.right_hand_side(state.grid, weights, edges)
-        if force is not None:
-            rhs = rhs + force
         offset = np.zeros_like(warped)
         offset[state.fixed_x, 0] = warped[state.fixed_x, 0]
         offset[state.fixed_y, 1] = warped[state.fixed_y, 1]
         on = tied >= 0
         offset[on] = np.einsum("nij,nj->ni", component_maps[tied[on]], state.nodes[on])
-        t1 = time.perf_counter()
-        result = reduced.solve(rhs, offset)
-        self.timings["rhs"] = self.timings.get("rhs", 0.0) + t1 - t0
-        self.timings["solve"] = self.timings.get("solve", 0.0) + time.perf_counter() - t1
-        return result
+        self.timings["rhs"] = self.timings.get("rhs", 0.0) + time.perf_counter() - t0
+
+        def solve(force=None):
+            t1 = time.perf_counter()
+            result = reduced.solve(rhs if force is None else rhs + force, offset)
+            self.timings["solve"] = self.timings.get("solve", 0.0) + time.perf_counter() - t1
+            return result
+
+        return solve
+
+    def _linear_solve(self, state, reduced, weights, edges, tied, component_maps, warped) -> np.ndarray:
+        """Least-squares node positions (see :meth:`_solver`)."""
+        return self._solver(state, reduced, weights, edges, tied, component_maps, warped)()
 
     def solve(self, warp, mode: str = "similarity") -> Mesh:
         """Feature-aware mesh for ``warp`` (a :class:`warps.Warp` instance).
@@ -340,14 +345,13 @@ class FeatureWarper:
         stiffness = system.node_stiffness(state.grid, features.weight)
 
         def untangled(reduced, edges, tied, start):
-            def solve(force):
-                return self._linear_solve(state, reduced, features.weight, edges, tied, component_maps,
-                                          warped, force=force)
+            solve = self._solver(state, reduced, features.weight, edges, tied, component_maps, warped)
 
-            def energy(points):
-                return 0.5 * system.energy(state.grid, features.weight, edges, points)
+            def residual(points):
+                return system.residual(state.grid, features.weight, edges, points)
 
-            x, iterations = injectivity.untangle(solve, energy, start, tris, floor, stiffness)
+            x, iterations = injectivity.untangle(solve, residual, start, tris, floor, stiffness,
+                                                 areas=lambda points: injectivity.grid_areas(state.grid, points))
             info["untangle_iterations"] = info.get("untangle_iterations", 0) + iterations
             return x, not injectivity.flipped(x, tris).any()
 

@@ -1,15 +1,20 @@
-"""The ``featurewarp`` command line: parses, checks and prints; the numerics live elsewhere.
+"""The ``featurewarp`` command line: parses, checks and prints; the work lives elsewhere.
 
-Numeric modules are imported inside the commands so that ``--help`` stays fast.
+``warp`` and ``batch`` run :func:`featurewarp_cli.batch.warp_file`; ``diff`` uses
+:mod:`featurewarp_cli.diff`. Numeric modules are imported inside the commands so
+that ``--help`` stays fast. Only image bytes ever go to stdout when OUTPUT is ``-``;
+every message goes to stderr.
 """
 
 from __future__ import annotations
 
+import inspect
 import json
 import math
 import os
 import sys
-import time
+import traceback
+import warnings
 
 import click
 
@@ -17,6 +22,11 @@ from . import __version__, plugins
 
 MODES = ("similarity", "rigid", "plain")
 INTERPOLATIONS = ("linear", "cubic", "lanczos")
+FORMAT_NAMES = ("png", "jpg", "jpeg", "webp", "tif", "tiff", "bmp")
+MAX_PIXELS = 200_000_000          # = imageio.MAX_PIXELS (not imported here: cv2 loads slowly)
+#: Keyword arguments of the commands that are engine or output settings, not preset parameters.
+SETTINGS = ("mode", "cell", "feature_weight", "decay", "formulation", "boundary", "background",
+            "interp", "fmt", "max_pixels")
 
 
 class PresetValue(click.ParamType):
@@ -56,18 +66,17 @@ class Number(click.ParamType):
         return number
 
 
-def shared_options() -> list[click.Option]:
-    """Options every preset command takes (built fresh for each command)."""
+def engine_options() -> list[click.Option]:
+    """Options ``warp`` and ``batch`` share (built fresh for each command)."""
     return [
-        click.Option(["-m", "--mask"], type=click.Path(dir_okay=False), metavar="PATH",
-                     help="Feature mask: pixels with gray value >= 128 keep their shape. "
-                          "Same width and height as INPUT. Without it the plain warp is produced."),
         click.Option(["--mode"], type=click.Choice(MODES), default="similarity", show_default=True,
                      help="similarity: features rotate and scale uniformly with the warp; "
                           "rigid: features also keep their size; plain: the standard warp, mask ignored."),
-        click.Option(["--cell"], type=Number(int, 2), metavar="PX",
-                     help="Grid cell size in pixels (>= 2). Default: 4 px, or larger on big images "
-                          "so that the grid keeps about 250 000 nodes (ceil(sqrt(w*h/250000))).  "),
+        click.Option(["--cell"], type=Number(float, 1), metavar="PX",
+                     help="Grid cell size in pixels (>= 1). Default: automatic: 4 px, or "
+                          "sqrt(w*h/250000) on big images; then divided by sqrt(2) until the "
+                          "grid is within 0.5 px of the analytic warp and the warp folds none of "
+                          "its triangles (sub-pixel allowed, at most 4 million nodes)."),
         click.Option(["--feature-weight"], type=Number(float, 0, open_min=True), default=10.0,
                      show_default=True, metavar="W",
                      help="w_F: each side of the feature equations is multiplied by W, so their "
@@ -79,26 +88,165 @@ def shared_options() -> list[click.Option]:
                      show_default=True,
                      help="exact: each feature moves as one similarity, held exactly; paper: the "
                           "paper's soft per-quad targets (w_F-weighted), for comparison."),
+        click.Option(["--boundary"], type=click.Choice(("fixed", "slide")),
+                     help="fixed: border nodes stay where the warp puts them (the paper). slide: "
+                          "on a side the warp keeps straight and axis-parallel they may slide along "
+                          "it, so features cut by the border keep their shape and the canvas stays "
+                          "exact. Default: slide (for arc it amounts to fixed: its sides are curves "
+                          "and oblique rays)."),
         click.Option(["--background"], metavar="COLOR",
                      help="Fill where no source pixel lands: #rrggbb, a colour name, or transparent. "
-                          "Default: transparent for PNG, WebP and TIFF output, white otherwise."),
+                          "Default: transparent for PNG, WebP and TIFF output, white otherwise "
+                          "(formats without alpha also get transparent input pixels flattened on it)."),
         click.Option(["--interp"], type=click.Choice(INTERPOLATIONS), default="cubic", show_default=True,
                      help="Resampling filter."),
-        click.Option(["--report"], type=click.Path(dir_okay=False), metavar="PATH",
-                     help="Write a JSON report: sizes, grid, feature components and their scale, "
-                          "solver, seconds per stage, flipped triangles."),
+        click.Option(["--format", "fmt"], type=click.Choice(FORMAT_NAMES, case_sensitive=False),
+                     help="Output format; overrides the extension (needed for '-' unless a "
+                          "prefix such as png:- is given)."),
+        click.Option(["--max-pixels"], type=Number(int, 1), default=MAX_PIXELS, show_default=True,
+                     metavar="N", help="Refuse inputs with more than N pixels (checked in the file "
+                                       "header, before decoding)."),
+        click.Option(["-q", "--quiet"], is_flag=True, help="Print nothing but errors."),
+        click.Option(["-v", "--verbose"], is_flag=True,
+                     help="Print a one-line summary per image on stderr (sizes, solver, seconds)."),
     ]
 
 
-def fail_usage(message: str, param: str | None = None):
-    """Raise a usage error (exit 2) that names the offending parameter."""
-    if param:
-        raise click.BadParameter(message, param_hint=param)
-    raise click.UsageError(message)
+def preset_options(preset) -> list[click.Option]:
+    """One option per declared parameter of ``preset``."""
+    options = []
+    for p in preset.params:
+        default_text = "unset" if p.default is None else f"{p.default:g}"
+        options.append(click.Option(
+            [f"--{p.cli_name}"], type=PresetValue(p), default=p.default, metavar=p.metavar,
+            help=f"{p.help} [default: {default_text}; {p.range_text()}]"))
+    return options
+
+
+def settings_from(preset, kwargs: dict):
+    """Split a preset command's keyword arguments into Settings, quiet and verbose."""
+    from .batch import Settings
+
+    quiet, verbose = kwargs.pop("quiet"), kwargs.pop("verbose")
+    if quiet and verbose:
+        raise click.UsageError("--quiet and --verbose exclude each other")
+    params = {p.name: kwargs.pop(p.name) for p in preset.params}
+    return Settings(preset.name, params, **{k: kwargs.pop(k) for k in SETTINGS}), quiet, verbose
+
+
+def click_error(err) -> click.ClickException:
+    """The click exception for a :class:`featurewarp_cli.batch.WarpError` (usage: exit 2, else 1)."""
+    if err.usage:
+        if err.param:
+            return click.BadParameter(err.message, param_hint=f"'{err.param}'")
+        return click.UsageError(err.message)
+    return click.ClickException(str(err))
+
+
+def summary_line(s: dict) -> str:
+    """The ``--verbose`` line of one warped image."""
+    (w, h), (cw, ch) = s["size"], s["canvas"]
+    return (f"{s['input']} {w}x{h} -> {s['output']} {cw}x{ch}: {s['preset']} ({s['mode']}), "
+            f"{s['components']} feature components, solver {s['solver']}, "
+            f"{s['flipped_triangles']} flipped triangles, {s['seconds']:.2f} s")
+
+
+def report_warnings(summary: dict, quiet: bool, verbose: bool) -> None:
+    """Print an image's warnings (unless quiet) and its summary line (if verbose) on stderr."""
+    if not quiet:
+        for warning in summary["warnings"]:
+            click.echo(f"featurewarp: warning: {summary['input']}: {warning}", err=True)
+    if verbose:
+        click.echo(f"featurewarp: {summary_line(summary)}", err=True)
+
+
+def warp_command(preset) -> click.Command:
+    """``featurewarp warp PRESET INPUT OUTPUT``."""
+    params = [click.Argument(["input"], type=click.Path(dir_okay=False, allow_dash=True)),
+              click.Argument(["output"], type=click.Path(dir_okay=False, allow_dash=True)),
+              click.Option(["-m", "--mask"], type=click.Path(dir_okay=False, allow_dash=True), metavar="PATH",
+                           help="Feature mask: pixels with gray value >= 128 (transparent ones count "
+                                "as black) keep their shape. Same width and height as INPUT. "
+                                "Without it the plain warp is produced."),
+              click.Option(["--report"], type=click.Path(dir_okay=False), metavar="PATH",
+                           help="Write a JSON report: sizes, grid, feature components (scale, "
+                                "rotation, residual from a similarity), background deviation from "
+                                "the warp, triangle area ratios, fold-overs before and after the "
+                                "guard, solver, seconds per stage."),
+              click.Option(["--save-grid"], type=click.Path(dir_okay=False), metavar="PATH.npz",
+                           help="Save the mapping: arrays source (N x 2 source pixel positions of "
+                                "the grid nodes), target (N x 2 on the output canvas), triangles "
+                                "(M x 3 node indices, counter-clockwise in source coordinates)."),
+              click.Option(["--grid", "draw_grid"], is_flag=True,
+                           help="Draw the deformed grid over the result.")]
+    params += engine_options() + preset_options(preset)
+
+    def callback(input, output, mask, report, save_grid, draw_grid, **kwargs):
+        from .batch import WarpError, warp_file
+
+        settings, quiet, verbose = settings_from(preset, kwargs)
+        try:
+            summary = warp_file(settings, input, output, mask, report, save_grid, draw_grid)
+        except WarpError as err:
+            raise click_error(err) from err
+        report_warnings(summary, quiet, verbose)
+
+    doc = (preset.__doc__ or preset.summary).strip()
+    return click.Command(preset.name, params=params, callback=callback, help=doc,
+                         short_help=preset.summary, no_args_is_help=True)
+
+
+def batch_command(preset) -> click.Command:
+    """``featurewarp batch PRESET INPUT... --out-dir DIR``."""
+    params = [click.Argument(["inputs"], nargs=-1, required=True, metavar="INPUT...",
+                             type=click.Path(dir_okay=False)),
+              click.Option(["-o", "--out-dir"], required=True, metavar="DIR",
+                           type=click.Path(file_okay=False), help="Folder for the outputs (must exist)."),
+              click.Option(["--mask-pattern"], default="{stem}_mask.png", show_default=True,
+                           metavar="PATTERN",
+                           help="Mask file of each input; {stem} is the input's name without "
+                                "extension; relative to the input's folder unless absolute. "
+                                "A missing mask fails that file. Inputs that are another "
+                                "input's mask are skipped, so 'photos/*.png' works."),
+              click.Option(["--suffix"], default="", metavar="S",
+                           help="Appended to each output's stem: DIR/{stem}S.{ext}."),
+              click.Option(["-j", "--jobs"], type=Number(int, 1), default=1, show_default=True,
+                           metavar="N", help="Worker processes; results are byte-identical to N=1.")]
+    params += engine_options() + preset_options(preset)
+
+    def callback(inputs, out_dir, mask_pattern, suffix, jobs, **kwargs):
+        from .batch import WarpError, plan, run_batch
+        from .imageio import format_name
+
+        settings, quiet, verbose = settings_from(preset, kwargs)
+        try:
+            fmt = format_name(settings.fmt) if settings.fmt else None
+            todo = plan(inputs, out_dir, suffix, fmt, None if settings.mode == "plain" else mask_pattern)
+        except WarpError as err:
+            raise click_error(err) from err
+        failed = 0
+        with click.progressbar(length=len(todo), label="warping", file=sys.stderr,
+                               hidden=quiet or not sys.stderr.isatty()) as bar:
+            for job, error, summary in run_batch(settings, todo, jobs):
+                bar.update(1)
+                if error:
+                    failed += 1
+                    click.echo(f"featurewarp: error: {job.input}: {error}", err=True)
+                else:
+                    report_warnings(summary, quiet, verbose)
+        if failed:
+            raise click.ClickException(f"{failed} of {len(todo)} files failed")
+
+    doc = (f"Warp every INPUT with {preset.name} into --out-dir, each with its own mask.\n\n"
+           + inspect.cleandoc(preset.__doc__ or preset.summary))
+    return click.Command(preset.name, params=params, callback=callback, help=doc,
+                         short_help=preset.summary, no_args_is_help=True)
 
 
 class PresetGroup(click.Group):
-    """``featurewarp warp``: one subcommand per registered preset, built from its declaration."""
+    """A group with one subcommand per registered preset, built from its declaration."""
+
+    make_command = staticmethod(warp_command)
 
     def list_commands(self, ctx):
         return list(plugins.names())
@@ -116,7 +264,7 @@ class PresetGroup(click.Group):
                 raise click.ClickException(message)
 
             return broken
-        return preset_command(preset)
+        return self.make_command(preset)
 
     def resolve_command(self, ctx, args):
         try:
@@ -129,134 +277,72 @@ class PresetGroup(click.Group):
             raise
 
 
-def preset_command(preset) -> click.Command:
-    """Build the click command for one preset class."""
-    options = [click.Argument(["input"], type=click.Path(dir_okay=False)),
-               click.Argument(["output"], type=click.Path(dir_okay=False))]
-    options += shared_options()
-    for p in preset.params:
-        default_text = "unset" if p.default is None else f"{p.default:g}"
-        options.append(click.Option(
-            [f"--{p.cli_name}"], type=PresetValue(p), default=p.default, metavar=p.metavar,
-            help=f"{p.help} [default: {default_text}; {p.range_text()}]"))
-    doc = (preset.__doc__ or preset.summary).strip()
+def compare_command(preset) -> click.Command:
+    """``featurewarp compare PRESET INPUT OUTPUT``: the labelled four-way panel."""
+    params = [click.Argument(["input"], type=click.Path(dir_okay=False, allow_dash=True)),
+              click.Argument(["output"], type=click.Path(dir_okay=False, allow_dash=True)),
+              click.Option(["-m", "--mask"], type=click.Path(dir_okay=False, allow_dash=True),
+                           metavar="PATH", help="Feature mask (as for warp)."),
+              click.Option(["--grid", "draw_grid"], is_flag=True,
+                           help="Draw the deformed grid over the three results.")]
+    params += [o for o in engine_options() if o.name != "mode"] + preset_options(preset)
 
-    def callback(input, output, **kwargs):
-        shared = {k: kwargs.pop(k) for k in
-                  ("mask", "mode", "cell", "feature_weight", "decay", "formulation", "background",
-                   "interp", "report")}
-        run_warp(preset, input, output, preset_params=kwargs, **shared)
+    def callback(input, output, mask, draw_grid, **kwargs):
+        from .batch import WarpError, compare_file
 
-    return click.Command(preset.name, params=options, callback=callback, help=doc,
+        kwargs["mode"] = "similarity"
+        settings, quiet, verbose = settings_from(preset, kwargs)
+        try:
+            summary = compare_file(settings, input, output, mask, draw_grid)
+        except WarpError as err:
+            raise click_error(err) from err
+        report_warnings(summary, quiet, verbose)
+
+    doc = (f"Write one labelled panel: input with the mask tinted | plain | rigid | similarity "
+           f"({preset.name}).\n\n" + inspect.cleandoc(preset.__doc__ or preset.summary))
+    return click.Command(preset.name, params=params, callback=callback, help=doc,
                          short_help=preset.summary, no_args_is_help=True)
 
 
-def check_output_path(path: str, param: str, image: bool = True) -> None:
-    """Fail with a usage error unless ``path`` can be written (with a known image format)."""
-    from .imageio import output_format
+class CompareGroup(PresetGroup):
+    """``featurewarp compare``: the same presets, each as a comparison panel."""
 
-    if image:
-        try:
-            output_format(path)
-        except ValueError as err:
-            fail_usage(str(err), param)
-    directory = os.path.dirname(os.path.abspath(path))
-    if not os.path.isdir(directory):
-        fail_usage(f"directory {directory} does not exist", param)
-    if not os.access(directory, os.W_OK):
-        fail_usage(f"directory {directory} is not writable", param)
-    if os.path.isdir(path):
-        fail_usage(f"{path} is a directory", param)
+    make_command = staticmethod(compare_command)
 
 
-def run_warp(preset, input, output, *, mask, mode, cell, feature_weight, decay, formulation,
-             background, interp, report, preset_params):
-    """Load, warp, render and write one image (the body of ``featurewarp warp PRESET``)."""
-    from . import imageio
-    from .api import FeatureWarper
+class BatchGroup(PresetGroup):
+    """``featurewarp batch``: the same presets, each as a batch command."""
 
-    timings = {}
-    t0 = time.perf_counter()
-    if not os.path.isfile(input):
-        fail_usage(f"{input} does not exist" if not os.path.exists(input) else f"{input} is not a file", "INPUT")
-    check_output_path(output, "OUTPUT")
-    if report:
-        check_output_path(report, "--report", image=False)
-    _, has_alpha, _ = imageio.output_format(output)
-    if background is None:
-        background_rgb = None if has_alpha else (255, 255, 255)
-    else:
-        try:
-            background_rgb = imageio.parse_colour(background)
-        except ValueError as err:
-            fail_usage(str(err), "--background")
-        if background_rgb is None and not has_alpha:
-            fail_usage(f"{os.path.splitext(output)[1]} has no alpha channel; "
-                       "use a colour or a PNG, WebP or TIFF output", "--background")
-
-    try:
-        image = imageio.read_image(input)
-    except imageio.ImageError as err:
-        raise click.ClickException(str(err)) from None
-    height, width = image.shape[:2]
-    feature_mask = None
-    if mask is not None and mode != "plain":
-        if not os.path.isfile(mask):
-            fail_usage(f"{mask} does not exist", "--mask")
-        try:
-            feature_mask = imageio.mask_from_image(imageio.read_image(mask))
-        except imageio.ImageError as err:
-            raise click.ClickException(f"mask: {err}") from None
-        if feature_mask.shape != (height, width):
-            fail_usage(f"mask is {feature_mask.shape[1]}x{feature_mask.shape[0]} but "
-                       f"{input} is {width}x{height}", "--mask")
-    timings["load"] = time.perf_counter() - t0
-
-    try:
-        warp = preset(width, height, **preset_params)
-    except ValueError as err:
-        fail_usage(str(err))
-    warper = FeatureWarper(width, height, feature_mask, cell=cell, feature_weight=feature_weight,
-                           decay=decay, formulation=formulation)
-    mesh = warper.solve(warp, mode)
-    result = warper.render(image, mesh, interp, background_rgb)
-    timings.update(mesh.info["timings"])
-
-    t1 = time.perf_counter()
-    try:
-        data = imageio.encode_image(result, output)
-        imageio.write_atomic(output, data)
-    except (imageio.ImageError, OSError) as err:
-        raise click.ClickException(f"cannot write {output}: {err}") from None
-    timings["write"] = time.perf_counter() - t1
-
-    if report:
-        from .report import build_report
-
-        doc = build_report(input, output, image, result, warp, mesh, timings)
-        try:
-            imageio.write_atomic(report, (json.dumps(doc, indent=2) + "\n").encode())
-        except OSError as err:
-            raise click.ClickException(f"cannot write report {report}: {err}") from None
+    make_command = staticmethod(batch_command)
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
+EPILOG = """\b
+Shell completion (bash; use zsh_source or fish_source for zsh or fish):
+  eval "$(_FEATUREWARP_COMPLETE=bash_source featurewarp)"
+"""
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100},
+             epilog=EPILOG)
 @click.version_option(__version__, "-V", "--version", prog_name="featurewarp")
-@click.option("--debug", is_flag=True, help="Show a traceback on unexpected errors.")
-@click.pass_context
-def cli(ctx, debug):
+@click.option("--debug", is_flag=True, help="Show a traceback with processing errors.")
+def cli(debug):
     """Warp images while the features marked in a mask keep their shape.
 
     Features (faces, people, logos, products) only rotate and scale uniformly;
-    the background absorbs the rest of the warp.
+    the background absorbs the rest of the warp. Exit status: 0 success,
+    1 processing failure (or images that differ, for diff), 2 usage error.
 
     \b
     Examples:
       featurewarp warp stretch banner.jpg wide.jpg --mask banner_mask.png --sx 2
       featurewarp warp swirl in.png out.png -m mask.png --angle 120 --report r.json
+      cat in.jpg | featurewarp warp bulge - png:- -m mask.png > out.png
+      featurewarp batch swirl photos/*.jpg --out-dir out --jobs 8 --angle 90
+      featurewarp compare arc photo.jpg panel.png -m mask.png --angle 120 --grid
+      featurewarp diff out.png golden.png --max-rmse 0.5
       featurewarp warps            # presets, their options, defaults and ranges
     """
-    ctx.obj = {"debug": debug}
 
 
 @cli.group(cls=PresetGroup, context_settings={"help_option_names": ["-h", "--help"]},
@@ -264,9 +350,85 @@ def cli(ctx, debug):
 def warp():
     """Warp INPUT with PRESET into OUTPUT, keeping masked features in shape.
 
-    The output format follows OUTPUT's extension (png, jpg, webp, tif, bmp).
-    Run 'featurewarp warp PRESET --help' for a preset's own options.
+    The output format follows OUTPUT's extension (png, jpg, webp, tif, bmp), an
+    ImageMagick-style prefix (png:out.bin) or --format. '-' as INPUT reads stdin,
+    '-' as OUTPUT writes stdout. Run 'featurewarp warp PRESET --help' for a preset's
+    own options.
     """
+
+
+@cli.group(cls=BatchGroup, context_settings={"help_option_names": ["-h", "--help"]},
+           subcommand_metavar="PRESET INPUT... --out-dir DIR [OPTIONS]")
+def batch():
+    """Warp many images with PRESET, each with its mask, into one folder.
+
+    One line on stderr per failed file; the others are still written; exit 1
+    if any failed. A progress bar is shown when stderr is a terminal.
+    """
+
+
+@cli.group(cls=CompareGroup, context_settings={"help_option_names": ["-h", "--help"]},
+           subcommand_metavar="PRESET INPUT OUTPUT [OPTIONS]")
+def compare():
+    """Show what featurewarp does: input with the mask tinted | plain | rigid | similarity.
+
+    One factorization serves the three warps. Run 'featurewarp compare PRESET --help'
+    for the options.
+    """
+
+
+@cli.command("diff")
+@click.argument("a", type=click.Path(dir_okay=False, allow_dash=True))
+@click.argument("b", type=click.Path(dir_okay=False, allow_dash=True))
+@click.option("--max-rmse", type=Number(float, 0), metavar="X", help="Pass if RMSE <= X.")
+@click.option("--min-psnr", type=Number(float), metavar="DB", help="Pass if PSNR >= DB.")
+@click.option("--max-pixels-off", type=Number(int, 0), metavar="N",
+              help="Pass if at most N pixels differ by more than --tolerance in some channel.")
+@click.option("--tolerance", type=Number(float, 0), default=0.0, show_default=True, metavar="T",
+              help="Per-sample difference (0..255 scale) that still counts as equal.")
+@click.option("--diff-image", type=click.Path(dir_okay=False), metavar="PATH",
+              help="Write A in faded gray with the pixels off in red.")
+@click.option("-q", "--quiet", is_flag=True, help="Print no metrics; only the exit status tells.")
+def diff_command(a, b, max_rmse, min_psnr, max_pixels_off, tolerance, diff_image, quiet):
+    """Compare images A and B (e.g. an output with its golden file).
+
+    Prints RMSE, PSNR, the largest absolute difference and the pixels off, on
+    the 0..255 scale (16-bit samples divided by 257), every channel and alpha
+    included. Exit 0 within tolerance, 1 beyond it or when the sizes or channel
+    counts differ. Without --max-rmse, --min-psnr or --max-pixels-off the images
+    must match within --tolerance everywhere. One of A and B may be '-' (stdin).
+    """
+    from . import diff, imageio
+    from .batch import WarpError, read_input
+
+    if a == "-" and b == "-":
+        raise click.UsageError("only one of A and B can be '-' (stdin)")
+    if diff_image:
+        try:
+            if diff_image == "-":
+                raise ValueError("cannot be '-' (stdout holds the metrics)")
+            path, fmt = imageio.output_target(diff_image)
+            imageio.check_writable(path)
+        except ValueError as err:
+            raise click.BadParameter(str(err), param_hint="'--diff-image'") from None
+    try:
+        first, second = read_input(a, "A", None), read_input(b, "B", None)
+    except WarpError as err:
+        raise click_error(err) from err
+    reason = diff.mismatch(first, second)
+    if reason:
+        raise click.ClickException(f"{a} and {b} cannot be compared: {reason}")
+    result = diff.compare(first, second, tolerance)
+    if not quiet:
+        click.echo("\n".join(result.lines()))
+    if diff_image:
+        try:
+            imageio.write_atomic(path, imageio.encode_image(diff.highlight(first, result.off), fmt))
+        except (imageio.ImageError, OSError) as err:
+            raise click.ClickException(f"cannot write {path}: {err}") from err
+    broken = diff.failures(result, max_rmse, min_psnr, max_pixels_off)
+    if broken:
+        raise click.ClickException(f"{a} and {b} differ beyond tolerance: {'; '.join(broken)}")
 
 
 @cli.command("warps")
@@ -296,29 +458,50 @@ def list_warps(as_json):
         click.echo()
 
 
+def one_line_warning(message, category, filename, lineno, file=None, line=None):
+    """Show a Python warning (e.g. numpy's overflow) as one line on stderr."""
+    click.echo(f"featurewarp: warning: {message} ({os.path.basename(filename)}:{lineno})", err=True)
+
+
 def main(argv=None):
     """Console-script entry point.
 
     Every error is one line on stderr: exit 2 for usage errors, 1 for processing
-    failures (and for anything unexpected; ``--debug`` shows its traceback).
+    failures (and for anything unexpected). ``featurewarp --debug ...`` also
+    prints the traceback of processing failures.
     """
     argv = sys.argv[1:] if argv is None else list(argv)
+    leading = []
+    for arg in argv:                       # global options come before the command
+        if not arg.startswith("-"):
+            break
+        leading.append(arg)
+    debug = "--debug" in leading
     try:
-        code = cli.main(args=argv, prog_name="featurewarp", standalone_mode=False)
+        with warnings.catch_warnings():
+            if not debug:
+                warnings.showwarning = one_line_warning
+            code = cli.main(args=argv, prog_name="featurewarp", standalone_mode=False)
     except click.exceptions.NoArgsIsHelpError as err:
         err.show()
         code = err.exit_code
-    except click.ClickException as err:
+    except click.UsageError as err:
         click.echo(f"featurewarp: error: {err.format_message()}", err=True)
         code = err.exit_code
     except click.exceptions.Abort:
         click.echo("featurewarp: aborted", err=True)
         code = 1
-    except Exception as err:  # anything the commands did not anticipate
-        if "--debug" in argv:
-            raise
-        click.echo(f"featurewarp: error: {type(err).__name__}: {err} (--debug shows a traceback)", err=True)
+    except BrokenPipeError:                # the reader of stdout went away: nothing to report
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         code = 1
+    except Exception as err:  # ClickException (processing) and anything unanticipated
+        if debug:
+            traceback.print_exception(err, file=sys.stderr)
+        if isinstance(err, click.ClickException):
+            message, code = err.format_message(), err.exit_code
+        else:
+            message, code = f"{type(err).__name__}: {err} (--debug shows a traceback)", 1
+        click.echo(f"featurewarp: error: {message}", err=True)
     sys.exit(code if isinstance(code, int) else 0)
 
 

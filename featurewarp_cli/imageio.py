@@ -1,23 +1,42 @@
-"""Reading images and masks, parsing colours, and writing outputs atomically."""
+"""Reading images and masks, output formats, parsing colours, and writing outputs atomically.
+
+``-`` stands for stdin (reading) or stdout (writing). An output may carry an
+ImageMagick-style format prefix (``png:-``, ``jpg:out.bin``). Image sizes are read
+from the file header before any pixel is decoded, so that oversized images are
+refused cheaply.
+"""
 
 from __future__ import annotations
 
+import contextlib
 import os
+import struct
+import sys
 import tempfile
 
 import cv2
 import numpy as np
 
-#: Output formats by extension: (OpenCV extension, has alpha, encoder parameters).
+cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
+
+#: Output formats by name: (OpenCV extension, has alpha, fixed encoder parameters).
+#: Every encoder setting is pinned so that the same pixels always give the same bytes.
 FORMATS = {
-    ".png": (".png", True, [cv2.IMWRITE_PNG_COMPRESSION, 6]),
-    ".jpg": (".jpg", False, [cv2.IMWRITE_JPEG_QUALITY, 95]),
-    ".jpeg": (".jpg", False, [cv2.IMWRITE_JPEG_QUALITY, 95]),
-    ".webp": (".webp", True, [cv2.IMWRITE_WEBP_QUALITY, 101]),
-    ".tif": (".tiff", True, []),
-    ".tiff": (".tiff", True, []),
-    ".bmp": (".bmp", False, []),
+    "png": (".png", True, [cv2.IMWRITE_PNG_COMPRESSION, 6, cv2.IMWRITE_PNG_STRATEGY, 0]),
+    "jpg": (".jpg", False, [cv2.IMWRITE_JPEG_QUALITY, 95, cv2.IMWRITE_JPEG_PROGRESSIVE, 0,
+                            cv2.IMWRITE_JPEG_OPTIMIZE, 0]),
+    # 101: lossless (libwebp may still clear the colour under fully transparent pixels)
+    "webp": (".webp", True, [cv2.IMWRITE_WEBP_QUALITY, 101]),
+    "tiff": (".tiff", True, [cv2.IMWRITE_TIFF_COMPRESSION, 5]),    # 5: LZW
+    "bmp": (".bmp", False, []),
 }
+#: Other spellings of the format names (also accepted as file extensions).
+ALIASES = {"jpeg": "jpg", "tif": "tiff"}
+#: Formats that only store 8-bit samples (16-bit results are scaled down).
+EIGHT_BIT = {"jpg", "webp", "bmp"}
+
+#: Default limit on width * height of an input (``--max-pixels``).
+MAX_PIXELS = 200_000_000
 
 COLOURS = {
     "white": (255, 255, 255), "black": (0, 0, 0), "red": (255, 0, 0), "green": (0, 128, 0),
@@ -27,18 +46,69 @@ COLOURS = {
     "brown": (165, 42, 42), "navy": (0, 0, 128), "silver": (192, 192, 192),
 }
 
+#: EXIF orientation (2..8) -> the array operation that shows the image upright.
+_ORIENTATIONS = {
+    2: lambda a: a[:, ::-1],
+    3: lambda a: a[::-1, ::-1],
+    4: lambda a: a[::-1],
+    5: lambda a: a.swapaxes(0, 1),
+    6: lambda a: np.rot90(a, -1),
+    7: lambda a: np.rot90(a, 2).swapaxes(0, 1),
+    8: lambda a: np.rot90(a, 1),
+}
+
 
 class ImageError(Exception):
     """An image or mask that cannot be read, decoded or written."""
 
 
-def output_format(path: str) -> tuple[str, bool, list]:
-    """Encoder extension, alpha support and parameters for an output path."""
-    ext = os.path.splitext(path)[1].lower()
-    if ext not in FORMATS:
-        known = ", ".join(sorted(FORMATS))
-        raise ValueError(f"unknown output format {ext or '(no extension)'!r} for {path}; use one of {known}")
-    return FORMATS[ext]
+def format_name(text: str) -> str | None:
+    """Canonical format name for ``png``, ``JPEG``, ``.tif`` ...; None if not an output format."""
+    name = text.lower().lstrip(".")
+    name = ALIASES.get(name, name)
+    return name if name in FORMATS else None
+
+
+def split_prefix(spec: str) -> tuple[str | None, str]:
+    """Split an ImageMagick-style ``format:path`` into (format name, path).
+
+    Only a known format name counts as a prefix, so ``C:/x.png`` or ``a:b.png``
+    stay plain paths. Without a prefix the format is None.
+    """
+    head, sep, rest = spec.partition(":")
+    if sep and rest and format_name(head) and not head.startswith("."):
+        return format_name(head), rest
+    return None, spec
+
+
+def output_target(spec: str, fmt: str | None = None) -> tuple[str, str]:
+    """Path and format name of an OUTPUT argument.
+
+    The format comes from a ``png:``-style prefix, else ``fmt`` (``--format``),
+    else the path's extension. ``-`` (stdout) needs a prefix or ``fmt``.
+
+    Raises
+    ------
+    ValueError
+        Unknown format, conflicting prefix and ``fmt``, or stdout without a format.
+    """
+    prefix, path = split_prefix(spec)
+    wanted = format_name(fmt) if fmt else None
+    if fmt and wanted is None:
+        raise ValueError(f"unknown format {fmt!r}; use one of {', '.join(FORMATS)}")
+    if prefix and wanted and prefix != wanted:
+        raise ValueError(f"{spec} asks for {prefix} but --format says {wanted}")
+    name = prefix or wanted
+    if name is None:
+        if path == "-":
+            raise ValueError("writing to stdout ('-') needs --format or a prefix such as png:-")
+        ext = os.path.splitext(path)[1]
+        name = format_name(ext) if ext else None
+        if name is None:
+            known = ", ".join(sorted(set(FORMATS) | set(ALIASES)))
+            raise ValueError(f"unknown output format {ext or '(no extension)'!r} for {path}; "
+                             f"use one of {known}, or --format")
+    return path, name
 
 
 def parse_colour(text: str):
@@ -64,55 +134,245 @@ def parse_colour(text: str):
     raise ValueError(f"{text!r} is not a colour (use #rrggbb, a name such as white, or transparent)")
 
 
-def read_image(path: str) -> np.ndarray:
-    """Decode an image file keeping its depth and alpha (OpenCV channel order).
+def read_bytes(path: str) -> bytes:
+    """The bytes of a file, or of stdin for ``-``.
 
     Raises
     ------
     ImageError
-        When the file is missing, empty or cannot be decoded.
+        When the file cannot be read.
     """
+    if path == "-":
+        if sys.stdin.isatty():
+            raise ImageError("stdin is a terminal; pipe an image into it (or give a file name)")
+        return sys.stdin.buffer.read()
     try:
-        data = np.fromfile(path, dtype=np.uint8)
+        with open(path, "rb") as fh:
+            return fh.read()
     except OSError as err:
         raise ImageError(f"cannot read {path}: {err.strerror or err}") from None
-    return decode_image(data, path)
 
 
-def decode_image(data: np.ndarray, name: str) -> np.ndarray:
-    """Decode image bytes (``(n,) uint8``); ``name`` is used in error messages."""
-    if data.size == 0:
+def read_image(path: str, max_pixels: int | None = MAX_PIXELS) -> np.ndarray:
+    """Read and decode an image file (``-``: stdin); see :func:`decode_image`."""
+    return decode_image(read_bytes(path), "stdin" if path == "-" else path, max_pixels)
+
+
+def _tiff_tags(data: bytes) -> dict[int, int]:
+    """Integer tags of the first IFD of a TIFF structure (a TIFF file or an EXIF block)."""
+    order = {b"II": "<", b"MM": ">"}.get(data[:2])
+    if order is None:
+        return {}
+    tags: dict[int, int] = {}
+    try:
+        (offset,) = struct.unpack_from(order + "I", data, 4)
+        (count,) = struct.unpack_from(order + "H", data, offset)
+        for k in range(count):
+            tag, kind, _, value = struct.unpack_from(order + "HHI4s", data, offset + 2 + 12 * k)
+            if kind in (3, 4):                                     # SHORT, LONG
+                tags[tag] = struct.unpack_from(order + ("H" if kind == 3 else "I"), value)[0]
+    except struct.error:
+        pass
+    return tags
+
+
+def _jpeg_segments(data: bytes):
+    """Yield (marker, payload) of a JPEG's header segments, up to the start of scan."""
+    i = 2
+    while i + 4 <= len(data) and data[i] == 0xFF:
+        marker = data[i + 1]
+        if marker == 0xFF:                                          # fill byte
+            i += 1
+            continue
+        if marker == 0x01 or 0xD0 <= marker <= 0xD8:               # markers without a length
+            i += 2
+            continue
+        (length,) = struct.unpack_from(">H", data, i + 2)
+        yield marker, data[i + 4 : i + 2 + length]
+        if marker == 0xDA:
+            return
+        i += 2 + length
+
+
+def image_size(data: bytes) -> tuple[int, int] | None:
+    """(width, height) from the header of a PNG, JPEG, WebP, TIFF, BMP or GIF; None if unknown.
+
+    Only the first bytes are parsed, no pixel is decoded.
+    """
+    try:
+        if data[:8] == b"\x89PNG\r\n\x1a\n" and data[12:16] == b"IHDR":
+            return struct.unpack_from(">II", data, 16)
+        if data[:2] == b"\xff\xd8":
+            for marker, payload in _jpeg_segments(data):
+                if 0xC0 <= marker <= 0xCF and marker not in (0xC4, 0xC8, 0xCC):   # start of frame
+                    height, width = struct.unpack_from(">HH", payload, 1)
+                    return width, height
+            return None
+        if data[:4] == b"RIFF" and data[8:12] == b"WEBP":
+            chunk = data[12:16]
+            if chunk == b"VP8 ":
+                width, height = struct.unpack_from("<HH", data, 26)
+                return width & 0x3FFF, height & 0x3FFF
+            if chunk == b"VP8L":
+                (bits,) = struct.unpack_from("<I", data, 21)
+                return (bits & 0x3FFF) + 1, ((bits >> 14) & 0x3FFF) + 1
+            if chunk == b"VP8X":
+                return 1 + int.from_bytes(data[24:27], "little"), 1 + int.from_bytes(data[27:30], "little")
+            return None
+        if data[:4] in (b"II*\x00", b"MM\x00*"):
+            tags = _tiff_tags(data)
+            return (tags[256], tags[257]) if 256 in tags and 257 in tags else None
+        if data[:2] == b"BM" and struct.unpack_from("<I", data, 14)[0] >= 40:
+            width, height = struct.unpack_from("<ii", data, 18)
+            return width, abs(height)
+        if data[:6] in (b"GIF87a", b"GIF89a"):
+            return struct.unpack_from("<HH", data, 6)
+    except struct.error:
+        return None
+    return None
+
+
+def exif_orientation(data: bytes) -> int:
+    """EXIF orientation (1..8) of a JPEG; 1 (upright) when it has none."""
+    if data[:2] != b"\xff\xd8":
+        return 1
+    try:
+        for marker, payload in _jpeg_segments(data):
+            if marker == 0xE1 and payload[:6] == b"Exif\x00\x00":
+                value = _tiff_tags(payload[6:]).get(0x0112, 1)
+                return value if value in _ORIENTATIONS else 1
+    except struct.error:
+        pass
+    return 1
+
+
+@contextlib.contextmanager
+def _captured_stderr():
+    """Collect what C libraries (libpng, libjpeg) print on file descriptor 2 instead of showing it.
+
+    Yields a list that holds the printed lines once the block has finished.
+    """
+    lines: list[str] = []
+    sys.stderr.flush()                                              # our own messages stay visible
+    try:
+        saved = os.dup(2)
+    except OSError:                                                 # no stderr at all
+        yield lines
+        return
+    with tempfile.TemporaryFile() as tmp:
+        os.dup2(tmp.fileno(), 2)
+        try:
+            yield lines
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            tmp.seek(0)
+            lines.extend(line for line in tmp.read().decode(errors="replace").splitlines() if line.strip())
+
+
+def check_pixels(width: int, height: int, name: str, max_pixels: int | None) -> None:
+    """Raise ImageError if a ``width`` x ``height`` image is empty or above ``max_pixels``."""
+    if width < 1 or height < 1:
+        raise ImageError(f"{name} has no pixels ({width}x{height})")
+    if max_pixels is not None and width * height > max_pixels:
+        raise ImageError(f"{name} is {width}x{height} = {width * height} pixels, above the limit "
+                         f"of {max_pixels} (--max-pixels)")
+
+
+def decode_image(data: bytes, name: str, max_pixels: int | None = MAX_PIXELS) -> np.ndarray:
+    """Decode image bytes (format sniffed from them) keeping depth and alpha.
+
+    The size in the header is checked against ``max_pixels`` before decoding;
+    JPEGs are turned upright according to their EXIF orientation; gray + alpha
+    becomes BGRA. Corrupt data that the decoder only warns about (libjpeg's
+    "Corrupt JPEG data", "Premature end") is refused as well.
+
+    Parameters
+    ----------
+    data : bytes
+    name : str
+        Used in error messages.
+    max_pixels : int or None
+        Largest accepted width * height; None: no limit.
+
+    Returns
+    -------
+    (h, w) or (h, w, C) ndarray, uint8 or uint16, OpenCV channel order.
+
+    Raises
+    ------
+    ImageError
+        When the data is empty, too large, or cannot be decoded.
+    """
+    if len(data) == 0:
         raise ImageError(f"{name} is empty")
-    image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
+    size = image_size(data)
+    if size is not None:
+        check_pixels(*size, name, max_pixels)
+    with _captured_stderr() as messages:
+        image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
+    detail = f" ({messages[-1]})" if messages else ""
     if image is None:
-        raise ImageError(f"{name} is not an image that can be decoded (corrupt or unsupported format)")
+        raise ImageError(f"{name} cannot be decoded (corrupt, truncated or not a supported "
+                         f"image){detail}")
+    corrupt = [m for m in messages if m.startswith(("Corrupt JPEG", "Premature end"))]
+    if corrupt:
+        raise ImageError(f"{name} is corrupt: {corrupt[0]}")
     if image.dtype not in (np.uint8, np.uint16):
         raise ImageError(f"{name} has unsupported sample type {image.dtype}")
+    check_pixels(image.shape[1], image.shape[0], name, max_pixels)
     if image.ndim == 3 and image.shape[2] == 2:      # gray + alpha: encoders want BGRA
         gray, alpha = image[:, :, 0], image[:, :, 1]
         image = np.dstack([gray, gray, gray, alpha])
+    orientation = exif_orientation(data)
+    if orientation != 1:
+        image = np.ascontiguousarray(_ORIENTATIONS[orientation](image))
     return image
 
 
 def mask_from_image(image: np.ndarray) -> np.ndarray:
-    """Boolean feature mask: gray value >= 128 (alpha, if any, is ignored)."""
-    if image.ndim == 3:
-        image = cv2.cvtColor(image[:, :, :3], cv2.COLOR_BGR2GRAY) if image.shape[2] >= 3 else image[:, :, 0]
-    if image.dtype == np.uint16:
-        return image >= 128 * 257
-    return image >= 128
+    """Boolean feature mask: gray value >= 128 of the mask composited over black.
+
+    Transparent pixels of a mask with alpha therefore never mark a feature.
+    """
+    top = np.iinfo(image.dtype).max
+    if image.ndim == 2:
+        gray = image.astype(np.float64)
+    else:
+        colour = image[:, :, :3] if image.shape[2] >= 3 else image[:, :, :1]
+        gray = cv2.cvtColor(colour, cv2.COLOR_BGR2GRAY) if colour.shape[2] == 3 else colour[:, :, 0]
+        gray = gray.astype(np.float64)
+        if image.shape[2] == 4:
+            gray = gray * image[:, :, 3] / top
+    return gray >= 128 * top / 255
 
 
-def encode_image(image: np.ndarray, path: str) -> bytes:
-    """Encode ``image`` in the format named by ``path``'s extension."""
-    ext, _, params = output_format(path)
-    if ext in (".jpg", ".bmp") and image.dtype != np.uint8:
-        image = (image // 257).astype(np.uint8)
-    if ext == ".jpg" and image.ndim == 3 and image.shape[2] == 4:
-        image = image[:, :, :3]
-    ok, buf = cv2.imencode(ext, image, params)
+def flatten(image: np.ndarray, rgb=(255, 255, 255)) -> np.ndarray:
+    """Composite a BGRA image over an opaque (r, g, b) colour (0..255); other images unchanged."""
+    if image.ndim != 3 or image.shape[2] != 4:
+        return image
+    top = np.iinfo(image.dtype).max
+    alpha = image[:, :, 3:].astype(np.float64) / top
+    background = np.array(rgb[::-1], np.float64) * top / 255
+    out = image[:, :, :3] * alpha + background * (1 - alpha)
+    return np.round(out).astype(image.dtype)
+
+
+def encode_image(image: np.ndarray, fmt: str, background=(255, 255, 255)) -> bytes:
+    """Encode ``image`` as format ``fmt`` (a name of :data:`FORMATS`) with fixed settings.
+
+    16-bit images are scaled to 8 bits for formats that need it, and alpha is
+    composited over ``background`` (r, g, b) for formats without alpha.
+    """
+    ext, has_alpha, params = FORMATS[fmt]
+    if not has_alpha:
+        image = flatten(image, background)
+    if fmt in EIGHT_BIT and image.dtype != np.uint8:
+        image = ((image.astype(np.uint32) + 128) // 257).astype(np.uint8)
+    with _captured_stderr():
+        ok, buf = cv2.imencode(ext, image, params)
     if not ok:
-        raise ImageError(f"cannot encode the result as {ext}")
+        raise ImageError(f"cannot encode the result as {fmt}")
     return buf.tobytes()
 
 
@@ -137,3 +397,29 @@ def write_atomic(path: str, data: bytes) -> None:
         if os.path.exists(tmp):
             os.unlink(tmp)
         raise
+
+
+def write_output(path: str, data: bytes) -> None:
+    """Write ``data`` to stdout for ``-``, else atomically to ``path``."""
+    if path == "-":
+        sys.stdout.buffer.write(data)
+        sys.stdout.buffer.flush()
+    else:
+        write_atomic(path, data)
+
+
+def check_writable(path: str) -> None:
+    """Raise ValueError unless a file ``path`` can be created (its directory exists and is writable).
+
+    Writability is probed by creating and removing a temporary file, which is
+    also right for root and for read-only file systems.
+    """
+    directory = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(directory):
+        raise ValueError(f"directory {directory} does not exist")
+    if os.path.isdir(path):
+        raise ValueError(f"{path} is a directory")
+    try:
+        tempfile.TemporaryFile(dir=directory).close()
+    except OSError as err:
+        raise ValueError(f"directory {directory} is not writable ({err.strerror or err})") from None

@@ -56,6 +56,19 @@ def max_step(start: np.ndarray, end: np.ndarray, triangles: np.ndarray) -> float
     return 1.0 if first > 1.0 else first
 
 
+def grid_areas(grid: Grid, points: np.ndarray) -> np.ndarray:
+    """Signed areas of ``grid.triangles()`` under node positions ``points``, by slicing
+    the node array (several times faster than gathering corners by index): (2K,)."""
+    c = points.reshape(grid.ny, grid.nx, 2)
+    tl, tr, br, bl = c[:-1, :-1], c[:-1, 1:], c[1:, 1:], c[1:, :-1]
+
+    def cross(u, v):
+        return 0.5 * (u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0])
+
+    diagonal = br - tl
+    return np.concatenate([cross(tr - tl, diagonal).ravel(), cross(diagonal, bl - tl).ravel()])
+
+
 def flipped(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     """(M,) bool: triangles whose signed area is <= 0."""
     return signed_areas(points, triangles) <= 0
@@ -73,6 +86,12 @@ def trouble_quads(grid: Grid, points: np.ndarray, triangles: np.ndarray, radius:
     return quads.ravel().astype(bool)
 
 
+#: untangle gives up when, over this many steps, the fold count has not fallen below
+#: this fraction of what it was.
+PROGRESS_EVERY = 20
+PROGRESS_RATIO = 0.9
+
+
 def area_gradients(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     """Gradient of each triangle's signed area with respect to its three corners.
 
@@ -88,25 +107,29 @@ def area_gradients(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     return np.stack([half_perp(b, c), half_perp(c, a), half_perp(a, b)], axis=1)
 
 
-def untangle(solve, energy, x: np.ndarray, triangles: np.ndarray, floor: np.ndarray,
-             stiffness: np.ndarray, max_iterations: int = 80) -> tuple[np.ndarray, int]:
+def untangle(solve, residual, x: np.ndarray, triangles: np.ndarray, floor: np.ndarray,
+             stiffness: np.ndarray, max_iterations: int = 80, areas=None) -> tuple[np.ndarray, int]:
     """Open folded or crushed triangles while staying near the least-squares optimum.
 
-    Minimises phi(x) = energy(x) + sum_t kappa_t max(0, floor_t - area_t(x))^2
-    by gradient descent preconditioned with the factored quadratic energy: the
-    direction is ``solve(force) - x`` with ``force = -grad(penalty)``, followed by a
-    backtracking line search on phi (starting from twice the last accepted step), so phi never increases. kappa starts where
-    the penalty is as stiff as the quadratic energy at each triangle and grows
-    4-fold (at most 8 times) whenever ten steps pass with folds left. Tied features stay exact
-    (every iterate is a solution of the same parametrized system). Stops as
-    soon as no triangle is folded and none is below half its floor.
+    Minimises phi(x) = E(x) + sum_t kappa_t max(0, floor_t - area_t(x))^2, where
+    E(x) = 1/2 |r(x)|^2 is the least-squares energy of the weighted residual
+    r, by gradient descent preconditioned with the factored quadratic energy:
+    the direction is ``solve(force) - x`` with ``force = -grad(penalty)``,
+    followed by a backtracking line search on phi (starting from twice the last
+    accepted step; E along the line is an exact quadratic), so phi never
+    increases. kappa starts where the penalty is as stiff as the quadratic
+    energy at each triangle and grows 4-fold (at most 8 times) whenever ten
+    steps pass with folds left. Tied features stay exact (every iterate solves
+    the same parametrized system). Stops as soon as no triangle is folded and
+    none is below half its floor, and gives up early when the number of folds
+    stops falling.
 
     Parameters
     ----------
     solve : callable
-        ``solve(force)`` -> (N, 2) minimiser of energy(x) - force . x.
-    energy : callable
-        ``energy(x)`` -> float, the quadratic energy (consistent with ``solve``).
+        ``solve(force)`` -> (N, 2) minimiser of E(x) - force . x.
+    residual : callable
+        ``residual(x)`` -> weighted residual vector r(x) (affine in x).
     x : (N, 2) ndarray
         Starting point: the unconstrained optimum ``solve(0)``.
     triangles : (M, 3) ndarray of int
@@ -115,6 +138,8 @@ def untangle(solve, energy, x: np.ndarray, triangles: np.ndarray, floor: np.ndar
     stiffness : (N,) ndarray
         Diagonal of the quadratic energy's Hessian per node.
     max_iterations : int
+    areas : callable, optional
+        ``areas(x)`` -> signed area per triangle (default :func:`grid.signed_areas`).
 
     Returns
     -------
@@ -122,33 +147,47 @@ def untangle(solve, energy, x: np.ndarray, triangles: np.ndarray, floor: np.ndar
         The last iterate (check it for folds).
     iterations : int
     """
+    if areas is None:
+        def areas(points):
+            return signed_areas(points, triangles)
     grads = area_gradients(x, triangles)
     kappa = stiffness[triangles].mean(axis=1) / np.maximum(2.0 * (grads * grads).sum(axis=(1, 2)), 1e-12)
 
     def penalty(points):
-        deficit = np.maximum(0.0, floor - signed_areas(points, triangles))
+        deficit = np.maximum(0.0, floor - areas(points))
         return float((kappa * deficit * deficit).sum()), deficit
 
     stalled = boosts = 0
     alpha = 0.5
+    checkpoint = None
+    r0 = residual(x)
     for iteration in range(max_iterations):
-        areas = signed_areas(x, triangles)
-        if areas.min() > 0 and np.all(areas >= 0.5 * floor):
+        current = areas(x)
+        if current.min() > 0 and np.all(current >= 0.5 * floor):
             return x, iteration
+        if iteration % PROGRESS_EVERY == 0:
+            folds = int(np.count_nonzero(current <= 0))
+            if checkpoint is not None and folds > PROGRESS_RATIO * checkpoint:
+                return x, iteration          # not converging: let the caller relax the features
+            checkpoint = folds
         pen, deficit = penalty(x)
-        phi = energy(x) + pen
         active = np.flatnonzero(deficit > 0)
         grads = area_gradients(x, triangles[active])
         contributions = (2.0 * kappa[active] * deficit[active])[:, None, None] * grads
         corners = triangles[active].ravel()
         force = np.stack([np.bincount(corners, contributions[:, :, d].ravel(), minlength=x.shape[0])
                           for d in range(2)], axis=1)
-        direction = solve(force) - x
+        candidate = solve(force)
+        direction = candidate - x
+        rd = residual(candidate) - r0                  # r is affine: r(x + a d) = r0 + a rd
+        b, c = float((r0 * rd).sum()), float((rd * rd).sum())
+        phi = 0.5 * float((r0 * r0).sum()) + pen
         alpha = min(1.0, 2.0 * alpha)
         while alpha > 1e-6:
-            candidate = x + alpha * direction
-            if energy(candidate) + penalty(candidate)[0] < phi:
-                x = candidate
+            energy = 0.5 * float((r0 * r0).sum()) + alpha * b + 0.5 * alpha * alpha * c
+            if energy + penalty(x + alpha * direction)[0] < phi:
+                x = x + alpha * direction
+                r0 = r0 + alpha * rd
                 break
             alpha *= 0.5
         stalled += 1

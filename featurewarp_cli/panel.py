@@ -23,11 +23,12 @@ def as_bgr8(image: np.ndarray) -> np.ndarray:
     return image
 
 
-def draw_grid(image: np.ndarray, mesh, spacing_px: float = 16.0) -> np.ndarray:
+def draw_grid(image: np.ndarray, mesh, spacing_px: float | None = None) -> np.ndarray:
     """Draw the deformed grid lines over ``image`` (a copy, 8-bit BGR).
 
     Every k-th grid line is drawn so that lines are about ``spacing_px`` apart
-    in the source (the paper's Fig. 3).
+    in the source (the paper's Fig. 3); default: 1/20 of the source's shorter
+    side, at least 12 px.
 
     Parameters
     ----------
@@ -43,6 +44,8 @@ def draw_grid(image: np.ndarray, mesh, spacing_px: float = 16.0) -> np.ndarray:
     out = as_bgr8(image).copy()
     grid_x = np.unique(mesh.source[:, 0])
     grid_y = np.unique(mesh.source[:, 1])
+    if spacing_px is None:
+        spacing_px = max(12.0, min(np.ptp(grid_x), np.ptp(grid_y)) / 20.0)
     nx, ny = grid_x.size, grid_y.size
     nodes = mesh.target.reshape(ny, nx, 2)
     step_x = max(1, round(spacing_px / max(grid_x[1] - grid_x[0], 1e-9))) if nx > 1 else 1

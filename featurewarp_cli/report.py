@@ -44,6 +44,8 @@ def build_report(input_path, output_path, image, result, warp, mesh, timings) ->
         "preset": warp.name,
         "params": warp.values,
         "mode": info["mode"],
+        "formulation": info["formulation"],
+        "boundary": info["boundary"],
         "input": image_summary(input_path, image),
         "output": image_summary(output_path, result),
         "canvas": {"width": mesh.canvas[0], "height": mesh.canvas[1], "offset": list(warp.offset)},
@@ -52,4 +54,13 @@ def build_report(input_path, output_path, image, result, warp, mesh, timings) ->
         "solver": info["solver"],
         "seconds": {k: round(float(timings.get(k, 0.0)), 6) for k in stages},
         "flipped_triangles": info["flipped_triangles"],
+        "fold_guard": {
+            "flipped_before": info.get("flipped_before_guard", 0),
+            "flipped_after": info["flipped_triangles"],
+            "untangle_iterations": info.get("untangle_iterations", 0),
+            "release_rounds": info.get("release_rounds", 0),
+            "released_components": info.get("released_components", []),
+            "feature_blend": info.get("feature_blend", 1.0),
+        },
+        "quality": info["quality"],
     }

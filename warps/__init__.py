@@ -74,6 +74,8 @@ class Param:
             if self.default is None:
                 return None
             raise ValueError(f"--{self.cli_name} needs a value")
+        if isinstance(value, bool):
+            raise ValueError(f"--{self.cli_name}: {value!r} is not a number")
         try:
             number = float(value)
         except (TypeError, ValueError):
@@ -130,9 +132,13 @@ class Warp:
     name: ClassVar[str] = ""
     summary: ClassVar[str] = ""
     params: ClassVar[tuple[Param, ...]] = ()
-    #: Default border handling: 'fixed' (border nodes at W) or 'slide' (nodes on a
-    #: side that W keeps straight and axis-parallel may move along it).
-    boundary: ClassVar[str] = "fixed"
+    #: Default border handling: 'slide' lets nodes move along every side that W
+    #: maps onto an axis-parallel straight line (all sides of a stretch; the sides
+    #: of a swirl or bulge that lie outside its radius; none of an arc), so a
+    #: feature cut by the border keeps its shape while the canvas stays exact and
+    #: presets with the same free sides share one factorization. 'fixed' pins every
+    #: border node to W (the paper). A preset may override it.
+    boundary: ClassVar[str] = "slide"
 
     def __init__(self, width: int, height: int, /, **values):
         if width < 1 or height < 1:

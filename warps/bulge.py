@@ -22,7 +22,7 @@ class Bulge(Warp):
               "Centre magnification minus 1 (0.5: 1.5x). Injective only for -1 < S < 3, hence the range.",
               min=-0.95, max=2.95, metavar="S"),
         Param("radius", float, 0.5, "Radius of the effect as a fraction of min(width, height).",
-              min=0, min_open=True, max=10),
+              min=0.001, max=10),
     )
 
     def _setup(self, strength, radius):

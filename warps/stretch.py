@@ -2,22 +2,22 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from . import Param, Warp
 
 
 class Stretch(Warp):
-    """Scale x by ``sx`` and y by ``sy``; the canvas is round(w*sx) x round(h*sy).
+    """Scale x by sx and y by sy; the canvas is round(w*sx) x round(h*sy).
 
-    ``width`` / ``height`` name the target size in pixels instead of a factor.
+    --width / --height name the target size in pixels instead of a factor.
     """
 
     name = "stretch"
     summary = "Non-uniform scale to a new size or aspect ratio."
-    # The canvas edges stay straight lines, so border nodes may slide along them:
-    # a feature cut by the border keeps its shape and the canvas stays exact.
-    boundary = "slide"
+
     params = (
         Param("sx", float, 1.0, "Horizontal scale factor.", min=0, min_open=True, max=100),
         Param("sy", float, 1.0, "Vertical scale factor.", min=0, min_open=True, max=100),
@@ -26,8 +26,9 @@ class Stretch(Warp):
     )
 
     def _setup(self, sx, sy, width, height):
-        out_w = width if width is not None else max(1, round(self.width * sx))
-        out_h = height if height is not None else max(1, round(self.height * sy))
+        # Half-up rounding (Python's round() goes to even: 160.5 -> 160).
+        out_w = width if width is not None else max(1, math.floor(self.width * sx + 0.5))
+        out_h = height if height is not None else max(1, math.floor(self.height * sy + 0.5))
         self.canvas = (int(out_w), int(out_h))
         # Scale the pixel-edge extent exactly onto the canvas edge extent.
         self.scale = np.array([out_w / self.width, out_h / self.height])

@@ -21,7 +21,7 @@ class Swirl(Warp):
         Param("angle", float, 90.0, "Rotation at the centre in degrees, any real number "
               "(positive: clockwise on screen).", metavar="DEG"),
         Param("radius", float, 0.5, "Radius of the swirl as a fraction of min(width, height).",
-              min=0, min_open=True, max=10),
+              min=0.001, max=10),
     )
 
     def _setup(self, angle, radius):

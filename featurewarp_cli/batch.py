@@ -1,0 +1,386 @@
+"""Running warp jobs: one file (``featurewarp warp``) or many, optionally in parallel processes
+(``featurewarp batch``).
+
+Both commands go through :func:`warp_file`; a batch only adds output naming, mask
+lookup and a process pool. Nothing here depends on click: errors are
+:class:`WarpError`, which the command line turns into exit codes.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field
+from multiprocessing import get_context
+
+from . import imageio, plugins
+
+
+class WarpError(Exception):
+    """A warp that cannot be done.
+
+    Parameters
+    ----------
+    message : str
+        One line naming the problem.
+    param : str, optional
+        The argument or option at fault (``INPUT``, ``--mask`` ...).
+    usage : bool
+        True for a bad invocation (exit 2), False for a failure while processing (exit 1).
+    """
+
+    def __init__(self, message: str, param: str | None = None, usage: bool = False):
+        super().__init__(message)
+        self.message, self.param, self.usage = message, param, usage
+
+    def __str__(self) -> str:
+        return f"{self.param}: {self.message}" if self.param else self.message
+
+
+@dataclass(frozen=True)
+class Settings:
+    """Everything about a warp except its files: the preset, its parameters, engine and output options.
+
+    Attributes
+    ----------
+    preset : str
+        Registered preset name.
+    params : dict
+        The preset's parameter values by name.
+    mode, cell, feature_weight, decay, formulation, boundary
+        See :class:`featurewarp_cli.api.FeatureWarper`.
+    background : str or None
+        Colour text for uncovered pixels (see :func:`imageio.parse_colour`);
+        None: transparent where the format has alpha, else white.
+    interp : {'linear', 'cubic', 'lanczos'}
+    fmt : str or None
+        Output format name (``--format``); None: from the output's prefix or extension.
+    max_pixels : int
+        Largest accepted input width * height.
+    """
+
+    preset: str
+    params: dict = field(default_factory=dict)
+    mode: str = "similarity"
+    cell: int | None = None
+    feature_weight: float = 10.0
+    decay: float = 2.0
+    formulation: str = "exact"
+    boundary: str | None = None
+    background: str | None = None
+    interp: str = "cubic"
+    fmt: str | None = None
+    max_pixels: int = imageio.MAX_PIXELS
+
+
+def background_colour(text: str | None, fmt: str):
+    """(r, g, b) fill for uncovered pixels, or None (transparent), for output format ``fmt``."""
+    has_alpha = imageio.FORMATS[fmt][1]
+    if text is None:
+        return None if has_alpha else (255, 255, 255)
+    try:
+        rgb = imageio.parse_colour(text)
+    except ValueError as err:
+        raise WarpError(str(err), "--background", usage=True) from None
+    if rgb is None and not has_alpha:
+        raise WarpError(f"{fmt} has no alpha channel; use a colour or a png, webp or tiff output",
+                        "--background", usage=True)
+    return rgb
+
+
+def _writable(path: str, param: str) -> None:
+    try:
+        imageio.check_writable(path)
+    except ValueError as err:
+        raise WarpError(str(err), param, usage=True) from None
+
+
+def read_input(path: str, param: str, max_pixels: int | None):
+    """Decode an image argument (``-``: stdin); a missing file is a usage error, a bad one a
+    processing error (:class:`WarpError`). ``param`` names the argument in messages."""
+    if path != "-" and not os.path.isfile(path):
+        problem = "does not exist" if not os.path.exists(path) else "is not a file"
+        raise WarpError(f"{path} {problem}", param, usage=True)
+    try:
+        return imageio.read_image(path, max_pixels)
+    except imageio.ImageError as err:
+        raise WarpError(str(err), None if param == "INPUT" else param) from err
+
+
+def load_image_and_mask(settings: Settings, input: str, mask: str | None):
+    """Decode INPUT and its mask (checked against each other).
+
+    Returns
+    -------
+    image : ndarray
+    feature_mask : (h, w) bool ndarray or None
+        None without a mask or in plain mode.
+    warnings : list of str
+    """
+    use_mask = mask is not None and settings.mode != "plain"
+    if use_mask and mask != "-" and not os.path.isfile(mask):
+        raise WarpError(f"{mask} does not exist", "--mask", usage=True)
+    image = read_input(input, "INPUT", settings.max_pixels)
+    height, width = image.shape[:2]
+    feature_mask, warnings = None, []
+    if use_mask:
+        feature_mask = imageio.mask_from_image(read_input(mask, "--mask", settings.max_pixels))
+        if feature_mask.shape != (height, width):
+            raise WarpError(f"mask is {feature_mask.shape[1]}x{feature_mask.shape[0]} but the "
+                            f"image is {width}x{height}", "--mask", usage=True)
+        if not feature_mask.any():
+            warnings.append("the mask marks no feature (no pixel >= 128): plain warp")
+    return image, feature_mask, warnings
+
+
+def make_warper(settings: Settings, width: int, height: int, feature_mask):
+    """The preset's warp for this image size and a FeatureWarper (bad options: WarpError)."""
+    from .api import FeatureWarper
+
+    try:
+        preset = plugins.load(settings.preset)
+        warp = preset(width, height, **settings.params)
+        warper = FeatureWarper(width, height, feature_mask, cell=settings.cell,
+                               feature_weight=settings.feature_weight, decay=settings.decay,
+                               formulation=settings.formulation, boundary=settings.boundary)
+    except plugins.UnknownPreset as err:
+        raise WarpError(str(err), usage=True) from None
+    except ValueError as err:
+        raise WarpError(str(err), usage=True) from None
+    try:
+        imageio.check_pixels(*warp.canvas, "the output canvas", settings.max_pixels)
+    except imageio.ImageError as err:
+        raise WarpError(str(err)) from None
+    return warp, warper
+
+
+def check_outputs(settings: Settings, output: str, *extra: tuple[str | None, str]):
+    """Resolve OUTPUT's path and format and check that it and ``extra`` (path, option) can be written."""
+    try:
+        out_path, fmt = imageio.output_target(output, settings.fmt)
+    except ValueError as err:
+        raise WarpError(str(err), "OUTPUT", usage=True) from None
+    if out_path != "-":
+        _writable(out_path, "OUTPUT")
+    for path, param in extra:
+        if path:
+            _writable(path, param)
+    return out_path, fmt
+
+
+def write_image(out_path: str, fmt: str, image, background) -> None:
+    """Encode and write atomically (``-``: stdout); failures are WarpError."""
+    try:
+        imageio.write_output(out_path, imageio.encode_image(image, fmt, background or (255, 255, 255)))
+    except (imageio.ImageError, OSError) as err:
+        raise WarpError(f"cannot write {out_path}: {getattr(err, 'strerror', None) or err}") from err
+
+
+def warp_file(settings: Settings, input: str, output: str, mask: str | None = None,
+              report: str | None = None, save_grid: str | None = None, draw_grid: bool = False) -> dict:
+    """Load, warp, render and write one image (the body of ``featurewarp warp PRESET``).
+
+    Every check that needs no pixels runs before anything is decoded, and the
+    output is written atomically, so a failure leaves no partial file and an
+    existing OUTPUT untouched. OUTPUT may be INPUT.
+
+    Parameters
+    ----------
+    settings : Settings
+    input : str
+        Image path, ``-`` for stdin (a ``png:``-style prefix is ignored: the format is sniffed).
+    output : str
+        Image path, ``-`` for stdout, optionally with a ``png:``-style format prefix.
+    mask : str, optional
+        Feature-mask path (``-``: stdin, unless INPUT is stdin). None: plain warp.
+    report : str, optional
+        Where to write the JSON report.
+    save_grid : str, optional
+        Where to write the mesh as ``.npz`` (``source``, ``target``, ``triangles``).
+    draw_grid : bool
+        Draw the deformed grid over the result.
+
+    Returns
+    -------
+    dict
+        Summary for ``--verbose``: input and output size, solver, feature
+        components, flipped triangles, seconds, and warnings.
+
+    Raises
+    ------
+    WarpError
+    """
+    t0 = time.perf_counter()
+    input = imageio.split_prefix(input)[1]
+    if mask == "-" and input == "-":
+        raise WarpError("cannot be '-' when INPUT is '-' (stdin holds the image)", "--mask", usage=True)
+    out_path, fmt = check_outputs(settings, output, (report, "--report"), (save_grid, "--save-grid"))
+    background = background_colour(settings.background, fmt)
+    image, feature_mask, warnings = load_image_and_mask(settings, input, mask)
+    height, width = image.shape[:2]
+    timings = {"load": time.perf_counter() - t0}
+
+    warp, warper = make_warper(settings, width, height, feature_mask)
+    mesh = warper.solve(warp, settings.mode)
+    result = warper.render(image, mesh, settings.interp, background)
+    if draw_grid:
+        from .panel import draw_grid as overlay
+
+        result = overlay(result, mesh)
+    timings.update(mesh.info["timings"])
+
+    t1 = time.perf_counter()
+    write_image(out_path, fmt, result, background)
+    timings["write"] = time.perf_counter() - t1
+    if save_grid:
+        try:
+            imageio.write_atomic(save_grid, mesh.to_npz())
+        except OSError as err:
+            raise WarpError(f"cannot write {save_grid}: {err.strerror or err}") from err
+
+    if report:
+        from .report import build_report
+
+        doc = build_report(input, out_path, image, result, warp, mesh, timings)
+        try:
+            imageio.write_atomic(report, (json.dumps(doc, indent=2) + "\n").encode())
+        except OSError as err:
+            raise WarpError(f"cannot write report {report}: {err.strerror or err}") from err
+    flips = mesh.info.get("flipped_triangles", 0)
+    if flips:
+        warnings.append(f"{flips} triangles of the mesh fold over; the output may show folds")
+    return {
+        "input": "stdin" if input == "-" else input, "output": "stdout" if out_path == "-" else out_path,
+        "preset": settings.preset, "mode": settings.mode,
+        "size": (width, height), "canvas": tuple(mesh.canvas), "solver": mesh.info["solver"],
+        "components": len(mesh.info["components"]), "flipped_triangles": flips,
+        "seconds": time.perf_counter() - t0, "warnings": warnings,
+    }
+
+
+def compare_file(settings: Settings, input: str, output: str, mask: str | None = None,
+                 draw_grid: bool = False) -> dict:
+    """Write one labelled panel: input with the mask tinted | plain | rigid | similarity.
+
+    The three warps share one grid and one factorization. Other arguments as
+    for :func:`warp_file`; ``settings.mode`` is ignored.
+
+    Returns
+    -------
+    dict
+        Summary (as :func:`warp_file`'s, for the similarity result).
+    """
+    from dataclasses import replace
+
+    from . import panel
+
+    t0 = time.perf_counter()
+    input = imageio.split_prefix(input)[1]
+    out_path, fmt = check_outputs(settings, output)
+    background = background_colour(settings.background, fmt)
+    settings = replace(settings, mode="similarity")
+    image, feature_mask, warnings = load_image_and_mask(settings, input, mask)
+    height, width = image.shape[:2]
+    warp, warper = make_warper(settings, width, height, feature_mask)
+    tiles, labels = [panel.tint(image, feature_mask)], ["input + mask"]
+    for mode in ("plain", "rigid", "similarity"):
+        mesh = warper.solve(warp, mode)
+        result = warper.render(image, mesh, settings.interp, background)
+        tiles.append(panel.draw_grid(result, mesh) if draw_grid else result)
+        labels.append(f"{mode} {settings.preset}" if mode == "plain" else f"featurewarp {mode}")
+    write_image(out_path, fmt, panel.labelled_panel(tiles, labels), (255, 255, 255))
+    return {
+        "input": "stdin" if input == "-" else input, "output": "stdout" if out_path == "-" else out_path,
+        "preset": settings.preset, "mode": "compare", "size": (width, height),
+        "canvas": tuple(mesh.canvas), "solver": mesh.info["solver"],
+        "components": len(mesh.info["components"]), "flipped_triangles": mesh.info["flipped_triangles"],
+        "seconds": time.perf_counter() - t0, "warnings": warnings,
+    }
+
+
+@dataclass(frozen=True)
+class Job:
+    """One file of a batch: where to read, where to write, and its mask (None: no mask)."""
+
+    input: str
+    output: str
+    mask: str | None
+
+
+def plan(inputs, out_dir: str, suffix: str = "", fmt: str | None = None,
+         mask_pattern: str | None = "{stem}_mask.png") -> list[Job]:
+    """The jobs of a batch: one per input, minus inputs that are another input's mask.
+
+    Parameters
+    ----------
+    inputs : sequence of str
+    out_dir : str
+        Outputs are ``out_dir/{stem}{suffix}.{ext}``; ext is ``fmt`` or the input's extension.
+    suffix : str
+    fmt : str, optional
+        Output format name.
+    mask_pattern : str or None
+        Mask file name with ``{stem}`` (the input's name without extension),
+        relative to the input's folder unless absolute. None: no masks.
+
+    Raises
+    ------
+    WarpError
+        An output folder that is missing or not writable, a pattern that does not
+        format, or two inputs that would write the same output.
+    """
+    def mask_of(path):
+        if mask_pattern is None:
+            return None
+        stem = os.path.splitext(os.path.basename(path))[0]
+        try:
+            name = mask_pattern.format(stem=stem)
+        except (KeyError, IndexError, ValueError) as err:
+            raise WarpError(f"{mask_pattern!r} is not a valid pattern ({err!r}); use {{stem}}",
+                            "--mask-pattern", usage=True) from None
+        return os.path.join(os.path.dirname(path), name)
+
+    _writable(os.path.join(out_dir, "probe"), "--out-dir")
+    masks = {os.path.abspath(mask_of(p)) for p in inputs} if mask_pattern else set()
+    jobs, seen = [], {}
+    for path in inputs:
+        if os.path.abspath(path) in masks:
+            continue
+        stem, ext = os.path.splitext(os.path.basename(path))
+        output = os.path.join(out_dir, stem + suffix + ("." + fmt if fmt else ext))
+        key = os.path.abspath(output)
+        if key in seen:
+            raise WarpError(f"{seen[key]} and {path} would both write {output}; use --suffix or "
+                            "separate batches", usage=True)
+        seen[key] = path
+        jobs.append(Job(path, output, mask_of(path)))
+    return jobs
+
+
+def run_job(settings: Settings, job: Job) -> tuple[str | None, dict | None]:
+    """Run one batch job; returns (error message or None, summary or None). Never raises."""
+    try:
+        return None, warp_file(settings, job.input, job.output, job.mask)
+    except WarpError as err:
+        return str(err), None
+    except Exception as err:  # one bad file must not stop the batch
+        return f"{type(err).__name__}: {err}", None
+
+
+def run_batch(settings: Settings, jobs: list[Job], workers: int = 1):
+    """Run ``jobs``, yielding (job, error, summary) in the order of ``jobs``.
+
+    With ``workers`` > 1 the jobs run in that many fresh processes (spawned,
+    not forked, so that no thread pool of a parent library is inherited). The
+    outputs are byte-identical to a serial run.
+    """
+    workers = max(1, min(workers, len(jobs)))
+    if workers == 1:
+        for job in jobs:
+            yield (job, *run_job(settings, job))
+        return
+    with ProcessPoolExecutor(workers, mp_context=get_context("spawn")) as pool:
+        yield from ((job, *outcome) for job, outcome in
+                    zip(jobs, pool.map(run_job, [settings] * len(jobs), jobs)))

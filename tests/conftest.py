@@ -1,0 +1,79 @@
+"""Shared fixtures: small synthetic images and masks, built in memory (no files)."""
+
+from __future__ import annotations
+
+import os
+import sys
+
+import cv2
+import numpy as np
+import pytest
+
+sys.path.insert(0, os.path.dirname(__file__))
+
+from shapes import scene  # noqa: E402
+
+#: Two shapes well inside a 200 x 150 image (at least 2 cells from the border).
+SMALL_SHAPES = (
+    ("disc", 60, 60, 20, (0, 0, 255)),
+    ("square", 140, 90, 30, (0, 255, 0)),
+)
+SMALL_SIZE = (200, 150)
+
+
+@pytest.fixture
+def rng():
+    """A seeded random generator: every test run draws the same numbers."""
+    return np.random.default_rng(20240607)
+
+
+@pytest.fixture(scope="session")
+def small_scene():
+    """(image, mask): 200 x 150 BGR uint8 textured scene with a disc and a square."""
+    image, mask = scene(SMALL_SHAPES, SMALL_SIZE)
+    image.flags.writeable = False
+    mask.flags.writeable = False
+    return image, mask
+
+
+@pytest.fixture(scope="session")
+def textured_bgr():
+    """A 160 x 120 BGR uint8 image with texture in all three channels (no flat areas)."""
+    y, x = np.mgrid[0:120, 0:160]
+    b = 128 + 60 * np.sin(x / 5.0) * np.cos(y / 7.0)
+    g = 128 + 50 * np.cos((x + y) / 9.0)
+    r = 40 + x * 1.2
+    image = np.clip(np.dstack([b, g, r]), 0, 255).astype(np.uint8)
+    image.flags.writeable = False
+    return image
+
+
+@pytest.fixture(scope="session")
+def blob_mask():
+    """A 160 x 120 mask with two random-looking blobs away from the border."""
+    mask = np.zeros((120, 160), np.uint8)
+    cv2.circle(mask, (55, 50), 18, 1, -1)
+    cv2.ellipse(mask, (112, 78), (24, 11), 30, 0, 360, 1, -1)
+    pts = np.array([[30, 85], [48, 78], [52, 100], [38, 104]], np.int32)
+    cv2.fillPoly(mask, [pts], 1)
+    return mask > 0
+
+
+@pytest.fixture(scope="session")
+def random_mask():
+    """A 160 x 120 mask of random blobs (seeded): smoothed noise above a threshold, border cleared."""
+    noise = np.random.default_rng(7).normal(size=(120, 160)).astype(np.float32)
+    smooth = cv2.GaussianBlur(noise, (0, 0), 6)
+    mask = smooth > np.quantile(smooth, 0.85)
+    mask[:8], mask[-8:], mask[:, :8], mask[:, -8:] = False, False, False, False
+    return mask
+
+
+@pytest.fixture(scope="session")
+def border_mask():
+    """A 160 x 120 mask whose two features touch the image border (top-left, bottom-right)."""
+    mask = np.zeros((120, 160), bool)
+    mask[0:40, 0:30] = True
+    mask[90:, 125:] = True
+    mask[50:70, 70:90] = True          # and one inside
+    return mask

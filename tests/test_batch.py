@@ -1,0 +1,153 @@
+"""``featurewarp batch``: naming, masks, failures, progress, and --jobs giving identical files."""
+
+from __future__ import annotations
+
+import os
+import pty
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from featurewarp_cli import batch, imageio
+from test_cli import listing, runner, save, scene, square_mask, textured  # noqa: F401  (fixture)
+
+
+@pytest.fixture
+def photos(tmp_path):
+    """Three images with masks in tmp_path/photos (one jpg), and an empty tmp_path/out."""
+    folder = tmp_path / "photos"
+    folder.mkdir()
+    (tmp_path / "out").mkdir()
+    for name in ("a.png", "b.png", "c.jpg"):
+        scene(folder, name)
+    return folder
+
+
+def names(folder) -> list[str]:
+    return sorted(os.listdir(folder))
+
+
+def test_batch_warps_every_input_with_its_mask(runner, photos, tmp_path):
+    inputs = sorted(str(p) for p in photos.iterdir())           # masks included, as a glob gives them
+    run = runner("batch", "swirl", *inputs, "--out-dir", tmp_path / "out", "--angle", "45")
+    assert (run.code, run.stderr, run.stdout) == (0, "", b"")
+    assert names(tmp_path / "out") == ["a.png", "b.png", "c.jpg"]
+    single = runner("warp", "swirl", photos / "a.png", tmp_path / "a.png", "-m", photos / "a_mask.png",
+                    "--angle", "45")
+    assert single.code == 0
+    assert (tmp_path / "a.png").read_bytes() == (tmp_path / "out" / "a.png").read_bytes()
+
+
+def test_suffix_and_format(runner, photos, tmp_path):
+    run = runner("batch", "stretch", photos / "a.png", photos / "c.jpg", "-o", tmp_path / "out",
+                 "--suffix", "_wide", "--format", "webp", "--sx", "2")
+    assert run.code == 0, run.stderr
+    assert names(tmp_path / "out") == ["a_wide.webp", "c_wide.webp"]
+
+
+def test_failures_are_one_line_each_and_the_rest_is_written(runner, photos, tmp_path):
+    (photos / "broken.png").write_bytes(b"not a png")
+    save(photos / "broken_mask.png", square_mask())
+    save(photos / "lonely.png", textured())                      # no lonely_mask.png
+    files = [photos / n for n in ("a.png", "broken.png", "lonely.png", "b.png")]
+    run = runner("batch", "swirl", *files, "-o", tmp_path / "out")
+    assert run.code == 1
+    assert len(run.lines) == 3 and "Traceback" not in run.stderr
+    assert "broken.png" in run.lines[0] and "cannot be decoded" in run.lines[0]
+    assert "lonely.png" in run.lines[1] and "lonely_mask.png does not exist" in run.lines[1]
+    assert run.lines[2] == "featurewarp: error: 2 of 4 files failed"
+    assert names(tmp_path / "out") == ["a.png", "b.png"]
+
+
+def test_mask_pattern_relative_to_each_input_or_absolute(runner, tmp_path):
+    for sub in ("x", "y"):
+        (tmp_path / sub).mkdir()
+        save(tmp_path / sub / f"{sub}.png", textured())
+        save(tmp_path / sub / f"masks-{sub}.png", square_mask())
+    (tmp_path / "out").mkdir()
+    run = runner("batch", "bulge", tmp_path / "x" / "x.png", tmp_path / "y" / "y.png", "-o", tmp_path / "out",
+                 "--mask-pattern", "masks-{stem}.png")
+    assert run.code == 0, run.stderr
+    shared = save(tmp_path / "one_mask.png", np.zeros((36, 48), np.uint8))
+    run = runner("batch", "bulge", tmp_path / "x" / "x.png", "-o", tmp_path / "out", "--suffix", "-abs",
+                 "--mask-pattern", shared, "-v")
+    assert run.code == 0 and "plain warp" in run.stderr            # the all-black absolute mask was used
+
+
+def test_plain_mode_needs_no_masks(runner, tmp_path):
+    src = save(tmp_path / "lone.png", textured())
+    (tmp_path / "out").mkdir()
+    assert runner("batch", "arc", src, "-o", tmp_path / "out", "--mode", "plain").code == 0
+
+
+@pytest.mark.parametrize("args, words", [
+    (["--out-dir", "{tmp}/nowhere"], ["--out-dir", "does not exist"]),
+    (["--out-dir", "{tmp}/out", "--mask-pattern", "{nope}.png"], ["--mask-pattern", "nope"]),
+    (["--out-dir", "{tmp}/out", "--jobs", "0"], ["--jobs", ">= 1"]),
+    (["--out-dir", "{tmp}/out", "--angle", "inf"], ["--angle", "finite"]),
+    (["--out-dir", "{tmp}/out", "--background", "transparent", "--format", "bmp"], []),
+], ids=["missing out-dir", "bad pattern", "no jobs", "inf angle", "transparent bmp"])
+def test_usage_errors(runner, photos, tmp_path, args, words):
+    run = runner("batch", "swirl", photos / "a.png", *[a.replace("{tmp}", str(tmp_path)) for a in args])
+    if not words:                              # a per-file problem: every file fails, exit 1
+        assert run.code == 1 and "no alpha" in run.stderr
+        return
+    assert run.code == 2 and len(run.lines) == 1
+    for word in words:
+        assert word in run.stderr
+    assert names(tmp_path / "out") == []
+
+
+def test_two_inputs_writing_the_same_output(runner, tmp_path):
+    for sub in ("x", "y"):
+        (tmp_path / sub).mkdir()
+        save(tmp_path / sub / "a.png", textured())
+    (tmp_path / "out").mkdir()
+    run = runner("batch", "swirl", tmp_path / "x" / "a.png", tmp_path / "y" / "a.png", "-o", tmp_path / "out",
+                 "--mode", "plain")
+    assert run.code == 2 and "would both write" in run.stderr and names(tmp_path / "out") == []
+
+
+def test_jobs_give_byte_identical_files(photos, tmp_path):
+    """Every output format, serial in this process against two spawned worker processes."""
+    settings = batch.Settings("bulge", {"strength": 0.8}, background="#204060")
+    results = {}
+    for workers in (1, 2):
+        out = tmp_path / f"out{workers}"
+        out.mkdir()
+        jobs = [batch.Job(str(photos / name), str(out / f"{name[0]}.{fmt}"), str(photos / f"{name[0]}_mask.png"))
+                for name in ("a.png", "c.jpg") for fmt in ("png", "jpg", "webp", "tiff", "bmp")]
+        assert [error for _, error, _ in batch.run_batch(settings, jobs, workers)] == [None] * len(jobs)
+        results[workers] = listing(out)
+    assert results[1] == results[2] and len(results[1]) == 10
+
+
+def test_progress_bar_only_on_a_terminal(photos, tmp_path):
+    args = [sys.executable, "-m", "featurewarp_cli", "batch", "swirl", str(photos / "a.png"),
+            str(photos / "b.png"), "-o", str(tmp_path / "out")]
+    piped = subprocess.run(args, capture_output=True, timeout=120)
+    assert (piped.returncode, piped.stderr) == (0, b"")
+    leader, follower = pty.openpty()
+    try:
+        on_tty = subprocess.run(args, stdout=subprocess.PIPE, stderr=follower, timeout=120)
+        os.close(follower)
+        shown = os.read(leader, 65536)
+    finally:
+        os.close(leader)
+    assert on_tty.returncode == 0 and b"warping" in shown and on_tty.stdout == b""
+
+
+def test_plan_skips_masks_and_names_outputs(tmp_path):
+    jobs = batch.plan(["p/a.png", "p/a_mask.png", "q/b.jpg"], str(tmp_path), "-w", "png")
+    assert [(j.input, os.path.basename(j.output), j.mask) for j in jobs] == [
+        ("p/a.png", "a-w.png", "p/a_mask.png"), ("q/b.jpg", "b-w.png", "q/b_mask.png")]
+    assert batch.plan(["a.png"], str(tmp_path), mask_pattern=None)[0].mask is None
+
+
+def test_run_job_never_raises(tmp_path):
+    job = batch.Job(str(tmp_path / "missing.png"), str(tmp_path / "o.png"), None)
+    error, summary = batch.run_job(batch.Settings("swirl"), job)
+    assert "does not exist" in error and summary is None
+    assert imageio.FORMATS                      # the module imports cleanly in workers too

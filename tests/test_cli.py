@@ -1,0 +1,380 @@
+"""The command line: pipes, formats, determinism, atomic writes, verbosity, completion, entry points.
+
+Most tests call :func:`featurewarp_cli.cli.main` in-process through click's
+``CliRunner`` isolation (the ``runner`` fixture), so that exit codes and the
+one-line error messages are exactly those of the console script; a few run
+the real command in a subprocess. The helpers here are shared by the other CLI
+test files (``from test_cli import ...``).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from featurewarp_cli import imageio, plugins
+from featurewarp_cli.cli import main
+
+SIZE = (48, 36)                      # width, height of the test images: small, so a warp takes ms
+FORMATS = ("png", "jpg", "webp", "tiff", "bmp")
+
+
+@dataclass
+class Run:
+    """The outcome of one command: exit code, stdout bytes, stderr text."""
+
+    code: int
+    stdout: bytes
+    stderr: str
+
+    @property
+    def lines(self) -> list[str]:
+        return self.stderr.splitlines()
+
+
+class Runner:
+    """Calls ``main(args)`` as the console script would, capturing stdin, stdout and stderr."""
+
+    def __init__(self):
+        self.cli = CliRunner()
+
+    def __call__(self, *args, input: bytes | None = None, env: dict | None = None) -> Run:
+        with self.cli.isolation(input=input, env=env) as (out, err, _):
+            try:
+                main([str(a) for a in args])
+                code = 0
+            except SystemExit as exit_:
+                code = exit_.code
+            sys.stdout.flush()
+            sys.stderr.flush()
+            return Run(code, out.getvalue(), err.getvalue().decode())
+
+
+@pytest.fixture
+def runner() -> Runner:
+    return Runner()
+
+
+def command(*args, input: bytes | None = None) -> subprocess.CompletedProcess:
+    """Run ``python -m featurewarp_cli ARGS`` in a fresh process."""
+    return subprocess.run([sys.executable, "-m", "featurewarp_cli", *map(str, args)], input=input,
+                          capture_output=True, timeout=120)
+
+
+def textured(size=SIZE, channels=3, dtype=np.uint8) -> np.ndarray:
+    """A smooth, colourful test image of ``size`` (width, height)."""
+    w, h = size
+    y, x = np.mgrid[0:h, 0:w]
+    planes = [128 + 90 * np.sin(x / 4.0 + k) * np.cos(y / 5.0 - k) for k in range(channels)]
+    image = np.clip(np.dstack(planes), 0, 255)
+    if dtype == np.uint16:
+        return (image * 257).astype(np.uint16)
+    image = image.astype(np.uint8)
+    return image[:, :, 0] if channels == 1 else image
+
+
+def square_mask(size=SIZE) -> np.ndarray:
+    """A uint8 mask (0 / 255) with one square feature in the middle."""
+    w, h = size
+    mask = np.zeros((h, w), np.uint8)
+    mask[h // 3 : 2 * h // 3, w // 3 : 2 * w // 3] = 255
+    return mask
+
+
+def save(path, image: np.ndarray):
+    """Write ``image`` with OpenCV (format from the extension); returns the path as str."""
+    ok, buf = cv2.imencode(os.path.splitext(str(path))[1], image)
+    assert ok
+    buf.tofile(str(path))
+    return str(path)
+
+
+def scene(tmp_path, name="in.png"):
+    """Write a test image and its mask into ``tmp_path``; returns (image path, mask path)."""
+    return (save(tmp_path / name, textured()),
+            save(tmp_path / (os.path.splitext(name)[0] + "_mask.png"), square_mask()))
+
+
+def decode(data: bytes) -> np.ndarray:
+    return imageio.decode_image(data, "test")
+
+
+def listing(directory) -> dict:
+    """{name: bytes} of every file in a directory (to prove nothing was created or changed)."""
+    return {p.name: p.read_bytes() for p in sorted(directory.iterdir()) if p.is_file()}
+
+
+# --- basics ---------------------------------------------------------------------------------
+
+def test_warp_writes_the_declared_canvas(runner, tmp_path):
+    image, mask = scene(tmp_path)
+    run = runner("warp", "stretch", image, tmp_path / "out.png", "--mask", mask, "--sx", "1.5")
+    assert (run.code, run.stdout, run.stderr) == (0, b"", "")
+    out = imageio.read_image(str(tmp_path / "out.png"))
+    assert out.shape[:2] == (SIZE[1], round(SIZE[0] * 1.5))
+
+
+def test_output_may_be_the_input(runner, tmp_path):
+    image, mask = scene(tmp_path)
+    before = open(image, "rb").read()
+    run = runner("warp", "swirl", image, image, "--mask", mask, "--angle", "60")
+    assert run.code == 0, run.stderr
+    after = open(image, "rb").read()
+    assert after != before and decode(after).shape == decode(before).shape
+    assert sorted(os.listdir(tmp_path)) == ["in.png", "in_mask.png"]
+
+
+def test_report_is_written(runner, tmp_path):
+    image, mask = scene(tmp_path)
+    run = runner("warp", "bulge", image, tmp_path / "out.png", "-m", mask, "--report", tmp_path / "r.json")
+    assert run.code == 0, run.stderr
+    report = json.loads((tmp_path / "r.json").read_text())
+    assert report["preset"] == "bulge" and report["output"]["width"] == SIZE[0]
+
+
+# --- pipes ----------------------------------------------------------------------------------
+
+def test_stdin_to_stdout_equals_files(runner, tmp_path):
+    image, mask = scene(tmp_path)
+    files = runner("warp", "swirl", image, tmp_path / "out.png", "-m", mask)
+    piped = runner("warp", "swirl", "-", "png:-", "-m", mask, "--verbose", input=open(image, "rb").read())
+    assert files.code == piped.code == 0
+    assert piped.stdout == (tmp_path / "out.png").read_bytes()
+    assert "48x36" in piped.stderr                       # the summary goes to stderr, not stdout
+
+
+@pytest.mark.parametrize("source", ["jpg", "webp", "tiff", "bmp"])
+def test_stdin_format_is_sniffed(runner, tmp_path, source):
+    data = imageio.encode_image(textured(), source)
+    run = runner("warp", "stretch", "-", "-", "--format", "png", "--sx", "2", input=data)
+    assert run.code == 0, run.stderr
+    assert decode(run.stdout).shape == (SIZE[1], 2 * SIZE[0], 3)
+
+
+def test_prefix_names_the_format_of_a_file(runner, tmp_path):
+    image, _ = scene(tmp_path)
+    run = runner("warp", "swirl", image, f"jpg:{tmp_path / 'out.bin'}")
+    assert run.code == 0, run.stderr
+    assert (tmp_path / "out.bin").read_bytes()[:2] == b"\xff\xd8"
+
+
+def test_mask_from_stdin(runner, tmp_path):
+    image, mask = scene(tmp_path)
+    run = runner("warp", "swirl", image, "-", "--format", "png", "-m", "-", input=open(mask, "rb").read())
+    reference = runner("warp", "swirl", image, "png:-", "-m", mask)
+    assert run.code == 0 and run.stdout == reference.stdout
+
+
+def test_output_target_parsing():
+    assert imageio.output_target("png:-") == ("-", "png")
+    assert imageio.output_target("-", "JPEG") == ("-", "jpg")
+    assert imageio.output_target("a/b.TIF") == ("a/b.TIF", "tiff")
+    assert imageio.output_target("x:y.png") == ("x:y.png", "png")       # not a format prefix
+    with pytest.raises(ValueError, match="--format"):
+        imageio.output_target("-")
+    with pytest.raises(ValueError, match="asks for png"):
+        imageio.output_target("png:-", "jpg")
+
+
+# --- determinism ----------------------------------------------------------------------------
+
+@pytest.mark.parametrize("fmt", FORMATS)
+def test_same_command_gives_the_same_bytes(runner, tmp_path, fmt):
+    """Twice in this process and once in a fresh one: byte-identical files."""
+    image, mask = scene(tmp_path)
+    args = ["warp", "bulge", image, None, "-m", mask, "--strength", "0.7", "--background", "#336699"]
+    outputs = []
+    for k in range(2):
+        args[3] = tmp_path / f"out{k}.{fmt}"
+        assert runner(*args).code == 0
+        outputs.append(args[3].read_bytes())
+    args[3] = tmp_path / f"out2.{fmt}"
+    assert command(*args).returncode == 0
+    outputs.append(args[3].read_bytes())
+    assert outputs[0] == outputs[1] == outputs[2]
+    assert decode(outputs[0]).shape[:2] == (SIZE[1], SIZE[0])
+
+
+# --- formats and depths ---------------------------------------------------------------------
+
+def test_sixteen_bit_png_stays_sixteen_bit(runner, tmp_path):
+    src = save(tmp_path / "deep.png", textured(dtype=np.uint16))
+    assert runner("warp", "swirl", src, tmp_path / "out.png", "--angle", "0").code == 0
+    out = imageio.read_image(str(tmp_path / "out.png"))
+    assert out.dtype == np.uint16
+    assert np.abs(out.astype(int) - imageio.read_image(src).astype(int)).max() <= 257
+
+
+@pytest.mark.parametrize("fmt", ["jpg", "webp", "bmp"])
+def test_sixteen_bit_is_scaled_for_eight_bit_formats(runner, tmp_path, fmt):
+    src = save(tmp_path / "deep.png", textured(dtype=np.uint16))
+    assert runner("warp", "swirl", src, tmp_path / f"out.{fmt}", "--angle", "0").code == 0
+    out = imageio.read_image(str(tmp_path / f"out.{fmt}"))
+    assert out.dtype == np.uint8
+    assert np.abs(out.astype(int) - textured().astype(int)).mean() < 3
+
+
+def test_alpha_is_flattened_on_the_background_for_jpeg(runner, tmp_path):
+    rgba = np.dstack([textured(), np.zeros(SIZE[::-1], np.uint8)])     # fully transparent
+    src = save(tmp_path / "clear.png", rgba)
+    run = runner("warp", "swirl", src, tmp_path / "out.bmp", "--angle", "0", "--background", "red")
+    assert run.code == 0, run.stderr
+    out = imageio.read_image(str(tmp_path / "out.bmp"))
+    assert out.shape == (SIZE[1], SIZE[0], 3) and (out == (0, 0, 255)).all()
+
+
+# --- atomic writes --------------------------------------------------------------------------
+
+@pytest.mark.parametrize("where", ["encode", "write", "rename", "solve"])
+def test_a_failure_leaves_the_existing_output_untouched(runner, tmp_path, monkeypatch, where):
+    image, mask = scene(tmp_path)
+    out = tmp_path / "out.png"
+    out.write_bytes(b"precious")
+
+    def boom(*args, **kwargs):
+        raise OSError(28, "No space left on device")
+
+    target = {"encode": (imageio, "encode_image"), "write": (os, "fdopen"), "rename": (os, "replace"),
+              "solve": (__import__("featurewarp_cli.api").api.FeatureWarper, "solve")}[where]
+    monkeypatch.setattr(*target, boom)
+    before = listing(tmp_path)
+    run = runner("warp", "swirl", image, out, "-m", mask)
+    assert run.code == 1 and len(run.lines) == 1 and "Traceback" not in run.stderr
+    assert "No space left on device" in run.stderr
+    assert listing(tmp_path) == before
+
+
+# --- verbosity, debug -----------------------------------------------------------------------
+
+def test_verbose_summary_line(runner, tmp_path):
+    image, mask = scene(tmp_path)
+    run = runner("warp", "stretch", image, tmp_path / "o.png", "-m", mask, "--sx", "2", "-v")
+    assert run.code == 0 and len(run.lines) == 1
+    line = run.lines[0]
+    assert "48x36" in line and "96x36" in line and "solver" in line and line.endswith(" s")
+
+
+def test_quiet_silences_warnings(runner, tmp_path):
+    image, _ = scene(tmp_path)
+    black = save(tmp_path / "black.png", np.zeros(SIZE[::-1], np.uint8))
+    loud = runner("warp", "swirl", image, tmp_path / "o.png", "-m", black)
+    quiet = runner("warp", "swirl", image, tmp_path / "o.png", "-m", black, "--quiet")
+    assert loud.code == quiet.code == 0
+    assert "warning" in loud.stderr and "plain warp" in loud.stderr and quiet.stderr == ""
+
+
+def test_quiet_and_verbose_exclude_each_other(runner, tmp_path):
+    image, _ = scene(tmp_path)
+    run = runner("warp", "swirl", image, tmp_path / "o.png", "-q", "-v")
+    assert run.code == 2 and "exclude" in run.stderr
+
+
+def test_debug_shows_a_traceback_for_processing_errors(runner, tmp_path):
+    bad = tmp_path / "bad.png"
+    bad.write_text("not an image")
+    plain = runner("warp", "swirl", bad, tmp_path / "o.png")
+    debug = runner("--debug", "warp", "swirl", bad, tmp_path / "o.png")
+    assert plain.code == debug.code == 1
+    assert "Traceback" not in plain.stderr and "Traceback" in debug.stderr
+    assert debug.lines[-1] == plain.lines[0]
+
+
+def test_unexpected_errors_are_one_line(runner, tmp_path, monkeypatch):
+    image, _ = scene(tmp_path)
+    monkeypatch.setattr(imageio, "mask_from_image", lambda image: 1 / 0)
+    run = runner("warp", "swirl", image, tmp_path / "o.png", "-m", image)
+    assert run.code == 1 and run.lines == [
+        "featurewarp: error: ZeroDivisionError: division by zero (--debug shows a traceback)"]
+
+
+# --- conventions ----------------------------------------------------------------------------
+
+def test_warps_json(runner):
+    run = runner("warps", "--json")
+    assert run.code == 0
+    entries = json.loads(run.stdout)
+    assert [e["name"] for e in entries] == list(plugins.names())
+    for entry in entries:
+        for p in entry["params"]:
+            assert {"name", "type", "default", "min", "max", "help"} <= set(p)
+
+
+def test_help_is_fast_and_consistent():
+    from featurewarp_cli import cli
+
+    assert cli.MAX_PIXELS == imageio.MAX_PIXELS
+    code = "import sys, featurewarp_cli.cli; print('cv2' in sys.modules)"
+    imported = subprocess.run([sys.executable, "-c", code], capture_output=True, timeout=60)
+    assert imported.stdout.strip() == b"False"        # --help does not load OpenCV
+
+
+def test_help_documents_completion(runner):
+    run = runner("--help")
+    assert run.code == 0 and b"_FEATUREWARP_COMPLETE=bash_source featurewarp" in run.stdout
+
+
+def test_completion_works(runner):
+    script = runner(env={"_FEATUREWARP_COMPLETE": "bash_source"})
+    assert script.code == 0 and b"_featurewarp_completion" in script.stdout
+    words = runner(env={"_FEATUREWARP_COMPLETE": "bash_complete", "COMP_WORDS": "featurewarp warp s",
+                        "COMP_CWORD": "2"})
+    assert words.code == 0 and b"stretch" in words.stdout and b"swirl" in words.stdout
+
+
+def test_python_dash_m_and_console_script(tmp_path):
+    version = command("--version")
+    assert version.returncode == 0 and b"featurewarp" in version.stdout
+    missing = command("warp", "swirl", tmp_path / "nope.png", tmp_path / "o.png")
+    assert missing.returncode == 2 and missing.stdout == b""
+    assert missing.stderr.decode().splitlines() == [
+        f"featurewarp: error: Invalid value for 'INPUT': {tmp_path / 'nope.png'} does not exist"]
+
+
+def test_real_pipe_end_to_end(tmp_path):
+    image, mask = scene(tmp_path)
+    run = command("warp", "arc", "-", "png:-", "-m", mask, "--angle", "90", input=open(image, "rb").read())
+    assert run.returncode == 0 and run.stderr == b""
+    assert run.stdout[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_python_warnings_are_one_line(runner, tmp_path, monkeypatch):
+    import warnings
+
+    from featurewarp_cli import batch
+
+    def warn_then_transparent(text, fmt):
+        warnings.warn("overflow encountered in divide", RuntimeWarning)
+        return None
+
+    monkeypatch.setattr(batch, "background_colour", warn_then_transparent)
+    image, _ = scene(tmp_path)
+    run = runner("warp", "swirl", image, tmp_path / "o.png")
+    assert run.code == 0
+    assert run.lines == ["featurewarp: warning: overflow encountered in divide (test_cli.py:"
+                         f"{warn_then_transparent.__code__.co_firstlineno + 1})"]
+
+
+def test_stdin_terminal_is_refused(monkeypatch):
+    class Terminal:
+        def isatty(self):
+            return True
+
+    monkeypatch.setattr(sys, "stdin", Terminal())
+    with pytest.raises(imageio.ImageError, match="stdin is a terminal"):
+        imageio.read_bytes("-")
+
+
+def test_broken_pipe_is_one_line(tmp_path):
+    image, _ = scene(tmp_path)
+    run = subprocess.run(f"{sys.executable} -m featurewarp_cli warp stretch {image} bmp:- --sx 40 --sy 20 | true",
+                         shell=True, capture_output=True, timeout=120)
+    lines = run.stderr.decode().splitlines()
+    assert lines == ["featurewarp: error: cannot write -: Broken pipe"]

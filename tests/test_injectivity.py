@@ -1,0 +1,108 @@
+"""No fold-overs: the final grid has no triangle of non-positive area anywhere in the presets' ranges."""
+
+import numpy as np
+import pytest
+
+from featurewarp_cli import injectivity
+from featurewarp_cli.api import FeatureWarper, load_warp
+from featurewarp_cli.grid import Grid, signed_areas
+
+W, H = 160, 120
+
+SWEEP = [
+    ("swirl", {"angle": a}) for a in (-360, -180, 90, 180, 360)
+] + [
+    ("arc", {"angle": a}) for a in (10, 120, 250, 360)
+] + [
+    ("bulge", {"strength": s}) for s in (-0.95, -0.5, 1.5, 2.95)
+] + [
+    ("stretch", p) for p in ({"sx": 0.2}, {"sy": 5}, {"sx": 0.2, "sy": 5}, {"sx": 5, "sy": 0.2}, {"sx": 3, "sy": 3})
+]
+
+
+def blobs():
+    """Discs and a square, one near the centre, one cut by the border."""
+    y, x = np.mgrid[0:H, 0:W]
+    mask = (x - 80) ** 2 + (y - 60) ** 2 < 18**2
+    mask |= (x - 35) ** 2 + (y - 35) ** 2 < 14**2
+    mask |= (abs(x - 125) < 15) & (abs(y - 80) < 15)
+    mask |= (x - 80) ** 2 + (y - 118) ** 2 < 12**2          # cut by the bottom border
+    return mask
+
+
+MASKS = {"none": None, "blobs": blobs()}
+
+
+@pytest.mark.parametrize("preset,params", SWEEP, ids=[f"{p}-{v}" for p, v in SWEEP])
+@pytest.mark.parametrize("mask_name", ["none", "blobs"])
+@pytest.mark.parametrize("feature_weight", [10.0, 100.0])
+def test_sweep_has_no_fold_overs(preset, params, mask_name, feature_weight):
+    """Every preset over its declared range, with and without features, at w_F 10 and 100."""
+    mask = MASKS[mask_name]
+    if mask is None and feature_weight != 10.0:
+        pytest.skip("w_F does not matter without features")
+    warper = FeatureWarper(W, H, mask, feature_weight=feature_weight)
+    for mode in ("similarity", "rigid"):
+        mesh = warper.solve(load_warp(preset)(W, H, **params), mode)
+        assert mesh.flips() == 0, mesh.info
+        assert np.isfinite(mesh.target).all()
+
+
+@pytest.mark.parametrize("angle", [-720, 720])
+def test_extreme_swirl_plain_grid_does_not_fold(angle):
+    """Swirl +-720 without features: the automatic grid is fine enough that W itself does not fold."""
+    mesh = FeatureWarper(W, H, None).solve(load_warp("swirl")(W, H, angle=angle), "plain")
+    assert mesh.flips() == 0
+
+
+def test_extreme_swirl_with_features_does_not_fold():
+    """Swirl 720 with features (the slowest case: sub-pixel grid, features relaxed towards W)."""
+    mesh = FeatureWarper(W, H, blobs()).solve(load_warp("swirl")(W, H, angle=720))
+    assert mesh.info["flipped_before_guard"] > 0
+    assert mesh.flips() == 0
+
+
+def test_guard_leaves_features_exact_when_folds_are_local():
+    """Swirl 180 folds the background near the centre; untangling keeps every feature a similarity."""
+    y, x = np.mgrid[0:360, 0:500]
+    mask = np.zeros((360, 500), bool)
+    for cx, cy in ((110, 100), (250, 100), (390, 100), (110, 260), (250, 260), (390, 260)):
+        mask |= (x - cx) ** 2 + (y - cy) ** 2 < 36**2
+    warper = FeatureWarper(500, 360, mask)
+    mesh = warper.solve(load_warp("swirl")(500, 360, angle=180))
+    assert mesh.info["flipped_before_guard"] > 0
+    assert mesh.flips() == 0
+    assert max(c["residual_percent"] for c in mesh.info["quality"]["components"]) < 0.5
+
+
+def test_without_guard_folds_remain():
+    """The guard is what removes them (injective=False keeps the raw least-squares solution)."""
+    y, x = np.mgrid[0:360, 0:500]
+    mask = np.zeros((360, 500), bool)
+    for cx, cy in ((250, 100), (250, 260)):
+        mask |= (x - cx) ** 2 + (y - cy) ** 2 < 36**2
+    mesh = FeatureWarper(500, 360, mask, injective=False).solve(load_warp("swirl")(500, 360, angle=360))
+    assert mesh.flips() > 0
+
+
+def test_max_step_stops_before_the_first_fold():
+    """Along the segment, every triangle keeps positive area up to the returned step, not beyond."""
+    grid = Grid.for_image(20, 20, 5)
+    start = grid.nodes()
+    end = start.copy()
+    centre = np.flatnonzero(~grid.boundary())[0]
+    end[centre] += [30.0, 30.0]                     # drags one node across its neighbours
+    tris = grid.triangles()
+    t = injectivity.max_step(start, end, tris)
+    assert 0 < t < 1
+    assert signed_areas(start + 0.999 * t * (end - start), tris).min() > 0
+    assert signed_areas(start + min(1.0, 1.01 * t) * (end - start), tris).min() <= 0
+
+
+def test_auto_cell_follows_the_warp():
+    """The automatic grid stays within 0.5 px of the analytic warp and folds nothing of it."""
+    for angle in (90, 360, 720):
+        warper = FeatureWarper(W, H, None)
+        mesh = warper.solve(load_warp("swirl")(W, H, angle=angle), "plain")
+        assert mesh.info["grid"]["pl_error_px"] <= 0.5
+        assert mesh.flips() == 0

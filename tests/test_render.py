@@ -1,0 +1,235 @@
+"""Rendering: inverse map by rasterized triangles, resampling, alpha and background."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from featurewarp_cli import render
+from featurewarp_cli.api import FeatureWarper, load_warp, warp
+from featurewarp_cli.grid import Grid
+
+W, H = 160, 120
+
+
+def inverse(mesh):
+    return render.inverse_map(mesh.source, mesh.target, mesh.triangles, mesh.canvas)
+
+
+def channels(image):
+    return 1 if image.ndim == 2 else image.shape[2]
+
+
+@pytest.fixture(scope="module")
+def images(textured_bgr):
+    """The same picture as gray, BGR and BGRA, in 8 and 16 bits."""
+    bgr = textured_bgr
+    gray = cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY)
+    alpha = np.full((H, W), 255, np.uint8)
+    alpha[20:50, 30:70] = 90
+    bgra = np.dstack([bgr, alpha])
+    eight = {"gray": gray, "bgr": bgr, "bgra": bgra}
+    # 16 bits with content in the low byte too (not just 8-bit values times 257).
+    ramp = (np.arange(W) % 200)[None, :]
+    sixteen = {"gray": (gray * 250.0 + ramp).astype(np.uint16),
+               "bgr": (bgr * 250.0 + ramp[..., None]).astype(np.uint16)}
+    sixteen["bgra"] = np.dstack([sixteen["bgr"], alpha.astype(np.uint16) * 257])
+    return {("uint8", k): v for k, v in eight.items()} | {("uint16", k): v for k, v in sixteen.items()}
+
+
+# --- identity -----------------------------------------------------------------------------
+
+@pytest.mark.parametrize("interp", ["linear", "cubic", "lanczos"])
+@pytest.mark.parametrize("with_mask", [False, True])
+def test_identity_stretch_reproduces_the_image(textured_bgr, blob_mask, interp, with_mask):
+    """stretch sx = sy = 1 gives back the input (max abs difference <= 1 on uint8)."""
+    out = warp(textured_bgr, blob_mask if with_mask else None, "stretch", sx=1, sy=1, interp=interp)
+    assert out.shape == textured_bgr.shape and out.dtype == np.uint8
+    assert np.abs(out.astype(int) - textured_bgr).max() <= 1
+
+
+def test_inverse_map_of_a_stretch_is_the_analytic_inverse():
+    """Each pixel of a stretched canvas maps back to ((x + 0.5) / s - 0.5) in the source."""
+    w = load_warp("stretch")(W, H, sx=2.5, sy=0.7)
+    mesh = FeatureWarper(W, H).solve(w, "plain")
+    coords, covered = inverse(mesh)
+    cw, ch = w.canvas
+    assert coords.shape == (ch, cw, 2) and covered.shape == (ch, cw)
+    assert covered.all()
+    y, x = np.mgrid[0:ch, 0:cw]
+    np.testing.assert_allclose(coords[..., 0], (x + 0.5) * W / cw - 0.5, atol=2e-4)
+    np.testing.assert_allclose(coords[..., 1], (y + 0.5) * H / ch - 0.5, atol=2e-4)
+
+
+def test_inverse_map_of_a_rotated_grid_matches_barycentric_reference(rng):
+    """inverse_map gives, per pixel, the barycentric source position of the triangle holding it."""
+    grid = Grid.for_image(40, 30, 5)
+    source = grid.nodes()
+    a = np.radians(20)
+    m = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]]) * 1.4
+    target = source @ m.T + [20.0, 3.0]
+    coords, covered = render.inverse_map(source, target, grid.triangles(), (80, 70))
+    y, x = np.mgrid[0:70, 0:80]
+    expected = (np.stack([x, y], -1) - [20.0, 3.0]) @ np.linalg.inv(m).T
+    inside = ((expected[..., 0] >= -0.5) & (expected[..., 0] <= 39.5)
+              & (expected[..., 1] >= -0.5) & (expected[..., 1] <= 29.5))
+    # Covered exactly where the pixel centre lies inside the warped rectangle (ties aside).
+    margin = ((expected[..., 0] > -0.49) & (expected[..., 0] < 39.49)
+              & (expected[..., 1] > -0.49) & (expected[..., 1] < 29.49))
+    assert covered[margin].all()
+    assert not covered[~inside].any()
+    np.testing.assert_allclose(coords[covered], expected[covered], atol=1e-3)
+    assert (coords[~covered] == -1).all()
+
+
+# --- no cracks ----------------------------------------------------------------------------
+
+GENTLE = [("swirl", {"angle": 120}), ("bulge", {"strength": 0.5}), ("bulge", {"strength": -0.9}),
+          ("stretch", {"sx": 1.7, "sy": 0.6}), ("stretch", {"width": 57, "height": 140})]
+STRONG = [("swirl", {"angle": -300}), ("swirl", {"angle": 200, "radius": 0.3}),
+          ("bulge", {"strength": 2.5, "radius": 0.3}), ("stretch", {"sx": 0.33, "sy": 3.1}),
+          ("stretch", {"width": 57, "height": 301})]
+
+
+@pytest.mark.parametrize("preset,params,with_mask",
+                         [(*c, False) for c in GENTLE + STRONG] + [(*c, True) for c in GENTLE])
+def test_canvas_fully_covered(small_scene, preset, params, with_mask):
+    """Swirl, bulge and stretch cover every canvas pixel: no cracks between triangles."""
+    _, mask = small_scene
+    h, w = mask.shape
+    mesh = FeatureWarper(w, h, mask if with_mask else None).solve(load_warp(preset)(w, h, **params))
+    coords, covered = inverse(mesh)
+    assert covered.shape == (mesh.canvas[1], mesh.canvas[0])
+    assert covered.all()
+    assert (coords >= -0.5 - 1e-3).all()
+    assert (coords[..., 0] <= w - 0.5 + 1e-3).all() and (coords[..., 1] <= h - 0.5 + 1e-3).all()
+
+
+@pytest.mark.parametrize("angle", [60, 120, 360])
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
+def test_arc_corners_are_transparent(textured_bgr, dtype, angle):
+    """Arc leaves the canvas corners uncovered; with background None they get alpha 0, the sector alpha max."""
+    image = textured_bgr.astype(dtype) * (257 if dtype == np.uint16 else 1)
+    w = load_warp("arc")(W, H, angle=angle)
+    warper = FeatureWarper(W, H)
+    mesh = warper.solve(w)
+    _, covered = inverse(mesh)
+    out = warper.render(image, mesh, background=None)
+    top = np.iinfo(dtype).max
+    assert out.shape == (w.canvas[1], w.canvas[0], 4) and out.dtype == dtype
+    assert not covered[-1, 0] and not covered[-1, -1]           # bottom corners lie outside the sector
+    assert (~covered).sum() > 0.05 * covered.size
+    assert (out[..., 3][~covered] == 0).all()
+    assert (out[..., :3][~covered] == 0).all()
+    assert (out[..., 3][covered] == top).all()
+    np.testing.assert_array_equal(out[..., 3] == 0, ~covered)
+
+
+# --- kinds of images ----------------------------------------------------------------------
+
+@pytest.mark.parametrize("kind", ["gray", "bgr", "bgra"])
+@pytest.mark.parametrize("depth", ["uint8", "uint16"])
+@pytest.mark.parametrize("preset,params", [("swirl", {"angle": 100}), ("stretch", {"sx": 1.5, "sy": 0.8})])
+def test_output_keeps_dtype_and_channels(images, blob_mask, kind, depth, preset, params):
+    """Gray, BGR, BGRA in 8 and 16 bits come out with the same dtype and channel count when covered."""
+    image = images[(depth, kind)]
+    out = warp(image, blob_mask, preset, **params)
+    w = load_warp(preset)(W, H, **params)
+    assert out.dtype == image.dtype
+    assert out.ndim == image.ndim and channels(out) == channels(image)
+    assert out.shape[:2] == (w.canvas[1], w.canvas[0])
+    # and the content is a resampling of the input, not zeros or a rescaled copy
+    assert abs(float(out.mean()) - float(image.mean())) < 0.1 * float(image.mean())
+
+
+@pytest.mark.parametrize("depth", ["uint8", "uint16"])
+def test_sixteen_bit_keeps_its_low_bits(images, depth):
+    """A 16-bit image is resampled in 16 bits (not through 8 bits): identity keeps it within 1 step."""
+    image = images[(depth, "bgr")]
+    out = warp(image, None, "stretch", interp="linear")
+    assert np.abs(out.astype(np.int64) - image).max() <= 1
+    if depth == "uint16":
+        assert np.count_nonzero(out % 257) > 0.5 * out.size
+
+
+@pytest.mark.parametrize("preset,params,move", [
+    ("stretch", {"sx": 2.0, "sy": 1.5}, lambda x, y: ((x + 0.5) * 2.0 - 0.5, (y + 0.5) * 1.5 - 0.5)),
+    ("stretch", {"sx": 0.5, "sy": 2.0}, lambda x, y: ((x + 0.5) * 0.5 - 0.5, (y + 0.5) * 2.0 - 0.5)),
+])
+@pytest.mark.parametrize("depth", [np.uint8, np.uint16])
+def test_input_alpha_travels_with_its_pixels(textured_bgr, preset, params, move, depth):
+    """A transparent square in the input is transparent at its warped place, opaque elsewhere."""
+    top = np.iinfo(depth).max
+    bgr = textured_bgr.astype(depth) * (257 if depth == np.uint16 else 1)
+    alpha = np.full((H, W), top, depth)
+    x0, x1, y0, y1 = 40, 80, 30, 70
+    alpha[y0:y1, x0:x1] = 0
+    out = warp(np.dstack([bgr, alpha]), None, preset, **params)
+    assert out.shape[2] == 4
+    (ax, ay), (bx, by) = move(x0, y0), move(x1 - 1, y1 - 1)
+    inner = out[int(np.ceil(ay)) + 2 : int(by) - 1, int(np.ceil(ax)) + 2 : int(bx) - 1, 3]
+    assert inner.size > 0 and (inner == 0).all()
+    outside = np.ones(out.shape[:2], bool)
+    outside[int(ay) - 3 : int(np.ceil(by)) + 4, int(ax) - 3 : int(np.ceil(bx)) + 4] = False
+    assert (out[..., 3][outside] == top).all()
+
+
+def test_alpha_travels_under_a_feature_aware_swirl(textured_bgr):
+    """Under a feature-aware swirl, alpha and colour move together: pixel colour and alpha keep pairing."""
+    alpha = np.where((np.arange(W)[None, :] // 10 + np.arange(H)[:, None] // 10) % 2 == 0, 255, 0).astype(np.uint8)
+    bgr = np.zeros((H, W, 3), np.uint8)
+    bgr[alpha == 255] = (255, 255, 255)
+    mask = np.zeros((H, W), bool)
+    mask[40:80, 60:100] = True
+    out = warp(np.dstack([bgr, alpha]), mask, "swirl", angle=120, interp="linear")
+    np.testing.assert_array_equal(out[..., 0], out[..., 3])      # white where opaque, black where clear
+    assert 0.3 < (out[..., 3] > 128).mean() < 0.7
+
+
+# --- background -----------------------------------------------------------------------------
+
+@pytest.mark.parametrize("rgb", [(10, 20, 30), (255, 0, 128), (0, 0, 0)])
+@pytest.mark.parametrize("kind", ["bgr", "bgra"])
+@pytest.mark.parametrize("depth", ["uint8", "uint16"])
+def test_background_fills_uncovered_pixels_exactly(images, rgb, kind, depth):
+    """An (r, g, b) background lands in uncovered pixels as (b, g, r[, opaque]); 16-bit as value * 257."""
+    image = images[(depth, kind)]
+    w = load_warp("arc")(W, H, angle=150)
+    warper = FeatureWarper(W, H)
+    mesh = warper.solve(w)
+    _, covered = inverse(mesh)
+    out = warper.render(image, mesh, background=rgb)
+    assert out.dtype == image.dtype and channels(out) == channels(image)
+    factor = 257 if depth == "uint16" else 1
+    expected = [rgb[2] * factor, rgb[1] * factor, rgb[0] * factor]
+    if kind == "bgra":
+        expected.append(np.iinfo(image.dtype).max)
+    assert (~covered).any()
+    np.testing.assert_array_equal(out[~covered], np.broadcast_to(expected, (np.count_nonzero(~covered), len(expected))))
+    # covered pixels hold the image, not the background
+    assert not np.all(out[covered] == expected, axis=-1).all()
+
+
+def test_background_on_gray_is_its_luma(images):
+    """A gray image keeps one channel; the fill is the colour's gray value."""
+    w = load_warp("arc")(W, H, angle=150)
+    warper = FeatureWarper(W, H)
+    mesh = warper.solve(w)
+    _, covered = inverse(mesh)
+    out = warper.render(images[("uint8", "gray")], mesh, background=(200, 100, 50))
+    assert out.ndim == 2
+    assert (out[~covered] == round(0.299 * 200 + 0.587 * 100 + 0.114 * 50)).all()
+
+
+def test_gray_with_transparent_background_gains_alpha(images):
+    """A gray image with uncovered pixels and no background comes out gray-as-BGRA with alpha 0 there."""
+    w = load_warp("arc")(W, H, angle=150)
+    warper = FeatureWarper(W, H)
+    mesh = warper.solve(w)
+    _, covered = inverse(mesh)
+    gray = images[("uint8", "gray")]
+    out = warper.render(gray, mesh, background=None)
+    assert out.shape[2] == 4
+    np.testing.assert_array_equal(out[..., 3] == 0, ~covered)
+    assert (out[..., 0] == out[..., 1]).all() and (out[..., 1] == out[..., 2]).all()
