@@ -90,10 +90,11 @@ def engine_options() -> list[click.Option]:
                           "paper's soft per-quad targets (w_F-weighted), for comparison."),
         click.Option(["--boundary"], type=click.Choice(("fixed", "slide")),
                      help="fixed: border nodes stay where the warp puts them (the paper). slide: "
-                          "on a side the warp keeps straight and axis-parallel they may slide along "
-                          "it, so features cut by the border keep their shape and the canvas stays "
-                          "exact. Default: slide (for arc it amounts to fixed: its sides are curves "
-                          "and oblique rays)."),
+                          "on a side the warp maps onto an axis-parallel straight line they may "
+                          "slide along it, so features cut by the border keep their shape and the "
+                          "canvas stays exact. Default: slide (for stretch; it amounts to fixed for "
+                          "swirl and bulge, whose border stays put, and for arc, whose sides are "
+                          "curves and oblique rays)."),
         click.Option(["--background"], metavar="COLOR",
                      help="Fill where no source pixel lands: #rrggbb, a colour name, or transparent. "
                           "Default: transparent for PNG, WebP and TIFF output, white otherwise "

@@ -133,11 +133,11 @@ class Warp:
     summary: ClassVar[str] = ""
     params: ClassVar[tuple[Param, ...]] = ()
     #: Default border handling: 'slide' lets nodes move along every side that W
-    #: maps onto an axis-parallel straight line (all sides of a stretch; the sides
-    #: of a swirl or bulge that lie outside its radius; none of an arc), so a
-    #: feature cut by the border keeps its shape while the canvas stays exact and
-    #: presets with the same free sides share one factorization. 'fixed' pins every
-    #: border node to W (the paper). A preset may override it.
+    #: maps onto an axis-parallel straight line, unless W leaves the whole border
+    #: in place (all sides of a stretch; none of a swirl or bulge, whose border
+    #: stays put, or of an arc, whose sides are arcs and oblique rays), so a
+    #: feature cut by the border keeps its shape while the canvas stays exact.
+    #: 'fixed' pins every border node to W (the paper). A preset may override it.
     boundary: ClassVar[str] = "slide"
 
     def __init__(self, width: int, height: int, /, **values):

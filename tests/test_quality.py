@@ -1,0 +1,148 @@
+"""Issue-3 behaviour: intuitive feature scale, sliding borders, smoothness, saved grids, panels."""
+
+import io
+import subprocess
+import sys
+
+import cv2
+import numpy as np
+import pytest
+
+import shapes
+from featurewarp_cli.api import FeatureWarper, load_warp
+from featurewarp_cli.grid import signed_areas
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return shapes.scene()
+
+
+def area_ratios(scene, preset, mode="similarity", **params):
+    image, mask = scene
+    h, w = mask.shape
+    warper = FeatureWarper(w, h, mask)
+    out = warper.render(image, warper.solve(load_warp(preset)(w, h, **params), mode))
+    return np.array([shapes.area(out, colour) / shapes.area(image, colour)
+                     for *_, colour in shapes.SHAPES])
+
+
+def test_swirl_keeps_feature_area(scene):
+    """Similarity mode under an area-preserving swirl keeps every feature's area within 10 %."""
+    ratios = area_ratios(scene, "swirl", angle=150)
+    assert np.all(np.abs(ratios - 1.0) <= 0.10), ratios
+
+
+def test_one_axis_stretch_keeps_feature_size(scene):
+    """Similarity mode under stretch sy=2 leaves features at their size (the paper's intent)."""
+    ratios = area_ratios(scene, "stretch", sy=2)
+    assert np.all(np.abs(ratios - 1.0) <= 0.05), ratios
+
+
+def test_uniform_scale_scales_features(scene):
+    """Similarity mode under a uniform 1.5x scale multiplies areas by 2.25."""
+    ratios = area_ratios(scene, "stretch", sx=1.5, sy=1.5)
+    assert np.all(np.abs(ratios / 2.25 - 1.0) <= 0.05), ratios
+
+
+def border_cut_scene():
+    """A disc cut by the left border and a square cut by the top border."""
+    cut = (("disc", 0, 180, 40, (0, 0, 255)), ("square", 250, 0, 60, (0, 200, 0)))
+    return shapes.scene(cut)
+
+
+@pytest.mark.parametrize("params", [{"sy": 2}, {"sx": 2}, {"sx": 0.6, "sy": 1.4}])
+def test_sliding_border_keeps_cut_features(params):
+    """With slide (stretch's default) a feature cut by the border stays a similarity (<= 1 % RMS
+    of its size, several times less than with a fixed border); the canvas stays exact."""
+    _, mask = border_cut_scene()
+    residuals = {}
+    for boundary in ("slide", "fixed"):
+        warp = load_warp("stretch")(500, 360, **params)
+        mesh = FeatureWarper(500, 360, mask, boundary=boundary).solve(warp)
+        residuals[boundary] = max(c["residual_percent"] for c in mesh.info["quality"]["components"])
+        corners = np.array([[-0.5, -0.5], [499.5, -0.5], [-0.5, 359.5], [499.5, 359.5]])
+        at = [np.flatnonzero(np.all(np.abs(mesh.source - c) < 1e-9, axis=1))[0] for c in corners]
+        np.testing.assert_allclose(mesh.target[at], warp(corners), atol=1e-9)
+        xs, ys = mesh.target[:, 0], mesh.target[:, 1]
+        assert xs.min() >= -0.5 - 1e-9 and xs.max() <= warp.canvas[0] - 0.5 + 1e-9
+        assert ys.min() >= -0.5 - 1e-9 and ys.max() <= warp.canvas[1] - 0.5 + 1e-9
+        assert mesh.flips() == 0
+    assert residuals["slide"] <= 1.0, residuals
+    assert residuals["fixed"] > 3.0 * residuals["slide"] and residuals["fixed"] > 2.0, residuals
+
+
+@pytest.mark.parametrize("preset,params", [("stretch", {"sy": 2}), ("stretch", {"sx": 0.5}),
+                                           ("swirl", {"angle": 120}), ("arc", {"angle": 120}),
+                                           ("bulge", {"strength": 0.5})])
+@pytest.mark.parametrize("mode", ["similarity", "rigid"])
+def test_no_crease_next_to_features(scene, preset, params, mode):
+    """Background triangles next to features stay within 4x the warp's own anisotropy there."""
+    _, mask = scene
+    h, w = mask.shape
+    quality = FeatureWarper(w, h, mask).solve(load_warp(preset)(w, h, **params), mode).info["quality"]
+    assert quality["max_anisotropy_near_features"] <= 4.0 * max(quality["warp_anisotropy_near_features"], 1.0)
+
+
+def test_report_quality_fields(scene):
+    """The mesh info has the quality figures the report promises."""
+    _, mask = scene
+    h, w = mask.shape
+    quality = FeatureWarper(w, h, mask).solve(load_warp("swirl")(w, h, angle=120)).info["quality"]
+    assert len(quality["components"]) == 6
+    for component in quality["components"]:
+        assert set(component) == {"scale", "rotation_deg", "residual_rms_px", "residual_percent"}
+        assert component["residual_percent"] < 1.0
+    assert quality["flipped_triangles"] == 0
+    assert 0 < quality["area_ratio"]["min"] <= 1.0 <= quality["area_ratio"]["max"]
+    assert quality["background_rms_px"] > 0
+
+
+def run(*args, **kwargs):
+    return subprocess.run([sys.executable, "-m", "featurewarp_cli", *args], capture_output=True, **kwargs)
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("q")
+    image, mask = shapes.scene()
+    cv2.imwrite(str(folder / "in.png"), image)
+    cv2.imwrite(str(folder / "mask.png"), mask.astype(np.uint8) * 255)
+    return folder
+
+
+def test_save_grid_writes_the_mapping(files):
+    """--save-grid: source (N, 2), target (N, 2), triangles (M, 3) counter-clockwise in source
+    coordinates; target is where the warp put the nodes on the canvas."""
+    out = run("warp", "swirl", str(files / "in.png"), str(files / "out.png"), "-m", str(files / "mask.png"),
+              "--save-grid", str(files / "grid.npz"), "--angle", "90")
+    assert out.returncode == 0, out.stderr
+    grid = np.load(files / "grid.npz")
+    assert set(grid.files) == {"source", "target", "triangles"}
+    n = grid["source"].shape[0]
+    assert grid["source"].shape == grid["target"].shape == (n, 2)
+    assert grid["triangles"].ndim == 2 and grid["triangles"].shape[1] == 3
+    assert signed_areas(grid["source"], grid["triangles"]).min() > 0
+    assert signed_areas(grid["target"], grid["triangles"]).min() > 0
+    assert grid["source"].min() == -0.5 and grid["source"][:, 0].max() == 499.5
+
+
+def test_compare_writes_a_four_way_panel(files):
+    """compare: one panel, input | plain | rigid | similarity, with caption bars; --grid draws lines."""
+    plain = files / "panel.png"
+    gridded = files / "panel-grid.png"
+    for path, extra in ((plain, []), (gridded, ["--grid"])):
+        out = run("compare", "arc", str(files / "in.png"), str(path), "-m", str(files / "mask.png"),
+                  "--angle", "90", *extra)
+        assert out.returncode == 0, out.stderr
+    a, b = cv2.imread(str(plain)), cv2.imread(str(gridded))
+    assert a.shape == b.shape and a.shape[0] == 360 + 28
+    assert a.shape[1] > 4 * 360                    # four tiles side by side
+    assert np.abs(a.astype(int) - b.astype(int)).max() > 100   # the grid lines are visible
+
+
+def test_compare_rejects_mode(files):
+    """compare always shows all modes, so --mode is not one of its options (usage error, exit 2)."""
+    out = run("compare", "arc", str(files / "in.png"), str(files / "p.png"), "--mode", "rigid")
+    assert out.returncode == 2
+    assert not (files / "p.png").exists()
