@@ -305,6 +305,55 @@ def compare_command(preset) -> click.Command:
                          short_help=preset.summary, no_args_is_help=True)
 
 
+def animate_command(preset) -> click.Command:
+    """``featurewarp animate PRESET INPUT OUTPUT --vary NAME=START:END``."""
+    params = [click.Argument(["input"], type=click.Path(dir_okay=False, allow_dash=True)),
+              click.Argument(["output"], type=click.Path(dir_okay=False)),
+              click.Option(["-m", "--mask"], type=click.Path(dir_okay=False, allow_dash=True),
+                           metavar="PATH", help="Feature mask (as for warp)."),
+              click.Option(["--vary"], multiple=True, required=True, metavar="NAME=START:END",
+                           help="A numeric option of the preset to vary linearly over the frames, "
+                                "e.g. angle=0:360 (repeat for several)."),
+              click.Option(["--frames"], type=Number(int, 1), default=24, show_default=True, metavar="N",
+                           help="Number of frames (START and END included)."),
+              click.Option(["--fps"], type=Number(float, 0, open_min=True), default=12.0,
+                           show_default=True, metavar="F", help="Frames per second.")]
+    params += [o for o in engine_options() if o.name != "fmt"] + preset_options(preset)
+
+    def callback(input, output, mask, vary, frames, fps, **kwargs):
+        from .animate import animate_file, parse_vary
+        from .batch import WarpError
+
+        kwargs["fmt"] = None
+        settings, quiet, verbose = settings_from(preset, kwargs)
+        try:
+            ranges = parse_vary(vary, preset)
+            with click.progressbar(length=frames, label="frames", file=sys.stderr,
+                                   hidden=quiet or not sys.stderr.isatty()) as bar:
+                summary = animate_file(settings, input, output, mask, ranges, frames, fps, bar.update)
+        except WarpError as err:
+            raise click_error(err) from err
+        if not quiet:
+            for warning in summary["warnings"]:
+                click.echo(f"featurewarp: warning: {input}: {warning}", err=True)
+        if verbose:
+            click.echo(f"featurewarp: {output}: {summary['frames']} frames "
+                       f"{summary['canvas'][0]}x{summary['canvas'][1]}, {summary['factorizations']} "
+                       f"factorization(s), {summary['seconds']:.2f} s", err=True)
+
+    doc = (f"Animate {preset.name}: vary its options over frames, factoring once. OUTPUT: .gif, "
+           f".webp or .png (animated), .mp4 or .avi (video), or a numbered PNG sequence "
+           f"such as out-%04d.png.\n\n" + inspect.cleandoc(preset.__doc__ or preset.summary))
+    return click.Command(preset.name, params=params, callback=callback, help=doc,
+                         short_help=preset.summary, no_args_is_help=True)
+
+
+class AnimateGroup(PresetGroup):
+    """``featurewarp animate``: the same presets, each as an animation command."""
+
+    make_command = staticmethod(animate_command)
+
+
 class CompareGroup(PresetGroup):
     """``featurewarp compare``: the same presets, each as a comparison panel."""
 
@@ -341,6 +390,7 @@ def cli(debug):
       cat in.jpg | featurewarp warp bulge - png:- -m mask.png > out.png
       featurewarp batch swirl photos/*.jpg --out-dir out --jobs 8 --angle 90
       featurewarp compare arc photo.jpg panel.png -m mask.png --angle 120 --grid
+      featurewarp animate swirl photo.jpg swirl.gif -m mask.png --vary angle=0:360 --frames 36
       featurewarp diff out.png golden.png --max-rmse 0.5
       featurewarp warps            # presets, their options, defaults and ranges
     """
@@ -375,6 +425,16 @@ def compare():
 
     One factorization serves the three warps. Run 'featurewarp compare PRESET --help'
     for the options.
+    """
+
+
+@cli.group(cls=AnimateGroup, context_settings={"help_option_names": ["-h", "--help"]},
+           subcommand_metavar="PRESET INPUT OUTPUT --vary NAME=START:END [OPTIONS]")
+def animate():
+    """Animate a preset: vary its options over frames, factoring once.
+
+    Writes an animated GIF, WebP or PNG, an MP4/AVI video, or a numbered PNG
+    sequence (out-%04d.png). A progress bar is shown when stderr is a terminal.
     """
 
 

@@ -1,0 +1,183 @@
+"""Animations: one preset parameter (or several) varied over frames, factoring once.
+
+Writes an animated GIF, WebP or PNG (APNG), an MP4/AVI video through OpenCV's
+video writer, or a numbered PNG sequence (a path with a ``%d``-style field).
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import tempfile
+import time
+
+import cv2
+import numpy as np
+
+from . import fidelity, imageio
+from .batch import Settings, WarpError, background_colour, load_image_and_mask, make_warper
+
+ANIMATED = {".gif", ".webp", ".png", ".apng"}
+VIDEO = {".mp4": "mp4v", ".avi": "MJPG"}
+
+
+def parse_vary(texts, preset) -> dict[str, tuple[float, float]]:
+    """``NAME=START:END`` strings -> {name: (start, end)}, checked against the preset's parameters."""
+    names = {p.cli_name: p for p in preset.params}
+    ranges = {}
+    for text in texts:
+        match = re.fullmatch(r"\s*([\w-]+)\s*=\s*([^:]+):([^:]+)\s*", text)
+        if not match:
+            raise WarpError(f"{text!r} is not NAME=START:END", "--vary", usage=True)
+        name, start, end = match.groups()
+        if name not in names:
+            raise WarpError(f"{preset.name} has no parameter {name!r} (it has: {', '.join(names)})",
+                            "--vary", usage=True)
+        param = names[name]
+        try:
+            ranges[param.name] = (param.check(start), param.check(end))
+        except ValueError as err:
+            raise WarpError(str(err), "--vary", usage=True) from None
+    if not ranges:
+        raise WarpError("give at least one NAME=START:END", "--vary", usage=True)
+    return ranges
+
+
+def frame_params(settings: Settings, ranges: dict, frames: int) -> list[dict]:
+    """Parameter values of each frame: linear from START to END, both included."""
+    steps = np.linspace(0.0, 1.0, frames) if frames > 1 else np.zeros(1)
+    out = []
+    for s in steps:
+        params = dict(settings.params)
+        for name, (start, end) in ranges.items():
+            value = start + s * (end - start)
+            params[name] = round(value) if isinstance(start, int) and isinstance(end, int) else value
+        out.append(params)
+    return out
+
+
+def output_kind(path: str) -> str:
+    """'sequence' (a %d field in the name), 'animation' or 'video'."""
+    if re.search(r"%0?\d*d", os.path.basename(path)):
+        return "sequence"
+    ext = os.path.splitext(path)[1].lower()
+    if ext in ANIMATED:
+        return "animation"
+    if ext in VIDEO:
+        return "video"
+    raise WarpError(f"cannot tell the animation format of {path}: use .gif, .webp, .png, .mp4, .avi "
+                    "or a numbered sequence such as out-%04d.png", "OUTPUT", usage=True)
+
+
+def centre_on(image: np.ndarray, size: tuple[int, int], fill) -> np.ndarray:
+    """``image`` (8-bit BGR or BGRA) centred on a canvas of ``size`` (width, height) filled with ``fill``."""
+    width, height = size
+    canvas = np.empty((height, width, image.shape[2]), image.dtype)
+    canvas[:] = fill[: image.shape[2]]
+    y, x = (height - image.shape[0]) // 2, (width - image.shape[1]) // 2
+    canvas[y : y + image.shape[0], x : x + image.shape[1]] = image
+    return canvas
+
+
+def to_bgr(image: np.ndarray, alpha: bool) -> np.ndarray:
+    """8-bit BGR (or BGRA when ``alpha``) from any gray/BGR/BGRA 8/16-bit image."""
+    if image.dtype == np.uint16:
+        image = (image // 257).astype(np.uint8)
+    if image.ndim == 2:
+        image = cv2.cvtColor(image, cv2.COLOR_GRAY2BGR)
+    if alpha and image.shape[2] == 3:
+        image = cv2.cvtColor(image, cv2.COLOR_BGR2BGRA)
+    if not alpha and image.shape[2] == 4:
+        image = image[:, :, :3]
+    return image
+
+
+def animate_file(settings: Settings, input: str, output: str, mask: str | None, ranges: dict,
+                 frames: int, fps: float, progress=None) -> dict:
+    """Render the frames and write the animation (see the module docstring).
+
+    Parameters
+    ----------
+    settings : Settings
+        Warp settings; ``settings.params`` are the fixed parameter values.
+    input, output, mask : str
+    ranges : dict
+        {parameter: (start, end)} from :func:`parse_vary`.
+    frames : int
+    fps : float
+    progress : callable, optional
+        Called with 1 after each frame.
+
+    Returns
+    -------
+    dict
+        Summary: frames, canvas, factorizations, seconds, flipped triangles (total).
+    """
+    t0 = time.perf_counter()
+    kind = output_kind(output)
+    if kind != "sequence":
+        imageio.check_writable(output)
+    image, feature_mask, warnings = load_image_and_mask(settings, imageio.split_prefix(input)[1], mask)
+    height, width = image.shape[:2]
+    per_frame = frame_params(settings, ranges, frames)
+    warps = []
+    for params in per_frame:
+        warp, warper = make_warper(Settings(**{**settings.__dict__, "params": params}), width, height,
+                                   feature_mask)
+        warps.append(warp)
+    if settings.cell is None:                  # one grid fine enough for every frame: one factorization
+        cell = min(fidelity.auto_cell(width, height, w)[0] for w in warps)
+        warper = make_warper(Settings(**{**settings.__dict__, "cell": cell}), width, height, feature_mask)[1]
+    fmt = "png" if kind != "video" else "bmp"
+    background = background_colour(settings.background, fmt) if kind != "video" else (
+        imageio.parse_colour(settings.background) if settings.background else (255, 255, 255))
+    alpha = kind != "video" and background is None
+    canvas = (max(w.canvas[0] for w in warps), max(w.canvas[1] for w in warps))
+    fill = (0, 0, 0, 0) if alpha else tuple(background[::-1]) + (255,)
+    rendered, flips = [], 0
+    for warp in warps:
+        mesh = warper.solve(warp, settings.mode)
+        flips += mesh.info["flipped_triangles"]
+        frame = to_bgr(warper.render(image, mesh, settings.interp, background), alpha)
+        rendered.append(centre_on(frame, canvas, fill))
+        if progress:
+            progress(1)
+    write_frames(output, kind, rendered, fps)
+    return {"frames": frames, "canvas": canvas, "factorizations": warper.factorizations,
+            "flipped_triangles": flips, "seconds": time.perf_counter() - t0, "warnings": warnings}
+
+
+def write_frames(output: str, kind: str, frames: list[np.ndarray], fps: float) -> None:
+    """Write ``frames`` atomically: OpenCV encodes into a temporary file, whose bytes
+    :func:`imageio.write_atomic` then puts in place (or each frame of a sequence)."""
+    if kind == "sequence":
+        for index, frame in enumerate(frames):
+            path = output % index
+            imageio.check_writable(path)
+            ok, data = cv2.imencode(".png", frame, [cv2.IMWRITE_PNG_COMPRESSION, 3])
+            imageio.write_atomic(path, data.tobytes())
+        return
+    directory = os.path.dirname(os.path.abspath(output))
+    ext = os.path.splitext(output)[1].lower()
+    fd, tmp = tempfile.mkstemp(prefix=".featurewarp-", suffix=ext, dir=directory)
+    os.close(fd)
+    try:
+        if kind == "animation":
+            animation = cv2.Animation()
+            animation.frames = frames
+            animation.durations = [max(1, round(1000.0 / fps))] * len(frames)
+            written = cv2.imwriteanimation(tmp, animation)
+        else:
+            size = (frames[0].shape[1], frames[0].shape[0])
+            writer = cv2.VideoWriter(tmp, cv2.VideoWriter_fourcc(*VIDEO[ext]), fps, size)
+            written = writer.isOpened()
+            for frame in frames:
+                writer.write(frame)
+            writer.release()
+        if not written or os.path.getsize(tmp) == 0:
+            raise WarpError(f"OpenCV could not write {output}")
+        with open(tmp, "rb") as encoded:         # renamed into place with the usual permissions
+            imageio.write_atomic(output, encoded.read())
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)

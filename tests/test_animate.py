@@ -1,0 +1,73 @@
+"""featurewarp animate: frames, formats, one factorization, errors."""
+
+import subprocess
+import sys
+
+import cv2
+import numpy as np
+import pytest
+
+import shapes
+
+
+def run(*args):
+    return subprocess.run([sys.executable, "-m", "featurewarp_cli", "animate", *args], capture_output=True,
+                          text=True)
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("anim")
+    image, mask = shapes.scene()
+    image, mask = image[::2, ::2], mask[::2, ::2]
+    cv2.imwrite(str(folder / "in.png"), image)
+    cv2.imwrite(str(folder / "mask.png"), mask.astype(np.uint8) * 255)
+    return folder
+
+
+@pytest.mark.parametrize("name", ["out.gif", "out.webp", "out.png"])
+def test_animated_image_has_every_frame(files, name):
+    """An animated GIF/WebP/PNG holds --frames frames of the warp's canvas; one factorization."""
+    out = run("swirl", str(files / "in.png"), str(files / name), "-m", str(files / "mask.png"),
+              "--vary", "angle=0:90", "--frames", "5", "-v")
+    assert out.returncode == 0, out.stderr
+    assert "5 frames 250x180, 1 factorization(s)" in out.stderr
+    ok, animation = cv2.imreadanimation(str(files / name))
+    assert ok and len(animation.frames) == 5
+    assert animation.frames[0].shape[:2] == (180, 250)
+    assert np.abs(animation.frames[0].astype(int) - animation.frames[-1].astype(int)).max() > 50
+
+
+def test_numbered_sequence_and_varying_canvas(files):
+    """A %d pattern writes numbered PNGs; frames of a growing stretch are centred on the largest canvas."""
+    out = run("stretch", str(files / "in.png"), str(files / "seq-%02d.png"), "-m", str(files / "mask.png"),
+              "--vary", "sx=1:1.5", "--frames", "3")
+    assert out.returncode == 0, out.stderr
+    frames = [cv2.imread(str(files / f"seq-{i:02d}.png"), cv2.IMREAD_UNCHANGED) for i in range(3)]
+    assert all(f.shape[:2] == (180, 375) for f in frames)
+    assert frames[0][:, 0, 3].max() == 0 and frames[-1][:, 0, 3].min() == 255   # padding is transparent
+
+
+def test_video(files):
+    """An .mp4 is written through OpenCV's video writer."""
+    out = run("bulge", str(files / "in.png"), str(files / "out.mp4"), "-m", str(files / "mask.png"),
+              "--vary", "strength=0:1", "--frames", "4")
+    assert out.returncode == 0, out.stderr
+    video = cv2.VideoCapture(str(files / "out.mp4"))
+    assert int(video.get(cv2.CAP_PROP_FRAME_COUNT)) == 4
+
+
+@pytest.mark.parametrize("vary,message", [("angle", "NAME=START:END"), ("spin=0:1", "no parameter 'spin'"),
+                                          ("angle=0:nan", "finite")])
+def test_bad_vary_is_a_usage_error(files, vary, message):
+    """A malformed --vary, an unknown parameter or a bad value: one line, exit 2, no file."""
+    out = run("swirl", str(files / "in.png"), str(files / "bad.gif"), "--vary", vary)
+    assert out.returncode == 2
+    assert message in out.stderr and len(out.stderr.strip().splitlines()) == 1
+    assert not (files / "bad.gif").exists()
+
+
+def test_unknown_format_is_a_usage_error(files):
+    """An output whose animation format cannot be told: exit 2."""
+    out = run("swirl", str(files / "in.png"), str(files / "out.jpg"), "--vary", "angle=0:90")
+    assert out.returncode == 2 and "animation format" in out.stderr
