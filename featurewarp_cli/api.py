@@ -414,13 +414,18 @@ class FeatureWarper:
         return [{"quads": int(c), "scale": float(s), "rotation_deg": float(a), "exact": bool(e)}
                 for c, s, a, e in zip(counts, scales, angles, exact)]
 
-    def render(self, image: np.ndarray, mesh: Mesh, interp: str = "cubic", background=None) -> np.ndarray:
-        """Resample ``image`` through ``mesh``; see :func:`featurewarp_cli.render.resample`."""
+    def render(self, image: np.ndarray, mesh: Mesh, interp: str = "cubic", background=None,
+               antialias: bool = True) -> np.ndarray:
+        """Resample ``image`` through ``mesh``; see :func:`featurewarp_cli.render.render`.
+
+        With ``antialias`` (default) regions the warp shrinks are prefiltered and the
+        mesh's silhouette gets partial coverage (alpha, or a blend with ``background``).
+        """
         if image.shape[:2] != (self.height, self.width):
             raise ValueError(f"image is {image.shape[1]}x{image.shape[0]}, warper is for {self.width}x{self.height}")
         t0 = time.perf_counter()
-        coords, covered = rnd.inverse_map(mesh.source, mesh.target, mesh.triangles, mesh.canvas)
-        out = rnd.resample(image, coords, covered, interp, background)
+        out = rnd.render(image, mesh.source, mesh.target, mesh.triangles, mesh.canvas, interp, background,
+                         antialias=antialias)
         mesh.info["timings"]["render"] = time.perf_counter() - t0
         return out
 

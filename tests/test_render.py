@@ -109,13 +109,13 @@ def test_canvas_fully_covered(small_scene, preset, params, with_mask):
 @pytest.mark.parametrize("angle", [60, 120, 360])
 @pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
 def test_arc_corners_are_transparent(textured_bgr, dtype, angle):
-    """Arc leaves the canvas corners uncovered; with background None they get alpha 0, the sector alpha max."""
+    """Without antialiasing, arc leaves the canvas corners uncovered; with background None they get alpha 0, the sector alpha max."""
     image = textured_bgr.astype(dtype) * (257 if dtype == np.uint16 else 1)
     w = load_warp("arc")(W, H, angle=angle)
     warper = FeatureWarper(W, H)
     mesh = warper.solve(w)
     _, covered = inverse(mesh)
-    out = warper.render(image, mesh, background=None)
+    out = warper.render(image, mesh, background=None, antialias=False)
     top = np.iinfo(dtype).max
     assert out.shape == (w.canvas[1], w.canvas[0], 4) and out.dtype == dtype
     assert not covered[-1, 0] and not covered[-1, -1]           # bottom corners lie outside the sector
@@ -124,6 +124,31 @@ def test_arc_corners_are_transparent(textured_bgr, dtype, angle):
     assert (out[..., :3][~covered] == 0).all()
     assert (out[..., 3][covered] == top).all()
     np.testing.assert_array_equal(out[..., 3] == 0, ~covered)
+
+
+@pytest.mark.parametrize("background", [None, (10, 200, 30)])
+def test_antialiased_silhouette(textured_bgr, background):
+    """With antialiasing (default) the sector's edge is feathered: pixels two or more pixels outside
+    the mesh are exactly the background (or alpha 0), pixels two or more inside are untouched by
+    it, and the edge holds partial values."""
+    warper = FeatureWarper(W, H)
+    mesh = warper.solve(load_warp("arc")(W, H, angle=150))
+    _, covered = inverse(mesh)
+    out = warper.render(textured_bgr, mesh, background=background).astype(int)
+    ring = np.ones((5, 5), np.uint8)
+    far_out = cv2.dilate(covered.astype(np.uint8), ring) == 0
+    deep_in = cv2.erode(covered.astype(np.uint8), ring, borderType=cv2.BORDER_CONSTANT, borderValue=0) == 1
+    if background is None:
+        alpha = out[..., 3]
+        assert (alpha[far_out] == 0).all() and (alpha[deep_in] == 255).all()
+        edge = alpha[~far_out & ~deep_in]
+        assert ((edge > 0) & (edge < 255)).sum() > 50
+    else:
+        expected = np.array(background[::-1])
+        assert (out[far_out] == expected).all()
+        plain = warper.render(textured_bgr, mesh, background=background, antialias=False).astype(int)
+        assert (out[deep_in] != expected).any(axis=-1).mean() > 0.9
+        assert np.abs(out - plain)[~far_out & ~deep_in].max() > 0
 
 
 # --- kinds of images ----------------------------------------------------------------------
@@ -193,13 +218,13 @@ def test_alpha_travels_under_a_feature_aware_swirl(textured_bgr):
 @pytest.mark.parametrize("kind", ["bgr", "bgra"])
 @pytest.mark.parametrize("depth", ["uint8", "uint16"])
 def test_background_fills_uncovered_pixels_exactly(images, rgb, kind, depth):
-    """An (r, g, b) background lands in uncovered pixels as (b, g, r[, opaque]); 16-bit as value * 257."""
+    """Without antialiasing, an (r, g, b) background lands in uncovered pixels as (b, g, r[, opaque]); 16-bit as value * 257."""
     image = images[(depth, kind)]
     w = load_warp("arc")(W, H, angle=150)
     warper = FeatureWarper(W, H)
     mesh = warper.solve(w)
     _, covered = inverse(mesh)
-    out = warper.render(image, mesh, background=rgb)
+    out = warper.render(image, mesh, background=rgb, antialias=False)
     assert out.dtype == image.dtype and channels(out) == channels(image)
     factor = 257 if depth == "uint16" else 1
     expected = [rgb[2] * factor, rgb[1] * factor, rgb[0] * factor]
@@ -212,24 +237,24 @@ def test_background_fills_uncovered_pixels_exactly(images, rgb, kind, depth):
 
 
 def test_background_on_gray_is_its_luma(images):
-    """A gray image keeps one channel; the fill is the colour's gray value."""
+    """Without antialiasing, a gray image keeps one channel; the fill is the colour's gray value."""
     w = load_warp("arc")(W, H, angle=150)
     warper = FeatureWarper(W, H)
     mesh = warper.solve(w)
     _, covered = inverse(mesh)
-    out = warper.render(images[("uint8", "gray")], mesh, background=(200, 100, 50))
+    out = warper.render(images[("uint8", "gray")], mesh, background=(200, 100, 50), antialias=False)
     assert out.ndim == 2
     assert (out[~covered] == round(0.299 * 200 + 0.587 * 100 + 0.114 * 50)).all()
 
 
 def test_gray_with_transparent_background_gains_alpha(images):
-    """A gray image with uncovered pixels and no background comes out gray-as-BGRA with alpha 0 there."""
+    """Without antialiasing, a gray image with uncovered pixels and no background comes out gray-as-BGRA with alpha 0 there."""
     w = load_warp("arc")(W, H, angle=150)
     warper = FeatureWarper(W, H)
     mesh = warper.solve(w)
     _, covered = inverse(mesh)
     gray = images[("uint8", "gray")]
-    out = warper.render(gray, mesh, background=None)
+    out = warper.render(gray, mesh, background=None, antialias=False)
     assert out.shape[2] == 4
     np.testing.assert_array_equal(out[..., 3] == 0, ~covered)
     assert (out[..., 0] == out[..., 1]).all() and (out[..., 1] == out[..., 2]).all()

@@ -1,0 +1,1 @@
+"""Benchmarks for featurewarp (``make bench``); see benchmarks/run.py."""

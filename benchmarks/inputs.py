@@ -1,0 +1,52 @@
+"""Benchmark inputs: a realistic feature mask and upscaled sample photos."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+#: Photo sizes (width, height) by label.
+SIZES = {"1MP": (1024, 1024), "12MP": (4000, 3000)}
+
+
+def disc_mask(width: int, height: int, fraction: float = 0.2, seed: int = 1) -> np.ndarray:
+    """Random discs (radius 9 % of the short side) until they cover ``fraction`` of the image.
+
+    Returns
+    -------
+    (height, width) bool ndarray
+    """
+    rng = np.random.default_rng(seed)
+    mask = np.zeros((height, width), np.uint8)
+    radius = max(1, int(0.09 * min(width, height)))
+    for _ in range(10_000):
+        if mask.mean() >= fraction:
+            break
+        cx = rng.uniform(radius, max(radius + 1, width - radius))
+        cy = rng.uniform(radius, max(radius + 1, height - radius))
+        cv2.circle(mask, (int(cx), int(cy)), radius, 1, -1)
+    return mask.astype(bool)
+
+
+def make_photos(samples: Path, folder: Path) -> dict[str, tuple[Path, Path]]:
+    """Upscale samples/astronaut.png and its mask to each of :data:`SIZES` in ``folder``.
+
+    Returns
+    -------
+    dict
+        label -> (photo path, mask path), PNG files.
+    """
+    photo = cv2.imread(str(samples / "astronaut.png"), cv2.IMREAD_UNCHANGED)
+    mask = cv2.imread(str(samples / "astronaut_mask.png"), cv2.IMREAD_GRAYSCALE)
+    if photo is None or mask is None:
+        raise FileNotFoundError(f"samples/astronaut.png or its mask is missing in {samples}")
+    out = {}
+    for label, (w, h) in SIZES.items():
+        p, m = folder / f"photo-{label}.png", folder / f"mask-{label}.png"
+        cv2.imwrite(str(p), cv2.resize(photo, (w, h), interpolation=cv2.INTER_CUBIC))
+        big = cv2.resize(mask, (w, h), interpolation=cv2.INTER_LINEAR)
+        cv2.imwrite(str(m), np.where(big >= 128, 255, 0).astype(np.uint8))
+        out[label] = (p, m)
+    return out

@@ -1,0 +1,355 @@
+"""featurewarp benchmark: what ``make bench`` runs.
+
+Sections (each prints a table; everything goes to one JSON file):
+
+table1    The paper's Table 1 (setup = normal matrix assembly, factor, rhs setup,
+          back-substitution) on grids of 50x100 ... 1000x1000 nodes with a disc mask
+          covering about 20 %, beside the paper's published seconds. Measured through
+          the public FeatureWarper (cell 4, an image sized to give the node counts)
+          and its ``timings``; the solver's symbolic-analysis cache is cleared before
+          each run (a cold factorization) and one more run shows it warm.
+render    The renderer alone on 12 MP at cell 4 (swirl 180 with the mask).
+commands  Whole ``featurewarp warp`` commands (subprocess wall time, peak RSS of
+          that process) for each preset on a 1 MP and a 12 MP photo with a mask,
+          made by upscaling samples/astronaut.png and its mask into a temporary
+          folder; 1 MP at --cell 4, 12 MP at the default cell, plus 12 MP swirl
+          at --cell 4. Also ``featurewarp --help`` start-up.
+magick    ImageMagick's plain equivalents on the same files, each run right after
+          ours (part of ``commands``), when ``convert`` is installed, and the
+          ratios ours / ImageMagick.
+
+Medians of 5 runs (``--quick``: 3 runs, fewer sizes, 12 MP swirl only). A figure
+whose first run takes over 45 s, or any figure once the time budget (``--budget``,
+570 s) is spent, is not repeated; its run count is printed and kept in the JSON.
+Results: benchmarks/results/bench-<date>.json and benchmarks/results/latest.json.
+
+Usage::
+
+    .venv/bin/python benchmarks/run.py [--quick] [--runs N] [--only table1,render,...]
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as _dt
+import json
+import os
+import platform
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+import cv2  # noqa: E402
+import numpy as np  # noqa: E402
+
+from benchmarks import targets as tgt  # noqa: E402
+from benchmarks.inputs import disc_mask, make_photos  # noqa: E402
+
+SECTIONS = ("table1", "render", "commands", "magick")
+
+#: The paper's Table 1 (Pentium 4, 3.2 GHz): setup, factor, rhs setup, solve in seconds.
+PAPER_TABLE1 = {
+    (50, 100): (0.156, 0.110, 0.015, 0.0),
+    (100, 100): (0.375, 0.250, 0.031, 0.015),
+    (100, 200): (1.141, 0.562, 0.047, 0.031),
+    (200, 200): (2.171, 1.407, 0.109, 0.063),
+}
+GRIDS = [(50, 100), (100, 100), (100, 200), (200, 200), (500, 500), (1000, 1000)]
+QUICK_GRIDS = GRIDS[:5]
+
+#: Our presets and the ImageMagick operation each is compared with.
+PRESETS = {
+    "swirl": (["--angle", "180"], ["-swirl", "180"]),
+    "bulge": (["--strength", "0.5"], ["-implode", "-0.5"]),
+    "arc": (["--angle", "60"], ["-distort", "Arc", "60"]),
+    "stretch": (["--sx", "2"], ["-liquid-rescale", "200x100%!"]),
+}
+
+
+def median(values):
+    return float(statistics.median(values)) if values else float("nan")
+
+
+# --------------------------------------------------------------------------- running
+
+TIME = shutil.which("time") or ("/usr/bin/time" if os.path.exists("/usr/bin/time") else None)
+#: A figure whose first run takes longer than this many seconds is not repeated.
+SLOW_RUN_S = 45.0
+
+
+def run_measured(cmd: list[str], env=None) -> tuple[float, int, int]:
+    """Run ``cmd``; return (wall seconds, peak RSS in MB of that process, exit code).
+
+    The peak comes from GNU time when it is installed (the command is then
+    forked from the small ``time`` process, not from this one, whose memory a
+    forked child would count), else from wait4's rusage.
+    """
+    with tempfile.NamedTemporaryFile("r", suffix=".rss") as rss:
+        full = [TIME, "-f", "%M", "-o", rss.name, *cmd] if TIME else cmd
+        t0 = time.perf_counter()
+        proc = subprocess.Popen(full, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env)
+        _, status, usage = os.wait4(proc.pid, 0)
+        wall = time.perf_counter() - t0
+        code = os.waitstatus_to_exitcode(status)
+        err = proc.stderr.read().decode(errors="replace")
+        proc.stderr.close()
+        peak_kb = usage.ru_maxrss
+        if TIME:
+            try:
+                peak_kb = int(rss.read().strip().splitlines()[-1])
+            except (ValueError, IndexError):
+                pass
+    if code != 0:
+        sys.stderr.write(f"bench: command failed ({code}): {' '.join(cmd)}\n{err}\n")
+    return wall, peak_kb // 1024, code
+
+
+#: perf_counter() time after which figures stop repeating (set by main from --budget).
+DEADLINE = float("inf")
+
+
+def repeat(cmd, runs, env=None):
+    """Run ``cmd`` ``runs`` times (fewer when one run is slow or the time budget is spent)."""
+    walls, peaks, codes = [], [], []
+    for _ in range(runs):
+        wall, peak, code = run_measured(cmd, env)
+        walls.append(wall)
+        peaks.append(peak)
+        codes.append(code)
+        if wall > SLOW_RUN_S or time.perf_counter() + wall > DEADLINE:
+            break
+    return {"cmd": cmd, "seconds": walls, "runs": len(walls), "median_s": median(walls), "peak_mb": max(peaks),
+            "ok": all(c == 0 for c in codes)}
+
+
+# --------------------------------------------------------------------------- sections
+
+def bench_table1(runs: int, grids) -> list[dict]:
+    from featurewarp_cli import solver
+    from featurewarp_cli.api import FeatureWarper, load_warp
+
+    rows = []
+    print("\n(a) Table 1: seconds per stage, median of %d cold runs (paper's numbers in brackets)" % runs)
+    print(f"{'grid (nodes)':>14} {'unknowns':>9} {'setup':>15} {'factor':>15} {'rhs setup':>15} "
+          f"{'solve':>15} {'total':>7} {'factor warm':>11}")
+    for gy, gx in grids:
+        cell = 4
+        width, height = (gx - 1) * cell, (gy - 1) * cell
+        mask = disc_mask(width, height)
+        warp = load_warp("swirl")(width, height, angle=90)
+        samples = {k: [] for k in ("assemble", "factor", "rhs", "solve")}
+        info = {}
+        for _ in range(runs):
+            if samples["factor"] and time.perf_counter() > DEADLINE:
+                break
+            solver._symbolic_cache.clear()
+            warper = FeatureWarper(width, height, mask, cell=cell)
+            mesh = warper.solve(warp)
+            for k in samples:
+                samples[k].append(warper.timings.get(k, 0.0))
+            info = {"nodes": mesh.info["grid"]["nodes"], "factorizations": warper.factorizations,
+                    "flipped_before_guard": mesh.info.get("flipped_before_guard")}
+        # One more with the symbolic analysis cached (another mask of the same pattern would hit it too).
+        warper = FeatureWarper(width, height, mask, cell=cell)
+        warper.solve(warp)
+        warm = warper.timings.get("factor", float("nan"))
+        unknowns = None
+        for state in getattr(warper, "_states", {}).values():
+            system = getattr(state, "system", None)
+            sub = getattr(system, "x", system)
+            unknowns = getattr(sub, "n_unknowns", None)
+        med = {k: median(v) for k, v in samples.items()}
+        total = sum(med.values())
+        paper = PAPER_TABLE1.get((gy, gx))
+        cells = []
+        for i, k in enumerate(("assemble", "factor", "rhs", "solve")):
+            cells.append(f"{med[k]:7.3f} [{paper[i]:5.3f}]" if paper else f"{med[k]:7.3f}        ")
+        print(f"{f'{gy}x{gx}':>14} {unknowns or '':>9} {' '.join(f'{c:>15}' for c in cells)} "
+              f"{total:7.3f} {warm:11.3f}")
+        rows.append({"grid": [gy, gx], "image": [width, height], "mask_fraction": float(mask.mean()),
+                     "unknowns": unknowns, "runs": samples, "median": med, "total": total,
+                     "factor_warm": warm, "paper": paper, **info})
+    return rows
+
+
+def bench_render(runs: int, photo12: Path, mask12: Path) -> dict:
+    from featurewarp_cli import render as rnd
+    from featurewarp_cli.api import FeatureWarper, load_warp
+    from featurewarp_cli.imageio import mask_from_image, read_image
+
+    image = read_image(str(photo12))
+    mask = mask_from_image(read_image(str(mask12)))
+    h, w = image.shape[:2]
+    warper = FeatureWarper(w, h, mask, cell=4)
+    # The plain swirl's mesh: rendering costs the same for any node positions, and this
+    # skips a cell-4 factorization and fold-over guard that the render figure does not need.
+    mesh = warper.solve(load_warp("swirl")(w, h, angle=180), "plain")
+    result = {"size": [w, h], "cell": 4, "triangles": int(mesh.triangles.shape[0])}
+    print(f"\nRender only, {w}x{h} at cell 4 (swirl 180 mesh, {mesh.triangles.shape[0]} triangles, "
+          f"12 MP output), median of {runs}")
+    variants = [("api (FeatureWarper.render)", lambda: warper.render(image, mesh))]
+    if hasattr(rnd, "render"):
+        variants.append(("render.render, antialiased", lambda: rnd.render(
+            image, mesh.source, mesh.target, mesh.triangles, mesh.canvas, "cubic", None)))
+        variants.append(("render.render, antialias=False", lambda: rnd.render(
+            image, mesh.source, mesh.target, mesh.triangles, mesh.canvas, "cubic", None, antialias=False)))
+    for name, fn in variants:
+        times = []
+        for _ in range(runs):
+            t0 = time.perf_counter()
+            fn()
+            times.append(time.perf_counter() - t0)
+            if time.perf_counter() > DEADLINE:
+                break
+        result[name] = {"seconds": times, "median_s": median(times)}
+        print(f"  {name:34s} {median(times):7.3f} s   (target <= {tgt.RENDER_12MP_CELL4_S} s)")
+    return result
+
+
+def ours_cmd(exe: Path, preset, photo, mask, out, extra=()):
+    args, _ = PRESETS[preset]
+    return [str(exe), "warp", preset, str(photo), str(out), "--mask", str(mask), *args, *extra]
+
+
+def magick_cmd(preset, photo, out):
+    _, args = PRESETS[preset]
+    return ["convert", str(photo), *args, str(out)]
+
+
+def bench_commands(runs, exe, photos, tmp, quick, with_magick) -> tuple[dict, dict]:
+    """Our commands, each followed by its ImageMagick counterpart (same load conditions)."""
+    results = {"startup": {}, "runs": []}
+    magick = {"available": False, "runs": []}
+    if with_magick and shutil.which("convert"):
+        version = subprocess.run(["convert", "-version"], capture_output=True, text=True).stdout.splitlines()
+        magick.update(available=True, version=version[0] if version else "")
+    for name, cmd in (("--help", [str(exe), "--help"]), ("warps", [str(exe), "warps"])):
+        results["startup"][name] = repeat(cmd, runs)
+    print("\n(b) Whole commands: median wall seconds and peak RSS of the process")
+    if magick["available"]:
+        print(f"(c) each followed by ImageMagick's plain equivalent ({magick['version']})")
+    elif with_magick:
+        print("(c) ImageMagick: convert not found, skipped")
+    for name, r in results["startup"].items():
+        show(f"featurewarp {name}", r, runs)
+    plan = [("1MP", preset, ["--cell", "4"]) for preset in PRESETS]
+    plan += [("12MP", preset, []) for preset in (("swirl",) if quick else ("swirl", "bulge", "arc"))]
+    plan.append(("12MP", "swirl", ["--cell", "4"]))     # stretch: liquid-rescale is a 1 MP comparison
+    done = set()
+    for size, preset, extra in plan:
+        photo, mask = photos[size]
+        r = repeat(ours_cmd(exe, preset, photo, mask, tmp / f"ours-{size}-{preset}.png", extra), runs)
+        r.update(size=size, preset=preset, extra=extra)
+        results["runs"].append(r)
+        show(f"{size} featurewarp {preset} {' '.join(PRESETS[preset][0] + extra)}", r, runs)
+        if magick["available"] and (size, preset) not in done:
+            done.add((size, preset))
+            m = repeat(magick_cmd(preset, photo, tmp / f"magick-{size}-{preset}.png"), runs)
+            m.update(size=size, preset=preset)
+            magick["runs"].append(m)
+            show(f"{size} convert {' '.join(PRESETS[preset][1])}", m, runs)
+    return results, magick
+
+
+def show(label, r, runs):
+    note = "" if r["runs"] == runs else f"  ({r['runs']} run{'s' if r['runs'] > 1 else ''}: slow or out of budget)"
+    print(f"  {label:50s} {r['median_s']:7.3f} s  {r['peak_mb']:5d} MB{'' if r['ok'] else '  FAILED'}{note}")
+
+
+def ratios(commands, magick) -> list[dict]:
+    if not magick.get("available"):
+        return []
+    im = {(r["size"], r["preset"]): r for r in magick["runs"]}
+    rows = []
+    print("\nRatios, featurewarp (with mask) / ImageMagick (plain)")
+    for r in commands["runs"]:
+        ref = im.get((r["size"], r["preset"]))
+        if ref is None:
+            continue
+        ratio = r["median_s"] / ref["median_s"]
+        label = f"{r['size']} {r['preset']} {' '.join(r['extra'])}".strip()
+        rows.append({"size": r["size"], "preset": r["preset"], "extra": r["extra"], "ours_s": r["median_s"],
+                     "magick_s": ref["median_s"], "ratio": ratio, "ours_mb": r["peak_mb"],
+                     "magick_mb": ref["peak_mb"]})
+        print(f"  {label:30s} {r['median_s']:7.3f} s / {ref['median_s']:7.3f} s = {ratio:5.2f}x")
+    return rows
+
+
+def machine() -> dict:
+    import scipy
+
+    info = {"python": platform.python_version(), "numpy": np.__version__, "scipy": scipy.__version__,
+            "opencv": cv2.__version__, "cpus": os.cpu_count(), "platform": platform.platform(),
+            "loadavg_start": os.getloadavg()}
+    try:
+        import sksparse
+
+        info["scikit-sparse"] = getattr(sksparse, "__version__", "installed")
+    except ImportError:
+        info["scikit-sparse"] = None
+    return info
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--quick", action="store_true", help="3 runs, fewer sizes, 12 MP swirl only")
+    parser.add_argument("--runs", type=int, help="runs per measurement (default 5; 3 with --quick)")
+    parser.add_argument("--only", help=f"comma-separated sections: {','.join(SECTIONS)}")
+    parser.add_argument("--budget", type=float, default=570.0,
+                        help="seconds after which figures stop repeating (default 570)")
+    parser.add_argument("--results", default=str(ROOT / "benchmarks" / "results"), help="output folder")
+    args = parser.parse_args(argv)
+    runs = args.runs or (3 if args.quick else 5)
+    sections = SECTIONS if not args.only else tuple(s.strip() for s in args.only.split(","))
+    unknown = set(sections) - set(SECTIONS)
+    if unknown:
+        parser.error(f"unknown section(s): {', '.join(sorted(unknown))}")
+    exe = Path(sys.executable).parent / "featurewarp"
+    if not exe.exists():
+        exe = Path(shutil.which("featurewarp") or "featurewarp")
+
+    started = time.perf_counter()
+    global DEADLINE
+    DEADLINE = started + args.budget
+    report = {"date": _dt.datetime.now().isoformat(timespec="seconds"), "runs": runs, "quick": args.quick,
+              "machine": machine(), "targets": {}}
+    print(f"featurewarp benchmark, {runs} runs per figure, {os.cpu_count()} cpus, "
+          f"load average {report['machine']['loadavg_start'][0]:.2f}")
+    with tempfile.TemporaryDirectory(prefix="featurewarp-bench-") as tmpdir:
+        tmp = Path(tmpdir)
+        photos = None
+        if {"render", "commands"} & set(sections):
+            photos = make_photos(ROOT / "samples", tmp)
+        if "table1" in sections:
+            report["table1"] = bench_table1(runs, QUICK_GRIDS if args.quick else GRIDS)
+        if "render" in sections:
+            report["render"] = bench_render(runs, *photos["12MP"])
+        if "commands" in sections:
+            commands, magick = bench_commands(runs, exe, photos, tmp, args.quick, "magick" in sections)
+            report["commands"], report["magick"] = commands, magick
+            report["ratios"] = ratios(commands, magick)
+    report["targets"] = tgt.evaluate(report)
+    report["machine"]["loadavg_end"] = os.getloadavg()
+    report["seconds"] = time.perf_counter() - started
+    tgt.print_targets(report["targets"])
+    print(f"\nbenchmark took {report['seconds']:.0f} s")
+
+    out_dir = Path(args.results)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
+    text = json.dumps(report, indent=2, default=float) + "\n"
+    (out_dir / f"bench-{stamp}.json").write_text(text)
+    (out_dir / "latest.json").write_text(text)
+    print(f"results: {out_dir / f'bench-{stamp}.json'} (and latest.json)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,55 @@
+"""The speed and memory targets of issue 4, checked against a benchmark report."""
+
+from __future__ import annotations
+
+import math
+
+GRID_200_TOTAL_S = 0.10          # 200x200 nodes: setup + factor + rhs + solve
+GRID_1000_FACTOR_S = 2.0         # 1000x1000 nodes: factorization
+RENDER_12MP_CELL4_S = 0.5        # rendering 12 MP at cell 4
+SWIRL_12MP_RATIO = 0.5           # whole command / ImageMagick -swirl 180
+SWIRL_12MP_PEAK_MB = 800
+STRETCH_1MP_RATIO = 0.1          # whole command / ImageMagick -liquid-rescale 200x100%!
+STARTUP_S = 0.25                 # featurewarp --help, featurewarp warps
+
+
+def _row(name, value, limit, unit="s"):
+    met = None if value is None or (isinstance(value, float) and math.isnan(value)) else value <= limit
+    return {"target": name, "value": value, "limit": limit, "unit": unit, "met": met}
+
+
+def evaluate(report: dict) -> list[dict]:
+    """One row per target that the report has the numbers for."""
+    rows = []
+    for entry in report.get("table1", []):
+        if entry["grid"] == [200, 200]:
+            rows.append(_row("200x200 grid: setup+factor+rhs+solve", entry["total"], GRID_200_TOTAL_S))
+        if entry["grid"] == [1000, 1000]:
+            rows.append(_row("1000x1000 grid: factorization (cold)", entry["median"]["factor"], GRID_1000_FACTOR_S))
+    render = report.get("render", {})
+    for name in ("render.render, antialiased", "api (FeatureWarper.render)"):
+        if name in render:
+            rows.append(_row(f"render 12 MP at cell 4 ({name})", render[name]["median_s"], RENDER_12MP_CELL4_S))
+    commands = report.get("commands", {})
+    for name, r in commands.get("startup", {}).items():
+        rows.append(_row(f"featurewarp {name} start-up", r["median_s"], STARTUP_S))
+    for r in commands.get("runs", []):
+        if r["size"] == "12MP" and r["preset"] == "swirl" and not r["extra"]:
+            rows.append(_row("12 MP swirl 180 peak RSS", r["peak_mb"], SWIRL_12MP_PEAK_MB, "MB"))
+    for r in report.get("ratios", []):
+        if r["size"] == "12MP" and r["preset"] == "swirl" and not r["extra"]:
+            rows.append(_row("12 MP swirl 180 / magick -swirl 180", r["ratio"], SWIRL_12MP_RATIO, "x"))
+        if r["size"] == "1MP" and r["preset"] == "stretch":
+            rows.append(_row("1 MP stretch --sx 2 / magick -liquid-rescale", r["ratio"], STRETCH_1MP_RATIO, "x"))
+    return rows
+
+
+def print_targets(rows: list[dict]) -> None:
+    if not rows:
+        return
+    print("\nTargets")
+    for r in rows:
+        state = {True: "met", False: "NOT met", None: "n/a"}[r["met"]]
+        value = r["value"]
+        shown = f"{value:.3f}" if isinstance(value, float) else str(value)
+        print(f"  {r['target']:56s} {shown:>8} {r['unit']:2s} (<= {r['limit']})  {state}")
