@@ -178,6 +178,20 @@ def write_image(out_path: str, fmt: str, image, background) -> None:
         raise WarpError(f"cannot write {out_path}: {getattr(err, 'strerror', None) or err}") from err
 
 
+def summary(preset: str, mode: str, input: str, out_path: str, size, mesh, t0: float,
+            warnings: list) -> dict:
+    """The ``--verbose`` summary of one written image (a fold-over, if any, becomes a warning)."""
+    flips = mesh.info.get("flipped_triangles", 0)
+    if flips:
+        warnings.append(f"{flips} triangles of the mesh fold over; the output may show folds")
+    return {
+        "input": "stdin" if input == "-" else input, "output": "stdout" if out_path == "-" else out_path,
+        "preset": preset, "mode": mode, "size": tuple(size), "canvas": tuple(mesh.canvas),
+        "solver": mesh.info["solver"], "components": len(mesh.info["components"]),
+        "flipped_triangles": flips, "seconds": time.perf_counter() - t0, "warnings": warnings,
+    }
+
+
 def warp_file(settings: Settings, input: str, output: str, mask: str | None = None,
               report: str | None = None, save_grid: str | None = None, draw_grid: bool = False) -> dict:
     """Load, warp, render and write one image (the body of ``featurewarp warp PRESET``).
@@ -248,16 +262,7 @@ def warp_file(settings: Settings, input: str, output: str, mask: str | None = No
             imageio.write_atomic(report, (json.dumps(doc, indent=2) + "\n").encode())
         except OSError as err:
             raise WarpError(f"cannot write report {report}: {err.strerror or err}") from err
-    flips = mesh.info.get("flipped_triangles", 0)
-    if flips:
-        warnings.append(f"{flips} triangles of the mesh fold over; the output may show folds")
-    return {
-        "input": "stdin" if input == "-" else input, "output": "stdout" if out_path == "-" else out_path,
-        "preset": settings.preset, "mode": settings.mode,
-        "size": (width, height), "canvas": tuple(mesh.canvas), "solver": mesh.info["solver"],
-        "components": len(mesh.info["components"]), "flipped_triangles": flips,
-        "seconds": time.perf_counter() - t0, "warnings": warnings,
-    }
+    return summary(settings.preset, settings.mode, input, out_path, (width, height), mesh, t0, warnings)
 
 
 def compare_file(settings: Settings, input: str, output: str, mask: str | None = None,
@@ -270,7 +275,7 @@ def compare_file(settings: Settings, input: str, output: str, mask: str | None =
     Returns
     -------
     dict
-        Summary (as :func:`warp_file`'s, for the similarity result).
+        :func:`summary` of the similarity result.
     """
     from dataclasses import replace
 
@@ -291,13 +296,7 @@ def compare_file(settings: Settings, input: str, output: str, mask: str | None =
         tiles.append(panel.draw_grid(result, mesh) if draw_grid else result)
         labels.append(f"{mode} {settings.preset}" if mode == "plain" else f"featurewarp {mode}")
     write_image(out_path, fmt, panel.labelled_panel(tiles, labels), (255, 255, 255))
-    return {
-        "input": "stdin" if input == "-" else input, "output": "stdout" if out_path == "-" else out_path,
-        "preset": settings.preset, "mode": "compare", "size": (width, height),
-        "canvas": tuple(mesh.canvas), "solver": mesh.info["solver"],
-        "components": len(mesh.info["components"]), "flipped_triangles": mesh.info["flipped_triangles"],
-        "seconds": time.perf_counter() - t0, "warnings": warnings,
-    }
+    return summary(settings.preset, "compare", input, out_path, (width, height), mesh, t0, warnings)
 
 
 @dataclass(frozen=True)
