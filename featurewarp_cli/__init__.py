@@ -8,7 +8,7 @@ __version__ = "0.1.0"
 
 
 def __getattr__(name):
-    if name in {"warp", "FeatureWarper", "load_warp", "Result"}:
+    if name in {"warp", "FeatureWarper", "load_warp", "Mesh"}:
         from . import api
 
         return getattr(api, name)

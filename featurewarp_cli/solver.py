@@ -50,15 +50,6 @@ _SYMBOLIC_CACHE_SIZE = 4
 _symbolic_cache: OrderedDict = OrderedDict()
 
 
-def cholmod_available() -> bool:
-    """True when scikit-sparse's CHOLMOD can be imported."""
-    try:
-        import sksparse.cholmod  # noqa: F401
-    except ImportError:
-        return False
-    return True
-
-
 def grid_nested_dissection(ny: int, nx: int, leaf: int = _LEAF_NODES) -> np.ndarray:
     """Nested-dissection order of the nodes of an ``ny`` x ``nx`` grid (row-major numbering).
 
