@@ -43,6 +43,15 @@ BLEND_BISECTIONS = 8
 UNTANGLED_BISECTIONS = 3
 #: Fraction of its area under the warp that the fold-over guard asks each triangle to keep.
 UNTANGLE_FLOOR = 0.05
+#: The fold-over guard first untangles a window around the folds, reaching this many
+#: times the largest fold's extent beyond it (at least WINDOW_MIN_MARGIN quads), in at
+#: most WINDOW_ITERATIONS steps; where that fails, the whole grid. On the 12 MP swirl 180
+#: benchmark: 43 window steps on 15 % of the triangles instead of 36 on all of them.
+WINDOW_MARGINS = (0.5,)
+WINDOW_MIN_MARGIN = 8
+WINDOW_ITERATIONS = 60
+#: Windows larger than this fraction of the grid are left to the global pass.
+WINDOW_MAX_FRACTION = 0.5
 
 
 def load_warp(name: str):
@@ -106,6 +115,7 @@ class _GridState:
     features: feat.Features
     tied: np.ndarray
     system: "AxisSystems | None" = None
+    normal: object = None               # the normal matrix (CSR), once the fold-over guard needs it
 
     @property
     def fixed(self) -> np.ndarray:
@@ -233,9 +243,9 @@ class FeatureWarper:
         self.timings["factor"] = self.timings.get("factor", 0.0) + time.perf_counter() - t1
         return reduced
 
-    def _solver(self, state, reduced, weights, edges, tied, component_maps, warped):
-        """``solve(force=None)``: least-squares node positions for these edge targets, the
-        fixed border and tied features, plus an optional external force per node (N, 2)."""
+    def _constants(self, state, weights, edges, tied, component_maps, warped):
+        """A^T b for these edge targets, and q: fixed nodes at W, tied nodes at their
+        component's linear map (see :meth:`solver.ReducedSystem.solve`)."""
         t0 = time.perf_counter()
         rhs = system.right_hand_side(state.grid, weights, edges)
         offset = np.zeros_like(warped)
@@ -244,6 +254,12 @@ class FeatureWarper:
         on = tied >= 0
         offset[on] = np.einsum("nij,nj->ni", component_maps[tied[on]], state.nodes[on])
         self.timings["rhs"] = self.timings.get("rhs", 0.0) + time.perf_counter() - t0
+        return rhs, offset
+
+    def _solver(self, state, reduced, weights, edges, tied, component_maps, warped):
+        """``solve(force=None)``: least-squares node positions for these edge targets, the
+        fixed border and tied features, plus an optional external force per node (N, 2)."""
+        rhs, offset = self._constants(state, weights, edges, tied, component_maps, warped)
 
         def solve(force=None):
             t1 = time.perf_counter()
@@ -251,6 +267,7 @@ class FeatureWarper:
             self.timings["solve"] = self.timings.get("solve", 0.0) + time.perf_counter() - t1
             return result
 
+        solve.rhs, solve.offset = rhs, offset
         return solve
 
     def _linear_solve(self, state, reduced, weights, edges, tied, component_maps, warped) -> np.ndarray:
@@ -346,11 +363,21 @@ class FeatureWarper:
 
         def untangled(reduced, edges, tied, start):
             solve = self._solver(state, reduced, features.weight, edges, tied, component_maps, warped)
+            x = start
+            crushed = np.flatnonzero(injectivity.grid_areas(state.grid, x) < 0.5 * floor) % features.weight.size
+            extent = injectivity.extent(state.grid, crushed)
+            for margin in WINDOW_MARGINS:        # near the folds first: cheap, and usually enough
+                x, iterations, window_quads = self._untangle_window(
+                    state, solve.rhs, solve.offset, tied, x, floor, stiffness,
+                    max(WINDOW_MIN_MARGIN, int(margin * extent)))
+                info["untangle_iterations"] = info.get("untangle_iterations", 0) + iterations
+                if x is None:
+                    break
+                if not injectivity.flipped(x, tris).any():
+                    info["untangle_window_quads"] = window_quads
+                    return x, True
 
-            def residual(points):
-                return system.residual(state.grid, features.weight, edges, points)
-
-            x, iterations = injectivity.untangle(solve, residual, start, tris, floor, stiffness,
+            x, iterations = injectivity.untangle(solve, self._normal(state).dot, start, tris, floor, stiffness,
                                                  areas=lambda points: injectivity.grid_areas(state.grid, points))
             info["untangle_iterations"] = info.get("untangle_iterations", 0) + iterations
             return x, not injectivity.flipped(x, tris).any()
@@ -402,6 +429,72 @@ class FeatureWarper:
             return best, component_maps
         info["fallback"] = True
         return warped + injectivity.max_step(warped, x, tris) * 0.95 * (x - warped), component_maps
+
+    def _normal(self, state: _GridState):
+        """The normal matrix (CSR) of the state's weights, built once."""
+        if state.normal is None:
+            state.normal = system.normal_matrix(state.grid, state.features.weight).tocsr()
+        return state.normal
+
+    def _untangle_window(self, state: _GridState, rhs, offset, tied, x, floor, stiffness, margin: int):
+        """:func:`injectivity.untangle` on a window around the folded or crushed triangles.
+
+        A fold is a local defect, so the guard first works on the nodes within
+        ``margin`` quads of it, everything else held where it is, except that a
+        tied feature reaching into the window keeps its shared unknown (it may
+        shift as a whole, as in the global pass). The window's system is the
+        rows of the normal matrix for its unknowns: a small fraction of the
+        grid, so each step costs a fraction of a global one.
+
+        Returns
+        -------
+        x : (N, 2) ndarray or None
+            New positions; None when the window would be about as large as the grid.
+        iterations : int
+        quads : int
+            Quads whose shape the window may change.
+        """
+        grid, weights = state.grid, state.features.weight
+        n_quads = weights.size
+        crushed = np.flatnonzero(injectivity.grid_areas(grid, x) < 0.5 * floor) % n_quads
+        quads = np.zeros(n_quads, bool)
+        quads[crushed] = True
+        _, near, inner = injectivity.window(grid, quads, margin)
+        moving = inner & ~state.fixed & (tied < 0)
+        moving |= np.isin(tied, np.unique(tied[near & (tied >= 0)])) & (tied >= 0)
+        corners = grid.quads()
+        touched = moving[corners].any(axis=1)
+        ties = tied[corners]
+        rigid = (ties[:, 0] >= 0) & (ties == ties[:, :1]).all(axis=1)    # inside one tied feature
+        changing = np.flatnonzero(touched & ~rigid)
+        if changing.size > WINDOW_MAX_FRACTION * n_quads:
+            return None, 0, 0
+        in_system = np.zeros(grid.n_nodes, bool)
+        in_system[corners[touched].ravel()] = True
+        nodes = np.flatnonzero(in_system)
+        local_moving = moving[nodes]
+        unknown = system.number_unknowns(~local_moving, np.where(local_moving, tied[nodes], -1))
+        matrix = self._normal(state)[nodes][:, nodes]
+        reduced = ReducedSystem(matrix, unknown)
+        held = np.where(local_moving[:, None], offset[nodes], x[nodes])
+        local_rhs = rhs[nodes]
+
+        def solve(force):
+            t0 = time.perf_counter()
+            result = reduced.solve(local_rhs + force, held)
+            self.timings["solve"] = self.timings.get("solve", 0.0) + time.perf_counter() - t0
+            return result
+
+        local = np.full(grid.n_nodes, -1)
+        local[nodes] = np.arange(nodes.size)
+        quad_corners = local[corners[changing]]
+        triangles = np.concatenate([quad_corners[:, [0, 1, 2]], quad_corners[:, [0, 2, 3]]])
+        window_floor = np.concatenate([floor[changing], floor[changing + n_quads]])
+        moved, iterations = injectivity.untangle(solve, matrix.dot, x[nodes], triangles, window_floor,
+                                                 stiffness[nodes], max_iterations=WINDOW_ITERATIONS)
+        x = x.copy()
+        x[nodes] = moved
+        return x, iterations, int(changing.size)
 
     def _describe_components(self, state: _GridState, component_maps: np.ndarray) -> list[dict]:
         """Per component: quads, target scale and rotation, and whether it is held exactly."""

