@@ -213,15 +213,15 @@ class FeatureWarper:
         self.cell = cell
         self.factorizations = 0
         self.timings: dict[str, float] = {}
-        self._states: dict[float, _GridState] = {}
+        self._states: dict[tuple, _GridState] = {}
 
-    def _state(self, cell: float, warp, boundary: str) -> _GridState:
-        """Grid, features, border conditions and ties (built once per cell and border)."""
-        grid = Grid.for_image(self.width, self.height, cell)
+    def _state(self, grid: Grid, warped: np.ndarray, boundary: str) -> _GridState:
+        """Features, border conditions and ties on ``grid`` (built once per grid and border);
+        ``warped``: W at the grid's nodes."""
         sides = (False,) * 4
         if boundary == "slide":
-            sides = system.sliding_sides(grid, warp(grid.nodes()))
-        key = (cell, sides)
+            sides = system.sliding_sides(grid, warped)
+        key = ((grid.nx, grid.ny), sides)
         if key not in self._states:
             features = feat.analyse(self.mask, grid, self.feature_weight, self.decay)
             fixed_x, fixed_y = system.border_conditions(grid, sides)
@@ -310,8 +310,9 @@ class FeatureWarper:
             cell = float(self.cell)
             error = fidelity.pl_error(Grid.for_image(self.width, self.height, cell), warp)
         boundary = self.boundary or getattr(warp, "boundary", "fixed")
-        state = self._state(cell, warp, boundary)
-        warped = warp(state.nodes)
+        grid = Grid.for_image(self.width, self.height, cell)
+        warped = warp(grid.nodes())
+        state = self._state(grid, warped, boundary)
         self.timings["grid"] = time.perf_counter() - t0
         info = {
             "mode": mode,

@@ -93,16 +93,15 @@ def residual(grid: Grid, weights: np.ndarray, edges: np.ndarray, points: np.ndar
 def right_hand_side(grid: Grid, weights: np.ndarray, edges: np.ndarray) -> np.ndarray:
     """A^T b for edge targets ``edges`` ((K, 4, 2) ndarray); returns (N, 2)."""
     qy, qx = grid.quad_shape
-    we = (weights * weights)[:, None, None] * edges
-    we = we.reshape(qy, qx, 4, 2)
+    we = ((weights * weights)[:, None, None] * edges).reshape(qy, qx, 4, 2)
+    top, right, bottom, left = (we[:, :, k] for k in range(4))
     rhs = np.zeros((grid.ny, grid.nx, 2))
-    # Edge k runs from corner k to corner k+1 (corners: tl, tr, br, bl).
-    corner_slices = [(slice(0, -1), slice(0, -1)), (slice(0, -1), slice(1, None)),
-                     (slice(1, None), slice(1, None)), (slice(1, None), slice(0, -1))]
-    for k in range(4):
-        start, end = corner_slices[k], corner_slices[(k + 1) % 4]
-        rhs[end] += we[:, :, k]
-        rhs[start] -= we[:, :, k]
+    # Edge k runs from corner k to corner k+1 (corners: tl, tr, br, bl): it adds
+    # its target to its end and subtracts it from its start.
+    rhs[:-1, :-1] += left - top
+    rhs[:-1, 1:] += top - right
+    rhs[1:, 1:] += right - bottom
+    rhs[1:, :-1] += bottom - left
     return rhs.reshape(-1, 2)
 
 
