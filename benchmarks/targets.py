@@ -11,6 +11,7 @@ SWIRL_12MP_RATIO = 0.5           # whole command / ImageMagick -swirl 180
 SWIRL_12MP_PEAK_MB = 800
 STRETCH_1MP_RATIO = 0.1          # whole command / ImageMagick -liquid-rescale 200x100%!
 STARTUP_S = 0.25                 # featurewarp --help, featurewarp warps
+REWARP_1MP_S = 0.15              # API: re-solve + re-render 1 MP with new parameters, factorization reused
 
 
 def _row(name, value, limit, unit="s"):
@@ -30,6 +31,9 @@ def evaluate(report: dict) -> list[dict]:
     for name in ("render.render, antialiased", "api (FeatureWarper.render)"):
         if name in render:
             rows.append(_row(f"render 12 MP at cell 4 ({name})", render[name]["median_s"], RENDER_12MP_CELL4_S))
+    rewarp = report.get("rewarp")
+    if rewarp:
+        rows.append(_row("1 MP re-warp (API: re-solve + re-render)", rewarp["median_s"], REWARP_1MP_S))
     commands = report.get("commands", {})
     for name, r in commands.get("startup", {}).items():
         rows.append(_row(f"featurewarp {name} start-up", r["median_s"], STARTUP_S))

@@ -15,7 +15,7 @@ import cv2
 import numpy as np
 
 from . import fidelity, imageio
-from .batch import Settings, WarpError, background_colour, load_image_and_mask, make_warper
+from .batch import Settings, WarpError, background_colour, load_image_and_mask, make_warper, prefetch_engine
 
 ANIMATED = {".gif", ".webp", ".png", ".apng"}
 VIDEO = {".mp4": "mp4v", ".avi": "MJPG"}
@@ -117,6 +117,7 @@ def animate_file(settings: Settings, input: str, output: str, mask: str | None, 
     kind = output_kind(output)
     if kind != "sequence":
         imageio.check_writable(output)
+    prefetch_engine()
     image, feature_mask, warnings = load_image_and_mask(settings, imageio.split_prefix(input)[1], mask)
     height, width = image.shape[:2]
     per_frame = frame_params(settings, ranges, frames)
@@ -148,14 +149,14 @@ def animate_file(settings: Settings, input: str, output: str, mask: str | None, 
 
 
 def write_frames(output: str, kind: str, frames: list[np.ndarray], fps: float) -> None:
-    """Write ``frames`` atomically: OpenCV encodes into a temporary file, whose bytes
-    :func:`imageio.write_atomic` then puts in place (or each frame of a sequence)."""
+    """Write ``frames`` atomically: each frame of a sequence as :func:`imageio.encode_png`
+    bytes, an animation or video as OpenCV encodes it into a temporary file, whose bytes
+    :func:`imageio.write_atomic` then puts in place."""
     if kind == "sequence":
         for index, frame in enumerate(frames):
             path = output % index
             imageio.check_writable(path)
-            ok, data = cv2.imencode(".png", frame, [cv2.IMWRITE_PNG_COMPRESSION, 3])
-            imageio.write_atomic(path, data.tobytes())
+            imageio.write_atomic(path, imageio.encode_png(frame))
         return
     directory = os.path.dirname(os.path.abspath(output))
     ext = os.path.splitext(output)[1].lower()

@@ -8,14 +8,18 @@ lookup and a process pool. Nothing here depends on click: errors are
 
 from __future__ import annotations
 
+import importlib
 import json
 import os
+import sys
+import threading
 import time
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
-from multiprocessing import get_context
 
 from . import imageio, plugins
+
+#: The module that :func:`prefetch_engine` imports: the solver and renderer with scipy.
+ENGINE = "featurewarp_cli.api"
 
 
 class WarpError(Exception):
@@ -107,6 +111,23 @@ def read_input(path: str, param: str, max_pixels: int | None):
         return imageio.read_image(path, max_pixels)
     except imageio.ImageError as err:
         raise WarpError(str(err), None if param == "INPUT" else param) from err
+
+
+def prefetch_engine() -> None:
+    """Start importing the engine (scipy.sparse, solver, renderer: about 0.2 s) in a thread.
+
+    Called just before the images are decoded: OpenCV releases the GIL while it
+    decodes, so the import runs meanwhile instead of after it. A failed import
+    is left to the main thread, whose own import raises the error.
+    """
+    def work():
+        try:
+            importlib.import_module(ENGINE)
+        except Exception:  # the main thread imports it again and reports the error
+            pass
+
+    if ENGINE not in sys.modules:
+        threading.Thread(target=work, name="featurewarp-prefetch").start()
 
 
 def load_image_and_mask(settings: Settings, input: str, mask: str | None):
@@ -232,6 +253,7 @@ def warp_file(settings: Settings, input: str, output: str, mask: str | None = No
         raise WarpError("cannot be '-' when INPUT is '-' (stdin holds the image)", "--mask", usage=True)
     out_path, fmt = check_outputs(settings, output, (report, "--report"), (save_grid, "--save-grid"))
     background = background_colour(settings.background, fmt)
+    prefetch_engine()
     image, feature_mask, warnings = load_image_and_mask(settings, input, mask)
     height, width = image.shape[:2]
     timings = {"load": time.perf_counter() - t0}
@@ -286,6 +308,7 @@ def compare_file(settings: Settings, input: str, output: str, mask: str | None =
     out_path, fmt = check_outputs(settings, output)
     background = background_colour(settings.background, fmt)
     settings = replace(settings, mode="similarity")
+    prefetch_engine()
     image, feature_mask, warnings = load_image_and_mask(settings, input, mask)
     height, width = image.shape[:2]
     warp, warper = make_warper(settings, width, height, feature_mask)
@@ -380,6 +403,9 @@ def run_batch(settings: Settings, jobs: list[Job], workers: int = 1):
         for job in jobs:
             yield (job, *run_job(settings, job))
         return
+    from concurrent.futures import ProcessPoolExecutor
+    from multiprocessing import get_context
+
     with ProcessPoolExecutor(workers, mp_context=get_context("spawn")) as pool:
         yield from ((job, *outcome) for job, outcome in
                     zip(jobs, pool.map(run_job, [settings] * len(jobs), jobs)))

@@ -9,11 +9,9 @@ every message goes to stderr.
 from __future__ import annotations
 
 import inspect
-import json
 import math
 import os
 import sys
-import traceback
 import warnings
 
 import click
@@ -253,7 +251,7 @@ class PresetGroup(click.Group):
         return list(plugins.names())
 
     def get_command(self, ctx, name):
-        if name not in plugins.names():
+        if not plugins.known(name):
             return None
         try:
             preset = plugins.load(name)
@@ -505,6 +503,8 @@ def list_warps(as_json):
             continue
         entries.append({"name": name, "summary": preset.summary, "params": [p.as_dict() for p in preset.params]})
     if as_json:
+        import json
+
         click.echo(json.dumps(entries, indent=2))
         return
     for entry in entries:
@@ -557,6 +557,8 @@ def main(argv=None):
         code = 1
     except Exception as err:  # ClickException (processing) and anything unanticipated
         if debug:
+            import traceback
+
             traceback.print_exception(err, file=sys.stderr)
         if isinstance(err, click.ClickException):
             message, code = err.format_message(), err.exit_code

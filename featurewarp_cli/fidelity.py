@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from .grid import Grid, signed_areas
+from .grid import Grid
 
 #: Largest piecewise-linear deviation from the warp the automatic cell allows, in pixels.
 MAX_PL_ERROR = 0.5
@@ -20,6 +20,24 @@ MAX_PL_ERROR = 0.5
 MAX_NODES = 4_000_000
 #: Node count the automatic rule aims for when the warp is gentle.
 BASE_NODES = 250_000
+
+
+def _deviation(grid: Grid, warp) -> tuple[float, np.ndarray]:
+    """(:func:`pl_error`, W at the nodes as an (ny, nx, 2) array)."""
+    nodes = grid.nodes().reshape(grid.ny, grid.nx, 2)
+    warped = warp(nodes.reshape(-1, 2)).reshape(grid.ny, grid.nx, 2)
+    worst = 0.0
+    for a, b, wa, wb in (
+        (nodes[:, :-1], nodes[:, 1:], warped[:, :-1], warped[:, 1:]),        # horizontal edges
+        (nodes[:-1, :], nodes[1:, :], warped[:-1, :], warped[1:, :]),        # vertical edges
+        (nodes[:-1, :-1], nodes[1:, 1:], warped[:-1, :-1], warped[1:, 1:]),  # diagonals
+    ):
+        gap = warp(((a + b) / 2.0).reshape(-1, 2)) - ((wa + wb) / 2.0).reshape(-1, 2)
+        # The largest squared length, then one square root: the same number as the largest
+        # np.linalg.norm(gap, axis=1) (sqrt is monotonic and correctly rounded), at less cost.
+        squared = gap[:, 0] * gap[:, 0] + gap[:, 1] * gap[:, 1]
+        worst = max(worst, float(np.sqrt(squared.max(initial=0.0))))
+    return worst, warped
 
 
 def pl_error(grid: Grid, warp) -> float:
@@ -37,18 +55,22 @@ def pl_error(grid: Grid, warp) -> float:
     -------
     float
     """
-    nodes = grid.nodes().reshape(grid.ny, grid.nx, 2)
-    warped = warp(nodes.reshape(-1, 2)).reshape(grid.ny, grid.nx, 2)
-    worst = 0.0
-    for a, b, wa, wb in (
-        (nodes[:, :-1], nodes[:, 1:], warped[:, :-1], warped[:, 1:]),        # horizontal edges
-        (nodes[:-1, :], nodes[1:, :], warped[:-1, :], warped[1:, :]),        # vertical edges
-        (nodes[:-1, :-1], nodes[1:, 1:], warped[:-1, :-1], warped[1:, 1:]),  # diagonals
-    ):
-        middle = warp(((a + b) / 2.0).reshape(-1, 2))
-        gap = np.linalg.norm(middle - ((wa + wb) / 2.0).reshape(-1, 2), axis=1)
-        worst = max(worst, float(gap.max(initial=0.0)))
-    return worst
+    return _deviation(grid, warp)[0]
+
+
+def smallest_area(points: np.ndarray) -> float:
+    """Smallest signed area of the grid's triangles with nodes at ``points`` ((ny, nx, 2)).
+
+    The same numbers as :func:`grid.signed_areas` over ``grid.triangles()`` (two
+    triangles per quad: top-left, top-right, bottom-right and top-left,
+    bottom-right, bottom-left), from slices instead of index arrays. NaN if any is.
+    """
+    tl, tr, br, bl = points[:-1, :-1], points[:-1, 1:], points[1:, 1:], points[1:, :-1]
+    lowest = np.inf
+    for b, c in ((tr, br), (br, bl)):
+        u, v = b - tl, c - tl
+        lowest = np.minimum(lowest, (0.5 * (u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0])).min())
+    return float(lowest)
 
 
 def base_cell(width: int, height: int) -> float:
@@ -65,11 +87,10 @@ def follows(grid: Grid, warp) -> tuple[bool, float]:
     error : float
         Piecewise-linear error in pixels.
     """
-    error = pl_error(grid, warp)
+    error, warped = _deviation(grid, warp)
     if error > MAX_PL_ERROR:
         return False, error
-    areas = signed_areas(warp(grid.nodes()), grid.triangles())
-    return bool(areas.min() > 0), error
+    return bool(smallest_area(warped) > 0), error
 
 
 def auto_cell(width: int, height: int, warp=None) -> tuple[float, float]:

@@ -37,10 +37,16 @@ def similarity_fits(source: np.ndarray, target: np.ndarray, labels: np.ndarray, 
     fitted = np.stack([a[labels] * p[:, 0] - b[labels] * p[:, 1],
                        b[labels] * p[:, 0] + a[labels] * p[:, 1]], axis=1)
     rms = np.sqrt(per_label(((fitted - q) ** 2).sum(axis=1)) / n)
+    # Bounding boxes: min and max over each label's run of the label-sorted points
+    # (np.minimum.at does the same 7x slower).
+    order = np.argsort(labels, kind="stable")
+    first = np.searchsorted(labels[order], np.arange(count))
+    present = first < np.searchsorted(labels[order], np.arange(count), side="right")
     lo = np.full((count, 2), np.inf)
     hi = np.full((count, 2), -np.inf)
-    np.minimum.at(lo, labels, source)
-    np.maximum.at(hi, labels, source)
+    if present.any():
+        lo[present] = np.minimum.reduceat(source[order], first[present])
+        hi[present] = np.maximum.reduceat(source[order], first[present])
     return {"scale": np.hypot(a, b), "rotation_deg": np.degrees(np.arctan2(b, a)), "rms_px": rms,
             "diameter_px": np.hypot(*(hi - lo).T)}
 
@@ -54,6 +60,20 @@ def triangle_anisotropy(source: np.ndarray, target: np.ndarray, triangles: np.nd
     jac = dt @ np.linalg.inv(ds)
     sv = np.linalg.svd(jac, compute_uv=False)
     return sv[:, 0] / np.maximum(sv[:, 1], 1e-12)
+
+
+def background_rms(target: np.ndarray, warped: np.ndarray, quads: np.ndarray) -> float:
+    """RMS length of (solution edge - W's edge) over the four edges of each of ``quads``; 0 if none.
+
+    Edge k of a quad runs from corner k to corner k + 1 (cyclically). Computed per
+    coordinate on gathered columns, which costs a third of gathering (K, 4, 2) blocks.
+    """
+    if not quads.size:
+        return 0.0
+    ahead = np.roll(quads, -1, axis=1)
+    dx = (target[ahead, 0] - target[quads, 0]) - (warped[ahead, 0] - warped[quads, 0])
+    dy = (target[ahead, 1] - target[quads, 1]) - (warped[ahead, 1] - warped[quads, 1])
+    return float(np.sqrt((dx * dx + dy * dy).mean()))
 
 
 def mesh_quality(source, target, warped, triangles, quads, node_component, n_components,
@@ -93,13 +113,7 @@ def mesh_quality(source, target, warped, triangles, quads, node_component, n_com
                 "residual_rms_px": float(fits["rms_px"][k]),
                 "residual_percent": float(100.0 * fits["rms_px"][k] / max(fits["diameter_px"][k], 1e-12)),
             })
-    edges = quads[background_quads]
-    if edges.size:
-        got = np.roll(target[edges], -1, axis=1) - target[edges]
-        want = np.roll(warped[edges], -1, axis=1) - warped[edges]
-        report["background_rms_px"] = float(np.sqrt(((got - want) ** 2).sum(axis=2).mean()))
-    else:
-        report["background_rms_px"] = 0.0
+    report["background_rms_px"] = background_rms(target, warped, quads[background_quads])
     area = signed_areas(target, triangles)
     reference = signed_areas(warped, triangles)
     valid = np.abs(reference) > 1e-12
