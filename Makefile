@@ -8,7 +8,7 @@ PYTHON ?= python3
 VENV   ?= .venv
 BIN    := $(VENV)/bin
 SUDO   := $(shell [ "$$(id -u)" -eq 0 ] || echo sudo)
-APT_PACKAGES := python3-venv libsuitesparse-dev libopenblas0-pthread libopenblas-dev
+APT_PACKAGES := python3-venv python3-dev build-essential libsuitesparse-dev libopenblas0-pthread libopenblas-dev
 
 SAMPLES := astronaut coins shapes
 PRESETS := stretch arc swirl bulge
@@ -28,7 +28,7 @@ install:
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
 	$(BIN)/python -m pip install -q -e '.[cholmod,test]'
-	$(BIN)/python -c "import sksparse.cholmod; print('featurewarp installed; CHOLMOD in use')"
+	$(BIN)/python -c "import sksparse.cholmod, featurewarp_cli._raster; print('featurewarp installed; CHOLMOD and the compiled rasterizer in use')"
 
 test:
 	$(BIN)/python -m pytest

@@ -23,23 +23,38 @@ are applied on the way:
 
 :func:`inverse_map` and :func:`resample` are the two halves without
 antialiasing, kept for callers that want the map itself.
+
+The per-triangle and per-pixel loops (triangle setup, scanline filling, the
+filter's probes and sums) run in the compiled module :mod:`featurewarp_cli._raster`,
+which reproduces the numpy code here bit for bit; when it is not built, the
+numpy code runs instead (slower), with one notice on stderr per process.
 """
 
 from __future__ import annotations
 
 import os
+import sys
+import threading
 from concurrent.futures import ThreadPoolExecutor
 
 import cv2
 import numpy as np
 
+try:
+    from . import _raster
+except ImportError:                # built without a C compiler: the numpy code below instead
+    _raster = None
+
+_fallback_noted = False
+
 INTERPOLATION = {"linear": cv2.INTER_LINEAR, "cubic": cv2.INTER_CUBIC, "lanczos": cv2.INTER_LANCZOS4}
 
 #: Output pixels per band (rows are grouped so that a band holds about this many).
 BAND_PIXELS = 1 << 18
-#: Bands rendered at once (numpy and OpenCV release the GIL in the heavy parts).
-#: 12 MP at cell 4 on the 2-core machine at load 1.3: 1.36 s with one, 1.01 s
-#: with two (2.53 s / 1.74 s antialiased); the output does not depend on it.
+#: Bands rendered at once (the compiled loops, numpy and OpenCV release the GIL).
+#: 12 MP at cell 4 (swirl 180) on the 2-core machine takes 1.2 s of CPU
+#: antialiased, 0.7 s without; with two threads 0.6 s and 0.45 s when the machine
+#: is otherwise quiet. The output does not depend on it.
 THREADS = min(2, os.cpu_count() or 1)
 #: Minification (largest singular value of J) from which a pixel is prefiltered.
 AA_START = 1.1
@@ -50,20 +65,64 @@ AA_INTERPOLATION = cv2.INTER_LINEAR
 _COMPACT_WIDTH = 4096     # width of the (rows, width) maps used to sample scattered points
 
 
+def _compiled():
+    """The compiled loops, or None (then say once on stderr that numpy stands in)."""
+    global _fallback_noted
+    if _raster is None and not _fallback_noted:
+        sys.stderr.write("featurewarp: the compiled rasterizer is not built; "
+                         "rendering with numpy, which is slower\n")
+        _fallback_noted = True
+    return _raster
+
+
 # --------------------------------------------------------------------------- triangles
 
 class _Triangles:
     """Per-triangle data for scanline rasterization and sampling (float64 geometry).
 
-    For each non-degenerate triangle: its row range on the canvas, the two
-    lower and two upper x-bounds ``x(y) = k + m*y`` of its interior on a row,
-    the inverse affine map (``source = s0 + J (p - p0)``) and J's footprint.
-    Edges are evaluated from their lower-numbered node, so that the two
-    triangles sharing an edge compute bit-identical bounds: every pixel centre
-    is claimed by at least one of them (no cracks) and, off the edge, by one.
+    For each non-degenerate triangle that reaches the canvas (``index``): its
+    row range on the canvas, the two lower and two upper x-bounds
+    ``x(y) = k + m*y`` of its interior on a row, and the inverse affine map
+    (``source = s0 + J (p - p0)``). Edges are evaluated from their
+    lower-numbered node, so that the two triangles sharing an edge compute
+    bit-identical bounds: every pixel centre is claimed by at least one of them
+    (no cracks) and, off the edge, by one.
+
+    With ``compiled`` (the :mod:`featurewarp_cli._raster` module) only
+    ``index`` and the row ranges are stored, stably sorted by first row with
+    ``sort`` (the order the bands rasterize them in), and :meth:`records`
+    computes the rest for a range of them, in C. Without, numpy computes
+    everything, in the triangles' order.
     """
 
-    def __init__(self, source, target, triangles, canvas):
+    #: Columns of :meth:`records`.
+    FIELDS = ("lk0", "lm0", "lk1", "lm1", "uk0", "um0", "uk1", "um1",
+              "j00", "j01", "j10", "j11", "px0", "py0", "sx0", "sy0")
+    J = slice(8, 12)
+
+    def __init__(self, source, target, triangles, canvas, compiled=None, sort=True):
+        self.compiled = compiled
+        if compiled is None:
+            self._setup(source, target, triangles, canvas)
+            return
+        self.canvas = width, height = tuple(int(c) for c in canvas)
+        self.nodes = np.concatenate([np.asarray(target, dtype=np.float64).reshape(-1, 2),
+                                     np.asarray(source, dtype=np.float64).reshape(-1, 2)], axis=1)
+        self.triangles = np.ascontiguousarray(triangles, dtype=np.int64).reshape(-1, 3)
+        m = self.triangles.shape[0]
+        index, ylo, yhi = np.empty(m, np.int64), np.empty(m, np.int64), np.empty(m, np.int64)
+        self.count = compiled.triangles(self.nodes, self.triangles, width, height, sort,
+                                        index, ylo, yhi)
+        self.index, self.ylo, self.yhi = index[:self.count], ylo[:self.count], yhi[:self.count]
+
+    def records(self, sel: np.ndarray) -> np.ndarray:
+        """(len(sel), 16) float64: :data:`FIELDS` of triangles ``sel`` (compiled setup)."""
+        rec = np.empty((sel.size, len(self.FIELDS)))
+        self.compiled.records(self.nodes, self.triangles, self.index, *self.canvas, sel, rec)
+        return rec
+
+    def _setup(self, source, target, triangles, canvas):
+        """The numpy version of ``_raster.triangles`` and the setup in ``_raster.rasterize``."""
         width, height = canvas
         tri = np.asarray(triangles)
         target = np.asarray(target, dtype=np.float64)
@@ -77,8 +136,8 @@ class _Triangles:
         keep = (np.abs(det) > 1e-12) & (ylo <= yhi)
         keep &= np.maximum(np.maximum(x0, x1), x2) >= 0
         keep &= np.minimum(np.minimum(x0, x1), x2) <= width - 1
-        self.index = np.flatnonzero(keep)
-        everything = self.index.size == tri.shape[0]
+        self.index = index = np.flatnonzero(keep)
+        everything = index.size == tri.shape[0]
 
         def kept(a):
             return a if everything else a[keep]
@@ -86,7 +145,7 @@ class _Triangles:
         n0, n1, n2, x0, x1, x2, y0, y1, y2, det = map(kept, (n0, n1, n2, x0, x1, x2, y0, y1, y2, det))
         self.ylo = kept(ylo).astype(np.int64)
         self.yhi = kept(yhi).astype(np.int64)
-        self.count = self.index.size
+        self.count = index.size
 
         # x-bounds per edge: the edge from node a to node b (a < b) cuts row y at
         # x = ax + m (y - ay); it bounds the interior from below when the third
@@ -142,15 +201,6 @@ class _Triangles:
         self.px0, self.py0 = x0, y0
         self.sx0, self.sy0 = sx0, sy0
 
-    def footprint(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Singular values (largest first) of J and the unit major axis in source space."""
-        a, b, c, d = self.j00, self.j01, self.j10, self.j11
-        p = np.hypot(a + d, c - b)
-        q = np.hypot(a - d, c + b)
-        s1, s2 = (p + q) / 2.0, np.abs(p - q) / 2.0
-        theta = 0.5 * (np.arctan2(c + b, a - d) + np.arctan2(c - b, a + d))
-        return s1, s2, np.stack([np.cos(theta), np.sin(theta)], axis=1)
-
 
 def _spans(tris: _Triangles, sel: np.ndarray, y0: int, y1: int, width: int):
     """Row spans of triangles ``sel`` inside rows [y0, y1).
@@ -199,7 +249,7 @@ def _rasterize_band(tris: _Triangles, sel: np.ndarray, y0: int, y1: int, width: 
     start_x = tris.sx0[t] + j00 * qx + tris.j01[t] * qy
     start_y = tris.sy0[t] + j10 * qx + tris.j11[t] * qy
     offset = np.cumsum(n) - n
-    local = np.arange(total, dtype=np.float32) - np.repeat(offset.astype(np.float32), n)
+    local = (np.arange(total) - np.repeat(offset, n)).astype(np.float32)
     pixel = np.repeat((y - y0) * width + xl - offset, n) + np.arange(total)
     mapx[pixel] = np.repeat(start_x.astype(np.float32), n) + np.repeat(j00.astype(np.float32), n) * local
     mapy[pixel] = np.repeat(start_y.astype(np.float32), n) + np.repeat(j10.astype(np.float32), n) * local
@@ -215,15 +265,24 @@ def _rasterize_band(tris: _Triangles, sel: np.ndarray, y0: int, y1: int, width: 
 
 
 def _band_order(tris: _Triangles):
-    """Triangles sorted by first row, and the tallest triangle's height."""
+    """Triangles sorted (stably) by first row, their first rows, and the tallest
+    triangle's height. The compiled setup stores them in that order: order is None."""
+    tallest = int((tris.yhi - tris.ylo).max()) if tris.count else 0
+    if tris.compiled is not None:
+        return None, tris.ylo, tallest
     order = np.argsort(tris.ylo, kind="stable")
-    return order, tris.ylo[order], int((tris.yhi - tris.ylo).max()) if tris.count else 0
+    return order, tris.ylo[order], tallest
+
+
+def _band_range(ylo_sorted, tallest, y0, y1) -> tuple[int, int]:
+    """[a, b): the sorted triangles that may have a row in [y0, y1)."""
+    return (int(np.searchsorted(ylo_sorted, y0 - tallest, side="left")),
+            int(np.searchsorted(ylo_sorted, y1 - 1, side="right")))
 
 
 def _band_triangles(order, ylo_sorted, yhi, tallest, y0, y1):
-    """Triangles (indices into the triangle data) with a row in [y0, y1)."""
-    a = np.searchsorted(ylo_sorted, y0 - tallest, side="left")
-    b = np.searchsorted(ylo_sorted, y1 - 1, side="right")
+    """Triangles (indices into the triangle data) with a row in [y0, y1), in rasterizing order."""
+    a, b = _band_range(ylo_sorted, tallest, y0, y1)
     cand = order[a:b]
     return cand[yhi[cand] >= y0]
 
@@ -261,8 +320,14 @@ def inverse_map(source: np.ndarray, target: np.ndarray, triangles: np.ndarray,
     width, height = canvas
     mapx = np.full(height * width, -1.0, dtype=np.float32)
     mapy = np.full(height * width, -1.0, dtype=np.float32)
-    tris = _Triangles(source, target, triangles, canvas)
-    if tris.count:
+    raster = _compiled()
+    tris = _Triangles(source, target, triangles, canvas, raster, sort=False)   # later ones win
+    if tris.count and raster is not None:
+        for a in range(0, tris.count, 1 << 16):           # later triangles win, as in numpy
+            sel = np.arange(a, min(tris.count, a + (1 << 16)))
+            raster.rasterize(tris.records(sel), tris.ylo[sel], tris.yhi[sel], 0, height, width,
+                             mapx, mapy, None, None)
+    elif tris.count:
         _rasterize_band(tris, np.arange(tris.count), 0, height, width, mapx, mapy)
     covered = mapx > -0.75
     coords = np.stack([mapx, mapy], axis=1).reshape(height, width, 2)
@@ -281,7 +346,8 @@ class _Boundary:
 
     def __init__(self, source, target, triangles):
         source = np.asarray(source, dtype=np.float64)
-        lo, hi = source.min(axis=0), source.max(axis=0)
+        x, y = source[:, 0], source[:, 1]
+        lo, hi = np.array([x.min(), y.min()]), np.array([x.max(), y.max()])     # (min(axis=0) is slow)
         tol = 1e-9 * max(1.0, float(np.abs(source).max()))
         side = np.zeros(source.shape[0], dtype=np.int64)      # bit mask of the box sides a node lies on
         side |= (np.abs(source[:, 0] - lo[0]) <= tol) * 1
@@ -290,7 +356,7 @@ class _Boundary:
         side |= (np.abs(source[:, 1] - hi[1]) <= tol) * 8
         tri = np.asarray(triangles, dtype=np.int64)
         on = side[tri] > 0
-        cand = np.flatnonzero(on.sum(axis=1) >= 2)
+        cand = np.flatnonzero(on[:, 0].astype(np.int8) + on[:, 1] + on[:, 2] >= 2)
         a_list, b_list = [], []
         for i, j in ((0, 1), (1, 2), (2, 0)):
             a, b = tri[cand, i], tri[cand, j]
@@ -355,11 +421,33 @@ class _Boundary:
 # --------------------------------------------------------------------------- antialiasing
 
 class _Minification:
-    """Footprint of minifying triangles: pyramid level and probes along the major axis."""
+    """Footprint of the minifying triangles among those whose J is (j00, j01, j10, j11).
 
-    def __init__(self, tris: _Triangles, threshold: float = AA_START):
-        s1, s2, axis = tris.footprint()
-        self.minified = s1 > threshold
+    ``minified`` and ``index`` (the minifying triangles numbered 0, 1, ..., the
+    others -1) run over those triangles; ``ints`` = (k, base level, blend) and
+    ``floats`` = (step x, step y, frac), float32 steps and frac, over the
+    minifying ones. ``weights[k]`` holds the 2k-1 tent weights of k probes per
+    side. The values of a triangle depend on its J only.
+    """
+
+    weights = np.zeros((AA_MAX_STEPS + 1, 2 * AA_MAX_STEPS - 1), np.float32)
+    for _k in range(1, AA_MAX_STEPS + 1):
+        _j = np.arange(-(_k - 1), _k, dtype=np.float32)
+        weights[_k, :2 * _k - 1] = (1.0 - np.abs(_j) / _k) / _k           # tent, sums to 1
+    del _k, _j
+
+    def __init__(self, a, b, c, d, threshold: float = AA_START):
+        # Singular values of J = [[a, b], [c, d]] (largest first) and the unit major
+        # axis in source space.
+        p, q = np.hypot(a + d, c - b), np.hypot(a - d, c + b)
+        self.minified = (p + q) / 2.0 > threshold
+        sel = np.flatnonzero(self.minified)
+        self.index = np.full(self.minified.size, -1, np.int32)
+        self.index[sel] = np.arange(sel.size, dtype=np.int32)
+        a, b, c, d, p, q = (v[sel] for v in (a, b, c, d, p, q))
+        s1, s2 = (p + q) / 2.0, np.abs(p - q) / 2.0
+        theta = 0.5 * (np.arctan2(c + b, a - d) + np.arctan2(c - b, a + d))
+        axis = np.stack([np.cos(theta), np.sin(theta)], axis=1)
         m1 = np.maximum(s1, 1.0)
         m2 = np.maximum(s2, 1.0)
         # Tent of half-width W = 2 (m1 - m2) along the major axis, probes at most
@@ -370,36 +458,46 @@ class _Minification:
         steps = np.minimum(steps, AA_MAX_STEPS).astype(np.int64)
         half = 2.0 * (m1 - m2)
         steps[half < 1e-3] = 1
-        self.level = np.log2(m2)
-        self.steps = steps
-        self.step = (half / steps)[:, None] * axis                    # source offset between probes
-        self.max_level = int(np.ceil(self.level[self.minified].max())) if self.minified.any() else 0
+        level = np.log2(m2)
+        base = np.floor(level).astype(np.int64)
+        frac = (level - base).astype(np.float32)
+        self.ints = np.stack([steps, base, frac > 1e-4], axis=1).astype(np.int32)
+        self.floats = np.empty((sel.size, 3), np.float32)
+        self.floats[:, :2] = (half / steps)[:, None] * axis             # source offset between probes
+        self.floats[:, 2] = frac
+        self.max_level = int(np.ceil(level.max())) if sel.size else 0
 
 
 class _Pyramid:
-    """Gaussian pyramid of the source (cv2.pyrDown), built on demand."""
+    """Gaussian pyramid of the source (cv2.pyrDown), built on demand (thread-safe)."""
 
     def __init__(self, image):
         self.levels = [image]
+        self.lock = threading.Lock()
 
     def __getitem__(self, k):
-        while len(self.levels) <= k:
-            last = self.levels[-1]
-            if min(last.shape[:2]) < 2:
-                self.levels.append(last)
-            else:
-                self.levels.append(cv2.pyrDown(last))
-        return self.levels[k]
+        with self.lock:
+            while len(self.levels) <= k:
+                last = self.levels[-1]
+                if min(last.shape[:2]) < 2:
+                    self.levels.append(last)
+                else:
+                    self.levels.append(cv2.pyrDown(last))
+            return self.levels[k]
 
 
 def _sample_grid(image, x, y, interp):
     """Sample ``image`` at the points of (n, P) float32 arrays; returns (n, P, C) uint/float."""
     n, probes = x.shape
+    return _sample_points(image, x.reshape(-1), y.reshape(-1), interp).reshape(n, probes, -1)
+
+
+def _sample_points(image, mx, my, interp):
+    """Sample ``image`` at the points of flat float32 arrays; returns (n, C) uint/float."""
     channels = 1 if image.ndim == 2 else image.shape[2]
-    total = n * probes
+    total = mx.size
     rows = -(-total // _COMPACT_WIDTH)
     pad = rows * _COMPACT_WIDTH - total
-    mx, my = x.reshape(-1), y.reshape(-1)
     if pad:
         mx = np.concatenate([mx, np.zeros(pad, np.float32)])
         my = np.concatenate([my, np.zeros(pad, np.float32)])
@@ -407,7 +505,7 @@ def _sample_grid(image, x, y, interp):
     parts = [cv2.remap(image, mx[r:r + 8192], my[r:r + 8192], interp, borderMode=cv2.BORDER_REPLICATE)
              for r in range(0, rows, 8192)]            # remap wants fewer than 32767 rows
     values = parts[0] if len(parts) == 1 else np.concatenate(parts)
-    return values.reshape(-1, channels)[:total].reshape(n, probes, channels)
+    return values.reshape(-1, channels)[:total]
 
 
 def _antialiased(pyramid: _Pyramid, minif: _Minification, tri: np.ndarray,
@@ -419,14 +517,12 @@ def _antialiased(pyramid: _Pyramid, minif: _Minification, tri: np.ndarray,
     and, with weight frac(L), floor(L) + 1.
     """
     n = tri.size
-    steps = minif.steps[tri]
-    level = minif.level[tri]
-    base = np.floor(level).astype(np.int64)
-    frac = (level - base).astype(np.float32)
+    ints, floats = minif.ints[minif.index[tri]].astype(np.int64), minif.floats[minif.index[tri]]
+    steps, base, frac = ints[:, 0], ints[:, 1], floats[:, 2]
     image0 = pyramid[0]
     channels = 1 if image0.ndim == 2 else image0.shape[2]
     acc = np.zeros((n, channels), np.float32)
-    group_key = (steps * 64 + base) * 2 + (frac > 1e-4)
+    group_key = (steps * 64 + base) * 2 + ints[:, 2]
     order = np.argsort(group_key, kind="stable")
     keys = group_key[order]
     cuts = np.flatnonzero(np.diff(keys)) + 1
@@ -435,8 +531,8 @@ def _antialiased(pyramid: _Pyramid, minif: _Minification, tri: np.ndarray,
         k = int(steps[members[0]])
         b = int(base[members[0]])
         j = np.arange(-(k - 1), k, dtype=np.float32)
-        weight = (1.0 - np.abs(j) / k) / k                        # tent, sums to 1
-        step = minif.step[tri[members]].astype(np.float32)
+        weight = minif.weights[k, :2 * k - 1]
+        step = floats[members, :2]
         px = sx[members, None] + j[None, :] * step[:, 0:1]
         py = sy[members, None] + j[None, :] * step[:, 1:2]
         f = frac[members]
@@ -453,6 +549,31 @@ def _antialiased(pyramid: _Pyramid, minif: _Minification, tri: np.ndarray,
                 contrib *= w_level[:, None]
             acc[members] += contrib
     return acc
+
+
+def _antialiased_compiled(raster, pyramid: _Pyramid, minif: _Minification, aatri: np.ndarray,
+                          bx: np.ndarray, by: np.ndarray, flat: np.ndarray) -> None:
+    """:func:`_antialiased` and its write into the band, with the compiled loops.
+
+    The pixels with ``aatri >= 0`` (their triangle's number in ``minif``) get the
+    prefiltered value, rounded into ``flat`` (band pixels, out channels). The
+    probes of each pyramid level are laid out in one (rows, _COMPACT_WIDTH) map
+    for one :func:`cv2.remap` per level.
+    """
+    counts = np.zeros(minif.max_level + 2, np.int64)
+    raster.aa_count(aatri, minif.ints, counts)
+    offsets = np.zeros(counts.size + 1, np.int64)
+    np.cumsum(-(-counts // _COMPACT_WIDTH) * _COMPACT_WIDTH, out=offsets[1:])
+    px, py = np.zeros(offsets[-1], np.float32), np.zeros(offsets[-1], np.float32)
+    raster.aa_probes(aatri, bx, by, minif.ints, minif.floats, offsets, px, py)
+    image = pyramid[0]
+    channels = 1 if image.ndim == 2 else image.shape[2]
+    samples = np.empty((offsets[-1], channels), image.dtype)
+    for level in np.flatnonzero(counts):
+        a, b = offsets[level], offsets[level + 1]
+        samples[a:b] = _sample_points(pyramid[level], px[a:b], py[a:b], AA_INTERPOLATION)
+    raster.aa_resolve(aatri, minif.ints, minif.floats, minif.weights, AA_MAX_STEPS, offsets,
+                      samples, channels, flat, flat.shape[1])
 
 
 # --------------------------------------------------------------------------- render
@@ -497,11 +618,16 @@ def render(image: np.ndarray, source: np.ndarray, target: np.ndarray, triangles:
     if interp not in INTERPOLATION:
         raise ValueError(f"interp must be one of {', '.join(INTERPOLATION)}, not {interp!r}")
     width, height = (int(c) for c in canvas)
+    raster = _compiled() if image.dtype in (np.uint8, np.uint16) else None
+    with ThreadPoolExecutor(1) as helper:       # the boundary's setup beside the triangles'
+        boundary = helper.submit(_Boundary, source, target, triangles) if antialias else None
+        tris = _Triangles(source, target, triangles, (width, height), raster)
+        boundary = boundary.result() if antialias else None
     flag = INTERPOLATION[interp]
     channels = 1 if image.ndim == 2 else image.shape[2]
-    tris = _Triangles(source, target, triangles, (width, height))
-    boundary = _Boundary(source, target, triangles) if antialias else None
-    minif = _Minification(tris) if antialias and tris.count else None
+    # The compiled path takes each band's footprints in its thread (the numpy path all at once).
+    minif = (_Minification(tris.j00, tris.j01, tris.j10, tris.j11)
+             if antialias and tris.count and raster is None else None)
     pyramid = _Pyramid(image)
 
     # Decide the output layout up front: alpha is added when the background is
@@ -510,6 +636,10 @@ def render(image: np.ndarray, source: np.ndarray, target: np.ndarray, triangles:
     if boundary is not None:
         maybe_partial = boundary.inside_canvas(width, height) or tris.count == 0
     add = background is None and channels in (1, 3) and maybe_partial
+    # Without antialiasing a pixel is covered or not: render without alpha, note
+    # the uncovered pixels (holes) and add alpha at the end if there are any.
+    holes = {} if add and boundary is None else None
+    add = add and holes is None
     out_channels = 4 if add else channels
     shape = (height, width) if out_channels == 1 else (height, width, out_channels)
     out = np.empty(shape, dtype=image.dtype)
@@ -526,11 +656,24 @@ def render(image: np.ndarray, source: np.ndarray, target: np.ndarray, triangles:
         size = (y1 - y0) * width
         bx = np.full(size, -1.0, dtype=np.float32)
         by = np.full(size, -1.0, dtype=np.float32)
-        sel = (_band_triangles(order, ylo_sorted, tris.yhi, tallest, y0, y1) if tris.count
-               else np.zeros(0, np.int64))
         opaque = True
-        aa = _rasterize_band(tris, sel, y0, y1, width, bx, by,
-                             minif.minified if minif is not None else None)
+        if raster is not None:
+            # The band's triangles (a range of the sorted ones, less those that end
+            # above the band), their records and footprints. aatri: the last
+            # minifying triangle on each pixel (its number in local, -1: none), as
+            # the numpy code's last write of a pixel listed twice leaves it.
+            a, b = _band_range(ylo_sorted, tallest, y0, y1)
+            sel = a + np.flatnonzero(tris.yhi[a:b] >= y0)
+            rec = tris.records(sel)
+            local = _Minification(*rec[:, _Triangles.J].T) if antialias and sel.size else None
+            aatri = np.full(size, -1, np.int32) if local is not None else None
+            marked = raster.rasterize(rec, tris.ylo[sel], tris.yhi[sel], y0, y1, width, bx, by,
+                                      None if local is None else local.index, aatri)
+        else:
+            sel = (_band_triangles(order, ylo_sorted, tris.yhi, tallest, y0, y1) if tris.count
+                   else np.zeros(0, np.int64))
+            aa = _rasterize_band(tris, sel, y0, y1, width, bx, by,
+                                 minif.minified if minif is not None else None)
         # Coverage below 1: uncovered pixel centres, and pixels near the silhouette.
         uncovered = np.flatnonzero(bx < -0.75)
         near, dist, src = boundary.band(y0, y1, width) if boundary is not None else (np.zeros(0, np.int64),) * 3
@@ -545,7 +688,19 @@ def render(image: np.ndarray, source: np.ndarray, target: np.ndarray, triangles:
                 bx[near[outside]] = src[outside, 0]
                 by[near[outside]] = src[outside, 1]
         target_band = out[y0:y1]
-        if out_channels == channels:
+        flat = target_band.reshape(size, out_channels)
+        if out_channels != channels:
+            target_band[..., 3] = top
+        if raster is not None and marked > size // 4:
+            # Most of the band is the filter's: resample only the other pixels.
+            px, py = np.empty(size + _COMPACT_WIDTH, np.float32), np.empty(size + _COMPACT_WIDTH, np.float32)
+            n = raster.gather(aatri, bx, by, px, py)
+            if n:
+                m = -(-n // _COMPACT_WIDTH) * _COMPACT_WIDTH
+                px[n:m] = py[n:m] = 0.0
+                values = _sample_points(image, px[:m], py[:m], flag)[:n]
+                raster.scatter(aatri, values, channels, flat, out_channels)
+        elif out_channels == channels:
             band = cv2.remap(image, bx.reshape(-1, width), by.reshape(-1, width), flag,
                              dst=target_band, borderMode=cv2.BORDER_REPLICATE)
             if band is not target_band and not np.shares_memory(band, target_band):
@@ -554,9 +709,10 @@ def render(image: np.ndarray, source: np.ndarray, target: np.ndarray, triangles:
             band = cv2.remap(image, bx.reshape(-1, width), by.reshape(-1, width), flag,
                              borderMode=cv2.BORDER_REPLICATE)
             target_band[..., :3] = band[..., None] if channels == 1 else band
-            target_band[..., 3] = top
-        flat = target_band.reshape(size, out_channels)
-        if aa is not None and aa[0].size:
+        if raster is not None:
+            if marked:
+                _antialiased_compiled(raster, pyramid, local, aatri, bx, by, flat)
+        elif aa is not None and aa[0].size:
             pix, tri = aa
             values = _antialiased(pyramid, minif, tri, bx[pix], by[pix], flag)
             values = np.clip(np.rint(values), 0, top).astype(image.dtype)
@@ -575,8 +731,10 @@ def render(image: np.ndarray, source: np.ndarray, target: np.ndarray, triangles:
                 flat[partial[cov[:, 0] <= 0]] = 0
                 opaque = False
             else:
-                # No alpha could be added: uncovered pixels become 0.
+                # No alpha (yet): uncovered pixels become 0.
                 flat[partial[cov[:, 0] <= 0]] = 0
+                if holes is not None:
+                    holes[y0] = partial
         else:
             values = flat[partial].astype(np.float64)
             flat[partial] = np.rint(values * cov + fill[None, :] * (1.0 - cov)).astype(image.dtype)
@@ -591,6 +749,10 @@ def render(image: np.ndarray, source: np.ndarray, target: np.ndarray, triangles:
         all_opaque = all([one_band(y0) for y0 in starts])
     if add and all_opaque:
         out = np.ascontiguousarray(out[:, :, :channels] if channels > 1 else out[:, :, 0])
+    if holes:
+        out = add_alpha(out)
+        for y0, pixels in holes.items():
+            out.reshape(-1, 4)[y0 * width + pixels] = 0
     return out
 
 

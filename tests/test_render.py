@@ -258,3 +258,135 @@ def test_gray_with_transparent_background_gains_alpha(images):
     assert out.shape[2] == 4
     np.testing.assert_array_equal(out[..., 3] == 0, ~covered)
     assert (out[..., 0] == out[..., 1]).all() and (out[..., 1] == out[..., 2]).all()
+
+
+# --- the compiled rasterizer against the numpy code --------------------------------------------
+
+compiled = pytest.mark.skipif(render._raster is None, reason="featurewarp_cli._raster is not built")
+
+
+@pytest.fixture
+def numpy_only(monkeypatch):
+    """Run the renderer's numpy fallback (the compiled module 'not built'), notice already given."""
+    monkeypatch.setattr(render, "_raster", None)
+    monkeypatch.setattr(render, "_fallback_noted", True)
+
+
+def random_mesh(seed, width=70, height=50, nodes=60, triangles=120):
+    """Random triangles over and around a canvas: partly or wholly off it, huge and
+    tiny ones, overlapping ones, flat edges, collinear (zero-area) ones and nodes on
+    pixel centres (ties between neighbours); sources scaled by 0.3-4 so that some
+    triangles minify, anisotropically, down several pyramid levels."""
+    rng = np.random.default_rng(seed)
+    target = rng.uniform([-0.4 * width, -0.4 * height], [1.4 * width, 1.4 * height], (nodes, 2))
+    target[:10] = np.round(target[:10])                                  # on pixel centres
+    target[10:14] = [[-3 * width, -2 * height], [4 * width, -height], [width / 2, 5 * height],
+                     [-width, 3 * height]]                              # huge triangles
+    target[14:20] = target[20:26] + rng.uniform(-0.6, 0.6, (6, 2))      # tiny triangles
+    target[26:30, 1] = target[30:34, 1]                                 # flat edges
+    target[34] = 0.5 * (target[35] + target[36])                        # collinear
+    tri = rng.integers(0, nodes, (triangles, 3))
+    tri[:6] = [[10, 11, 12], [11, 12, 13], [14, 20, 21], [15, 21, 22], [26, 30, 3], [34, 35, 36]]
+    scale = rng.uniform(0.3, 4.0, (nodes, 2))
+    source = (target - target.mean(0)) * scale + [width / 2, height / 2]
+    source += rng.normal(0, 2, source.shape)
+    return source, target, tri, (width, height)
+
+
+def warped_grid(preset, width=90, height=60, cell=3, **params):
+    grid = Grid.for_image(width, height, cell)
+    w = load_warp(preset)(width, height, **params)
+    return grid.nodes(), w(grid.nodes()), grid.triangles(), tuple(w.canvas)
+
+
+def test_fallback_notice_is_printed_once(monkeypatch, capsys, textured_bgr):
+    """Without the compiled module, rendering works (numpy) and says so once on stderr."""
+    monkeypatch.setattr(render, "_raster", None)
+    monkeypatch.setattr(render, "_fallback_noted", False)
+    mesh = warped_grid("swirl", W, H, angle=90)
+    out = render.render(textured_bgr, *mesh)
+    render.inverse_map(*mesh)
+    assert out.shape == textured_bgr.shape
+    err = capsys.readouterr().err
+    assert err.count("featurewarp: the compiled rasterizer is not built; rendering with numpy, "
+                     "which is slower\n") == 1
+
+
+@compiled
+def test_compiled_module_gives_no_notice(capsys, textured_bgr):
+    render.render(textured_bgr, *warped_grid("swirl", W, H, angle=90))
+    assert "compiled rasterizer" not in capsys.readouterr().err
+
+
+@compiled
+@pytest.mark.parametrize("seed", range(6))
+def test_compiled_triangle_setup_equals_numpy(seed):
+    """_raster keeps the triangles numpy keeps, with their rows, bounds and inverse maps bit
+    for bit, in their order or stably sorted by first row."""
+    source, target, tri, canvas = random_mesh(seed)
+    ref = render._Triangles(source, target, tri, canvas)
+    fields = ref.lk[:1] + ref.lm[:1] + ref.lk[1:] + ref.lm[1:] + ref.uk[:1] + ref.um[:1] + ref.uk[1:] + ref.um[1:]
+    fields += [ref.j00, ref.j01, ref.j10, ref.j11, ref.px0, ref.py0, ref.sx0, ref.sy0]
+    order = np.argsort(ref.ylo, kind="stable")
+    for sort, index in ((False, slice(None)), (True, order)):
+        got = render._Triangles(source, target, tri, canvas, render._raster, sort=sort)
+        assert got.count == ref.count and 0 < ref.count < len(tri)
+        for a, b in zip([got.index, got.ylo, got.yhi], [ref.index, ref.ylo, ref.yhi]):
+            np.testing.assert_array_equal(a, b[index])
+        np.testing.assert_array_equal(got.records(np.arange(got.count)), np.stack(fields, 1)[index])
+        np.testing.assert_array_equal(got.records(np.array([7, 3, 4])), np.stack(fields, 1)[index][[7, 3, 4]])
+
+
+@compiled
+@pytest.mark.parametrize("seed", range(8))
+def test_compiled_inverse_map_equals_numpy(seed, monkeypatch):
+    mesh = random_mesh(seed)
+    coords, covered = render.inverse_map(*mesh)
+    monkeypatch.setattr(render, "_raster", None)
+    monkeypatch.setattr(render, "_fallback_noted", True)
+    ref_coords, ref_covered = render.inverse_map(*mesh)
+    assert covered.any() and not covered.all()
+    np.testing.assert_array_equal(coords, ref_coords)
+    np.testing.assert_array_equal(covered, ref_covered)
+
+
+def render_both(monkeypatch, image, mesh, **kw):
+    """(compiled, numpy) renders of the same thing."""
+    fast = render.render(image, *mesh, **kw)
+    monkeypatch.setattr(render, "_raster", None)
+    monkeypatch.setattr(render, "_fallback_noted", True)
+    slow = render.render(image, *mesh, **kw)
+    monkeypatch.undo()
+    return fast, slow
+
+
+@compiled
+@pytest.mark.parametrize("seed", range(8))
+@pytest.mark.parametrize("antialias", [True, False])
+def test_compiled_render_equals_numpy_on_random_meshes(seed, antialias, monkeypatch):
+    rng = np.random.default_rng(100 + seed)
+    depth = (np.uint8, np.uint16)[seed % 2]
+    channels = (3, 1, 4, 3)[seed % 4]
+    image = rng.integers(0, np.iinfo(depth).max, (50, 70, channels), dtype=depth, endpoint=True)
+    image = cv2.GaussianBlur(image, (3, 3), 0).reshape(image.shape)
+    image = image[..., 0] if channels == 1 else image
+    background = None if seed % 3 else (10, 200, 30)
+    mesh = random_mesh(seed)
+    fast, slow = render_both(monkeypatch, image, mesh, interp="linear", background=background,
+                             antialias=antialias, band_pixels=600, threads=2)
+    assert fast.dtype == slow.dtype and fast.shape == slow.shape
+    np.testing.assert_array_equal(fast, slow)
+
+
+@compiled
+@pytest.mark.parametrize("preset, params", [("swirl", {"angle": 240}), ("stretch", {"sx": 0.3, "sy": 0.8}),
+                                            ("stretch", {"sx": 0.15, "sy": 0.4}), ("arc", {"angle": 150}),
+                                            ("bulge", {"strength": -0.9})])
+@pytest.mark.parametrize("kind", ["bgr", "gray", "bgra"])
+def test_compiled_render_equals_numpy_on_warps(preset, params, kind, images, monkeypatch):
+    """Warps that shrink by up to 6x (several pyramid levels, 4 probes a side) and silhouettes."""
+    image = images[("uint16" if kind == "bgra" else "uint8", kind)]
+    mesh = warped_grid(preset, W, H, **params)
+    for background in (None, (255, 255, 255)):
+        fast, slow = render_both(monkeypatch, image, mesh, background=background)
+        np.testing.assert_array_equal(fast, slow)
