@@ -58,6 +58,7 @@ def build_report(input_path, output_path, image, result, warp, mesh, timings) ->
             "flipped_before": info.get("flipped_before_guard", 0),
             "flipped_after": info["flipped_triangles"],
             "untangle_iterations": info.get("untangle_iterations", 0),
+            "window_quads": info.get("untangle_window_quads", 0),
             "release_rounds": info.get("release_rounds", 0),
             "released_components": info.get("released_components", []),
             "feature_blend": info.get("feature_blend", 1.0),

@@ -138,6 +138,8 @@ def test_report_is_written(runner, tmp_path):
     assert run.code == 0, run.stderr
     report = json.loads((tmp_path / "r.json").read_text())
     assert report["preset"] == "bulge" and report["output"]["width"] == SIZE[0]
+    assert set(report["fold_guard"]) >= {"flipped_before", "flipped_after", "untangle_iterations",
+                                         "window_quads", "feature_blend"}
 
 
 # --- pipes ----------------------------------------------------------------------------------
