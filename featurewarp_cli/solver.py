@@ -13,149 +13,252 @@ Ordering
 --------
 When L has the pattern of a grid's 5-point Laplacian (what
 :func:`featurewarp_cli.system.normal_matrix` builds: offsets 0, +-1 and +-nx),
-the unknowns are numbered in a geometric nested-dissection order of the grid
-(:func:`grid_nested_dissection`): each rectangle is cut by its middle row or
-column of nodes, the two halves are numbered first and the separator last; the
-shared unknowns of tied features, each coupled to every node around its
-feature, come after everything else. CHOLMOD then factors with its natural
-ordering, which skips the graph partitioning it would otherwise run (seconds on
-a million unknowns) and gives a factor as sparse as METIS's. Other patterns use
-CHOLMOD's default ordering. The symbolic analysis is kept in a small
-module-level cache keyed by the sparsity pattern, so refactoring a matrix with
-the same pattern (another mask with the same ties, new weights) reuses it.
+the free unknowns are numbered in a geometric nested-dissection order of the
+grid cut along diagonals (:func:`grid_nested_dissection`); the shared unknowns
+of tied features, each coupled to every node around its feature, come after
+everything else. CHOLMOD then factors with its natural ordering, which skips
+the graph partitioning it would otherwise run (seconds on a million unknowns)
+for a factor about as sparse as METIS's. Other patterns use CHOLMOD's default
+ordering. Symbolic analyses (keyed by the sparsity pattern) and grid orderings
+(keyed by the tied nodes) are kept in a small module-level cache, so
+refactoring a matrix with the same pattern (new weights, same ties) reuses
+both, and the x and y systems of a sliding border share the ordering.
 """
 
 from __future__ import annotations
 
+import ctypes
 import hashlib
+import os
 import sys
 from collections import OrderedDict
-from functools import lru_cache
+from contextlib import contextmanager
 
 import numpy as np
 import scipy.sparse as sp
 
 _fallback_noted = False
 
-#: Grid rectangles with at most this many nodes are numbered row by row.
+#: Pieces of the grid with at most this many live nodes are not dissected further.
 _LEAF_NODES = 16
+#: A cut may move this fraction of a piece's extent away from its middle (to cross holes).
+_CUT_WINDOW = 0.1
 #: Largest system factored by CHOLMOD's simplicial method (supernodal above).
-#: Measured on the grid systems (2 cores): up to ~60 k unknowns simplicial factors
-#: as fast; at 190 k it factors 0.2 s slower (0.55 s vs 0.35 s) but solves twice
-#: as fast (22 ms vs 38 ms for x and y), which pays off after ~12 solves, and the
-#: fold-over guard solves dozens of times per factorization.
-_SIMPLICIAL_MAX = 250_000
-#: Symbolic analyses kept (keyed by the reduced matrix's sparsity pattern).
-_SYMBOLIC_CACHE_SIZE = 4
+#: Measured on the grid systems (2 cores): up to ~120 k unknowns both factor as
+#: fast, and simplicial solves are twice as fast (7 vs 13 ms for x and y at 68 k);
+#: at 190 k the supernodal factorization is 0.05-0.1 s faster (0.29 vs 0.34-0.39 s)
+#: for solves 20 ms slower (35 vs 15 ms), and a warp solves its full grid once (the
+#: fold-over guard's many solves use a smaller window system).
+_SIMPLICIAL_MAX = 150_000
+#: Entries kept in the cache: symbolic analyses (keyed by the reduced matrix's
+#: sparsity pattern) and grid orderings (keyed by the tied nodes).
+_SYMBOLIC_CACHE_SIZE = 8
 _symbolic_cache: OrderedDict = OrderedDict()
 
 
-def grid_nested_dissection(ny: int, nx: int, leaf: int = _LEAF_NODES) -> np.ndarray:
-    """Nested-dissection order of the nodes of an ``ny`` x ``nx`` grid (row-major numbering).
+def grid_nested_dissection(live: np.ndarray, leaf: int = _LEAF_NODES,
+                           window: float = _CUT_WINDOW) -> np.ndarray:
+    """Nested-dissection order of the live nodes of a grid, cut along diagonals.
 
-    The rectangle is split by its middle column (or row, whichever side is
-    longer) into two halves and a one-node-wide separator; the halves are
-    ordered recursively, then the separator. For the 5-point stencil a
-    separator line disconnects the halves, so the Cholesky factor of a matrix
-    numbered this way has O(n log n) fill and O(n^1.5) work.
+    In the 5-point stencil a node touches only its row and column neighbours,
+    so a diagonal line of nodes (x + y or x - y constant) separates the two
+    sides as well as a straight one, and a diamond-shaped piece has about
+    0.7 times the boundary of a square of the same area. Dissecting along
+    diagonals gives two thirds of the fill and half the work of straight cuts
+    on the feature grids (about as sparse as METIS). In the rotated
+    coordinates u = x + y, v = x - y the pieces are rectangles: each is cut
+    across its longer side, at the line with the fewest live nodes within
+    ``window`` of the middle (cuts through holes are cheap); the two halves
+    are numbered first, then the cut. Pieces with at most ``leaf`` live nodes
+    are numbered line by line.
 
-    Computed level by level, vectorized over the rectangles of a level: every
-    node gets a key whose base-4 digits are its path in the dissection tree
-    (0 first half, 1 second half, 2 separator or leaf), so sorting the keys
-    gives the post-order.
+    A grid more than about twice as long as wide is first cut straight across
+    into blocks at most that long (the rotated bounding box of a long strip
+    would be mostly empty); the blocks come first, then the lines between
+    them. The blocks are dissected together level by level, vectorized over
+    the pieces of a level, with prefix sums of the live nodes for the counts.
 
     Parameters
     ----------
-    ny, nx : int
-        Rows and columns of nodes.
+    live : (ny, nx) bool ndarray
+        Nodes to order (the others, fixed or tied, are left out).
     leaf : int
-        Rectangles with at most this many nodes are numbered row by row.
+        Pieces with at most this many live nodes are not cut.
+    window : float
+        How far from the middle a cut may move, as a fraction of the piece's extent.
 
     Returns
     -------
-    (ny * nx,) int ndarray
-        Node indices (``j * nx + i``) in elimination order (read-only, cached).
+    (live.sum(),) int ndarray
+        Node indices (``j * nx + i``) in elimination order.
     """
-    return _nested_dissection(int(ny), int(nx), int(leaf))
+    live = np.asarray(live, dtype=bool)
+    ny, nx = live.shape
+    if ny > nx:                                # tall: as its transpose
+        x, y = np.divmod(grid_nested_dissection(live.T, leaf, window), ny)
+        return y * nx + x
+    # Blocks at most about twice as wide as high, between separator columns numbered last.
+    blocks = -(-nx // (2 * ny + 2))
+    cuts = np.arange(1, blocks) * (nx + 1) // blocks - 1
+    left = np.concatenate([[0], cuts + 1])     # first column of each block
+    width = np.concatenate([cuts, [nx]]) - left
+    which, row = np.nonzero(live[:, cuts].T)
+    separators = row * nx + cuts[which]
+    y, x = np.nonzero(live)
+    block = np.searchsorted(cuts, x)
+    inside = ~np.isin(x, cuts)
+    y, x, block = y[inside], x[inside], block[inside]
+    order = np.empty(y.size, dtype=np.int64)
+    if not y.size:
+        return separators
+    # The blocks side by side in rotated coordinates: cell[u, v] is the node at
+    # x' + y = u, x' - y + ny - 1 + size * block = v (x' from its block's first
+    # column), or -1 where there is no live node.
+    size = ny + int(width.max()) - 1
+    xb = x - left[block]
+    cell = np.full((size, size * blocks), -1, dtype=np.int32)
+    cell[xb + y, xb - y + ny - 1 + size * block] = y * nx + x
+    total = np.zeros((size + 1, size * blocks + 1), dtype=np.int32)
+    total[1:, 1:] = cell >= 0
+    np.cumsum(total, axis=0, out=total)
+    np.cumsum(total, axis=1, out=total)
 
+    def count(r0, r1, c0, c1):                 # live nodes in [r0, r1) x [c0, c1)
+        return total[r1, c1] - total[r0, c1] - total[r1, c0] + total[r0, c0]
 
-@lru_cache(maxsize=8)
-def _nested_dissection(ny: int, nx: int, leaf: int) -> np.ndarray:
-    order = np.empty(ny * nx, dtype=np.int64)
-    # Active rectangles [r0, r1) x [c0, c1) and the position of their first node in the order.
-    r0, r1 = np.array([0]), np.array([ny])
-    c0, c1 = np.array([0]), np.array([nx])
-    start = np.zeros(1, dtype=np.int64)
+    # Pieces [r0, r1) x [c0, c1) in (u, v), their live count and first position in the order.
+    r0, r1 = np.zeros(blocks, dtype=np.int64), np.full(blocks, size)
+    c0 = np.arange(blocks) * size
+    c1 = c0 + size
+    n = count(r0, r1, c0, c1)
+    start = np.cumsum(n) - n
     while r0.size:
-        h, w = r1 - r0, c1 - c0
-        alive = (h > 0) & (w > 0)
-        r0, r1, c0, c1, start, h, w = (a[alive] for a in (r0, r1, c0, c1, start, h, w))
-        is_leaf = h * w <= max(leaf, 1)
-        if is_leaf.any():                      # every node of the rectangle, row by row
-            lh, lw, ls = h[is_leaf], w[is_leaf], start[is_leaf]
-            size = lh * lw
-            rect = np.repeat(np.arange(size.size), size)
-            local = np.arange(size.sum()) - np.repeat(np.cumsum(size) - size, size)
-            rows = r0[is_leaf][rect] + local // lw[rect]
-            cols = c0[is_leaf][rect] + local % lw[rect]
-            order[ls[rect] + local] = rows * nx + cols
-        split = ~is_leaf
-        r0, r1, c0, c1, start, h, w = (a[split] for a in (r0, r1, c0, c1, start, h, w))
-        vertical = w >= h                      # cut by the middle column, else the middle row
-        mid = np.where(vertical, (c0 + c1) // 2, (r0 + r1) // 2)
-        first = (r0, np.where(vertical, r1, mid), c0, np.where(vertical, mid, c1))
-        second = (np.where(vertical, r0, mid + 1), r1, np.where(vertical, mid + 1, c0), c1)
-        first_size = (first[1] - first[0]) * (first[3] - first[2])
-        second_size = (second[1] - second[0]) * (second[3] - second[2])
-        # The separator comes after both halves.
-        length = np.where(vertical, h, w)
-        rect = np.repeat(np.arange(length.size), length)
-        step = np.arange(length.sum()) - np.repeat(np.cumsum(length) - length, length)
-        v = vertical[rect]
-        rows = np.where(v, r0[rect] + step, mid[rect])
-        cols = np.where(v, mid[rect], c0[rect] + step)
-        order[(start + first_size + second_size)[rect] + step] = rows * nx + cols
-        r0, r1, c0, c1 = (np.concatenate(pair) for pair in zip(first, second))
-        start = np.concatenate([start, start + first_size])
-    order.flags.writeable = False
-    return order
+        small = n <= leaf
+        if small.any():
+            _place(order, start[small], n[small], cell, r0[small], r1[small], c0[small], c1[small])
+        r0, r1, c0, c1, n, start = (a[~small] for a in (r0, r1, c0, c1, n, start))
+        # Cut a column (fixed v) of wide pieces, a row of tall ones; candidates near the middle.
+        across = c1 - c0 >= r1 - r0
+        lo, hi = np.where(across, c0, r0), np.where(across, c1, r1)
+        mid = (lo + hi) // 2
+        reach = (window * (hi - lo)).astype(np.int64)
+        first, last = np.maximum(lo, mid - reach), np.minimum(hi - 1, mid + reach)
+        k = last - first + 1
+        piece = np.repeat(np.arange(k.size), k)
+        cut = first[piece] + np.arange(k.sum()) - np.repeat(np.cumsum(k) - k, k)
+        column = across[piece]
+        line = count(np.where(column, r0[piece], cut), np.where(column, r1[piece], cut + 1),
+                     np.where(column, cut, c0[piece]), np.where(column, cut + 1, c1[piece]))
+        # Per piece the emptiest line, the one nearest the middle among equals.
+        cut = cut[np.lexsort((np.abs(cut - mid[piece]), line, piece))[np.cumsum(k) - k]]
+        one = (r0, np.where(across, r1, cut), c0, np.where(across, cut, c1))
+        two = (np.where(across, r0, cut + 1), r1, np.where(across, cut + 1, c0), c1)
+        n1, n2 = count(*one), count(*two)
+        _place(order, start + n1 + n2, n - n1 - n2, cell, np.where(across, r0, cut),
+               np.where(across, r1, cut + 1), np.where(across, cut, c0), np.where(across, cut + 1, c1))
+        r0, r1, c0, c1 = (np.concatenate(pair) for pair in zip(one, two))
+        n, start = np.concatenate([n1, n2]), np.concatenate([start, start + n1])
+        keep = n > 0
+        r0, r1, c0, c1, n, start = (a[keep] for a in (r0, r1, c0, c1, n, start))
+    return np.concatenate([order, separators])
+
+
+def _place(order, start, n, cell, r0, r1, c0, c1):
+    """Write the live nodes of each rectangle of ``cell`` (row by row) to
+    ``order[start:start + n]`` (``n`` = its number of live nodes)."""
+    w = c1 - c0
+    area = (r1 - r0) * w
+    rect = np.repeat(np.arange(area.size), area)
+    row, col = np.divmod(np.arange(area.sum()) - np.repeat(np.cumsum(area) - area, area), w[rect])
+    nodes = cell.ravel()[(r0 * cell.shape[1] + c0)[rect] + row * cell.shape[1] + col]
+    nodes = nodes[nodes >= 0]
+    order[np.repeat(start - (np.cumsum(n) - n), n) + np.arange(nodes.size)] = nodes
 
 
 def _grid_width(row: np.ndarray, col: np.ndarray, n: int) -> int | None:
-    """nx when the entries (row, col) of an (n, n) matrix lie on the pattern of an
-    (n/nx) x nx grid's 5-point stencil (offsets 0, +-1, +-nx), else None."""
+    """nx when the lower-triangle entries (row >= col) of an (n, n) matrix lie on
+    the pattern of an (n/nx) x nx grid's 5-point stencil (offsets 0, 1, nx), else None."""
     if row.size == 0 or n < 4:
         return None
-    offset = np.abs(col.astype(np.int64) - row)
+    offset = row - col
     nx = int(offset.max())
     if nx < 2 or n % nx or not np.all((offset <= 1) | (offset == nx)):
         return None
     return nx
 
 
-def _unknown_order(unknown: np.ndarray, n_unknowns: int, nx: int | None) -> np.ndarray | None:
+def _digest(*arrays: np.ndarray) -> str:
+    """Hash of the arrays' types, shapes and contents (a cache key)."""
+    digest = hashlib.blake2b(digest_size=16)
+    for a in arrays:
+        digest.update(str((a.dtype, a.shape)).encode())
+        digest.update(np.ascontiguousarray(a))
+    return digest.hexdigest()
+
+
+def _cached(key: tuple, compute):
+    """``_symbolic_cache[key]``, computed by ``compute()`` when missing (least recently used dropped)."""
+    value = _symbolic_cache.get(key)
+    if value is None:
+        value = _symbolic_cache[key] = compute()
+        while len(_symbolic_cache) > _SYMBOLIC_CACHE_SIZE:
+            _symbolic_cache.popitem(last=False)
+    else:
+        _symbolic_cache.move_to_end(key)
+    return value
+
+
+def _unknown_order(unknown: np.ndarray, n_unknowns: int, nx: int) -> np.ndarray:
     """Elimination order of the unknowns: ``order[k]`` is the unknown eliminated k-th.
 
     Free unknowns (one node each) in the grid's nested-dissection order, then
-    shared unknowns (tied features) in index order. None without a grid.
+    shared unknowns (tied features) and any unused index. The dissection is of
+    every node not tied (fixed ones dropped afterwards), so the x and y systems of
+    a sliding border share it; it is cached with the symbolic analyses.
     """
-    if nx is None:
-        return None
-    nodes = grid_nested_dissection(unknown.size // nx, nx)
     counts = np.bincount(unknown[unknown >= 0], minlength=n_unknowns)
-    u = unknown[nodes]
-    single = u[u >= 0]
-    single = single[counts[single] == 1]
-    shared = np.flatnonzero(counts > 1)
-    rest = np.setdiff1d(np.arange(n_unknowns), np.concatenate([single, shared]), assume_unique=True)
-    return np.concatenate([single, rest, shared]).astype(np.int64)
+    single = counts[np.maximum(unknown, 0)] == 1
+    untied = ((unknown < 0) | single).reshape(-1, nx)
+    nodes = _cached(("nested-dissection", untied.shape, _digest(np.packbits(untied))),
+                    lambda: grid_nested_dissection(untied))
+    nodes = nodes[unknown[nodes] >= 0]
+    return np.concatenate([unknown[nodes], np.flatnonzero(counts != 1)])
 
 
-def _pattern_key(matrix: sp.csc_matrix) -> tuple:
-    digest = hashlib.blake2b(digest_size=16)
-    digest.update(np.ascontiguousarray(matrix.indptr, dtype=np.int64).tobytes())
-    digest.update(np.ascontiguousarray(matrix.indices, dtype=np.int64).tobytes())
-    return matrix.shape[0], matrix.nnz, digest.hexdigest()
+def _openmp_runtime():
+    """The OpenMP runtime loaded in this process (by CHOLMOD), as a ctypes library, or None."""
+    mode = getattr(os, "RTLD_NOLOAD", None)
+    if mode is None:
+        return None
+    for name in ("libgomp.so.1", "libomp.so", "libomp.so.5"):
+        try:
+            return ctypes.CDLL(name, mode=mode)        # only when already loaded
+        except OSError:
+            continue
+    return None
+
+
+@contextmanager
+def _without_openmp():
+    """Run the OpenMP loops started from this thread (CHOLMOD's) on one thread.
+
+    Debian's CHOLMOD runs the assembly loops of its supernodal factorization in
+    OpenMP teams of a fixed 4 threads (several small parallel regions per
+    supernode). On 2 cores the start-up and barriers of those teams cost more
+    than the loops: the 1 M-unknown factorization took 1.2 s with them and
+    0.85 s without (medians, other work running; the dense blocks still use
+    the BLAS threads).
+    """
+    omp = _openmp_runtime()
+    if omp is None:
+        yield
+        return
+    levels = omp.omp_get_max_active_levels()
+    omp.omp_set_max_active_levels(0)
+    try:
+        yield
+    finally:
+        omp.omp_set_max_active_levels(levels)
 
 
 def _cholmod_factor(lower: sp.csc_matrix, natural: bool):
@@ -170,16 +273,10 @@ def _cholmod_factor(lower: sp.csc_matrix, natural: bool):
     from sksparse.cholmod import analyze
 
     mode = "simplicial" if lower.shape[0] <= _SIMPLICIAL_MAX else "supernodal"
-    key = _pattern_key(lower) + (natural, mode)
-    symbolic = _symbolic_cache.get(key)
-    if symbolic is None:
-        symbolic = analyze(lower, mode=mode, ordering_method="natural" if natural else "default")
-        _symbolic_cache[key] = symbolic
-        while len(_symbolic_cache) > _SYMBOLIC_CACHE_SIZE:
-            _symbolic_cache.popitem(last=False)
-    else:
-        _symbolic_cache.move_to_end(key)
-    return symbolic.cholesky(lower)
+    key = (lower.shape[0], lower.nnz, _digest(lower.indptr, lower.indices), natural, mode)
+    symbolic = _cached(key, lambda: analyze(lower, mode=mode, ordering_method="natural" if natural else "default"))
+    with _without_openmp():
+        return symbolic.cholesky(lower)
 
 
 class ReducedSystem:
@@ -205,32 +302,38 @@ class ReducedSystem:
         global _fallback_noted
         unknown = np.asarray(unknown, dtype=np.int64)
         self.unknown = unknown
-        self.n_unknowns = int(unknown.max()) + 1 if unknown.size else 0
-        self.matrix = sp.csr_matrix(matrix)
+        self.n_unknowns = n = int(unknown.max()) + 1 if unknown.size else 0
+        matrix = sp.csc_matrix(matrix)
+        self.matrix = matrix.T                 # L is symmetric: the same matrix, as CSR, no copy
         self._solve = None
         self.method = "none"
         self.ordering = "default"
-        if self.n_unknowns == 0:
+        if n == 0:
             return
-        coo = self.matrix.tocoo()
-        nonzero = coo.data != 0
-        row, col, val = coo.row[nonzero], coo.col[nonzero], coo.data[nonzero]
-        ur, uc = unknown[row], unknown[col]
-        keep = (ur >= 0) & (uc >= 0)
-        ur, uc, val = ur[keep], uc[keep], val[keep]
-        order = _unknown_order(unknown, self.n_unknowns, _grid_width(row[keep], col[keep], coo.shape[0]))
-        if order is not None:
-            rank = np.empty(self.n_unknowns, dtype=np.int64)
-            rank[order] = np.arange(self.n_unknowns)
+        # Lower triangle of L on the unknowns; an edge between two nodes of one
+        # unknown lands twice on its diagonal (once from each triangle of L).
+        index = unknown.astype(matrix.indices.dtype)
+        row = matrix.indices
+        col = np.repeat(np.arange(matrix.shape[1], dtype=row.dtype), np.diff(matrix.indptr))
+        ur, uc = index[row], index[col]
+        keep = np.flatnonzero((row >= col) & (ur >= 0) & (uc >= 0) & (matrix.data != 0))
+        row, col, val, ur, uc = row[keep], col[keep], matrix.data[keep], ur[keep], uc[keep]
+        val = np.where((ur == uc) & (row != col), 2 * val, val)
+        nx = _grid_width(row, col, matrix.shape[0])
+        if nx is not None:
+            rank = np.empty(n, dtype=index.dtype)
+            rank[_unknown_order(unknown, n, nx)] = np.arange(n, dtype=index.dtype)
             ur, uc = rank[ur], rank[uc]
             self.ordering = "grid-nested-dissection"
-        n = self.n_unknowns
-        # P in the elimination order: row k of the gather sums the nodes of the
-        # k-th eliminated unknown; the scatter puts each solution back on its nodes.
-        nodes = np.flatnonzero(unknown >= 0)
-        position = unknown[nodes] if order is None else rank[unknown[nodes]]
-        self._gather = sp.csr_matrix((np.ones(nodes.size), (position, nodes)), shape=(n, unknown.size))
-        self._scatter = self._gather.T.tocsr()
+        # P in the elimination order: the scatter puts each unknown's value on its
+        # nodes (one entry per row), its transpose (the gather) sums them back.
+        nodes = unknown >= 0
+        position = unknown[nodes] if nx is None else rank[unknown[nodes]]
+        indptr = np.concatenate([[0], np.cumsum(nodes)])
+        self._scatter = sp.csr_matrix((np.ones(position.size), position, indptr), shape=(unknown.size, n))
+        self._gather = self._scatter.T
+        lower = sp.csc_matrix((val, (np.maximum(ur, uc), np.minimum(ur, uc))), shape=(n, n))
+        lower.sum_duplicates()
         try:
             import sksparse.cholmod  # noqa: F401
         except ImportError:
@@ -241,15 +344,10 @@ class ReducedSystem:
                                  "using SciPy's sparse LU, which is slower\n")
                 _fallback_noted = True
             self.method = "scipy-splu"
-            reduced = sp.csc_matrix((val, (ur, uc)), shape=(n, n))
-            self._solve = splu(reduced).solve
+            self._solve = splu((lower + sp.tril(lower, -1).T).tocsc()).solve
         else:
             self.method = "cholmod"
-            low = ur >= uc
-            lower = sp.csc_matrix((val[low], (ur[low], uc[low])), shape=(n, n))
-            lower.sum_duplicates()
-            lower.sort_indices()
-            self._solve = _cholmod_factor(lower, natural=order is not None)
+            self._solve = _cholmod_factor(lower, natural=nx is not None)
 
     def solve(self, rhs: np.ndarray, offset: np.ndarray) -> np.ndarray:
         """Minimise |A x - b|^2 over x = P z + q.
