@@ -386,3 +386,23 @@ def test_openmp_is_off_while_factoring_and_restored_after():
     with solver._without_openmp():
         assert omp.omp_get_max_active_levels() == 0
     assert omp.omp_get_max_active_levels() == before
+
+
+def test_other_masks_of_the_same_size_reuse_the_analysis_with_soft_features():
+    """With the paper's soft feature constraints the pattern is the grid's, whatever the mask:
+    a second image of the same size with another mask factors without a new analysis.
+    (The exact formulation ties each feature's nodes to one unknown, so its pattern
+    depends on the mask; it reuses the analysis for the same mask only.)"""
+    pytest.importorskip("sksparse.cholmod")
+    from featurewarp_cli.api import FeatureWarper
+
+    y, x = np.mgrid[0:120, 0:160]
+    masks = [(x - 50) ** 2 + (y - 60) ** 2 < 20**2, (abs(x - 110) < 25) & (abs(y - 40) < 15)]
+    warp = load_warp("swirl")(160, 120, angle=60)
+    solver._symbolic_cache.clear()
+    FeatureWarper(160, 120, masks[0], cell=4, formulation="paper").solve(warp)
+    kept = dict(solver._symbolic_cache)
+    mesh = FeatureWarper(160, 120, masks[1], cell=4, formulation="paper").solve(warp)
+    assert solver._symbolic_cache.keys() == kept.keys()
+    assert all(solver._symbolic_cache[k] is v for k, v in kept.items())
+    assert mesh.flips() == 0
