@@ -268,7 +268,12 @@ def _captured_stderr():
             os.dup2(saved, 2)
             os.close(saved)
             tmp.seek(0)
-            lines.extend(line for line in tmp.read().decode(errors="replace").splitlines() if line.strip())
+            printed = [line for line in tmp.read().decode(errors="replace").splitlines() if line.strip()]
+            # Our own notices (another thread may print while a decode runs) are shown after all.
+            ours = [line for line in printed if line.startswith("featurewarp:")]
+            if ours:
+                sys.stderr.write("".join(line + "\n" for line in ours))
+            lines.extend(line for line in printed if not line.startswith("featurewarp:"))
 
 
 def check_pixels(width: int, height: int, name: str, max_pixels: int | None) -> None:

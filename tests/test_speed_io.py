@@ -247,3 +247,46 @@ def test_quad_jacobians_are_the_einsum_numbers(rng, cell):
     u = np.array([[-sx, -sy], [sx, -sy], [sx, sy], [-sx, sy]]) / 2.0
     expected = np.einsum("kcd,ce->kde", warped[grid.quads()], u) / np.array([sx * sx, sy * sy])
     np.testing.assert_array_equal(targets.quad_jacobians(grid, warped), expected)
+
+
+def test_notices_printed_during_a_decode_still_show(capfd):
+    """While INPUT decodes in a thread, file descriptor 2 is captured for the decoder's
+    warnings; a featurewarp notice printed meanwhile is shown afterwards, not swallowed."""
+    import os
+
+    with imageio._captured_stderr() as lines:
+        os.write(2, b"featurewarp: a notice from another thread\nlibpng warning: iCCP: something\n")
+    assert lines == ["libpng warning: iCCP: something"]
+    assert "featurewarp: a notice from another thread" in capfd.readouterr().err
+
+
+def test_input_decodes_while_the_mesh_is_solved(tmp_path, monkeypatch):
+    """warp_file starts decoding INPUT in a thread when its header gives the size; the
+    result equals the serial path's."""
+    import cv2
+    import numpy as np
+
+    from featurewarp_cli import batch
+
+    rng = np.random.default_rng(3)
+    image = rng.integers(0, 255, (36, 48, 3), dtype=np.uint8)
+    mask = np.zeros((36, 48), np.uint8)
+    mask[10:25, 15:30] = 255
+    cv2.imwrite(str(tmp_path / "in.png"), image)
+    cv2.imwrite(str(tmp_path / "m.png"), mask)
+    settings = batch.Settings(preset="swirl", params={"angle": 90.0})
+    started = []
+    real = batch._Decoding.__init__
+
+    def spy(self, *args):
+        started.append(True)
+        real(self, *args)
+
+    monkeypatch.setattr(batch._Decoding, "__init__", spy)
+    batch.warp_file(settings, str(tmp_path / "in.png"), str(tmp_path / "a.png"), str(tmp_path / "m.png"))
+    assert started
+    serial = batch.load_image_and_mask(settings, str(tmp_path / "in.png"), str(tmp_path / "m.png"))
+    monkeypatch.setattr(batch, "start_loading", lambda s, i, m: (batch._Ready(serial[0]), serial[1], serial[2],
+                                                                 (48, 36)))
+    batch.warp_file(settings, str(tmp_path / "in.png"), str(tmp_path / "b.png"), str(tmp_path / "m.png"))
+    assert (tmp_path / "a.png").read_bytes() == (tmp_path / "b.png").read_bytes()
