@@ -4,6 +4,9 @@
  *   records()     their scanline bounds and inverse affine maps, for a band's triangles
  *                 (these two are render._Triangles)
  *   rasterize()   the inverse maps of one band of rows (render._rasterize_band)
+ *   fp_candidates(), fp_shape(), fp_finish()
+ *                 the footprints of a band's triangles (render._Minification) around
+ *                 the numpy calls (hypot, arctan2, cos, sin, log2) that Python makes
  *   aa_count(), aa_probes(), aa_resolve()
  *                 the minification filter (render._antialiased) around the cv2.remap
  *                 calls that Python makes: count and place the probes of each pyramid
@@ -24,6 +27,24 @@
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
+
+/* floor() and ceil() on every span and triangle are a dozen instructions each on plain
+ * x86-64 and one (roundsd) with SSE4.1: the loops that use them are built twice and
+ * the CPU picks one when the module loads (glibc's ifunc). Same results either way. */
+#if defined(__x86_64__) && defined(__GLIBC__) && defined(__has_attribute)
+#if __has_attribute(target_clones)
+#define ROUNDING_CLONES __attribute__((target_clones("sse4.1", "default")))
+#endif
+#endif
+#ifndef ROUNDING_CLONES
+#define ROUNDING_CLONES
+#endif
+/* Inlined into the clones above (and into the loops specialised by constants below). */
+#if defined(__GNUC__)
+#define ALWAYS_INLINE static inline __attribute__((always_inline))
+#else
+#define ALWAYS_INLINE static inline
+#endif
 
 /* Fields of a triangle's record (float64), as the attributes of render._Triangles:
  * lower and upper x-bounds k + m y (two each), J, p0 and s0. */
@@ -61,18 +82,18 @@ get(PyObject *obj, Py_buffer *view, const char *codes, Py_ssize_t itemsize, int 
 
 /* ------------------------------------------------------------------ triangles */
 
-/* Triangle n (node indices; nodes holds target x, y and source x, y of each) on a
- * width x height canvas: 0 when it is dropped (flat, or off the canvas), else 1 with
- * its first and last rows in *lo, *hi and, when r is given, its record in r. */
-static int
-setup(const double *nodes, const int64_t *n, long long width, long long height,
-      int64_t *lo, int64_t *hi, double *r)
+/* Triangle n (node indices; target and source hold the nodes' x, y) on a width x height
+ * canvas: 0 when it is dropped (flat, or off the canvas), else 1 with its first and last
+ * rows in *lo, *hi and, when r is given, its record in r. */
+ALWAYS_INLINE int
+setup(const double *target, const double *source, const int64_t n[3], long long width,
+      long long height, int64_t *lo, int64_t *hi, double *r)
 {
     static const int edge[3][2] = {{0, 1}, {1, 2}, {2, 0}};
     double x[3], y[3];
     for (int c = 0; c < 3; c++) {
-        x[c] = nodes[4 * n[c]];
-        y[c] = nodes[4 * n[c] + 1];
+        x[c] = target[2 * n[c]];
+        y[c] = target[2 * n[c] + 1];
     }
     double det = (x[1] - x[0]) * (y[2] - y[0]) - (y[1] - y[0]) * (x[2] - x[0]);
     double first = max_nan(ceil(min_nan(min_nan(y[0], y[1]), y[2])), 0.0);
@@ -114,7 +135,7 @@ setup(const double *nodes, const int64_t *n, long long width, long long height,
     }
 
     /* source = s0 + J (q - p0), J = S E^-1. */
-    const double *s0 = nodes + 4 * n[0] + 2, *s1 = nodes + 4 * n[1] + 2, *s2 = nodes + 4 * n[2] + 2;
+    const double *s0 = source + 2 * n[0], *s1 = source + 2 * n[1], *s2 = source + 2 * n[2];
     double sx0 = s0[0], sy0 = s0[1];
     double d1x = s1[0] - sx0, d1y = s1[1] - sy0;
     double d2x = s2[0] - sx0, d2y = s2[1] - sy0;
@@ -132,151 +153,228 @@ setup(const double *nodes, const int64_t *n, long long width, long long height,
     return 1;
 }
 
+/* A (rows, 3) int64 buffer of any strides: the triangles, as the mesh holds them (often a
+ * transposed view; copying 1.5 M triangles to C order costs more than reading them). */
+typedef struct {
+    Py_buffer view;
+    Py_ssize_t rows, s0, s1;
+} Triples;
+
+static int
+get_triples(PyObject *obj, Triples *t, const char *name)
+{
+    if (PyObject_GetBuffer(obj, &t->view, PyBUF_RECORDS_RO) < 0)
+        return -1;
+    const char *f = t->view.format ? t->view.format : "B";
+    if (*f == '<' || *f == '=' || *f == '@')
+        f++;
+    if (t->view.ndim != 2 || t->view.shape[1] != 3 || t->view.itemsize != 8 || f[0] == '\0' || f[1] != '\0'
+        || !strchr("lq", f[0])) {
+        PyErr_Format(PyExc_TypeError, "%s: expected an (n, 3) int64 array", name);
+        PyBuffer_Release(&t->view);
+        return -1;
+    }
+    t->rows = t->view.shape[0];
+    t->s0 = t->view.strides[0];
+    t->s1 = t->view.strides[1];
+    return 0;
+}
+
+static inline int64_t
+triple(const Triples *t, Py_ssize_t i, int c)
+{
+    return *(const int64_t *)((const char *)t->view.buf + i * t->s0 + c * t->s1);
+}
+
+/* setup() of triangles 0 .. m-1 for triangles(): rows (row[i] = -1 when dropped, last
+ * row in last[i]) and a count of kept triangles per first row in start[row + 1].
+ * Returns the number kept, or -1 when a node index is out of range. */
+static ROUNDING_CLONES Py_ssize_t
+triangle_rows(const double *target, Py_ssize_t nodes, const Triples *t, long long width,
+              long long height, int32_t *row, int32_t *last, int64_t *start)
+{
+    Py_ssize_t count = 0;
+    int64_t lo, hi;
+    for (Py_ssize_t i = 0; i < t->rows; i++) {
+        int64_t n[3] = {triple(t, i, 0), triple(t, i, 1), triple(t, i, 2)};
+        if (n[0] < 0 || n[0] >= nodes || n[1] < 0 || n[1] >= nodes || n[2] < 0 || n[2] >= nodes)
+            return -1;
+        if (!setup(target, NULL, n, width, height, &lo, &hi, NULL))
+            row[i] = -1;
+        else {
+            row[i] = (int32_t)lo;
+            last[i] = (int32_t)hi;
+            start[lo + 1]++, count++;
+        }
+    }
+    return count;
+}
+
 /* The kept triangles (index into triangles), in their order or (sort) in the order of
  * a stable sort by first row: the order in which render.py rasterizes its bands, whose
- * triangles are then contiguous. */
+ * triangles are then contiguous. Their nodes are copied to corners in that order, so
+ * that records() reads them in sequence rather than all over the triangle array. */
 static PyObject *
 triangles(PyObject *self, PyObject *args)
 {
-    PyObject *o_nodes, *o_tri, *o_index, *o_ylo, *o_yhi;
+    PyObject *o_target, *o_tri, *o_index, *o_ylo, *o_yhi, *o_corners;
     long long width, height;
     int sort;
-    if (!PyArg_ParseTuple(args, "OOLLpOOO:triangles", &o_nodes, &o_tri, &width, &height, &sort,
-                          &o_index, &o_ylo, &o_yhi))
+    if (!PyArg_ParseTuple(args, "OOLLpOOOO:triangles", &o_target, &o_tri, &width, &height, &sort,
+                          &o_index, &o_ylo, &o_yhi, &o_corners))
         return NULL;
-    Py_buffer nb = {0}, tri = {0}, ind = {0}, ylo = {0}, yhi = {0};
+    Py_buffer tb = {0}, ind = {0}, ylo = {0}, yhi = {0}, cor = {0};
+    Triples tri = {0};
     PyObject *result = NULL;
-    int64_t *row = NULL, *start = NULL;
-    if (get(o_nodes, &nb, F64, 0, "nodes") || get(o_tri, &tri, I64, 0, "triangles")
+    int32_t *row = NULL;
+    int64_t *start = NULL;
+    if (get(o_target, &tb, F64, 0, "target") || get_triples(o_tri, &tri, "triangles")
         || get(o_index, &ind, I64, 1, "index") || get(o_ylo, &ylo, I64, 1, "ylo")
-        || get(o_yhi, &yhi, I64, 1, "yhi"))
+        || get(o_yhi, &yhi, I64, 1, "yhi") || get(o_corners, &cor, I32, 1, "corners"))
         goto done;
-    Py_ssize_t nodes = N_OF(nb) / 4, m = N_OF(tri) / 3;
-    if (N_OF(ind) < m || N_OF(ylo) < m || N_OF(yhi) < m || width < 1 || height < 1
-        || !(row = malloc((2 * m + 1) * sizeof(int64_t)))
+    Py_ssize_t nodes = N_OF(tb) / 2, m = tri.rows;
+    if (N_OF(ind) < m || N_OF(ylo) < m || N_OF(yhi) < m || N_OF(cor) < 3 * m || width < 1 || height < 1
+        || height > INT32_MAX || nodes > INT32_MAX
+        || !(row = malloc((2 * m + 1) * sizeof(int32_t)))
         || !(start = calloc(height + 1, sizeof(int64_t)))) {
         PyErr_SetString(PyExc_ValueError, "triangles: buffer sizes do not match");
         goto done;
     }
-    const double *p = nb.buf;
-    const int64_t *t = tri.buf;
-    int64_t *index = ind.buf, *lo_out = ylo.buf, *hi_out = yhi.buf, *last = row + m;
-    Py_ssize_t count = 0, bad = 0;
+    int64_t *index = ind.buf, *lo_out = ylo.buf, *hi_out = yhi.buf;
+    int32_t *corners = cor.buf, *last = row + m;
+    Py_ssize_t count;
 
     Py_BEGIN_ALLOW_THREADS
-    for (Py_ssize_t i = 0; i < m && !bad; i++) {        /* rows, and a counting sort */
-        const int64_t *n = t + 3 * i;
-        bad = n[0] < 0 || n[0] >= nodes || n[1] < 0 || n[1] >= nodes || n[2] < 0 || n[2] >= nodes;
-        if (bad || !setup(p, n, width, height, &row[i], &last[i], NULL))
-            row[i] = -1;
-        else
-            start[row[i] + 1]++, count++;
-    }
-    for (long long y = 0; y < height && !bad; y++)
+    count = triangle_rows(tb.buf, nodes, &tri, width, height, row, last, start);
+    for (long long y = 0; y < height && count >= 0; y++)       /* a counting sort */
         start[y + 1] += start[y];
-    for (Py_ssize_t i = 0, kept = 0; i < m && !bad; i++) {
+    for (Py_ssize_t i = 0, kept = 0; i < m && count >= 0; i++) {
         if (row[i] < 0)
             continue;
         int64_t at = sort ? start[row[i]]++ : kept++;
         index[at] = i;
         lo_out[at] = row[i];
         hi_out[at] = last[i];
+        for (int c = 0; c < 3; c++)
+            corners[3 * at + c] = (int32_t)triple(&tri, i, c);
     }
     Py_END_ALLOW_THREADS
 
-    if (bad)
+    if (count < 0)
         PyErr_SetString(PyExc_IndexError, "triangles: node index out of range");
     else
         result = PyLong_FromSsize_t(count);
 done:
     free(row);
     free(start);
-    PyBuffer_Release(&nb);
-    PyBuffer_Release(&tri);
+    PyBuffer_Release(&tb);
+    PyBuffer_Release(&tri.view);
     PyBuffer_Release(&ind);
     PyBuffer_Release(&ylo);
     PyBuffer_Release(&yhi);
+    PyBuffer_Release(&cor);
     return result;
 }
 
-/* The mesh as the functions below take it: nodes (target x, y, source x, y of each),
- * triangles, the kept triangles' indices from triangles() and the canvas. */
-typedef struct {
-    Py_buffer nodes, tri, ind;
-    long long width, height;
-} Mesh;
-
-/* Get the mesh's buffers; check what setup() will read for kept triangles sel. */
-static int
-get_mesh(PyObject *o_nodes, PyObject *o_tri, PyObject *o_ind, const int64_t *sel, Py_ssize_t n,
-         Mesh *mesh)
+/* setup() of the kept triangles sel (nodes in corners) into rec; 0 when an index is out
+ * of range. */
+static ROUNDING_CLONES int
+record_rows(const double *target, const double *source, Py_ssize_t nodes, const int32_t *corners,
+            Py_ssize_t kept, long long width, long long height, const int64_t *sel, Py_ssize_t n,
+            double *r)
 {
-    if (get(o_nodes, &mesh->nodes, F64, 0, "nodes") || get(o_tri, &mesh->tri, I64, 0, "triangles")
-        || get(o_ind, &mesh->ind, I64, 0, "index"))
-        return -1;
-    Py_ssize_t nodes = N_OF(mesh->nodes) / 4, m = N_OF(mesh->tri) / 3, kept = N_OF(mesh->ind);
-    const int64_t *t = mesh->tri.buf, *index = mesh->ind.buf;
-    if (mesh->width < 1 || mesh->height < 1) {
-        PyErr_SetString(PyExc_ValueError, "empty canvas");
-        return -1;
+    int64_t lo, hi;
+    for (Py_ssize_t i = 0; i < n; i++, r += NREC) {
+        if (sel[i] < 0 || sel[i] >= kept)
+            return 0;
+        const int32_t *c = corners + 3 * sel[i];
+        int64_t nn[3] = {c[0], c[1], c[2]};
+        if (nn[0] < 0 || nn[0] >= nodes || nn[1] < 0 || nn[1] >= nodes || nn[2] < 0 || nn[2] >= nodes)
+            return 0;
+        if (!setup(target, source, nn, width, height, &lo, &hi, r))
+            for (int k = 0; k < NREC; k++)    /* not kept on this canvas: no pixel */
+                r[k] = NAN;
     }
-    for (Py_ssize_t i = 0; i < n; i++) {
-        int ok = sel[i] >= 0 && sel[i] < kept && index[sel[i]] >= 0 && index[sel[i]] < m;
-        for (int c = 0; ok && c < 3; c++)
-            ok = t[3 * index[sel[i]] + c] >= 0 && t[3 * index[sel[i]] + c] < nodes;
-        if (!ok) {
-            PyErr_SetString(PyExc_IndexError, "triangle or node index out of range");
-            return -1;
-        }
-    }
-    return 0;
-}
-
-static void
-release_mesh(Mesh *mesh)
-{
-    PyBuffer_Release(&mesh->nodes);
-    PyBuffer_Release(&mesh->tri);
-    PyBuffer_Release(&mesh->ind);
+    return 1;
 }
 
 /* The records of kept triangles sel (their J feeds the footprints too). */
 static PyObject *
 records(PyObject *self, PyObject *args)
 {
-    PyObject *o_nodes, *o_tri, *o_ind, *o_sel, *o_rec;
-    Mesh mesh = {0};
-    if (!PyArg_ParseTuple(args, "OOOLLOO:records", &o_nodes, &o_tri, &o_ind, &mesh.width,
-                          &mesh.height, &o_sel, &o_rec))
+    PyObject *o_target, *o_source, *o_cor, *o_sel, *o_rec;
+    long long width, height;
+    if (!PyArg_ParseTuple(args, "OOOLLOO:records", &o_target, &o_source, &o_cor, &width, &height,
+                          &o_sel, &o_rec))
         return NULL;
-    Py_buffer sel = {0}, rec = {0};
+    Py_buffer tb = {0}, sb = {0}, cor = {0}, sel = {0}, rec = {0};
     PyObject *result = NULL;
-    if (get(o_sel, &sel, I64, 0, "sel") || get(o_rec, &rec, F64, 1, "rec")
-        || get_mesh(o_nodes, o_tri, o_ind, sel.buf, N_OF(sel), &mesh))
+    if (get(o_target, &tb, F64, 0, "target") || get(o_source, &sb, F64, 0, "source")
+        || get(o_cor, &cor, I32, 0, "corners") || get(o_sel, &sel, I64, 0, "sel")
+        || get(o_rec, &rec, F64, 1, "rec"))
         goto done;
     Py_ssize_t n = N_OF(sel);
-    if (N_OF(rec) < NREC * n) {
-        PyErr_SetString(PyExc_ValueError, "records: buffer too small");
+    if (N_OF(rec) < NREC * n || N_OF(sb) != N_OF(tb) || width < 1 || height < 1) {
+        PyErr_SetString(PyExc_ValueError, "records: buffer sizes do not match or empty canvas");
         goto done;
     }
-    const int64_t *t = mesh.tri.buf, *index = mesh.ind.buf, *s = sel.buf;
-    double *r = rec.buf;
-    int64_t lo, hi;
+    int ok;
     Py_BEGIN_ALLOW_THREADS
-    for (Py_ssize_t i = 0; i < n; i++, r += NREC)
-        if (!setup(mesh.nodes.buf, t + 3 * index[s[i]], mesh.width, mesh.height, &lo, &hi, r))
-            for (int k = 0; k < NREC; k++)    /* not kept on this canvas: no pixel */
-                r[k] = NAN;
+    ok = record_rows(tb.buf, sb.buf, N_OF(tb) / 2, cor.buf, N_OF(cor) / 3, width, height, sel.buf, n,
+                     rec.buf);
     Py_END_ALLOW_THREADS
-    result = Py_NewRef(Py_None);
+    if (!ok)
+        PyErr_SetString(PyExc_IndexError, "records: triangle or node index out of range");
+    else
+        result = Py_NewRef(Py_None);
 done:
-    release_mesh(&mesh);
+    PyBuffer_Release(&tb);
+    PyBuffer_Release(&sb);
+    PyBuffer_Release(&cor);
     PyBuffer_Release(&sel);
     PyBuffer_Release(&rec);
     return result;
 }
 
-/* ------------------------------------------------------------------ rasterize */
+/* The loop of rasterize(): returns how many pixels it marked in aatri. */
+static ROUNDING_CLONES Py_ssize_t
+fill_band(const double *records, const int64_t *lo_of, const int64_t *hi_of, Py_ssize_t count,
+          long long y0, long long y1, long long width, const int32_t *restrict ids,
+          float *restrict mapx, float *restrict mapy, int32_t *restrict aatri)
+{
+    Py_ssize_t marked = 0;
+    for (Py_ssize_t t = 0; t < count; t++) {
+        const double *r = records + NREC * t;
+        int64_t lo = lo_of[t] > y0 ? lo_of[t] : y0, hi = hi_of[t] < y1 - 1 ? hi_of[t] : y1 - 1;
+        int32_t id = ids ? ids[t] : -1;
+        for (int64_t y = lo; y <= hi; y++) {
+            double yd = (double)y;
+            double xl = max_nan(r[LM0] * yd + r[LK0], r[LM1] * yd + r[LK1]);
+            double xr = min_nan(r[UM0] * yd + r[UK0], r[UM1] * yd + r[UK1]);
+            xl = max_nan(ceil(xl), 0.0);
+            xr = min_nan(floor(xr), (double)(width - 1));
+            if (!(xl <= xr))
+                continue;
+            int64_t a = (int64_t)xl, n = (int64_t)xr - a + 1;
+            double qx = (double)a - r[PX0], qy = yd - r[PY0];
+            float start_x = (float)(r[SX0] + r[J00] * qx + r[J01] * qy);
+            float start_y = (float)(r[SY0] + r[J10] * qx + r[J11] * qy);
+            float step_x = (float)r[J00], step_y = (float)r[J10];
+            float *restrict ox = mapx + (y - y0) * width + a, *restrict oy = mapy + (y - y0) * width + a;
+            for (int64_t j = 0; j < n; j++) {
+                ox[j] = start_x + step_x * (float)j;
+                oy[j] = start_y + step_y * (float)j;
+            }
+            if (id >= 0) {
+                int32_t *o = aatri + (y - y0) * width + a;
+                for (int64_t j = 0; j < n; j++)
+                    o[j] = id;
+                marked += n;
+            }
+        }
+    }
+    return marked;
+}
 
 static PyObject *
 rasterize(PyObject *self, PyObject *args)
@@ -306,39 +404,10 @@ rasterize(PyObject *self, PyObject *args)
     const int32_t *restrict ids = with_aa ? idb.buf : NULL;
     float *restrict mapx = mx.buf, *restrict mapy = my.buf;
     int32_t *restrict aatri = with_aa ? aa.buf : NULL;
-    Py_ssize_t marked = 0;
+    Py_ssize_t marked;
 
     Py_BEGIN_ALLOW_THREADS
-    for (Py_ssize_t t = 0; t < count; t++) {
-        const double *r = records + NREC * t;
-        int64_t lo = lo_of[t] > y0 ? lo_of[t] : y0, hi = hi_of[t] < y1 - 1 ? hi_of[t] : y1 - 1;
-        int32_t id = with_aa ? ids[t] : -1;
-        for (int64_t y = lo; y <= hi; y++) {
-            double yd = (double)y;
-            double xl = max_nan(r[LM0] * yd + r[LK0], r[LM1] * yd + r[LK1]);
-            double xr = min_nan(r[UM0] * yd + r[UK0], r[UM1] * yd + r[UK1]);
-            xl = max_nan(ceil(xl), 0.0);
-            xr = min_nan(floor(xr), (double)(width - 1));
-            if (!(xl <= xr))
-                continue;
-            int64_t a = (int64_t)xl, n = (int64_t)xr - a + 1;
-            double qx = (double)a - r[PX0], qy = yd - r[PY0];
-            float start_x = (float)(r[SX0] + r[J00] * qx + r[J01] * qy);
-            float start_y = (float)(r[SY0] + r[J10] * qx + r[J11] * qy);
-            float step_x = (float)r[J00], step_y = (float)r[J10];
-            float *restrict ox = mapx + (y - y0) * width + a, *restrict oy = mapy + (y - y0) * width + a;
-            for (int64_t j = 0; j < n; j++) {
-                ox[j] = start_x + step_x * (float)j;
-                oy[j] = start_y + step_y * (float)j;
-            }
-            if (id >= 0) {
-                int32_t *o = aatri + (y - y0) * width + a;
-                for (int64_t j = 0; j < n; j++)
-                    o[j] = id;
-                marked += n;
-            }
-        }
-    }
+    marked = fill_band(records, lo_of, hi_of, count, y0, y1, width, ids, mapx, mapy, aatri);
     Py_END_ALLOW_THREADS
 
     result = PyLong_FromSsize_t(marked);
@@ -350,6 +419,188 @@ done:
     PyBuffer_Release(&my);
     PyBuffer_Release(&idb);
     PyBuffer_Release(&aa);
+    return result;
+}
+
+/* ------------------------------------------------------------------ footprints
+ *
+ * render._Minification in three steps around the numpy calls that must stay numpy's
+ * (hypot, arctan2, cos, sin, log2: libm and numpy's own SIMD code may differ in the
+ * last bit). Between them, the same float64 operations as its numpy code:
+ *
+ *   fp_candidates()  the triangles whose J might have s1 > threshold, with the sums
+ *                    a + d, c - b, a - d, c + b that numpy takes hypot / arctan2 of;
+ *   fp_shape()       s1 = (p + q) / 2 from numpy's p, q: which of them minify, and
+ *                    their probe count k, m2 and the tent's half-width;
+ *   fp_finish()      ints (k, base, blend) and floats (step x, step y, frac) from
+ *                    numpy's cos, sin of the axis angle and log2 of m2.
+ */
+
+/* s1^2 is the larger root of x^2 - |J|_F^2 x + det^2: computed without hypot, its error
+ * is below 1e-7 s1^2 (the square root of a difference that cancels), so a triangle
+ * whose computed value stays under threshold^2 (1 - 1e-6) cannot have s1 > threshold in
+ * numpy's arithmetic either. NaN and overflow make a candidate (numpy decides). */
+static PyObject *
+fp_candidates(PyObject *self, PyObject *args)
+{
+    PyObject *o_rec, *o_cand, *o_sums;
+    double threshold;
+    if (!PyArg_ParseTuple(args, "OdOO:fp_candidates", &o_rec, &threshold, &o_cand, &o_sums))
+        return NULL;
+    Py_buffer rec = {0}, cand = {0}, sums = {0};
+    PyObject *result = NULL;
+    if (get(o_rec, &rec, F64, 0, "rec") || get(o_cand, &cand, I64, 1, "cand")
+        || get(o_sums, &sums, F64, 1, "sums"))
+        goto done;
+    Py_ssize_t n = N_OF(rec) / NREC, count = 0;
+    if (N_OF(cand) < n || N_OF(sums) < 4 * n) {
+        PyErr_SetString(PyExc_ValueError, "fp_candidates: buffer sizes do not match");
+        goto done;
+    }
+    const double *r = rec.buf, bound = threshold * threshold * (1.0 - 1e-6);
+    int64_t *c_out = cand.buf;
+    double *s = sums.buf;
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t i = 0; i < n; i++, r += NREC) {
+        double a = r[J00], b = r[J01], c = r[J10], d = r[J11];
+        double f2 = a * a + b * b + c * c + d * d, det = a * d - b * c;
+        double disc = f2 * f2 - 4.0 * det * det;
+        if (0.5 * (f2 + sqrt(disc > 0.0 ? disc : 0.0)) <= bound)
+            continue;
+        c_out[count] = i;
+        s[count] = a + d;                /* (rows of n: numpy's u1, v1, u2, v2) */
+        s[n + count] = c - b;
+        s[2 * n + count] = a - d;
+        s[3 * n + count] = c + b;
+        count++;
+    }
+    Py_END_ALLOW_THREADS
+    result = PyLong_FromSsize_t(count);
+done:
+    PyBuffer_Release(&rec);
+    PyBuffer_Release(&cand);
+    PyBuffer_Release(&sums);
+    return result;
+}
+
+/* Candidates j < count (triangle cand[j], hypot p[j] and q[j]) with (p + q) / 2 > threshold
+ * are numbered 0, 1, ... in index (n triangles, -1 for the others); their sums (rows of n
+ * in sums), m2, half-width and k are moved to position number (in place: number <= j). */
+static PyObject *
+fp_shape(PyObject *self, PyObject *args)
+{
+    PyObject *o_cand, *o_sums, *o_p, *o_q, *o_index, *o_m2, *o_half, *o_steps;
+    double threshold;
+    int kmax;
+    if (!PyArg_ParseTuple(args, "OOOOdiOOOO:fp_shape", &o_cand, &o_sums, &o_p, &o_q, &threshold, &kmax,
+                          &o_index, &o_m2, &o_half, &o_steps))
+        return NULL;
+    Py_buffer cand = {0}, sums = {0}, pb = {0}, qb = {0}, ind = {0}, m2b = {0}, hb = {0}, sb = {0};
+    PyObject *result = NULL;
+    if (get(o_cand, &cand, I64, 0, "cand") || get(o_sums, &sums, F64, 1, "sums")
+        || get(o_p, &pb, F64, 0, "p") || get(o_q, &qb, F64, 0, "q")
+        || get(o_index, &ind, I32, 1, "index") || get(o_m2, &m2b, F64, 1, "m2")
+        || get(o_half, &hb, F64, 1, "half") || get(o_steps, &sb, I64, 1, "steps"))
+        goto done;
+    Py_ssize_t count = N_OF(cand), n = N_OF(ind), number = 0;
+    const int64_t *c_in = cand.buf;
+    int bad = N_OF(sums) < 4 * n || N_OF(pb) < count || N_OF(qb) < count || N_OF(m2b) < count
+              || N_OF(hb) < count || N_OF(sb) < count || count > n;
+    for (Py_ssize_t j = 0; j < count && !bad; j++)
+        bad = c_in[j] < 0 || c_in[j] >= n;
+    if (bad) {
+        PyErr_SetString(PyExc_ValueError, "fp_shape: buffer sizes or indices do not match");
+        goto done;
+    }
+    double *s = sums.buf, *m2_out = m2b.buf, *half_out = hb.buf;
+    const double *p = pb.buf, *q = qb.buf;
+    int32_t *index = ind.buf;
+    int64_t *steps_out = sb.buf;
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t i = 0; i < n; i++)
+        index[i] = -1;
+    for (Py_ssize_t j = 0; j < count; j++) {
+        double s1 = (p[j] + q[j]) / 2.0;
+        if (!(s1 > threshold))
+            continue;
+        double s2 = fabs(p[j] - q[j]) / 2.0;
+        double m1 = max_nan(s1, 1.0), m2 = max_nan(s2, 1.0);
+        /* Tent of half-width 2 (m1 - m2), probes at most m2 apart, at most kmax a side. */
+        double steps = max_nan(2.0, ceil(2.0 * (m1 - m2) / m2 - 1e-9));
+        if (steps > kmax)
+            m2 = 2.0 * m1 / (kmax + 2.0);
+        int64_t k = (int64_t)min_nan(steps, (double)kmax);
+        double half = 2.0 * (m1 - m2);
+        index[c_in[j]] = (int32_t)number;
+        for (int row = 0; row < 4; row++)
+            s[row * n + number] = s[row * n + j];
+        m2_out[number] = m2;
+        half_out[number] = half;
+        steps_out[number] = half < 1e-3 ? 1 : k;
+        number++;
+    }
+    Py_END_ALLOW_THREADS
+    result = PyLong_FromSsize_t(number);
+done:
+    PyBuffer_Release(&cand);
+    PyBuffer_Release(&sums);
+    PyBuffer_Release(&pb);
+    PyBuffer_Release(&qb);
+    PyBuffer_Release(&ind);
+    PyBuffer_Release(&m2b);
+    PyBuffer_Release(&hb);
+    PyBuffer_Release(&sb);
+    return result;
+}
+
+/* ints = (k, base, blend), floats = (step x, step y, frac) of the minifying triangles
+ * from their half-width, k, level = log2(m2) and the axis (cos, sin). */
+static PyObject *
+fp_finish(PyObject *self, PyObject *args)
+{
+    PyObject *o_half, *o_steps, *o_level, *o_cos, *o_sin, *o_ints, *o_floats;
+    if (!PyArg_ParseTuple(args, "OOOOOOO:fp_finish", &o_half, &o_steps, &o_level, &o_cos, &o_sin,
+                          &o_ints, &o_floats))
+        return NULL;
+    Py_buffer hb = {0}, sb = {0}, lb = {0}, cb = {0}, nb = {0}, ib = {0}, fb = {0};
+    PyObject *result = NULL;
+    if (get(o_half, &hb, F64, 0, "half") || get(o_steps, &sb, I64, 0, "steps")
+        || get(o_level, &lb, F64, 0, "level") || get(o_cos, &cb, F64, 0, "cos")
+        || get(o_sin, &nb, F64, 0, "sin") || get(o_ints, &ib, I32, 1, "ints")
+        || get(o_floats, &fb, F32, 1, "floats"))
+        goto done;
+    Py_ssize_t m = N_OF(lb);
+    if (N_OF(hb) < m || N_OF(sb) < m || N_OF(cb) < m || N_OF(nb) < m || N_OF(ib) < 3 * m
+        || N_OF(fb) < 3 * m) {
+        PyErr_SetString(PyExc_ValueError, "fp_finish: buffer sizes do not match");
+        goto done;
+    }
+    const double *half = hb.buf, *level = lb.buf, *cs = cb.buf, *sn = nb.buf;
+    const int64_t *steps = sb.buf;
+    int32_t *ints = ib.buf;
+    float *floats = fb.buf;
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t i = 0; i < m; i++) {
+        int64_t base = (int64_t)floor(level[i]);
+        float frac = (float)(level[i] - (double)base);
+        double spacing = half[i] / (double)steps[i];      /* source offset between probes */
+        ints[3 * i] = (int32_t)steps[i];
+        ints[3 * i + 1] = (int32_t)base;
+        ints[3 * i + 2] = frac > 1e-4;
+        floats[3 * i] = (float)(spacing * cs[i]);
+        floats[3 * i + 1] = (float)(spacing * sn[i]);
+        floats[3 * i + 2] = frac;
+    }
+    Py_END_ALLOW_THREADS
+    result = Py_NewRef(Py_None);
+done:
+    PyBuffer_Release(&hb);
+    PyBuffer_Release(&sb);
+    PyBuffer_Release(&lb);
+    PyBuffer_Release(&cb);
+    PyBuffer_Release(&nb);
+    PyBuffer_Release(&ib);
+    PyBuffer_Release(&fb);
     return result;
 }
 
@@ -423,6 +674,17 @@ aa_cursors(const int64_t *offsets, Py_ssize_t levels, Py_ssize_t total, int64_t 
     return offsets[levels] <= total;
 }
 
+/* The 2k - 1 probes of a pixel at (sx, sy) on a level of the given scale. */
+ALWAYS_INLINE void
+probe_run(float *restrict ox, float *restrict oy, float sx, float sy, float step_x, float step_y,
+          float scale, const int k)
+{
+    for (int j = -(k - 1), c = 0; j <= k - 1; j++, c++) {
+        ox[c] = (sx + (float)j * step_x) * scale;
+        oy[c] = (sy + (float)j * step_y) * scale;
+    }
+}
+
 static PyObject *
 aa_probes(PyObject *self, PyObject *args)
 {
@@ -465,11 +727,12 @@ aa_probes(PyObject *self, PyObject *args)
             int64_t c = cursor[l];
             if (!(ok = c + 2 * k - 1 <= offsets[l + 1]))
                 break;
-            for (int j = -(k - 1); j <= k - 1; j++, c++) {
-                ox[c] = (sx + (float)j * step_x) * scale[l];
-                oy[c] = (sy + (float)j * step_y) * scale[l];
+            switch (k) {           /* constant k: the loop unrolls */
+            case 2: probe_run(ox + c, oy + c, sx, sy, step_x, step_y, scale[l], 2); break;
+            case 3: probe_run(ox + c, oy + c, sx, sy, step_x, step_y, scale[l], 3); break;
+            default: probe_run(ox + c, oy + c, sx, sy, step_x, step_y, scale[l], k);
             }
-            cursor[l] = c;
+            cursor[l] = c + 2 * k - 1;
         }
         if (!ok)
             break;
@@ -503,12 +766,39 @@ round_even(float x)
 /* value = sum over levels of [w_level *] (sum over j of weight_j * sample_j), as
  * render._antialiased takes it; rounded, clipped to [0, top] and written to the pixel
  * (to channels 0..2 when an alpha channel was added). */
-#if defined(__GNUC__)
-#define ALWAYS_INLINE static inline __attribute__((always_inline))
-#else
-#define ALWAYS_INLINE static inline
-#endif
 #define DEFINE_RESOLVE(NAME, T)                                                                 \
+    /* One pixel; called with constant probes and blend (below) so that the sums unroll. */   \
+    ALWAYS_INLINE void NAME##_pixel(const T *restrict v0, const T *restrict v1,                  \
+                                    const float *restrict w, const int probes, const int blend, \
+                                    float frac, T *restrict o, const int channels,             \
+                                    const int out_channels)                                     \
+    {                                                                                           \
+        const float top = sizeof(T) == 1 ? 255.0f : 65535.0f, keep = 1.0f - frac;               \
+        for (int c = 0; c < channels; c++) {                                                    \
+            float sum = (float)v0[c] * w[0];                                                    \
+            for (int j = 1; j < probes; j++)                                                    \
+                sum += (float)v0[j * channels + c] * w[j];                                      \
+            float acc = 0.0f;                                                                   \
+            if (blend) {                                                                        \
+                float sum1 = (float)v1[c] * w[0];                                               \
+                for (int j = 1; j < probes; j++)                                                \
+                    sum1 += (float)v1[j * channels + c] * w[j];                                 \
+                acc += sum * keep;                                                              \
+                acc += sum1 * frac;                                                             \
+            } else {                                                                            \
+                acc += sum;                                                                     \
+            }                                                                                   \
+            float r = round_even(acc);                                                          \
+            r = r < 0.0f ? 0.0f : r > top ? top : r;                                            \
+            if (out_channels == channels)                                                       \
+                o[c] = (T)r;                                                                    \
+            else if (channels == 1)                                                             \
+                o[0] = o[1] = o[2] = (T)r;                                                      \
+            else                                                                                \
+                o[c] = (T)r;                                                                    \
+        }                                                                                       \
+    }                                                                                           \
+                                                                                                \
     ALWAYS_INLINE int NAME(const int32_t *restrict aatri, Py_ssize_t n, Py_ssize_t tris,        \
                            const int32_t *restrict ints, const float *restrict floats,          \
                            const float *restrict weights, int kmax,                             \
@@ -516,7 +806,6 @@ round_even(float x)
                            int64_t *restrict cursor, const T *restrict samples, T *restrict out, \
                            const int channels, const int out_channels)                          \
     {                                                                                           \
-        const float top = sizeof(T) == 1 ? 255.0f : 65535.0f;                                   \
         int k, base, blend;                                                                     \
         for (Py_ssize_t p = 0; p < n; p++) {                                                    \
             int32_t t = aatri[p];                                                               \
@@ -532,31 +821,17 @@ round_even(float x)
             if (blend)                                                                          \
                 cursor[base + 1] = c1 + probes;                                                 \
             const float *w = weights + (Py_ssize_t)k * (2 * kmax - 1);                          \
-            float frac = floats[3 * t + 2], keep = 1.0f - frac;                                 \
             const T *v0 = samples + c0 * channels, *v1 = samples + c1 * channels;              \
             T *o = out + p * out_channels;                                                      \
-            for (int c = 0; c < channels; c++) {                                                \
-                float sum = (float)v0[c] * w[0];                                                \
-                for (int j = 1; j < probes; j++)                                                \
-                    sum += (float)v0[j * channels + c] * w[j];                                  \
-                float acc = 0.0f;                                                               \
-                if (blend) {                                                                    \
-                    float sum1 = (float)v1[c] * w[0];                                           \
-                    for (int j = 1; j < probes; j++)                                            \
-                        sum1 += (float)v1[j * channels + c] * w[j];                             \
-                    acc += sum * keep;                                                          \
-                    acc += sum1 * frac;                                                         \
-                } else {                                                                        \
-                    acc += sum;                                                                 \
-                }                                                                               \
-                float r = round_even(acc);                                                      \
-                r = r < 0.0f ? 0.0f : r > top ? top : r;                                        \
-                if (out_channels == channels)                                                   \
-                    o[c] = (T)r;                                                                \
-                else if (channels == 1)                                                         \
-                    o[0] = o[1] = o[2] = (T)r;                                                  \
-                else                                                                            \
-                    o[c] = (T)r;                                                                \
+            float frac = floats[3 * t + 2];                                                     \
+            switch (2 * probes + blend) {                                                       \
+            case 2 * 1: NAME##_pixel(v0, v1, w, 1, 0, frac, o, channels, out_channels); break;  \
+            case 2 * 3: NAME##_pixel(v0, v1, w, 3, 0, frac, o, channels, out_channels); break;  \
+            case 2 * 5: NAME##_pixel(v0, v1, w, 5, 0, frac, o, channels, out_channels); break;  \
+            case 2 * 7: NAME##_pixel(v0, v1, w, 7, 0, frac, o, channels, out_channels); break;  \
+            case 2 * 3 + 1: NAME##_pixel(v0, v1, w, 3, 1, frac, o, channels, out_channels); break; \
+            case 2 * 5 + 1: NAME##_pixel(v0, v1, w, 5, 1, frac, o, channels, out_channels); break; \
+            default: NAME##_pixel(v0, v1, w, probes, blend, frac, o, channels, out_channels);   \
             }                                                                                   \
         }                                                                                       \
         return 1;                                                                               \
@@ -677,6 +952,23 @@ done:
     return result;
 }
 
+ALWAYS_INLINE void
+scatter_pixels(const int32_t *aatri, Py_ssize_t n, const char *in, char *out, const Py_ssize_t size,
+               const Py_ssize_t channels, const Py_ssize_t out_channels)
+{
+    for (Py_ssize_t p = 0; p < n; p++) {
+        if (aatri[p] >= 0)
+            continue;
+        char *o = out + p * out_channels * size;
+        if (out_channels == channels || channels == 3)
+            memcpy(o, in, channels * size);
+        else                                          /* gray into B, G and R */
+            for (int c = 0; c < 3; c++)
+                memcpy(o + c * size, in, size);
+        in += channels * size;
+    }
+}
+
 static PyObject *
 scatter(PyObject *self, PyObject *args)
 {
@@ -699,20 +991,11 @@ scatter(PyObject *self, PyObject *args)
         PyErr_SetString(PyExc_ValueError, "scatter: buffer sizes do not match");
         goto done;
     }
-    const char *in = val.buf;
-    char *out = ob.buf;
     Py_BEGIN_ALLOW_THREADS
-    for (Py_ssize_t p = 0; p < n; p++) {
-        if (aatri[p] >= 0)
-            continue;
-        char *o = out + p * out_channels * size;
-        if (out_channels == channels || channels == 3)
-            memcpy(o, in, channels * size);
-        else                                          /* gray into B, G and R */
-            for (int c = 0; c < 3; c++)
-                memcpy(o + c * size, in, size);
-        in += channels * size;
-    }
+    if (size == 1 && channels == 3 && out_channels == 3)    /* the usual case: fixed-size copies */
+        scatter_pixels(aatri, n, val.buf, ob.buf, 1, 3, 3);
+    else
+        scatter_pixels(aatri, n, val.buf, ob.buf, size, channels, out_channels);
     Py_END_ALLOW_THREADS
     result = Py_NewRef(Py_None);
 done:
@@ -726,16 +1009,26 @@ done:
 
 static PyMethodDef methods[] = {
     {"triangles", triangles, METH_VARARGS,
-     "triangles(nodes, triangles, width, height, sort, index, ylo, yhi) -> count\n\n"
-     "The triangles that reach the canvas (their indices) and their row ranges, in their\n"
-     "order or, if sort, stably sorted by first row."},
+     "triangles(target, triangles, width, height, sort, index, ylo, yhi, corners) -> count\n\n"
+     "The triangles that reach the canvas (their indices), their row ranges and nodes, in\n"
+     "their order or, if sort, stably sorted by first row."},
     {"records", records, METH_VARARGS,
-     "records(nodes, triangles, index, width, height, sel, rec)\n\n"
+     "records(target, source, corners, width, height, sel, rec)\n\n"
      "The records (16 float64: x-bounds, J, p0, s0) of kept triangles sel."},
     {"rasterize", rasterize, METH_VARARGS,
      "rasterize(rec, ylo, yhi, y0, y1, width, mapx, mapy, ids, aatri) -> int\n\n"
      "Fill the band's maps from the triangles of rec, in order; set aatri to ids[t] where\n"
      "that is >= 0 (minifying triangles); return how many pixels that marked."},
+    {"fp_candidates", fp_candidates, METH_VARARGS,
+     "fp_candidates(rec, threshold, cand, sums) -> count\n\n"
+     "The triangles of rec that may minify past threshold, and a + d, c - b, a - d, c + b of\n"
+     "their J (rows of len(rec) in sums)."},
+    {"fp_shape", fp_shape, METH_VARARGS,
+     "fp_shape(cand, sums, p, q, threshold, kmax, index, m2, half, steps) -> count\n\n"
+     "The candidates that minify (numbered in index), with their m2, half-width and k."},
+    {"fp_finish", fp_finish, METH_VARARGS,
+     "fp_finish(half, steps, level, cos, sin, ints, floats)\n\n"
+     "The footprints' ints (k, base, blend) and floats (step x, step y, frac)."},
     {"aa_count", aa_count, METH_VARARGS,
      "aa_count(aatri, ints, counts)\n\nAdd the probes of each pyramid level to counts."},
     {"aa_probes", aa_probes, METH_VARARGS,

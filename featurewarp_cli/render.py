@@ -52,9 +52,9 @@ INTERPOLATION = {"linear": cv2.INTER_LINEAR, "cubic": cv2.INTER_CUBIC, "lanczos"
 #: Output pixels per band (rows are grouped so that a band holds about this many).
 BAND_PIXELS = 1 << 18
 #: Bands rendered at once (the compiled loops, numpy and OpenCV release the GIL).
-#: 12 MP at cell 4 (swirl 180) on the 2-core machine takes 1.2 s of CPU
-#: antialiased, 0.7 s without; with two threads 0.6 s and 0.45 s when the machine
-#: is otherwise quiet. The output does not depend on it.
+#: 12 MP at cell 4 (swirl 180) on the 2-core machine takes about 0.9 s of CPU
+#: antialiased, 0.6 s without; with two threads under 0.5 s and 0.35 s. The
+#: output does not depend on it.
 THREADS = min(2, os.cpu_count() or 1)
 #: Minification (largest singular value of J) from which a pixel is prefiltered.
 AA_START = 1.1
@@ -89,10 +89,10 @@ class _Triangles:
     (no cracks) and, off the edge, by one.
 
     With ``compiled`` (the :mod:`featurewarp_cli._raster` module) only
-    ``index`` and the row ranges are stored, stably sorted by first row with
-    ``sort`` (the order the bands rasterize them in), and :meth:`records`
-    computes the rest for a range of them, in C. Without, numpy computes
-    everything, in the triangles' order.
+    ``index``, the row ranges and the nodes (``corners``, int32) are stored,
+    stably sorted by first row with ``sort`` (the order the bands rasterize them
+    in), and :meth:`records` computes the rest for a range of them, in C.
+    Without, numpy computes everything, in the triangles' order.
     """
 
     #: Columns of :meth:`records`.
@@ -106,19 +106,23 @@ class _Triangles:
             self._setup(source, target, triangles, canvas)
             return
         self.canvas = width, height = tuple(int(c) for c in canvas)
-        self.nodes = np.concatenate([np.asarray(target, dtype=np.float64).reshape(-1, 2),
-                                     np.asarray(source, dtype=np.float64).reshape(-1, 2)], axis=1)
-        self.triangles = np.ascontiguousarray(triangles, dtype=np.int64).reshape(-1, 3)
-        m = self.triangles.shape[0]
+        self.target = np.ascontiguousarray(target, dtype=np.float64).reshape(-1, 2)
+        self.source = np.ascontiguousarray(source, dtype=np.float64).reshape(-1, 2)
+        triangles = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)     # any strides
+        m = triangles.shape[0]
         index, ylo, yhi = np.empty(m, np.int64), np.empty(m, np.int64), np.empty(m, np.int64)
-        self.count = compiled.triangles(self.nodes, self.triangles, width, height, sort,
-                                        index, ylo, yhi)
+        self.corners = np.empty((m, 3), np.int32)       # the kept triangles' nodes, in order
+        self.count = compiled.triangles(self.target, triangles, width, height, sort,
+                                        index, ylo, yhi, self.corners)
         self.index, self.ylo, self.yhi = index[:self.count], ylo[:self.count], yhi[:self.count]
+        self.corners = self.corners[:self.count]
 
-    def records(self, sel: np.ndarray) -> np.ndarray:
-        """(len(sel), 16) float64: :data:`FIELDS` of triangles ``sel`` (compiled setup)."""
-        rec = np.empty((sel.size, len(self.FIELDS)))
-        self.compiled.records(self.nodes, self.triangles, self.index, *self.canvas, sel, rec)
+    def records(self, sel: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """(len(sel), 16) float64: :data:`FIELDS` of triangles ``sel`` (compiled setup),
+        in ``out`` (an array of at least that many float64) if given."""
+        size = (sel.size, len(self.FIELDS))
+        rec = np.empty(size) if out is None else out[:size[0] * size[1]].reshape(size)
+        self.compiled.records(self.target, self.source, self.corners, *self.canvas, sel, rec)
         return rec
 
     def _setup(self, source, target, triangles, canvas):
@@ -467,6 +471,42 @@ class _Minification:
         self.floats[:, 2] = frac
         self.max_level = int(np.ceil(level.max())) if sel.size else 0
 
+    @classmethod
+    def compiled(cls, raster, rec: np.ndarray, threshold: float = AA_START) -> "_Minification":
+        """The same from records ``rec`` (n, 16): numpy's hypot, arctan2, cos, sin and log2
+        on the same values, the arithmetic between them in C, and the transcendental
+        functions only for triangles that may minify (``_raster.fp_candidates``)."""
+        self = cls.__new__(cls)
+        n = rec.shape[0]
+        cand, sums = np.empty(n, np.int64), np.empty((4, n))
+        count = raster.fp_candidates(rec, threshold, cand, sums)
+        u1, v1, u2, v2 = sums[:, :count]                   # a + d, c - b, a - d, c + b
+        p, q = np.hypot(u1, v1), np.hypot(u2, v2)
+        self.index = np.empty(n, np.int32)
+        m2, half, steps = np.empty(count), np.empty(count), np.empty(count, np.int64)
+        m = raster.fp_shape(cand[:count], sums, p, q, threshold, AA_MAX_STEPS, self.index, m2, half, steps)
+        self.minified = self.index >= 0
+        u1, v1, u2, v2 = sums[:, :m]                       # now those of the minifying ones
+        theta = 0.5 * (np.arctan2(v2, u2) + np.arctan2(v1, u1))
+        level = np.log2(m2[:m])
+        self.ints, self.floats = np.empty((m, 3), np.int32), np.empty((m, 3), np.float32)
+        raster.fp_finish(half[:m], steps[:m], level, np.cos(theta), np.sin(theta), self.ints, self.floats)
+        self.max_level = int(np.ceil(level.max())) if m else 0
+        return self
+
+
+class _Scratch(threading.local):
+    """Arrays that each thread reuses from band to band: fresh arrays of megabytes cost
+    page faults (the kernel zeroing the pages) every time. ``scratch(name, n, dtype)``
+    is the first n items of that thread's array, uninitialised."""
+
+    def __call__(self, name: str, n, dtype) -> np.ndarray:
+        n = int(n)
+        a = self.__dict__.get(name)
+        if a is None or a.size < n or a.dtype != dtype:
+            a = self.__dict__[name] = np.empty(n + n // 4, dtype)
+        return a[:n]
+
 
 class _Pyramid:
     """Gaussian pyramid of the source (cv2.pyrDown), built on demand (thread-safe)."""
@@ -552,7 +592,7 @@ def _antialiased(pyramid: _Pyramid, minif: _Minification, tri: np.ndarray,
 
 
 def _antialiased_compiled(raster, pyramid: _Pyramid, minif: _Minification, aatri: np.ndarray,
-                          bx: np.ndarray, by: np.ndarray, flat: np.ndarray) -> None:
+                          bx: np.ndarray, by: np.ndarray, flat: np.ndarray, scratch) -> None:
     """:func:`_antialiased` and its write into the band, with the compiled loops.
 
     The pixels with ``aatri >= 0`` (their triangle's number in ``minif``) get the
@@ -564,14 +604,21 @@ def _antialiased_compiled(raster, pyramid: _Pyramid, minif: _Minification, aatri
     raster.aa_count(aatri, minif.ints, counts)
     offsets = np.zeros(counts.size + 1, np.int64)
     np.cumsum(-(-counts // _COMPACT_WIDTH) * _COMPACT_WIDTH, out=offsets[1:])
-    px, py = np.zeros(offsets[-1], np.float32), np.zeros(offsets[-1], np.float32)
+    px, py = scratch("px", offsets[-1], np.float32), scratch("py", offsets[-1], np.float32)
+    for level in range(counts.size):                       # the padding after each level's probes
+        px[offsets[level] + counts[level]:offsets[level + 1]] = 0.0
+        py[offsets[level] + counts[level]:offsets[level + 1]] = 0.0
     raster.aa_probes(aatri, bx, by, minif.ints, minif.floats, offsets, px, py)
     image = pyramid[0]
     channels = 1 if image.ndim == 2 else image.shape[2]
-    samples = np.empty((offsets[-1], channels), image.dtype)
-    for level in np.flatnonzero(counts):
-        a, b = offsets[level], offsets[level + 1]
-        samples[a:b] = _sample_points(pyramid[level], px[a:b], py[a:b], AA_INTERPOLATION)
+    used = np.flatnonzero(counts)
+    if used.size == 1:                       # one level: its samples are all of them (no copy)
+        samples = _sample_points(pyramid[used[0]], px, py, AA_INTERPOLATION)
+    else:
+        samples = np.empty((offsets[-1], channels), image.dtype)
+        for level in used:
+            a, b = offsets[level], offsets[level + 1]
+            samples[a:b] = _sample_points(pyramid[level], px[a:b], py[a:b], AA_INTERPOLATION)
     raster.aa_resolve(aatri, minif.ints, minif.floats, minif.weights, AA_MAX_STEPS, offsets,
                       samples, channels, flat, flat.shape[1])
 
@@ -651,11 +698,14 @@ def render(image: np.ndarray, source: np.ndarray, target: np.ndarray, triangles:
     if minif is not None and minif.minified.any():
         pyramid[minif.max_level + 1]            # build the levels before the threads share them
 
+    scratch = _Scratch()
+
     def one_band(y0):
         y1 = min(height, y0 + rows)
         size = (y1 - y0) * width
-        bx = np.full(size, -1.0, dtype=np.float32)
-        by = np.full(size, -1.0, dtype=np.float32)
+        bx, by = scratch("bx", size, np.float32), scratch("by", size, np.float32)
+        bx.fill(-1.0)
+        by.fill(-1.0)
         opaque = True
         if raster is not None:
             # The band's triangles (a range of the sorted ones, less those that end
@@ -664,9 +714,11 @@ def render(image: np.ndarray, source: np.ndarray, target: np.ndarray, triangles:
             # the numpy code's last write of a pixel listed twice leaves it.
             a, b = _band_range(ylo_sorted, tallest, y0, y1)
             sel = a + np.flatnonzero(tris.yhi[a:b] >= y0)
-            rec = tris.records(sel)
-            local = _Minification(*rec[:, _Triangles.J].T) if antialias and sel.size else None
-            aatri = np.full(size, -1, np.int32) if local is not None else None
+            rec = tris.records(sel, scratch("rec", sel.size * 16, np.float64))
+            local = _Minification.compiled(raster, rec) if antialias and sel.size else None
+            aatri = scratch("aatri", size, np.int32) if local is not None else None
+            if aatri is not None:
+                aatri.fill(-1)
             marked = raster.rasterize(rec, tris.ylo[sel], tris.yhi[sel], y0, y1, width, bx, by,
                                       None if local is None else local.index, aatri)
         else:
@@ -693,7 +745,7 @@ def render(image: np.ndarray, source: np.ndarray, target: np.ndarray, triangles:
             target_band[..., 3] = top
         if raster is not None and marked > size // 4:
             # Most of the band is the filter's: resample only the other pixels.
-            px, py = np.empty(size + _COMPACT_WIDTH, np.float32), np.empty(size + _COMPACT_WIDTH, np.float32)
+            px, py = scratch("px", size + _COMPACT_WIDTH, np.float32), scratch("py", size + _COMPACT_WIDTH, np.float32)
             n = raster.gather(aatri, bx, by, px, py)
             if n:
                 m = -(-n // _COMPACT_WIDTH) * _COMPACT_WIDTH
@@ -711,7 +763,7 @@ def render(image: np.ndarray, source: np.ndarray, target: np.ndarray, triangles:
             target_band[..., :3] = band[..., None] if channels == 1 else band
         if raster is not None:
             if marked:
-                _antialiased_compiled(raster, pyramid, local, aatri, bx, by, flat)
+                _antialiased_compiled(raster, pyramid, local, aatri, bx, by, flat, scratch)
         elif aa is not None and aa[0].size:
             pix, tri = aa
             values = _antialiased(pyramid, minif, tri, bx[pix], by[pix], flag)

@@ -390,3 +390,31 @@ def test_compiled_render_equals_numpy_on_warps(preset, params, kind, images, mon
     for background in (None, (255, 255, 255)):
         fast, slow = render_both(monkeypatch, image, mesh, background=background)
         np.testing.assert_array_equal(fast, slow)
+
+
+@compiled
+@pytest.mark.parametrize("scale", [0.5, 1.0, 3.0, 40.0])
+def test_compiled_footprints_equal_numpy(scale):
+    """_Minification.compiled (hypot etc. only on the candidates, the rest in C) gives
+    numpy's footprints bit for bit, also right at the threshold and for odd values."""
+    rng = np.random.default_rng(int(scale * 10))
+    jac = rng.normal(0, scale, (20000, 4))
+    jac[:500] = np.round(jac[:500])
+    jac[500:1000, 1:3] = 0                                               # axis-aligned
+    angle = rng.uniform(0, 2 * np.pi, 1000)
+    near = render.AA_START * (1 + rng.uniform(-1e-12, 1e-12, 1000))      # s1 at the threshold
+    jac[1000:2000] = np.stack([np.cos(angle), -np.sin(angle), np.sin(angle), np.cos(angle)], 1) * near[:, None]
+    jac[2000:2100] = [render.AA_START, 0.0, 0.0, 0.5]
+    jac[2100:2110] = [[np.nan, 0, 0, 1], [1e200, 0, 0, 1e200], [1e200, 0, 0, 1e199], [0, 0, 0, 0],
+                      [1e-300, 0, 0, 1e-300], [5.0, 5.0, 5.0, 5.0], [30.0, 0, 0, 29.0], [1e-5, 0, 0, 1.2],
+                      [-2.0, 0, 0, -2.0], [0, 3.0, -3.0, 0]]
+    rec = np.zeros((jac.shape[0], len(render._Triangles.FIELDS)))
+    rec[:, render._Triangles.J] = jac
+    with np.errstate(all="ignore"):
+        ref = render._Minification(*jac.T)
+        got = render._Minification.compiled(render._raster, rec)
+    for name in ("index", "minified", "ints", "floats"):
+        a, b = getattr(got, name), getattr(ref, name)
+        assert a.dtype == b.dtype and a.shape == b.shape
+        np.testing.assert_array_equal(a.view(np.uint8), b.view(np.uint8))
+    assert got.max_level == ref.max_level and ref.minified.any()
