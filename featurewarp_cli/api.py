@@ -49,7 +49,7 @@ UNTANGLE_FLOOR = 0.05
 #: progress); where that fails, the whole grid. 12 MP swirl 180: 43 window steps on 15 %
 #: of the triangles instead of 36 on all of them; at --cell 4 (750 k nodes) 150 window
 #: steps, 9.8 s, where 60 left 3 folds and the global pass took 27 s in all.
-WINDOW_MARGINS = (0.5,)
+WINDOW_MARGIN = 0.5
 WINDOW_MIN_MARGIN = 8
 WINDOW_ITERATIONS = 150
 #: Windows larger than this fraction of the grid are left to the global pass.
@@ -237,6 +237,8 @@ class FeatureWarper:
         """Assemble and factor the normal equations for these weights and ties."""
         t0 = time.perf_counter()
         matrix = system.normal_matrix(state.grid, weights)
+        if state.normal is None and weights is state.features.weight:
+            state.normal = matrix.tocsr()                 # the fold-over guard's products use it
         t1 = time.perf_counter()
         reduced = AxisSystems(matrix, system.number_unknowns(state.fixed_x, tied),
                               system.number_unknowns(state.fixed_y, tied))
@@ -366,20 +368,13 @@ class FeatureWarper:
 
         def untangled(reduced, edges, tied, start):
             solve = self._solver(state, reduced, features.weight, edges, tied, component_maps, warped)
-            x = start
-            crushed = np.flatnonzero(injectivity.grid_areas(state.grid, x) < 0.5 * floor) % features.weight.size
-            extent = injectivity.extent(state.grid, crushed)
-            for margin in WINDOW_MARGINS:        # near the folds first: cheap, and usually enough
-                x, iterations, window_quads = self._untangle_window(
-                    state, solve.rhs, solve.offset, tied, x, floor, stiffness,
-                    max(WINDOW_MIN_MARGIN, int(margin * extent)))
-                info["untangle_iterations"] = info.get("untangle_iterations", 0) + iterations
-                if x is None:
-                    break
-                if not injectivity.flipped(x, tris).any():
-                    info["untangle_window_quads"] = window_quads
-                    return x, True
-
+            # Near the folds first: cheap, and usually enough.
+            x, iterations, window_quads = self._untangle_window(state, solve.rhs, solve.offset, tied, start,
+                                                                floor, stiffness)
+            info["untangle_iterations"] = info.get("untangle_iterations", 0) + iterations
+            if x is not None and not injectivity.flipped(x, tris).any():
+                info["untangle_window_quads"] = window_quads
+                return x, True
             x, iterations = injectivity.untangle(solve, self._normal(state).dot, start, tris, floor, stiffness,
                                                  areas=lambda points: injectivity.grid_areas(state.grid, points))
             info["untangle_iterations"] = info.get("untangle_iterations", 0) + iterations
@@ -439,11 +434,12 @@ class FeatureWarper:
             state.normal = system.normal_matrix(state.grid, state.features.weight).tocsr()
         return state.normal
 
-    def _untangle_window(self, state: _GridState, rhs, offset, tied, x, floor, stiffness, margin: int):
+    def _untangle_window(self, state: _GridState, rhs, offset, tied, x, floor, stiffness):
         """:func:`injectivity.untangle` on a window around the folded or crushed triangles.
 
         A fold is a local defect, so the guard first works on the nodes within
-        ``margin`` quads of it, everything else held where it is, except that a
+        :data:`WINDOW_MARGIN` times the largest fold's extent of the folded and
+        crushed triangles, everything else held where it is, except that a
         tied feature reaching into the window keeps its shared unknown (it may
         shift as a whole, as in the global pass). The window's system is the
         rows of the normal matrix for its unknowns: a small fraction of the
@@ -462,6 +458,7 @@ class FeatureWarper:
         crushed = np.flatnonzero(injectivity.grid_areas(grid, x) < 0.5 * floor) % n_quads
         quads = np.zeros(n_quads, bool)
         quads[crushed] = True
+        margin = max(WINDOW_MIN_MARGIN, int(WINDOW_MARGIN * injectivity.extent(grid, crushed)))
         _, near, inner = injectivity.window(grid, quads, margin)
         moving = inner & ~state.fixed & (tied < 0)
         moving |= np.isin(tied, np.unique(tied[near & (tied >= 0)])) & (tied >= 0)

@@ -78,18 +78,6 @@ def warp_edge_vectors(grid: Grid, warped: np.ndarray) -> np.ndarray:
     return np.roll(corners, -1, axis=1) - corners
 
 
-def residual(grid: Grid, weights: np.ndarray, edges: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """Weighted residual A x - b of the edge equations: w (edge(x) - target), (K, 4, 2).
-
-    The least-squares energy is its squared norm.
-    """
-    corners = points.reshape(grid.ny, grid.nx, 2)
-    tl, tr = corners[:-1, :-1], corners[:-1, 1:]
-    br, bl = corners[1:, 1:], corners[1:, :-1]
-    got = np.stack([tr - tl, br - tr, bl - br, tl - bl], axis=2).reshape(-1, 4, 2)
-    return weights[:, None, None] * (got - edges)
-
-
 def right_hand_side(grid: Grid, weights: np.ndarray, edges: np.ndarray) -> np.ndarray:
     """A^T b for edge targets ``edges`` ((K, 4, 2) ndarray); returns (N, 2)."""
     qy, qx = grid.quad_shape
