@@ -27,8 +27,8 @@ install:
 	else echo "make install: no apt-get here; install SuiteSparse (CHOLMOD) headers and OpenBLAS first"; fi
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
-	$(BIN)/python -m pip install -q -e '.[cholmod,test]'
-	$(BIN)/python -c "import sksparse.cholmod, featurewarp_cli._raster; print('featurewarp installed; CHOLMOD and the compiled rasterizer in use')"
+	$(BIN)/python -m pip install -q -e '.[test]'
+	$(BIN)/python -c "import featurewarp_cli._cholmod, featurewarp_cli._raster; print('featurewarp installed; CHOLMOD and the compiled rasterizer in use')"
 
 test:
 	$(BIN)/python -m pytest

@@ -337,11 +337,11 @@ def machine() -> dict:
             "opencv": cv2.__version__, "cpus": os.cpu_count(), "platform": platform.platform(),
             "loadavg_start": os.getloadavg()}
     try:
-        import sksparse
+        from featurewarp_cli import _cholmod
 
-        info["scikit-sparse"] = getattr(sksparse, "__version__", "installed")
+        info["cholmod"] = ".".join(map(str, _cholmod.VERSION))      # the system CHOLMOD, via the binding
     except ImportError:
-        info["scikit-sparse"] = None
+        info["cholmod"] = None                                       # SciPy's splu fallback
     return info
 
 

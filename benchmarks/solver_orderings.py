@@ -8,10 +8,15 @@ orderings  nnz(L) and work (sum of squared column counts of L, simplicial
            with the analysis and numeric factorization times of each.
 factor     ``ReducedSystem(matrix, unknown)`` with the symbolic cache cleared (a
            cold factorization: what FeatureWarper.timings['factor'] measures), for
-           every system of the case (x and y when the border slides); with
+           every system of the case one after the other (x and y when the border
+           slides), and for two systems also ``solver.factor_concurrently`` (the
+           two in parallel threads, as FeatureWarper factors them); with
            ``--baseline FILE`` (another solver.py, e.g. ``git show
-           HEAD:featurewarp_cli/solver.py > /tmp/solver_head.py``) the two run
+           HEAD:featurewarp_cli/solver.py > /tmp/solver_head.py``; one without
+           ``_lower_triplets`` gets the matrix as SciPy CSR) the variants run
            interleaved (A B A B ...).
+
+Orderings and factorizations go through the CHOLMOD binding featurewarp_cli._cholmod.
 
 Cases: table1-1000 and table1-500 (the Table 1 grids of benchmarks/run.py: cell 4,
 disc mask, swirl 90), 12MP-swirl (samples/astronaut.png and its mask upscaled to
@@ -34,6 +39,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from types import SimpleNamespace
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
@@ -80,10 +86,13 @@ def systems(name: str, photos) -> list:
 
 
 def lower_triangles(matrix, unknown):
-    """The reduced lower triangle in the grid order, and in the unknowns' own order."""
+    """The reduced lower triangle in the grid order, and in the unknowns' own order, each
+    as (n, rows, cols, vals) triplets (duplicates not summed)."""
     captured = []
     factor = solver._cholmod_factor
-    solver._cholmod_factor = lambda lower, natural: captured.append(lower)
+    unfactored = SimpleNamespace(solve=None)
+    solver._cholmod_factor = lambda n, rows, cols, vals, natural, key: (captured.append((n, rows, cols, vals))
+                                                                        or unfactored)
     grid_width = solver._grid_width
     try:
         solver.ReducedSystem(matrix, unknown)
@@ -95,24 +104,28 @@ def lower_triangles(matrix, unknown):
 
 
 def orderings(name, pairs, runs, nesdis):
-    from sksparse.cholmod import analyze
+    from featurewarp_cli import _cholmod
 
     grid, plain = lower_triangles(*pairs[0])
-    print(f"\n{name}: {plain.shape[0]} unknowns, nnz(lower A) {plain.nnz}")
+    n = plain[0]
+    print(f"\n{name}: {n} unknowns, nnz(lower A) {np.unique(plain[1] * n + plain[2]).size}")
     print(f"{'ordering':>22} {'nnz(L)':>10} {'work':>8} {'analyze':>8} {'factor':>8}")
-    mode = "simplicial" if plain.shape[0] <= solver._SIMPLICIAL_MAX else "supernodal"
-    methods = [("grid (natural)", grid, "natural"), ("cholmod amd", plain, "amd"), ("cholmod metis", plain, "metis")]
+    supernodal = n > solver._SIMPLICIAL_MAX
+    mode = "supernodal" if supernodal else "simplicial"
+    methods = [("grid (natural)", grid, _cholmod.NATURAL), ("cholmod amd", plain, _cholmod.AMD),
+               ("cholmod metis", plain, _cholmod.METIS)]
     if nesdis:
-        methods.append(("cholmod nesdis", plain, "nesdis"))
-    for label, lower, method in methods:
-        counts = np.diff(analyze(lower, mode="simplicial", ordering_method=method).cholesky(lower).L().indptr)
+        methods.append(("cholmod nesdis", plain, _cholmod.NESDIS))
+    for label, (n, rows, cols, vals), method in methods:
+        counts = np.empty(n, solver.INDEX)
+        _cholmod.analyze(n, rows, cols, False, method).column_counts(counts)
         an, fa = [], []
         for _ in range(runs):
             t0 = time.perf_counter()
-            symbolic = analyze(lower, mode=mode, ordering_method=method)
+            symbolic = _cholmod.analyze(n, rows, cols, supernodal, method)
             t1 = time.perf_counter()
             with solver._without_openmp():
-                symbolic.cholesky(lower)
+                symbolic.factorize(rows, cols, vals)
             an.append(t1 - t0)
             fa.append(time.perf_counter() - t1)
         print(f"{label:>22} {counts.sum() / 1e6:9.2f}M {np.sum(counts.astype(float) ** 2) / 1e9:7.2f}G "
@@ -126,12 +139,18 @@ def factor_times(name, pairs, runs, baseline):
         module = importlib.util.module_from_spec(spec)
         spec.loader.exec_module(module)
         variants = {"baseline": module, **variants}
+    if len(pairs) == 2:
+        variants["concurrent"] = None
+    as_scipy = [(matrix.to_scipy(), unknown) for matrix, unknown in pairs]   # for an older solver.py
     times = {k: ([], []) for k in variants}
     for _ in range(runs):
         for label, module in variants.items():
-            module._symbolic_cache.clear()
+            (module or solver)._symbolic_cache.clear()
             t0, c0 = time.perf_counter(), time.process_time()
-            for matrix, unknown in pairs:
+            if module is None:
+                solver.factor_concurrently(pairs[0][0], [unknown for _, unknown in pairs])
+            for matrix, unknown in (() if module is None else pairs if hasattr(module, "_lower_triplets")
+                                    else as_scipy):
                 module.ReducedSystem(matrix, unknown)
             times[label][0].append(time.perf_counter() - t0)
             times[label][1].append(time.process_time() - c0)

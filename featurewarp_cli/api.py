@@ -32,7 +32,7 @@ from . import features as feat
 from . import fidelity, injectivity, quality, system, targets
 from . import render as rnd
 from .grid import Grid, signed_areas
-from .solver import ReducedSystem
+from .solver import ReducedSystem, factor_concurrently
 
 MODES = ("similarity", "rigid", "plain")
 FORMULATIONS = ("exact", "paper")
@@ -117,7 +117,7 @@ class _GridState:
     features: feat.Features
     tied: np.ndarray
     system: "AxisSystems | None" = None
-    normal: object = None               # the normal matrix (CSR), once the fold-over guard needs it
+    normal: object = None               # the normal matrix, once the fold-over guard needs it
 
     @property
     def fixed(self) -> np.ndarray:
@@ -128,17 +128,21 @@ class _GridState:
 class AxisSystems:
     """The factored system for x and for y: one shared factorization when both
     coordinates hold the same nodes, two when a sliding border frees one of them.
+    The two are factored at once, in two threads (:func:`solver.factor_concurrently`).
 
     Parameters
     ----------
-    matrix : (N, N) sparse matrix
+    matrix : (N, N) matrix
+        The normal matrix (:func:`system.normal_matrix`).
     unknown_x, unknown_y : (N,) int ndarray
         Unknown numbering per coordinate (see :class:`solver.ReducedSystem`).
     """
 
     def __init__(self, matrix, unknown_x: np.ndarray, unknown_y: np.ndarray):
-        self.x = ReducedSystem(matrix, unknown_x)
-        self.y = self.x if np.array_equal(unknown_x, unknown_y) else ReducedSystem(matrix, unknown_y)
+        if np.array_equal(unknown_x, unknown_y):
+            self.x = self.y = ReducedSystem(matrix, unknown_x)
+        else:
+            self.x, self.y = factor_concurrently(matrix, [unknown_x, unknown_y])
         self.method = self.x.method
         self.factorizations = 1 if self.y is self.x else 2
 
@@ -238,7 +242,7 @@ class FeatureWarper:
         t0 = time.perf_counter()
         matrix = system.normal_matrix(state.grid, weights)
         if state.normal is None and weights is state.features.weight:
-            state.normal = matrix.tocsr()                 # the fold-over guard's products use it
+            state.normal = matrix                         # the fold-over guard's products use it
         t1 = time.perf_counter()
         reduced = AxisSystems(matrix, system.number_unknowns(state.fixed_x, tied),
                               system.number_unknowns(state.fixed_y, tied))
@@ -428,10 +432,10 @@ class FeatureWarper:
         info["fallback"] = True
         return warped + injectivity.max_step(warped, x, tris) * 0.95 * (x - warped), component_maps
 
-    def _normal(self, state: _GridState):
-        """The normal matrix (CSR) of the state's weights, built once."""
+    def _normal(self, state: _GridState) -> system.StencilMatrix:
+        """The normal matrix of the state's weights, built once."""
         if state.normal is None:
-            state.normal = system.normal_matrix(state.grid, state.features.weight).tocsr()
+            state.normal = system.normal_matrix(state.grid, state.features.weight)
         return state.normal
 
     def _untangle_window(self, state: _GridState, rhs, offset, tied, x, floor, stiffness):
@@ -474,7 +478,7 @@ class FeatureWarper:
         nodes = np.flatnonzero(in_system)
         local_moving = moving[nodes]
         unknown = system.number_unknowns(~local_moving, np.where(local_moving, tied[nodes], -1))
-        matrix = self._normal(state)[nodes][:, nodes]
+        matrix = self._normal(state).submatrix(nodes)
         reduced = ReducedSystem(matrix, unknown)
         held = np.where(local_moving[:, None], offset[nodes], x[nodes])
         local_rhs = rhs[nodes]

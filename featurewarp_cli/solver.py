@@ -6,8 +6,11 @@ a whole feature as one rigid piece whose linear part is already in q). The
 reduced matrix P^T L P depends on L and on which node maps to which unknown,
 never on q, so one factorization serves every warp.
 
-CHOLMOD (scikit-sparse) when it can be imported; SciPy's sparse LU otherwise,
-with one notice on stderr per process.
+CHOLMOD through the small binding :mod:`featurewarp_cli._cholmod` when it is
+built; SciPy's sparse LU otherwise (imported only then), with one notice on
+stderr per process. Nothing here imports SciPy when the binding is there: the
+reduced matrix is assembled as triplets with numpy, and P and P^T are numpy
+indexing and :func:`numpy.bincount`.
 
 Ordering
 --------
@@ -23,6 +26,13 @@ ordering. Symbolic analyses (keyed by the sparsity pattern) and grid orderings
 (keyed by the tied nodes) are kept in a small module-level cache, so
 refactoring a matrix with the same pattern (new weights, same ties) reuses
 both, and the x and y systems of a sliding border share the ordering.
+
+Threads
+-------
+Systems may be factored in several threads at once (the x and y systems of a
+sliding border are): the binding runs CHOLMOD without the GIL, each factor has
+its own CHOLMOD workspace, and the cache computes each entry once (a second
+thread asking for an entry being computed waits for it).
 """
 
 from __future__ import annotations
@@ -31,11 +41,19 @@ import ctypes
 import hashlib
 import os
 import sys
+import threading
 from collections import OrderedDict
+from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import contextmanager
 
 import numpy as np
-import scipy.sparse as sp
+
+try:
+    from . import _cholmod
+except ImportError:              # not built: SciPy's splu (see ReducedSystem)
+    _cholmod = None
+#: Index type of the binding's triplets (int32 unless built for CHOLMOD's long API).
+INDEX = np.int64 if _cholmod is not None and _cholmod.INDEX_BITS == 64 else np.int32
 
 _fallback_noted = False
 
@@ -53,7 +71,9 @@ _SIMPLICIAL_MAX = 150_000
 #: Entries kept in the cache: symbolic analyses (keyed by the reduced matrix's
 #: sparsity pattern) and grid orderings (keyed by the tied nodes).
 _SYMBOLIC_CACHE_SIZE = 8
+#: key -> Future of the value (done, or being computed by one thread).
 _symbolic_cache: OrderedDict = OrderedDict()
+_cache_lock = threading.Lock()
 
 
 def grid_nested_dissection(live: np.ndarray, leaf: int = _LEAF_NODES,
@@ -175,9 +195,15 @@ def _place(order, start, n, cell, r0, r1, c0, c1):
     order[np.repeat(start - (np.cumsum(n) - n), n) + np.arange(nodes.size)] = nodes
 
 
-def _grid_width(row: np.ndarray, col: np.ndarray, n: int) -> int | None:
+def _grid_width(row: np.ndarray, col: np.ndarray, n: int, nx: int | None = None) -> int | None:
     """nx when the lower-triangle entries (row >= col) of an (n, n) matrix lie on
-    the pattern of an (n/nx) x nx grid's 5-point stencil (offsets 0, 1, nx), else None."""
+    the pattern of an (n/nx) x nx grid's 5-point stencil (offsets 0, 1, nx), else None.
+
+    ``nx``: the grid width when the matrix is known to be a grid's stencil
+    (:class:`featurewarp_cli.system.StencilMatrix`); the entries are then not inspected.
+    """
+    if nx is not None:
+        return nx if nx >= 2 and n >= 4 and n > nx else None
     if row.size == 0 or n < 4:
         return None
     offset = row - col
@@ -197,15 +223,26 @@ def _digest(*arrays: np.ndarray) -> str:
 
 
 def _cached(key: tuple, compute):
-    """``_symbolic_cache[key]``, computed by ``compute()`` when missing (least recently used dropped)."""
-    value = _symbolic_cache.get(key)
-    if value is None:
-        value = _symbolic_cache[key] = compute()
-        while len(_symbolic_cache) > _SYMBOLIC_CACHE_SIZE:
-            _symbolic_cache.popitem(last=False)
-    else:
-        _symbolic_cache.move_to_end(key)
-    return value
+    """``_symbolic_cache[key]``, computed by ``compute()`` when missing (least recently used
+    dropped). Thread-safe: one thread computes a missing entry, others asking meanwhile wait."""
+    with _cache_lock:
+        future = _symbolic_cache.get(key)
+        mine = future is None
+        if mine:
+            future = _symbolic_cache[key] = Future()
+            while len(_symbolic_cache) > _SYMBOLIC_CACHE_SIZE:
+                _symbolic_cache.popitem(last=False)
+        else:
+            _symbolic_cache.move_to_end(key)
+    if mine:
+        try:
+            future.set_result(compute())
+        except BaseException as error:
+            with _cache_lock:
+                if _symbolic_cache.get(key) is future:
+                    del _symbolic_cache[key]
+            future.set_exception(error)
+    return future.result()
 
 
 def _unknown_order(unknown: np.ndarray, n_unknowns: int, nx: int) -> np.ndarray:
@@ -225,17 +262,45 @@ def _unknown_order(unknown: np.ndarray, n_unknowns: int, nx: int) -> np.ndarray:
     return np.concatenate([unknown[nodes], np.flatnonzero(counts != 1)])
 
 
+_omp = None
+_settings_lock = threading.Lock()
+_omp_users = 0
+_omp_saved = 0
+
+
 def _openmp_runtime():
-    """The OpenMP runtime loaded in this process (by CHOLMOD), as a ctypes library, or None."""
+    """The OpenMP runtime loaded in this process (by CHOLMOD), as a ctypes library, or None;
+    with ``per_thread`` set (see :func:`_without_openmp`)."""
+    global _omp
+    if _omp is not None:
+        return _omp or None
     mode = getattr(os, "RTLD_NOLOAD", None)
-    if mode is None:
-        return None
-    for name in ("libgomp.so.1", "libomp.so", "libomp.so.5"):
+    for name in ("libgomp.so.1", "libomp.so", "libomp.so.5") if mode is not None else ():
         try:
-            return ctypes.CDLL(name, mode=mode)        # only when already loaded
+            omp = ctypes.CDLL(name, mode=mode)        # only when already loaded
         except OSError:
             continue
+        with _settings_lock:
+            omp.per_thread = _per_thread_levels(omp)
+        _omp = omp
+        return omp
+    if _cholmod is not None:                           # loaded with CHOLMOD or not at all
+        _omp = False
     return None
+
+
+def _per_thread_levels(omp) -> bool:
+    """Whether the runtime keeps max-active-levels per thread (libgomp since GCC 11: an
+    ICV of each thread's implicit task) rather than one value for the process."""
+    level = omp.omp_get_max_active_levels()
+    other = 0 if level > 0 else 1
+    thread = threading.Thread(target=omp.omp_set_max_active_levels, args=(other,))
+    thread.start()
+    thread.join()
+    if omp.omp_get_max_active_levels() == level:
+        return True
+    omp.omp_set_max_active_levels(level)
+    return False
 
 
 @contextmanager
@@ -248,35 +313,139 @@ def _without_openmp():
     than the loops: the 1 M-unknown factorization took 1.2 s with them and
     0.85 s without (medians, other work running; the dense blocks still use
     the BLAS threads).
+
+    Safe in several threads at once: where the runtime keeps the setting per
+    thread (libgomp does) each thread sets and restores its own; where it keeps
+    one for the process, the first thread in sets it and the last one out
+    restores it (counted under a lock).
     """
+    global _omp_users, _omp_saved
     omp = _openmp_runtime()
     if omp is None:
         yield
         return
-    levels = omp.omp_get_max_active_levels()
-    omp.omp_set_max_active_levels(0)
+    if omp.per_thread:
+        levels = omp.omp_get_max_active_levels()
+        omp.omp_set_max_active_levels(0)
+        try:
+            yield
+        finally:
+            omp.omp_set_max_active_levels(levels)
+        return
+    with _settings_lock:
+        _omp_users += 1
+        if _omp_users == 1:
+            _omp_saved = omp.omp_get_max_active_levels()
+            omp.omp_set_max_active_levels(0)
     try:
         yield
     finally:
-        omp.omp_set_max_active_levels(levels)
+        with _settings_lock:
+            _omp_users -= 1
+            if _omp_users == 0:
+                omp.omp_set_max_active_levels(_omp_saved)
 
 
-def _cholmod_factor(lower: sp.csc_matrix, natural: bool):
-    """CHOLMOD factor of the symmetric matrix whose lower triangle is ``lower``,
-    reusing a cached symbolic analysis of the same pattern.
+_blas = None
+_blas_users = 0
+_blas_saved = 1
+
+
+def _openblas_runtime():
+    """The system OpenBLAS that CHOLMOD uses, as a ctypes library, or None (another BLAS,
+    or not loaded). NumPy's own OpenBLAS is a different library, not affected."""
+    global _blas
+    if _blas is None:
+        _blas = False
+        mode = getattr(os, "RTLD_NOLOAD", None)
+        for name in ("libopenblas.so.0", "libblas.so.3", "libopenblas.so") if mode is not None else ():
+            try:
+                lib = ctypes.CDLL(name, mode=mode)       # only when already loaded
+                lib.openblas_get_num_threads, lib.openblas_set_num_threads
+            except (OSError, AttributeError):
+                continue
+            _blas = lib
+            break
+    return _blas or None
+
+
+@contextmanager
+def _single_threaded_blas():
+    """Run the system OpenBLAS on one thread (a process-wide setting; counted under a lock,
+    so nested and concurrent uses restore it once, when the last one ends).
+
+    Two supernodal factorizations at once with OpenBLAS's own threads ran one
+    after the other (its threaded calls share one server): the x and y systems
+    of a 12 MP stretch (2 x 196 k unknowns) took 0.55 s either way; with one
+    BLAS thread each, 0.31 s in parallel (2 cores).
+    """
+    global _blas_users, _blas_saved
+    blas = _openblas_runtime()
+    if blas is None:
+        yield
+        return
+    with _settings_lock:
+        _blas_users += 1
+        if _blas_users == 1:
+            _blas_saved = blas.openblas_get_num_threads()
+            blas.openblas_set_num_threads(1)
+    try:
+        yield
+    finally:
+        with _settings_lock:
+            _blas_users -= 1
+            if _blas_users == 0:
+                blas.openblas_set_num_threads(_blas_saved)
+
+
+def factor_concurrently(matrix, unknowns: list) -> list:
+    """A :class:`ReducedSystem` of ``matrix`` for each numbering in ``unknowns``, factored
+    in parallel threads (CHOLMOD runs without the GIL), the BLAS on one thread each.
+
+    Parameters
+    ----------
+    matrix : (N, N) matrix
+    unknowns : list of (N,) int ndarray
+
+    Returns
+    -------
+    list of ReducedSystem
+    """
+    if len(unknowns) < 2 or _cholmod is None:
+        return [ReducedSystem(matrix, unknown) for unknown in unknowns]
+    with _single_threaded_blas(), ThreadPoolExecutor(len(unknowns) - 1,
+                                                     thread_name_prefix="featurewarp-factor") as pool:
+        others = [pool.submit(ReducedSystem, matrix, unknown) for unknown in unknowns[1:]]
+        first = ReducedSystem(matrix, unknowns[0])
+        return [first] + [future.result() for future in others]
+
+
+def _cholmod_factor(n: int, rows: np.ndarray, cols: np.ndarray, vals: np.ndarray, natural: bool, key):
+    """CHOLMOD factor of the n x n symmetric matrix whose lower triangle has the triplets
+    (rows >= cols; duplicates are summed), reusing a cached symbolic analysis of the
+    same pattern (``key``: a hashable that identifies it).
 
     Up to :data:`_SIMPLICIAL_MAX` unknowns the simplicial factorization is used:
     its solves are twice as fast (no BLAS calls on small blocks, no idle BLAS
     threads) for a factorization that is as fast or a little slower; above,
     the supernodal one.
     """
-    from sksparse.cholmod import analyze
-
-    mode = "simplicial" if lower.shape[0] <= _SIMPLICIAL_MAX else "supernodal"
-    key = (lower.shape[0], lower.nnz, _digest(lower.indptr, lower.indices), natural, mode)
-    symbolic = _cached(key, lambda: analyze(lower, mode=mode, ordering_method="natural" if natural else "default"))
+    supernodal = n > _SIMPLICIAL_MAX
+    ordering = _cholmod.NATURAL if natural else _cholmod.DEFAULT
+    symbolic = _cached(("symbolic", n, key, natural, supernodal),
+                       lambda: _cholmod.analyze(n, rows, cols, supernodal, ordering))
     with _without_openmp():
-        return symbolic.cholesky(lower)
+        return symbolic.factorize(rows, cols, vals)
+
+
+def _lower_triplets(matrix) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(rows, cols, vals) of the lower triangle of a symmetric matrix: a
+    :mod:`featurewarp_cli.system` matrix, or any SciPy sparse matrix."""
+    if hasattr(matrix, "lower_triplets"):
+        return matrix.lower_triplets()
+    coo = matrix.tocoo()
+    low = coo.row >= coo.col
+    return coo.row[low].astype(np.int64), coo.col[low].astype(np.int64), coo.data[low].astype(np.float64)
 
 
 class ReducedSystem:
@@ -284,8 +453,11 @@ class ReducedSystem:
 
     Parameters
     ----------
-    matrix : (N, N) sparse matrix
-        Symmetric positive semi-definite normal matrix L = A^T A.
+    matrix : (N, N) matrix
+        Symmetric positive semi-definite normal matrix L = A^T A: a
+        :class:`featurewarp_cli.system.StencilMatrix`, ``StencilWindow`` or
+        ``TripletMatrix``, or any SciPy sparse matrix (tests, benchmarks; read
+        with ``tocoo()``). It needs a ``dot`` method.
     unknown : (N,) int ndarray
         Unknown index of each node, or -1 for a fixed node. Several nodes may
         share one unknown.
@@ -296,15 +468,19 @@ class ReducedSystem:
         ``'cholmod'``, ``'scipy-splu'`` or ``'none'`` (nothing to solve).
     ordering : str
         ``'grid-nested-dissection'`` when the grid order was used, else ``'default'``.
+
+    Raises
+    ------
+    featurewarp_cli._cholmod.NotPositiveDefinite
+        When P^T L P is not positive definite (with CHOLMOD).
     """
 
-    def __init__(self, matrix: sp.spmatrix, unknown: np.ndarray):
+    def __init__(self, matrix, unknown: np.ndarray):
         global _fallback_noted
         unknown = np.asarray(unknown, dtype=np.int64)
         self.unknown = unknown
         self.n_unknowns = n = int(unknown.max()) + 1 if unknown.size else 0
-        matrix = sp.csc_matrix(matrix)
-        self.matrix = matrix.T                 # L is symmetric: the same matrix, as CSR, no copy
+        self.matrix = matrix
         self._solve = None
         self.method = "none"
         self.ordering = "default"
@@ -312,60 +488,93 @@ class ReducedSystem:
             return
         # Lower triangle of L on the unknowns; an edge between two nodes of one
         # unknown lands twice on its diagonal (once from each triangle of L).
-        index = unknown.astype(matrix.indices.dtype)
-        row = matrix.indices
-        col = np.repeat(np.arange(matrix.shape[1], dtype=row.dtype), np.diff(matrix.indptr))
+        size = matrix.shape[0]
+        row, col, val = _lower_triplets(matrix)
+        stencil = getattr(matrix, "nx", None)
+        index = unknown.astype(INDEX)
         ur, uc = index[row], index[col]
-        keep = np.flatnonzero((row >= col) & (ur >= 0) & (uc >= 0) & (matrix.data != 0))
-        row, col, val, ur, uc = row[keep], col[keep], matrix.data[keep], ur[keep], uc[keep]
+        keep = (ur >= 0) & (uc >= 0)
+        if stencil is None:
+            keep &= val != 0
+        keep = np.flatnonzero(keep)
+        row, col, val, ur, uc = row[keep], col[keep], val[keep], ur[keep], uc[keep]
         val = np.where((ur == uc) & (row != col), 2 * val, val)
-        nx = _grid_width(row, col, matrix.shape[0])
+        nx = _grid_width(row, col, size, stencil)
+        position = unknown[unknown >= 0]
         if nx is not None:
-            rank = np.empty(n, dtype=index.dtype)
-            rank[_unknown_order(unknown, n, nx)] = np.arange(n, dtype=index.dtype)
+            rank = np.empty(n, dtype=INDEX)
+            rank[_unknown_order(unknown, n, nx)] = np.arange(n, dtype=INDEX)
             ur, uc = rank[ur], rank[uc]
+            position = rank[position]
             self.ordering = "grid-nested-dissection"
         # P in the elimination order: the scatter puts each unknown's value on its
-        # nodes (one entry per row), its transpose (the gather) sums them back.
-        nodes = unknown >= 0
-        position = unknown[nodes] if nx is None else rank[unknown[nodes]]
-        indptr = np.concatenate([[0], np.cumsum(nodes)])
-        self._scatter = sp.csr_matrix((np.ones(position.size), position, indptr), shape=(unknown.size, n))
-        self._gather = self._scatter.T
-        lower = sp.csc_matrix((val, (np.maximum(ur, uc), np.minimum(ur, uc))), shape=(n, n))
-        lower.sum_duplicates()
-        try:
-            import sksparse.cholmod  # noqa: F401
-        except ImportError:
+        # nodes, the gather (P^T) sums them back: a copy for the unknowns of one node,
+        # np.bincount (in node order, as a sparse product adds) for the shared ones.
+        # (np.take is several times as fast as fancy indexing on (N, 2) arrays.)
+        nodes = np.flatnonzero(unknown >= 0)
+        self._scatter = np.full(unknown.size, n, dtype=np.int64)   # n: a zero row (fixed nodes)
+        self._scatter[nodes] = position
+        single = np.bincount(position, minlength=n)[position] == 1
+        self._gather = np.zeros(n, dtype=np.int64)                   # the node of each unknown
+        self._gather[position[single]] = nodes[single]
+        shared = ~single
+        self._shared = ((nodes[shared], position[shared], np.unique(position[shared]))
+                        if shared.any() else None)
+        rows, cols = np.maximum(ur, uc), np.minimum(ur, uc)
+        if _cholmod is None:
             from scipy.sparse.linalg import splu
 
             if not _fallback_noted:
-                sys.stderr.write("featurewarp: scikit-sparse (CHOLMOD) is not installed; "
+                sys.stderr.write("featurewarp: the CHOLMOD binding (featurewarp_cli._cholmod) is not built; "
                                  "using SciPy's sparse LU, which is slower\n")
                 _fallback_noted = True
             self.method = "scipy-splu"
-            self._solve = splu((lower + sp.tril(lower, -1).T).tocsc()).solve
+            lu = splu(_full_csc(n, rows, cols, val))
+
+            def solve(b, out):
+                out[...] = lu.solve(b)
+
+            self._solve = solve
         else:
             self.method = "cholmod"
-            self._solve = _cholmod_factor(lower, natural=nx is not None)
+            # The pattern of P^T L P: for a stencil, fixed by the grid and the numbering.
+            key = ((size, nx, _digest(unknown)) if stencil is not None and nx is not None
+                   else _digest(rows, cols))
+            self._solve = _cholmod_factor(n, rows, cols, val, natural=nx is not None, key=key).solve
 
     def solve(self, rhs: np.ndarray, offset: np.ndarray) -> np.ndarray:
         """Minimise |A x - b|^2 over x = P z + q.
 
         Parameters
         ----------
-        rhs : (N, 2) ndarray
-            A^T b for the x and y coordinates.
-        offset : (N, 2) ndarray
+        rhs : (N, k) ndarray
+            A^T b for the k coordinates (x and y: k = 2).
+        offset : (N, k) ndarray
             q: the position of fixed nodes, the offset of tied nodes, 0 for free ones.
 
         Returns
         -------
-        (N, 2) ndarray
+        (N, k) ndarray
             All node positions.
         """
         if self.n_unknowns == 0:
             return offset.copy()
-        residual = rhs - self.matrix @ offset
-        z = self._solve(np.ascontiguousarray(self._gather @ residual))
-        return self._scatter @ z + offset
+        n = self.n_unknowns
+        residual = rhs.T - self.matrix.dot(offset).T                 # (k, N), rows contiguous
+        gathered = np.take(residual, self._gather, axis=1)
+        if self._shared is not None:
+            nodes, position, shared = self._shared
+            for j, row in enumerate(residual):
+                gathered[j, shared] = np.bincount(position, row[nodes], minlength=n)[shared]
+        z = np.zeros((n + 1, residual.shape[0]))
+        self._solve(np.ascontiguousarray(gathered.T), z[:n])
+        return offset + np.take(z, self._scatter, axis=0)
+
+
+def _full_csc(n: int, rows: np.ndarray, cols: np.ndarray, vals: np.ndarray):
+    """The symmetric n x n matrix with this lower triangle, as SciPy CSC (for splu)."""
+    import scipy.sparse as sp
+
+    lower = sp.csc_matrix((vals, (rows, cols)), shape=(n, n))
+    lower.sum_duplicates()
+    return (lower + sp.tril(lower, -1).T).tocsc()
