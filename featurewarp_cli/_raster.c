@@ -4,9 +4,7 @@
  *   records()     their scanline bounds and inverse affine maps, for a band's triangles
  *                 (these two are render._Triangles)
  *   rasterize()   the inverse maps of one band of rows (render._rasterize_band)
- *   fp_candidates(), fp_shape(), fp_finish()
- *                 the footprints of a band's triangles (render._Minification) around
- *                 the numpy calls (hypot, arctan2, cos, sin, log2) that Python makes
+ *   footprints()  the footprints of a band's triangles (render._Minification)
  *   aa_count(), aa_probes(), aa_resolve()
  *                 the minification filter (render._antialiased) around the cv2.remap
  *                 calls that Python makes: count and place the probes of each pyramid
@@ -27,6 +25,9 @@
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
 
 /* floor() and ceil() on every span and triangle are a dozen instructions each on plain
  * x86-64 and one (roundsd) with SSE4.1: the loops that use them are built twice and
@@ -424,181 +425,86 @@ done:
 
 /* ------------------------------------------------------------------ footprints
  *
- * render._Minification in three steps around the numpy calls that must stay numpy's
- * (hypot, arctan2, cos, sin, log2: libm and numpy's own SIMD code may differ in the
- * last bit). Between them, the same float64 operations as its numpy code:
- *
- *   fp_candidates()  the triangles whose J might have s1 > threshold, with the sums
- *                    a + d, c - b, a - d, c + b that numpy takes hypot / arctan2 of;
- *   fp_shape()       s1 = (p + q) / 2 from numpy's p, q: which of them minify, and
- *                    their probe count k, m2 and the tent's half-width;
- *   fp_finish()      ints (k, base, blend) and floats (step x, step y, frac) from
- *                    numpy's cos, sin of the axis angle and log2 of m2.
+ * render._Minification: the same float64 operations in the same order (only + - * /
+ * and sqrt, which numpy rounds the same way, plus frexp, which is exact).
  */
 
-/* s1^2 is the larger root of x^2 - |J|_F^2 x + det^2: computed without hypot, its error
- * is below 1e-7 s1^2 (the square root of a difference that cancels), so a triangle
- * whose computed value stays under threshold^2 (1 - 1e-6) cannot have s1 > threshold in
- * numpy's arithmetic either. NaN and overflow make a candidate (numpy decides). */
 static PyObject *
-fp_candidates(PyObject *self, PyObject *args)
+footprints(PyObject *self, PyObject *args)
 {
-    PyObject *o_rec, *o_cand, *o_sums;
-    double threshold;
-    if (!PyArg_ParseTuple(args, "OdOO:fp_candidates", &o_rec, &threshold, &o_cand, &o_sums))
+    PyObject *o_rec, *o_index, *o_ints, *o_floats, *result = NULL;
+    double threshold, largest;
+    int kmax;
+    if (!PyArg_ParseTuple(args, "OdidOOO:footprints", &o_rec, &threshold, &kmax, &largest, &o_index,
+                          &o_ints, &o_floats))
         return NULL;
-    Py_buffer rec = {0}, cand = {0}, sums = {0};
-    PyObject *result = NULL;
-    if (get(o_rec, &rec, F64, 0, "rec") || get(o_cand, &cand, I64, 1, "cand")
-        || get(o_sums, &sums, F64, 1, "sums"))
+    Py_buffer rec = {0}, ind = {0}, ib = {0}, fb = {0};
+    if (get(o_rec, &rec, F64, 0, "rec") || get(o_index, &ind, I32, 1, "index")
+        || get(o_ints, &ib, I32, 1, "ints") || get(o_floats, &fb, F32, 1, "floats"))
         goto done;
     Py_ssize_t n = N_OF(rec) / NREC, count = 0;
-    if (N_OF(cand) < n || N_OF(sums) < 4 * n) {
-        PyErr_SetString(PyExc_ValueError, "fp_candidates: buffer sizes do not match");
+    if (N_OF(ind) < n || N_OF(ib) < 3 * n || N_OF(fb) < 3 * n || kmax < 1) {
+        PyErr_SetString(PyExc_ValueError, "footprints: buffer sizes do not match");
         goto done;
     }
-    const double *r = rec.buf, bound = threshold * threshold * (1.0 - 1e-6);
-    int64_t *c_out = cand.buf;
-    double *s = sums.buf;
+    const double *r = rec.buf;
+    int32_t *index = ind.buf, *ints = ib.buf, max_level = 0;
+    float *floats = fb.buf;
+    /* render._LOG2_SERIES: 2 / (k ln 2), k = 1, 3, ..., 11 */
+    const double c1 = 2.0 / (1.0 * M_LN2), c3 = 2.0 / (3.0 * M_LN2), c5 = 2.0 / (5.0 * M_LN2),
+                 c7 = 2.0 / (7.0 * M_LN2), c9 = 2.0 / (9.0 * M_LN2), c11 = 2.0 / (11.0 * M_LN2);
     Py_BEGIN_ALLOW_THREADS
     for (Py_ssize_t i = 0; i < n; i++, r += NREC) {
         double a = r[J00], b = r[J01], c = r[J10], d = r[J11];
-        double f2 = a * a + b * b + c * c + d * d, det = a * d - b * c;
-        double disc = f2 * f2 - 4.0 * det * det;
-        if (0.5 * (f2 + sqrt(disc > 0.0 ? disc : 0.0)) <= bound)
-            continue;
-        c_out[count] = i;
-        s[count] = a + d;                /* (rows of n: numpy's u1, v1, u2, v2) */
-        s[n + count] = c - b;
-        s[2 * n + count] = a - d;
-        s[3 * n + count] = c + b;
-        count++;
-    }
-    Py_END_ALLOW_THREADS
-    result = PyLong_FromSsize_t(count);
-done:
-    PyBuffer_Release(&rec);
-    PyBuffer_Release(&cand);
-    PyBuffer_Release(&sums);
-    return result;
-}
-
-/* Candidates j < count (triangle cand[j], hypot p[j] and q[j]) with (p + q) / 2 > threshold
- * are numbered 0, 1, ... in index (n triangles, -1 for the others); their sums (rows of n
- * in sums), m2, half-width and k are moved to position number (in place: number <= j). */
-static PyObject *
-fp_shape(PyObject *self, PyObject *args)
-{
-    PyObject *o_cand, *o_sums, *o_p, *o_q, *o_index, *o_m2, *o_half, *o_steps;
-    double threshold;
-    int kmax;
-    if (!PyArg_ParseTuple(args, "OOOOdiOOOO:fp_shape", &o_cand, &o_sums, &o_p, &o_q, &threshold, &kmax,
-                          &o_index, &o_m2, &o_half, &o_steps))
-        return NULL;
-    Py_buffer cand = {0}, sums = {0}, pb = {0}, qb = {0}, ind = {0}, m2b = {0}, hb = {0}, sb = {0};
-    PyObject *result = NULL;
-    if (get(o_cand, &cand, I64, 0, "cand") || get(o_sums, &sums, F64, 1, "sums")
-        || get(o_p, &pb, F64, 0, "p") || get(o_q, &qb, F64, 0, "q")
-        || get(o_index, &ind, I32, 1, "index") || get(o_m2, &m2b, F64, 1, "m2")
-        || get(o_half, &hb, F64, 1, "half") || get(o_steps, &sb, I64, 1, "steps"))
-        goto done;
-    Py_ssize_t count = N_OF(cand), n = N_OF(ind), number = 0;
-    const int64_t *c_in = cand.buf;
-    int bad = N_OF(sums) < 4 * n || N_OF(pb) < count || N_OF(qb) < count || N_OF(m2b) < count
-              || N_OF(hb) < count || N_OF(sb) < count || count > n;
-    for (Py_ssize_t j = 0; j < count && !bad; j++)
-        bad = c_in[j] < 0 || c_in[j] >= n;
-    if (bad) {
-        PyErr_SetString(PyExc_ValueError, "fp_shape: buffer sizes or indices do not match");
-        goto done;
-    }
-    double *s = sums.buf, *m2_out = m2b.buf, *half_out = hb.buf;
-    const double *p = pb.buf, *q = qb.buf;
-    int32_t *index = ind.buf;
-    int64_t *steps_out = sb.buf;
-    Py_BEGIN_ALLOW_THREADS
-    for (Py_ssize_t i = 0; i < n; i++)
+        double u1 = a + d, v1 = c - b, u2 = a - d, v2 = c + b;
+        double p = sqrt(u1 * u1 + v1 * v1), q = sqrt(u2 * u2 + v2 * v2), s1 = (p + q) / 2.0;
         index[i] = -1;
-    for (Py_ssize_t j = 0; j < count; j++) {
-        double s1 = (p[j] + q[j]) / 2.0;
-        if (!(s1 > threshold))
+        if (!(s1 > threshold && s1 < largest))
             continue;
-        double s2 = fabs(p[j] - q[j]) / 2.0;
-        double m1 = max_nan(s1, 1.0), m2 = max_nan(s2, 1.0);
-        /* Tent of half-width 2 (m1 - m2), probes at most m2 apart, at most kmax a side. */
+        double s2 = fabs(p - q) / 2.0, m1 = max_nan(s1, 1.0), m2 = max_nan(s2, 1.0);
+        /* tent of half-width 2 (m1 - m2), probes at most m2 apart, at most kmax a side */
         double steps = max_nan(2.0, ceil(2.0 * (m1 - m2) / m2 - 1e-9));
         if (steps > kmax)
             m2 = 2.0 * m1 / (kmax + 2.0);
         int64_t k = (int64_t)min_nan(steps, (double)kmax);
         double half = 2.0 * (m1 - m2);
-        index[c_in[j]] = (int32_t)number;
-        for (int row = 0; row < 4; row++)
-            s[row * n + number] = s[row * n + j];
-        m2_out[number] = m2;
-        half_out[number] = half;
-        steps_out[number] = half < 1e-3 ? 1 : k;
-        number++;
+        if (half < 1e-3)
+            k = 1;
+        /* the major axis: square root of the product of the two unit phasors */
+        double p1 = p > 0 ? p : 1.0, q1 = q > 0 ? q : 1.0;
+        double e1x = p > 0 ? u1 / p1 : 1.0, e1y = v1 / p1, e2x = q > 0 ? u2 / q1 : 1.0, e2y = v2 / q1;
+        double zr = e1x * e2x - e1y * e2y, zi = e1x * e2y + e1y * e2x;
+        double rr = sqrt(zr * zr + zi * zi), t, ax, ay;
+        int right = zr >= 0;
+        t = sqrt((right ? rr + zr : rr - zr) / 2.0);
+        double norm = sqrt(rr);
+        ax = (right ? t : fabs(zi) / (2.0 * t)) / norm;
+        ay = (right ? zi / (2.0 * t) : copysign(t, zi)) / norm;
+        /* level log2(m2) = base + frac */
+        int exponent;
+        double x = 2.0 * frexp(m2, &exponent);
+        int32_t base = exponent - 1;
+        t = (x - 1.0) / (x + 1.0);
+        double t2 = t * t;
+        float frac = (float)(t * (c1 + t2 * (c3 + t2 * (c5 + t2 * (c7 + t2 * (c9 + t2 * c11))))));
+        int32_t blend = frac > 1e-4;
+        double spacing = half / (double)k;
+        index[i] = (int32_t)count;
+        ints[3 * count] = (int32_t)k;
+        ints[3 * count + 1] = base;
+        ints[3 * count + 2] = blend;
+        floats[3 * count] = (float)(spacing * ax);
+        floats[3 * count + 1] = (float)(spacing * ay);
+        floats[3 * count + 2] = frac;
+        if (base + blend > max_level)
+            max_level = base + blend;
+        count++;
     }
     Py_END_ALLOW_THREADS
-    result = PyLong_FromSsize_t(number);
+    result = Py_BuildValue("ni", count, (int)max_level);
 done:
-    PyBuffer_Release(&cand);
-    PyBuffer_Release(&sums);
-    PyBuffer_Release(&pb);
-    PyBuffer_Release(&qb);
+    PyBuffer_Release(&rec);
     PyBuffer_Release(&ind);
-    PyBuffer_Release(&m2b);
-    PyBuffer_Release(&hb);
-    PyBuffer_Release(&sb);
-    return result;
-}
-
-/* ints = (k, base, blend), floats = (step x, step y, frac) of the minifying triangles
- * from their half-width, k, level = log2(m2) and the axis (cos, sin). */
-static PyObject *
-fp_finish(PyObject *self, PyObject *args)
-{
-    PyObject *o_half, *o_steps, *o_level, *o_cos, *o_sin, *o_ints, *o_floats;
-    if (!PyArg_ParseTuple(args, "OOOOOOO:fp_finish", &o_half, &o_steps, &o_level, &o_cos, &o_sin,
-                          &o_ints, &o_floats))
-        return NULL;
-    Py_buffer hb = {0}, sb = {0}, lb = {0}, cb = {0}, nb = {0}, ib = {0}, fb = {0};
-    PyObject *result = NULL;
-    if (get(o_half, &hb, F64, 0, "half") || get(o_steps, &sb, I64, 0, "steps")
-        || get(o_level, &lb, F64, 0, "level") || get(o_cos, &cb, F64, 0, "cos")
-        || get(o_sin, &nb, F64, 0, "sin") || get(o_ints, &ib, I32, 1, "ints")
-        || get(o_floats, &fb, F32, 1, "floats"))
-        goto done;
-    Py_ssize_t m = N_OF(lb);
-    if (N_OF(hb) < m || N_OF(sb) < m || N_OF(cb) < m || N_OF(nb) < m || N_OF(ib) < 3 * m
-        || N_OF(fb) < 3 * m) {
-        PyErr_SetString(PyExc_ValueError, "fp_finish: buffer sizes do not match");
-        goto done;
-    }
-    const double *half = hb.buf, *level = lb.buf, *cs = cb.buf, *sn = nb.buf;
-    const int64_t *steps = sb.buf;
-    int32_t *ints = ib.buf;
-    float *floats = fb.buf;
-    Py_BEGIN_ALLOW_THREADS
-    for (Py_ssize_t i = 0; i < m; i++) {
-        int64_t base = (int64_t)floor(level[i]);
-        float frac = (float)(level[i] - (double)base);
-        double spacing = half[i] / (double)steps[i];      /* source offset between probes */
-        ints[3 * i] = (int32_t)steps[i];
-        ints[3 * i + 1] = (int32_t)base;
-        ints[3 * i + 2] = frac > 1e-4;
-        floats[3 * i] = (float)(spacing * cs[i]);
-        floats[3 * i + 1] = (float)(spacing * sn[i]);
-        floats[3 * i + 2] = frac;
-    }
-    Py_END_ALLOW_THREADS
-    result = Py_NewRef(Py_None);
-done:
-    PyBuffer_Release(&hb);
-    PyBuffer_Release(&sb);
-    PyBuffer_Release(&lb);
-    PyBuffer_Release(&cb);
-    PyBuffer_Release(&nb);
     PyBuffer_Release(&ib);
     PyBuffer_Release(&fb);
     return result;
@@ -840,6 +746,101 @@ round_even(float x)
 DEFINE_RESOLVE(resolve8, uint8_t)
 DEFINE_RESOLVE(resolve16, uint16_t)
 
+#if defined(__SSE2__)
+/* resolve8 for 3 or 4 channels with every channel in a lane of an SSE register: the same
+ * float operations in the same order, lane by lane, so the same results. */
+
+/* A sample's channels (3 or 4 bytes) as floats; reads a 4th byte of a 3-channel sample
+ * only when it lies before end. */
+ALWAYS_INLINE __m128
+sample_ps(const uint8_t *p, const uint8_t *end, const int channels)
+{
+    uint32_t u;
+    if (channels == 4 || p + 4 <= end)
+        memcpy(&u, p, 4);
+    else
+        u = (uint32_t)p[0] | (uint32_t)p[1] << 8 | (uint32_t)p[2] << 16;
+    const __m128i zero = _mm_setzero_si128();
+    return _mm_cvtepi32_ps(_mm_unpacklo_epi16(_mm_unpacklo_epi8(_mm_cvtsi32_si128((int)u), zero), zero));
+}
+
+/* sum over j of w[j] * sample_j, as resolve8_pixel sums each channel. */
+ALWAYS_INLINE __m128
+tent_ps(const uint8_t *v, const uint8_t *end, const float *w, const int probes, const int channels)
+{
+    __m128 sum = _mm_mul_ps(sample_ps(v, end, channels), _mm_set1_ps(w[0]));
+    for (int j = 1; j < probes; j++)
+        sum = _mm_add_ps(sum, _mm_mul_ps(sample_ps(v + j * channels, end, channels), _mm_set1_ps(w[j])));
+    return sum;
+}
+
+ALWAYS_INLINE void
+resolve8_ps_pixel(const uint8_t *restrict v0, const uint8_t *restrict v1, const uint8_t *end,
+                  const float *restrict w, const int probes, const int blend, float frac,
+                  uint8_t *restrict o, const int channels)
+{
+    __m128 acc = _mm_setzero_ps(), sum = tent_ps(v0, end, w, probes, channels);
+    if (blend) {
+        __m128 sum1 = tent_ps(v1, end, w, probes, channels);
+        acc = _mm_add_ps(acc, _mm_mul_ps(sum, _mm_set1_ps(1.0f - frac)));
+        acc = _mm_add_ps(acc, _mm_mul_ps(sum1, _mm_set1_ps(frac)));
+    } else {
+        acc = _mm_add_ps(acc, sum);
+    }
+    /* round_even() (the sums lie in [0, 255], where it is (x + 2^23) - 2^23), clip, store */
+    const __m128 big = _mm_set1_ps(8388608.0f);
+    __m128 r = _mm_sub_ps(_mm_add_ps(acc, big), big);
+    r = _mm_min_ps(_mm_max_ps(r, _mm_setzero_ps()), _mm_set1_ps(255.0f));
+    __m128i b = _mm_cvttps_epi32(r);
+    b = _mm_packs_epi32(b, b);
+    uint32_t u = (uint32_t)_mm_cvtsi128_si32(_mm_packus_epi16(b, b));
+    if (channels == 4)
+        memcpy(o, &u, 4);
+    else
+        o[0] = (uint8_t)u, o[1] = (uint8_t)(u >> 8), o[2] = (uint8_t)(u >> 16);
+}
+
+/* resolve8 for 3 or 4 channels (out_channels: the same, or 4 for 3 channels). */
+ALWAYS_INLINE int
+resolve8_ps(const int32_t *restrict aatri, Py_ssize_t n, Py_ssize_t tris, const int32_t *restrict ints,
+            const float *restrict floats, const float *restrict weights, int kmax,
+            const int64_t *restrict offsets, Py_ssize_t levels, int64_t *restrict cursor,
+            const uint8_t *restrict samples, Py_ssize_t total, uint8_t *restrict out,
+            const int channels, const int out_channels)
+{
+    const uint8_t *end = samples + total * channels;
+    int k, base, blend;
+    for (Py_ssize_t p = 0; p < n; p++) {
+        int32_t t = aatri[p];
+        if (t < 0)
+            continue;
+        if (!aa_pixel(t, tris, ints, levels, &k, &base, &blend) || k > kmax)
+            return 0;
+        int probes = 2 * k - 1;
+        int64_t c0 = cursor[base], c1 = blend ? cursor[base + 1] : 0;
+        if (c0 + probes > offsets[base + 1] || (blend && c1 + probes > offsets[base + 2]))
+            return 0;
+        cursor[base] = c0 + probes;
+        if (blend)
+            cursor[base + 1] = c1 + probes;
+        const float *w = weights + (Py_ssize_t)k * (2 * kmax - 1);
+        const uint8_t *v0 = samples + c0 * channels, *v1 = samples + c1 * channels;
+        uint8_t *o = out + p * out_channels;
+        float frac = floats[3 * t + 2];
+        switch (2 * probes + blend) {
+        case 2 * 1: resolve8_ps_pixel(v0, v1, end, w, 1, 0, frac, o, channels); break;
+        case 2 * 3: resolve8_ps_pixel(v0, v1, end, w, 3, 0, frac, o, channels); break;
+        case 2 * 5: resolve8_ps_pixel(v0, v1, end, w, 5, 0, frac, o, channels); break;
+        case 2 * 7: resolve8_ps_pixel(v0, v1, end, w, 7, 0, frac, o, channels); break;
+        case 2 * 3 + 1: resolve8_ps_pixel(v0, v1, end, w, 3, 1, frac, o, channels); break;
+        case 2 * 5 + 1: resolve8_ps_pixel(v0, v1, end, w, 5, 1, frac, o, channels); break;
+        default: resolve8_ps_pixel(v0, v1, end, w, probes, blend, frac, o, channels);
+        }
+    }
+    return 1;
+}
+#endif
+
 /* resolve8 / resolve16 with the channel counts as constants (unrolled, in registers). */
 #define RESOLVE_ARGS                                                                            \
     const int32_t *aatri, Py_ssize_t n, Py_ssize_t tris, const int32_t *ints,                   \
@@ -848,8 +849,17 @@ DEFINE_RESOLVE(resolve16, uint16_t)
 #define RESOLVE_PASS aatri, n, tris, ints, floats, weights, kmax, offsets, levels, cursor
 
 static int
-resolve(RESOLVE_ARGS, const void *samples, void *out, int depth, int channels, int out_channels)
+resolve(RESOLVE_ARGS, const void *samples, Py_ssize_t total, void *out, int depth, int channels,
+        int out_channels)
 {
+#if defined(__SSE2__)
+    if (depth == 1 && channels == 3 && out_channels == 3)
+        return resolve8_ps(RESOLVE_PASS, samples, total, out, 3, 3);
+    if (depth == 1 && channels == 3 && out_channels == 4)
+        return resolve8_ps(RESOLVE_PASS, samples, total, out, 3, 4);
+    if (depth == 1 && channels == 4 && out_channels == 4)
+        return resolve8_ps(RESOLVE_PASS, samples, total, out, 4, 4);
+#endif
 #define CASE(C, OC)                                                                             \
     if (channels == C && out_channels == OC)                                                    \
         return depth == 1 ? resolve8(RESOLVE_PASS, samples, out, C, OC)                         \
@@ -891,8 +901,8 @@ aa_resolve(PyObject *self, PyObject *args)
     const int64_t *offsets = off.buf;
     int ok;
     Py_BEGIN_ALLOW_THREADS
-    ok = resolve(aatri, n, tris, ints, floats, weights, kmax, offsets, levels, cursor, smp.buf, ob.buf,
-                 (int)smp.itemsize, channels, out_channels);
+    ok = resolve(aatri, n, tris, ints, floats, weights, kmax, offsets, levels, cursor, smp.buf,
+                 N_OF(smp) / channels, ob.buf, (int)smp.itemsize, channels, out_channels);
     Py_END_ALLOW_THREADS
     if (!ok)
         PyErr_SetString(PyExc_ValueError, "aa_resolve: triangle, level, steps or offsets out of range");
@@ -1019,16 +1029,10 @@ static PyMethodDef methods[] = {
      "rasterize(rec, ylo, yhi, y0, y1, width, mapx, mapy, ids, aatri) -> int\n\n"
      "Fill the band's maps from the triangles of rec, in order; set aatri to ids[t] where\n"
      "that is >= 0 (minifying triangles); return how many pixels that marked."},
-    {"fp_candidates", fp_candidates, METH_VARARGS,
-     "fp_candidates(rec, threshold, cand, sums) -> count\n\n"
-     "The triangles of rec that may minify past threshold, and a + d, c - b, a - d, c + b of\n"
-     "their J (rows of len(rec) in sums)."},
-    {"fp_shape", fp_shape, METH_VARARGS,
-     "fp_shape(cand, sums, p, q, threshold, kmax, index, m2, half, steps) -> count\n\n"
-     "The candidates that minify (numbered in index), with their m2, half-width and k."},
-    {"fp_finish", fp_finish, METH_VARARGS,
-     "fp_finish(half, steps, level, cos, sin, ints, floats)\n\n"
-     "The footprints' ints (k, base, blend) and floats (step x, step y, frac)."},
+    {"footprints", footprints, METH_VARARGS,
+     "footprints(rec, threshold, kmax, largest, index, ints, floats) -> (count, max_level)\n\n"
+     "The minifying triangles of rec (numbered in index, -1 for the others), their ints\n"
+     "(k, base, blend) and floats (step x, step y, frac), and the highest level they use."},
     {"aa_count", aa_count, METH_VARARGS,
      "aa_count(aatri, ints, counts)\n\nAdd the probes of each pyramid level to counts."},
     {"aa_probes", aa_probes, METH_VARARGS,

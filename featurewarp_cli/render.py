@@ -32,6 +32,7 @@ numpy code runs instead (slower), with one notice on stderr per process.
 
 from __future__ import annotations
 
+import math
 import os
 import sys
 import threading
@@ -63,6 +64,12 @@ AA_MAX_STEPS = 4
 #: Interpolation of the probes (the tent of probes is the wider filter there).
 AA_INTERPOLATION = cv2.INTER_LINEAR
 _COMPACT_WIDTH = 4096     # width of the (rows, width) maps used to sample scattered points
+#: Footprints from this size on (NaN, overflow) are not filtered.
+_LARGEST_FOOTPRINT = 2.0 ** 60
+#: log2(x) = t (c1 + t^2 (c3 + t^2 (c5 + ...))) with t = (x - 1) / (x + 1): the blend
+#: between two pyramid levels, within 2e-7 of log2 on [1, 2). Only + - * / and sqrt,
+#: which numpy and C round the same, go into the footprints.
+_LOG2_SERIES = tuple(2.0 / (k * math.log(2.0)) for k in (1, 3, 5, 7, 9, 11))
 
 
 def _compiled():
@@ -441,17 +448,18 @@ class _Minification:
     del _k, _j
 
     def __init__(self, a, b, c, d, threshold: float = AA_START):
-        # Singular values of J = [[a, b], [c, d]] (largest first) and the unit major
-        # axis in source space.
-        p, q = np.hypot(a + d, c - b), np.hypot(a - d, c + b)
-        self.minified = (p + q) / 2.0 > threshold
+        # J = [[a, b], [c, d]] = R(theta) diag(s1, s2) R(phi)^T with (u1 + i v1) / 2 =
+        # (s1 + s2) / 2 e^{i (theta + phi)} and (u2 + i v2) / 2 = (s1 - s2) / 2 e^{i (theta - phi)}.
+        u1, v1, u2, v2 = a + d, c - b, a - d, c + b
+        p, q = np.sqrt(u1 * u1 + v1 * v1), np.sqrt(u2 * u2 + v2 * v2)
+        s1 = (p + q) / 2.0
+        with np.errstate(invalid="ignore"):
+            self.minified = (s1 > threshold) & (s1 < _LARGEST_FOOTPRINT)
         sel = np.flatnonzero(self.minified)
         self.index = np.full(self.minified.size, -1, np.int32)
         self.index[sel] = np.arange(sel.size, dtype=np.int32)
-        a, b, c, d, p, q = (v[sel] for v in (a, b, c, d, p, q))
-        s1, s2 = (p + q) / 2.0, np.abs(p - q) / 2.0
-        theta = 0.5 * (np.arctan2(c + b, a - d) + np.arctan2(c - b, a + d))
-        axis = np.stack([np.cos(theta), np.sin(theta)], axis=1)
+        u1, v1, u2, v2, p, q, s1 = (v[sel] for v in (u1, v1, u2, v2, p, q, s1))
+        s2 = np.abs(p - q) / 2.0
         m1 = np.maximum(s1, 1.0)
         m2 = np.maximum(s2, 1.0)
         # Tent of half-width W = 2 (m1 - m2) along the major axis, probes at most
@@ -462,36 +470,45 @@ class _Minification:
         steps = np.minimum(steps, AA_MAX_STEPS).astype(np.int64)
         half = 2.0 * (m1 - m2)
         steps[half < 1e-3] = 1
-        level = np.log2(m2)
-        base = np.floor(level).astype(np.int64)
-        frac = (level - base).astype(np.float32)
-        self.ints = np.stack([steps, base, frac > 1e-4], axis=1).astype(np.int32)
+        # The major axis e^{i theta}: the square root of e^{i (theta + phi)} e^{i (theta - phi)}
+        # (up to its sign, which the symmetric tent does not see).
+        p1, q1 = np.where(p > 0, p, 1.0), np.where(q > 0, q, 1.0)
+        e1x, e1y = np.where(p > 0, u1 / p1, 1.0), v1 / p1
+        e2x, e2y = np.where(q > 0, u2 / q1, 1.0), v2 / q1
+        zr, zi = e1x * e2x - e1y * e2y, e1x * e2y + e1y * e2x
+        r = np.sqrt(zr * zr + zi * zi)
+        right = zr >= 0
+        t = np.sqrt(np.where(right, r + zr, r - zr) / 2.0)
+        norm = np.sqrt(r)
+        axis_x = np.where(right, t, np.abs(zi) / (2.0 * t)) / norm
+        axis_y = np.where(right, zi / (2.0 * t), np.copysign(t, zi)) / norm
+        # Pyramid level log2(m2) = base + frac (frac from _LOG2_SERIES).
+        mantissa, exponent = np.frexp(m2)
+        base = exponent.astype(np.int64) - 1
+        x = 2.0 * mantissa
+        t = (x - 1.0) / (x + 1.0)
+        t2 = t * t
+        c1, c3, c5, c7, c9, c11 = _LOG2_SERIES
+        frac = (t * (c1 + t2 * (c3 + t2 * (c5 + t2 * (c7 + t2 * (c9 + t2 * c11)))))).astype(np.float32)
+        blend = frac > 1e-4
+        self.ints = np.stack([steps, base, blend], axis=1).astype(np.int32)
         self.floats = np.empty((sel.size, 3), np.float32)
-        self.floats[:, :2] = (half / steps)[:, None] * axis             # source offset between probes
+        spacing = half / steps                                           # source offset between probes
+        self.floats[:, 0] = spacing * axis_x
+        self.floats[:, 1] = spacing * axis_y
         self.floats[:, 2] = frac
-        self.max_level = int(np.ceil(level.max())) if sel.size else 0
+        self.max_level = int((base + blend).max()) if sel.size else 0
 
     @classmethod
     def compiled(cls, raster, rec: np.ndarray, threshold: float = AA_START) -> "_Minification":
-        """The same from records ``rec`` (n, 16): numpy's hypot, arctan2, cos, sin and log2
-        on the same values, the arithmetic between them in C, and the transcendental
-        functions only for triangles that may minify (``_raster.fp_candidates``)."""
+        """The same from records ``rec`` (n, 16), in C (the same operations)."""
         self = cls.__new__(cls)
         n = rec.shape[0]
-        cand, sums = np.empty(n, np.int64), np.empty((4, n))
-        count = raster.fp_candidates(rec, threshold, cand, sums)
-        u1, v1, u2, v2 = sums[:, :count]                   # a + d, c - b, a - d, c + b
-        p, q = np.hypot(u1, v1), np.hypot(u2, v2)
-        self.index = np.empty(n, np.int32)
-        m2, half, steps = np.empty(count), np.empty(count), np.empty(count, np.int64)
-        m = raster.fp_shape(cand[:count], sums, p, q, threshold, AA_MAX_STEPS, self.index, m2, half, steps)
+        self.index, ints, floats = np.empty(n, np.int32), np.empty((n, 3), np.int32), np.empty((n, 3), np.float32)
+        count, self.max_level = raster.footprints(rec, threshold, AA_MAX_STEPS, _LARGEST_FOOTPRINT, self.index,
+                                                  ints, floats)
         self.minified = self.index >= 0
-        u1, v1, u2, v2 = sums[:, :m]                       # now those of the minifying ones
-        theta = 0.5 * (np.arctan2(v2, u2) + np.arctan2(v1, u1))
-        level = np.log2(m2[:m])
-        self.ints, self.floats = np.empty((m, 3), np.int32), np.empty((m, 3), np.float32)
-        raster.fp_finish(half[:m], steps[:m], level, np.cos(theta), np.sin(theta), self.ints, self.floats)
-        self.max_level = int(np.ceil(level.max())) if m else 0
+        self.ints, self.floats = ints[:count], floats[:count]
         return self
 
 

@@ -392,11 +392,34 @@ def test_compiled_render_equals_numpy_on_warps(preset, params, kind, images, mon
         np.testing.assert_array_equal(fast, slow)
 
 
+def test_footprints_follow_the_singular_value_decomposition():
+    """The footprint's axis is J's major left singular vector (up to sign), its pyramid
+    level log2(m2) within 1e-6, from only + - * / and sqrt (no arctan2, cos, log2)."""
+    rng = np.random.default_rng(5)
+    jac = rng.normal(0, 3, (5000, 4))
+    jac[:200, 1:3] = 0                                                   # axis-aligned
+    foot = render._Minification(*jac.T)
+    u, sv, _ = np.linalg.svd(jac.reshape(-1, 2, 2))
+    assert np.array_equal(foot.minified, sv[:, 0] > render.AA_START)
+    sel = np.flatnonzero(foot.minified)
+    step = foot.floats[:, :2].astype(np.float64)
+    length = np.hypot(step[:, 0], step[:, 1])
+    moving = length > 0
+    cosine = np.abs(np.einsum("ni,ni->n", step[moving] / length[moving, None], u[sel][moving, :, 0]))
+    assert cosine.min() > 1 - 1e-6
+    m1, m2 = np.maximum(sv[sel, 0], 1.0), np.maximum(sv[sel, 1], 1.0)
+    k = np.minimum(np.maximum(2, np.ceil(2 * (m1 - m2) / m2 - 1e-9)), render.AA_MAX_STEPS)
+    m2 = np.where(np.ceil(2 * (m1 - m2) / m2 - 1e-9) > render.AA_MAX_STEPS, 2 * m1 / (render.AA_MAX_STEPS + 2), m2)
+    level = foot.ints[:, 1] + foot.floats[:, 2].astype(np.float64)
+    np.testing.assert_allclose(level, np.log2(m2), atol=1e-6)
+    assert np.array_equal(foot.ints[:, 0], np.where(2 * (m1 - m2) < 1e-3, 1, k))
+
+
 @compiled
 @pytest.mark.parametrize("scale", [0.5, 1.0, 3.0, 40.0])
 def test_compiled_footprints_equal_numpy(scale):
-    """_Minification.compiled (hypot etc. only on the candidates, the rest in C) gives
-    numpy's footprints bit for bit, also right at the threshold and for odd values."""
+    """_Minification.compiled (in C) gives numpy's footprints bit for bit, also right at
+    the threshold and for odd values (NaN, overflow, zeros)."""
     rng = np.random.default_rng(int(scale * 10))
     jac = rng.normal(0, scale, (20000, 4))
     jac[:500] = np.round(jac[:500])
