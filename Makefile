@@ -1,5 +1,5 @@
 # featurewarp: the README's commands.
-#   make install   system packages (SuiteSparse/CHOLMOD, OpenBLAS) + a venv with the package and test extras
+#   make install   system packages (SuiteSparse/CHOLMOD, OpenBLAS, a C compiler) + a venv with the package and test extras
 #   make test      the test suite
 #   make demo      every sample warped with every preset into out/ (make -j works)
 #   make bench     benchmarks (not part of make test)
@@ -28,6 +28,7 @@ install:
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
 	$(BIN)/python -m pip install -q -e '.[test]'
+	$(BIN)/python -m compileall -q featurewarp_cli warps   # an editable install is not byte-compiled
 	$(BIN)/python -c "import featurewarp_cli._cholmod, featurewarp_cli._raster; print('featurewarp installed; CHOLMOD and the compiled rasterizer in use')"
 
 test:
