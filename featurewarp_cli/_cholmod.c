@@ -25,6 +25,8 @@
 #include <stdint.h>
 #include <string.h>
 
+#include "_buffer.h"
+
 #include <cholmod.h>
 
 #ifdef CHOLMOD_LONG_INDICES
@@ -45,27 +47,6 @@ static PyObject *NotPositiveDefinite;
 /* Bytes that CHOLMOD still counted as in use when an object was freed (a leak check for
  * the tests: it must stay 0). Updated under the GIL, in the deallocators. */
 static Py_ssize_t leaked_bytes = 0;
-
-/* A C-contiguous buffer of items of `itemsize` bytes whose struct format code is among
- * `codes` (as in _raster.c). */
-static int
-get(PyObject *obj, Py_buffer *view, const char *codes, Py_ssize_t itemsize, int writable,
-    const char *name)
-{
-    int flags = PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0);
-    if (PyObject_GetBuffer(obj, view, flags) < 0)
-        return -1;
-    const char *f = view->format ? view->format : "B";
-    if (*f == '<' || *f == '=' || *f == '@')
-        f++;
-    if (view->itemsize != itemsize || f[0] == '\0' || f[1] != '\0' || !strchr(codes, f[0])) {
-        PyErr_Format(PyExc_TypeError, "%s: expected items of %zd bytes ('%s'), got '%s'",
-                     name, itemsize, codes, view->format ? view->format : "B");
-        PyBuffer_Release(view);
-        return -1;
-    }
-    return 0;
-}
 
 #define F64 "d", 8
 

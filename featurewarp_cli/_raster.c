@@ -25,6 +25,8 @@
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
+
+#include "_buffer.h"
 #if defined(__SSE2__)
 #include <emmintrin.h>
 #endif
@@ -53,27 +55,6 @@ enum { LK0, LM0, LK1, LM1, UK0, UM0, UK1, UM1, J00, J01, J10, J11, PX0, PY0, SX0
 
 static inline double max_nan(double a, double b) { return (a > b || a != a) ? a : b; }
 static inline double min_nan(double a, double b) { return (a < b || a != a) ? a : b; }
-
-/* A C-contiguous buffer with a struct format code among `codes`, of items of `itemsize`
- * bytes (any size when 0). */
-static int
-get(PyObject *obj, Py_buffer *view, const char *codes, Py_ssize_t itemsize, int writable,
-    const char *name)
-{
-    int flags = PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0);
-    if (PyObject_GetBuffer(obj, view, flags) < 0)
-        return -1;
-    const char *f = view->format ? view->format : "B";
-    if (*f == '<' || *f == '=' || *f == '@')
-        f++;
-    if ((itemsize && view->itemsize != itemsize) || f[0] == '\0' || f[1] != '\0' || !strchr(codes, f[0])) {
-        PyErr_Format(PyExc_TypeError, "%s: expected items of %zd bytes ('%s'), got '%s'",
-                     name, itemsize, codes, view->format ? view->format : "B");
-        PyBuffer_Release(view);
-        return -1;
-    }
-    return 0;
-}
 
 #define F64 "d", 8
 #define F32 "f", 4

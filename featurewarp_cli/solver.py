@@ -264,8 +264,29 @@ def _unknown_order(unknown: np.ndarray, n_unknowns: int, nx: int) -> np.ndarray:
 
 _omp = None
 _settings_lock = threading.Lock()
-_omp_users = 0
-_omp_saved = 0
+
+
+class _SharedSetting:
+    """A process-wide runtime setting held at ``value`` while any thread is inside a
+    ``with`` block of it: the first thread in sets it, the last one out restores it
+    (counted under a lock, so nested and concurrent uses are safe)."""
+
+    def __init__(self, get, set_, value):
+        self._get, self._set, self._value = get, set_, value
+        self._users, self._saved = 0, None
+
+    def __enter__(self):
+        with _settings_lock:
+            self._users += 1
+            if self._users == 1:
+                self._saved = self._get()
+                self._set(self._value)
+
+    def __exit__(self, *exc):
+        with _settings_lock:
+            self._users -= 1
+            if self._users == 0:
+                self._set(self._saved)
 
 
 def _openmp_runtime():
@@ -282,6 +303,7 @@ def _openmp_runtime():
             continue
         with _settings_lock:
             omp.per_thread = _per_thread_levels(omp)
+        omp.shared = _SharedSetting(omp.omp_get_max_active_levels, omp.omp_set_max_active_levels, 0)
         _omp = omp
         return omp
     if _cholmod is not None:                           # loaded with CHOLMOD or not at all
@@ -317,9 +339,8 @@ def _without_openmp():
     Safe in several threads at once: where the runtime keeps the setting per
     thread (libgomp does) each thread sets and restores its own; where it keeps
     one for the process, the first thread in sets it and the last one out
-    restores it (counted under a lock).
+    restores it (:class:`_SharedSetting`).
     """
-    global _omp_users, _omp_saved
     omp = _openmp_runtime()
     if omp is None:
         yield
@@ -332,23 +353,11 @@ def _without_openmp():
         finally:
             omp.omp_set_max_active_levels(levels)
         return
-    with _settings_lock:
-        _omp_users += 1
-        if _omp_users == 1:
-            _omp_saved = omp.omp_get_max_active_levels()
-            omp.omp_set_max_active_levels(0)
-    try:
+    with omp.shared:
         yield
-    finally:
-        with _settings_lock:
-            _omp_users -= 1
-            if _omp_users == 0:
-                omp.omp_set_max_active_levels(_omp_saved)
 
 
 _blas = None
-_blas_users = 0
-_blas_saved = 1
 
 
 def _openblas_runtime():
@@ -364,6 +373,7 @@ def _openblas_runtime():
                 lib.openblas_get_num_threads, lib.openblas_set_num_threads
             except (OSError, AttributeError):
                 continue
+            lib.shared = _SharedSetting(lib.openblas_get_num_threads, lib.openblas_set_num_threads, 1)
             _blas = lib
             break
     return _blas or None
@@ -371,31 +381,19 @@ def _openblas_runtime():
 
 @contextmanager
 def _single_threaded_blas():
-    """Run the system OpenBLAS on one thread (a process-wide setting; counted under a lock,
-    so nested and concurrent uses restore it once, when the last one ends).
+    """Run the system OpenBLAS on one thread (a process-wide :class:`_SharedSetting`).
 
     Two supernodal factorizations at once with OpenBLAS's own threads ran one
     after the other (its threaded calls share one server): the x and y systems
     of a 12 MP stretch (2 x 196 k unknowns) took 0.55 s either way; with one
     BLAS thread each, 0.31 s in parallel (2 cores).
     """
-    global _blas_users, _blas_saved
     blas = _openblas_runtime()
     if blas is None:
         yield
         return
-    with _settings_lock:
-        _blas_users += 1
-        if _blas_users == 1:
-            _blas_saved = blas.openblas_get_num_threads()
-            blas.openblas_set_num_threads(1)
-    try:
+    with blas.shared:
         yield
-    finally:
-        with _settings_lock:
-            _blas_users -= 1
-            if _blas_users == 0:
-                blas.openblas_set_num_threads(_blas_saved)
 
 
 def factor_concurrently(matrix, unknowns: list) -> list:
