@@ -12,8 +12,7 @@
  * factorization is 1.4 times as fast as the SuiteSparse_long one (cholmod_l_*: 68 vs 48 ms
  * at 51 k unknowns, less memory traffic), and int32 reaches far beyond featurewarp's
  * grids (nnz(L) an estimated 0.2 G at its 4 M-node limit; CHOLMOD reports
- * CHOLMOD_TOO_LARGE, a MemoryError here, past 2^31). Built with -DCHOLMOD_LONG_INDICES
- * it uses cholmod_l_* and int64 instead (the module's INDEX_BITS says which). Every object owns its own
+ * CHOLMOD_TOO_LARGE, a MemoryError here, past 2^31). Every object owns its own
  * cholmod_common (CHOLMOD's settings, statistics and workspace), so objects may be used
  * from different threads at once: the CHOLMOD calls run without the GIL, and a Factor
  * serialises the solves made on it (they share its workspace). Arrays come in as
@@ -29,19 +28,11 @@
 
 #include <cholmod.h>
 
-#ifdef CHOLMOD_LONG_INDICES
-#define CH(name) cholmod_l_##name
-typedef SuiteSparse_long Int;
-#define ITYPE CHOLMOD_LONG
-#define INT "lq", 8
-#define INDEX_MAX INT64_MAX
-#else
 #define CH(name) cholmod_##name
 typedef int32_t Int;
 #define ITYPE CHOLMOD_INT
 #define INT "i", 4
 #define INDEX_MAX INT32_MAX
-#endif
 
 static PyObject *NotPositiveDefinite;
 /* Bytes that CHOLMOD still counted as in use when an object was freed (a leak check for
@@ -550,8 +541,7 @@ PyInit__cholmod(void)
               || PyModule_AddIntConstant(m, "AMD", CHOLMOD_AMD) < 0
               || PyModule_AddIntConstant(m, "METIS", CHOLMOD_METIS) < 0
               || PyModule_AddIntConstant(m, "NESDIS", CHOLMOD_NESDIS) < 0
-              || PyModule_AddIntConstant(m, "DEFAULT", -1) < 0
-              || PyModule_AddIntConstant(m, "INDEX_BITS", 8 * sizeof(Int)) < 0;
+              || PyModule_AddIntConstant(m, "DEFAULT", -1) < 0;
     Py_XDECREF(version);
     if (bad) {
         Py_DECREF(m);

@@ -52,8 +52,8 @@ try:
     from . import _cholmod
 except ImportError:              # not built: SciPy's splu (see ReducedSystem)
     _cholmod = None
-#: Index type of the binding's triplets (int32 unless built for CHOLMOD's long API).
-INDEX = np.int64 if _cholmod is not None and _cholmod.INDEX_BITS == 64 else np.int32
+#: Index type of the binding's triplets (CHOLMOD's int API).
+INDEX = np.int32
 
 _fallback_noted = False
 
@@ -453,8 +453,8 @@ class ReducedSystem:
     ----------
     matrix : (N, N) matrix
         Symmetric positive semi-definite normal matrix L = A^T A: a
-        :class:`featurewarp_cli.system.StencilMatrix`, ``StencilWindow`` or
-        ``TripletMatrix``, or any SciPy sparse matrix (tests, benchmarks; read
+        :class:`featurewarp_cli.system.StencilMatrix` or ``StencilWindow``, or any
+        SciPy sparse matrix (tests, benchmarks; read
         with ``tocoo()``). It needs a ``dot`` method.
     unknown : (N,) int ndarray
         Unknown index of each node, or -1 for a fixed node. Several nodes may

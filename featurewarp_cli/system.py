@@ -98,7 +98,7 @@ class StencilMatrix:
     def to_scipy(self):
         """The matrix as a SciPy CSR matrix (imports SciPy; for tests and benchmarks)."""
         rows, cols, vals = self.lower_triplets()
-        return TripletMatrix.symmetric(rows, cols, vals, self.shape[0]).to_scipy()
+        return symmetric_scipy(rows, cols, vals, self.shape[0])
 
 
 class StencilWindow:
@@ -150,56 +150,18 @@ class StencilWindow:
     def to_scipy(self):
         """The matrix as a SciPy CSR matrix (imports SciPy; for tests and benchmarks)."""
         rows, cols, vals = self.lower_triplets()
-        return TripletMatrix.symmetric(rows, cols, vals, self.shape[0]).to_scipy()
+        return symmetric_scipy(rows, cols, vals, self.shape[0])
 
 
-class TripletMatrix:
-    """A sparse matrix as (row, column, value) triplets, both triangles of a symmetric one
-    (the general form; the engine itself uses :class:`StencilMatrix` and :class:`StencilWindow`).
+def symmetric_scipy(rows: np.ndarray, cols: np.ndarray, vals: np.ndarray, n: int):
+    """The symmetric n x n matrix whose lower triangle has these triplets (rows >= cols;
+    duplicates summed), as a SciPy CSR matrix (imports SciPy; for tests and benchmarks)."""
+    import scipy.sparse as sp
 
-    Parameters
-    ----------
-    rows, cols : (M,) int ndarray
-    vals : (M,) ndarray
-    n : int
-        The matrix is n x n.
-    """
-
-    def __init__(self, rows: np.ndarray, cols: np.ndarray, vals: np.ndarray, n: int):
-        self.rows = np.asarray(rows, dtype=np.int64)
-        self.cols = np.asarray(cols, dtype=np.int64)
-        self.vals = np.asarray(vals, dtype=np.float64)
-        self.shape = (int(n), int(n))
-
-    @classmethod
-    def symmetric(cls, rows, cols, vals, n: int) -> "TripletMatrix":
-        """The symmetric matrix whose lower triangle has these triplets (rows >= cols)."""
-        off = rows != cols
-        return cls(np.concatenate([rows, cols[off]]), np.concatenate([cols, rows[off]]),
-                   np.concatenate([vals, vals[off]]), n)
-
-    def dot(self, x: np.ndarray) -> np.ndarray:
-        """The product with ``x`` ((n,) or (n, k) ndarray); each row's terms are added in
-        the order of the triplets."""
-        x = np.asarray(x, dtype=np.float64)
-        n = self.shape[0]
-        if x.ndim == 1:
-            return np.bincount(self.rows, self.vals * x[self.cols], minlength=n)
-        return np.stack([np.bincount(self.rows, self.vals * x[self.cols, j], minlength=n)
-                         for j in range(x.shape[1])], axis=1).reshape(x.shape)
-
-    __matmul__ = dot
-
-    def lower_triplets(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(rows, cols, vals) of the lower triangle (rows >= cols)."""
-        low = self.rows >= self.cols
-        return self.rows[low], self.cols[low], self.vals[low]
-
-    def to_scipy(self):
-        """The matrix as a SciPy CSR matrix (imports SciPy; for tests and benchmarks)."""
-        import scipy.sparse as sp
-
-        return sp.csr_matrix((self.vals, (self.rows, self.cols)), shape=self.shape)
+    off = rows != cols
+    return sp.csr_matrix((np.concatenate([vals, vals[off]]),
+                          (np.concatenate([rows, cols[off]]), np.concatenate([cols, rows[off]]))),
+                         shape=(n, n))
 
 
 def normal_matrix(grid: Grid, weights: np.ndarray) -> StencilMatrix:
