@@ -21,9 +21,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from featurewarp_cli import render  # noqa: E402
-from featurewarp_cli.api import load_warp  # noqa: E402
-from featurewarp_cli.grid import Grid  # noqa: E402
+from featurewarp_cli.render import raster as render  # noqa: E402
+from featurewarp_cli.engine.warper import load_warp  # noqa: E402
+from featurewarp_cli.engine.grid import Grid  # noqa: E402
 
 
 def warped(image, preset, **params):

@@ -137,8 +137,8 @@ def repeat(cmd, runs, env=None):
 # --------------------------------------------------------------------------- sections
 
 def bench_table1(runs: int, grids) -> list[dict]:
-    from featurewarp_cli import solver
-    from featurewarp_cli.api import FeatureWarper, load_warp
+    from featurewarp_cli.engine import solver
+    from featurewarp_cli.engine.warper import FeatureWarper, load_warp
 
     rows = []
     print("\n(a) Table 1: seconds per stage, median of %d cold runs (paper's numbers in brackets)" % runs)
@@ -185,9 +185,9 @@ def bench_table1(runs: int, grids) -> list[dict]:
 
 
 def bench_render(runs: int, photo12: Path, mask12: Path) -> dict:
-    from featurewarp_cli import render as rnd
-    from featurewarp_cli.api import FeatureWarper, load_warp
-    from featurewarp_cli.imageio import mask_from_image, read_image
+    from featurewarp_cli.render import raster as rnd
+    from featurewarp_cli.engine.warper import FeatureWarper, load_warp
+    from featurewarp_cli.io.images import mask_from_image, read_image
 
     image = read_image(str(photo12))
     mask = mask_from_image(read_image(str(mask12)))
@@ -226,8 +226,8 @@ REWARP_ANGLES = (55.0, 65.0, 50.0, 70.0, 62.0, 58.0)
 
 def bench_rewarp(runs: int, photo1: Path, mask1: Path) -> dict:
     """Re-solve + re-render of a 1 MP swirl with new parameters, the factorization reused."""
-    from featurewarp_cli.api import FeatureWarper, load_warp
-    from featurewarp_cli.imageio import mask_from_image, read_image
+    from featurewarp_cli.engine.warper import FeatureWarper, load_warp
+    from featurewarp_cli.io.images import mask_from_image, read_image
 
     image = read_image(str(photo1))
     mask = mask_from_image(read_image(str(mask1)))

@@ -3,7 +3,7 @@
 Builds the systems that FeatureWarper factors for four cases and measures:
 
 orderings  nnz(L) and work (sum of squared column counts of L, simplicial
-           analysis) for the grid nested dissection of ``featurewarp_cli.solver``
+           analysis) for the grid nested dissection of ``featurewarp_cli.engine.solver``
            and for CHOLMOD's own orderings (AMD, METIS; NESDIS with --nesdis),
            with the analysis and numeric factorization times of each.
 factor     ``ReducedSystem(matrix, unknown)`` with the symbolic cache cleared (a
@@ -47,8 +47,9 @@ sys.path.insert(0, str(ROOT))
 import numpy as np  # noqa: E402
 
 from benchmarks.inputs import disc_mask, make_photos  # noqa: E402
-from featurewarp_cli import api, solver  # noqa: E402
-from featurewarp_cli.imageio import mask_from_image, read_image  # noqa: E402
+from featurewarp_cli.engine import warper as api
+from featurewarp_cli.engine import solver  # noqa: E402
+from featurewarp_cli.io.images import mask_from_image, read_image  # noqa: E402
 
 CASES = ("table1-1000", "table1-500", "12MP-swirl", "1MP-stretch")
 

@@ -1,15 +1,30 @@
-"""featurewarp: feature-aware image warping (Gal, Sorkine, Cohen-Or 2006, and beyond).
+"""featurewarp: warp images while the features in a mask keep their shape.
 
-The Python API lives in :mod:`featurewarp_cli.api`; importing this package is cheap
-(the numeric modules load on first use).
+Feature-aware texturing (Gal, Sorkine, Cohen-Or 2006) and beyond. The pipeline,
+one subpackage per stage::
+
+    io/       decode the image and the mask, encode and write the outputs
+    engine/   grid -> features -> W's Jacobians -> targets -> system -> factor
+              (CHOLMOD) -> solve -> fold-over guard -> quality   => Mesh
+    render/   Mesh -> inverse map (the compiled rasterizer) -> resampled image
+    app/      one file, batch, animate, compare panel, diff, report
+    cli/      the click commands
+
+Presets are plugins (:mod:`featurewarp_cli.plugins`). The public API is
+importable from here; importing this package is cheap (the numeric modules
+load on first use):
+
+>>> from featurewarp_cli import warp, FeatureWarper, Mesh
 """
 
 __version__ = "0.1.0"
 
+__all__ = ["warp", "FeatureWarper", "Mesh", "load_warp", "__version__"]
+
 
 def __getattr__(name):
     if name in {"warp", "FeatureWarper", "load_warp", "Mesh"}:
-        from . import api
+        from .engine import warper
 
-        return getattr(api, name)
-    raise AttributeError(name)
+        return getattr(warper, name)
+    raise AttributeError(f"module 'featurewarp_cli' has no attribute {name!r}")

@@ -1,5 +1,5 @@
 """``python -m featurewarp_cli``: the same as the ``featurewarp`` command."""
 
-from .cli import main
+from .cli.main import main
 
 main()

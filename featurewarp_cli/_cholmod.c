@@ -24,7 +24,7 @@
 #include <stdint.h>
 #include <string.h>
 
-#include "_buffer.h"
+#include "render/_buffer.h"
 
 #include <cholmod.h>
 

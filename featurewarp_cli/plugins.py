@@ -1,29 +1,206 @@
-"""The preset registry: entry points of the group ``featurewarp.warps``.
+"""The plugin protocol (:class:`Warp`, :class:`Param`) and the preset registry.
 
-Built-in presets are registered in this package's metadata exactly as a
-third-party package registers its own. A plugin that fails to import is
-reported as broken instead of breaking the command line.
+A preset is a subclass of :class:`Warp` registered under the entry-point group
+``featurewarp.warps``; the built-ins (in the installed package
+``featurewarp_warps``, the repository's ``warps/`` folder) are registered in this
+package's metadata exactly as a third-party package registers its own. A preset
+declares its parameters with :class:`Param` so that the command line builds
+options and help from them, and it maps points: ``warp(points)`` takes an
+``(N, 2)`` array of source pixel positions (x, y; pixel centres at integer
+coordinates) and returns their ``(N, 2)`` positions on the output canvas, whose
+size is ``warp.canvas``. Plugins import the protocol from here::
 
-Naming or loading a built-in preset does not scan the entry points:
-importing :mod:`importlib.metadata` and scanning costs about 25 ms of every
-command's start-up. The built-ins therefore always win over a third-party
-entry point of the same name.
+    from featurewarp_cli.plugins import Param, Warp
+
+A plugin that fails to import is reported as broken instead of breaking the
+command line. Naming or loading a built-in preset does not scan the entry
+points: importing :mod:`importlib.metadata` and scanning costs about 25 ms of
+every command's start-up. The built-ins therefore always win over a
+third-party entry point of the same name.
+
+Examples
+--------
+>>> import numpy as np
+>>> from featurewarp_cli.plugins import load
+>>> w = load("swirl")(640, 480, angle=120)
+>>> w.canvas
+(640, 480)
+>>> w(np.array([[319.5, 239.5]]))      # the centre does not move
+array([[319.5, 239.5]])
 """
 
 from __future__ import annotations
 
 import importlib
+import math
+from dataclasses import dataclass
 from functools import lru_cache
+from typing import TYPE_CHECKING, ClassVar
+
+if TYPE_CHECKING:                   # numpy is imported on first use: --help needs none of it
+    import numpy as np
+
+__all__ = ["Param", "Warp", "load", "names", "known", "UnknownPreset", "GROUP", "BUILTIN"]
+
+
+
+@dataclass(frozen=True)
+class Param:
+    """Declaration of one preset parameter.
+
+    Parameters
+    ----------
+    name : str
+        Python name; the option is ``--name`` (underscores become dashes).
+    type : type
+        ``float`` or ``int``.
+    default : float or int or None
+        Value when the option is not given. None means "not set".
+    help : str
+        One line for ``--help``.
+    min, max : float, optional
+        Allowed range; None means unbounded on that side.
+    min_open, max_open : bool
+        True when the bound itself is excluded.
+    metavar : str
+        Placeholder shown in help.
+    """
+
+    name: str
+    type: type
+    default: float | int | None
+    help: str
+    min: float | None = None
+    max: float | None = None
+    min_open: bool = False
+    max_open: bool = False
+    metavar: str = "F"
+
+    def range_text(self) -> str:
+        """Human-readable range, e.g. ``0 < F <= 360``."""
+        lo = "" if self.min is None else f"{self.min:g} {'<' if self.min_open else '<='} "
+        hi = "" if self.max is None else f" {'<' if self.max_open else '<='} {self.max:g}"
+        return f"{lo}{self.metavar}{hi}" if lo or hi else "any real number"
+
+    def check(self, value):
+        """Convert and validate ``value``; raise ValueError naming the problem."""
+        if value is None:
+            if self.default is None:
+                return None
+            raise ValueError(f"--{self.cli_name} needs a value")
+        if isinstance(value, bool):
+            raise ValueError(f"--{self.cli_name}: {value!r} is not a number")
+        try:
+            number = float(value)
+        except (TypeError, ValueError):
+            raise ValueError(f"--{self.cli_name}: {value!r} is not a number") from None
+        if not math.isfinite(number):
+            raise ValueError(f"--{self.cli_name}: {value!r} is not a finite number")
+        if self.type is int:
+            if number != int(number):
+                raise ValueError(f"--{self.cli_name}: {value!r} is not a whole number")
+            number = int(number)
+        too_low = self.min is not None and (number < self.min or (self.min_open and number == self.min))
+        too_high = self.max is not None and (number > self.max or (self.max_open and number == self.max))
+        if too_low or too_high:
+            raise ValueError(f"--{self.cli_name}: {number:g} is out of range ({self.range_text()})")
+        return number
+
+    @property
+    def cli_name(self) -> str:
+        return self.name.replace("_", "-")
+
+    def as_dict(self) -> dict:
+        """JSON-ready description (for ``featurewarp warps --json``)."""
+        return {
+            "name": self.name, "type": self.type.__name__, "default": self.default,
+            "min": self.min, "max": self.max, "min_open": self.min_open,
+            "max_open": self.max_open, "help": self.help,
+        }
+
+
+class Warp:
+    """Base class of a preset warp: a vectorized map of source points.
+
+    Subclasses set ``name``, ``summary``, ``params`` and implement ``_setup``
+    (derive constants and the canvas) and ``forward``.
+
+    Parameters
+    ----------
+    width, height : int
+        Size of the source image in pixels.
+    **values
+        Parameter values by name; missing ones take their declared default.
+
+    Attributes
+    ----------
+    canvas : tuple of int
+        ``(width, height)`` of the output image.
+    offset : tuple of float
+        Position of the canvas origin in the warp's own coordinates (non-zero
+        when the canvas is the bounding box of a shape, as for ``arc``).
+    values : dict
+        The validated parameter values.
+    """
+
+    name: ClassVar[str] = ""
+    summary: ClassVar[str] = ""
+    params: ClassVar[tuple[Param, ...]] = ()
+    #: Default border handling: 'slide' lets nodes move along every side that W
+    #: maps onto an axis-parallel straight line, unless W leaves the whole border
+    #: in place (all sides of a stretch; none of a swirl or bulge, whose border
+    #: stays put, or of an arc, whose sides are arcs and oblique rays), so a
+    #: feature cut by the border keeps its shape while the canvas stays exact.
+    #: 'fixed' pins every border node to W (the paper). A preset may override it.
+    boundary: ClassVar[str] = "slide"
+
+    def __init__(self, width: int, height: int, /, **values):
+        if width < 1 or height < 1:
+            raise ValueError(f"image size {width}x{height} is empty")
+        known = {p.name for p in self.params}
+        unknown = set(values) - known
+        if unknown:
+            raise ValueError(f"{self.name}: unknown parameter(s) {', '.join(sorted(unknown))}")
+        self.width, self.height = int(width), int(height)
+        self.values = {p.name: p.check(values.get(p.name, p.default)) for p in self.params}
+        self.offset = (0.0, 0.0)
+        self.canvas = (self.width, self.height)
+        self._setup(**self.values)
+
+    def _setup(self, **values) -> None:
+        """Derive constants and set ``self.canvas`` (and ``self.offset``)."""
+
+    def forward(self, points: np.ndarray) -> np.ndarray:
+        """Map ``(N, 2)`` source positions to ``(N, 2)`` canvas positions."""
+        raise NotImplementedError
+
+    def __call__(self, points) -> np.ndarray:
+        import numpy as np
+
+        points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+        return self.forward(points)
+
+    def __repr__(self) -> str:
+        args = ", ".join(f"{k}={v!r}" for k, v in self.values.items())
+        return f"{type(self).__name__}({self.width}, {self.height}, {args})"
+
+
+def centre(width: int, height: int) -> np.ndarray:
+    """Centre of an image in pixel-centre coordinates."""
+    import numpy as np
+
+    return np.array([(width - 1) / 2.0, (height - 1) / 2.0])
+
 
 GROUP = "featurewarp.warps"
 
 #: The built-in presets: name -> ``module:attribute``, as in pyproject.toml's entry points
 #: (tests/test_presets.py checks that the two agree).
 BUILTIN = {
-    "stretch": "warps.stretch:Stretch",
-    "arc": "warps.arc:Arc",
-    "swirl": "warps.swirl:Swirl",
-    "bulge": "warps.bulge:Bulge",
+    "stretch": "featurewarp_warps.stretch:Stretch",
+    "arc": "featurewarp_warps.arc:Arc",
+    "swirl": "featurewarp_warps.swirl:Swirl",
+    "bulge": "featurewarp_warps.bulge:Bulge",
 }
 
 

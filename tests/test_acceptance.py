@@ -11,7 +11,7 @@ import cv2
 import numpy as np
 import pytest
 
-from featurewarp_cli.api import warp
+from featurewarp_cli.engine.warper import warp
 from shapes import SHAPES, area, distortions, scene
 
 CASES = [

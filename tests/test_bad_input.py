@@ -18,7 +18,7 @@ import cv2
 import numpy as np
 import pytest
 
-from featurewarp_cli import imageio
+from featurewarp_cli.io import images as imageio
 from test_cli import SIZE, listing, runner, save, square_mask, textured  # noqa: F401  (fixture)
 
 # --- building odd files ---------------------------------------------------------------------

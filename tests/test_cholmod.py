@@ -11,9 +11,10 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 import pytest
 
-from featurewarp_cli import solver, system
-from featurewarp_cli.api import AxisSystems, FeatureWarper, load_warp
-from featurewarp_cli.grid import Grid
+from featurewarp_cli.engine import solver
+from featurewarp_cli.engine import system
+from featurewarp_cli.engine.warper import AxisSystems, FeatureWarper, load_warp
+from featurewarp_cli.engine.grid import Grid
 
 cholmod = pytest.importorskip("featurewarp_cli._cholmod")
 INDEX = solver.INDEX             # the binding's index type (int32)
@@ -160,7 +161,7 @@ def grid_problem(width=160, height=120, cell=4):
     grid = Grid.for_image(width, height, cell)
     yy, xx = np.mgrid[0:height, 0:width]
     mask = (xx - 60) ** 2 + (yy - 50) ** 2 < 25 ** 2
-    from featurewarp_cli import features as feat
+    from featurewarp_cli.engine import features as feat
 
     features = feat.analyse(mask, grid, 10.0, 2.0)
     matrix = system.normal_matrix(grid, features.weight)
@@ -229,7 +230,7 @@ def test_openmp_and_blas_settings_are_restored_after_threads():
 
 def test_the_engine_does_not_import_scipy():
     code = ("import sys, numpy as np\n"
-            "from featurewarp_cli.api import warp\n"
+            "from featurewarp_cli.engine.warper import warp\n"
             "image = np.zeros((90, 120, 3), np.uint8)\n"
             "mask = np.zeros((90, 120), bool); mask[30:60, 40:80] = True\n"
             "warp(image, mask, 'stretch', sx=1.5)\n"

@@ -20,8 +20,9 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from featurewarp_cli import imageio, plugins
-from featurewarp_cli.cli import main
+from featurewarp_cli.io import images as imageio
+from featurewarp_cli import plugins
+from featurewarp_cli.cli.main import main
 
 SIZE = (48, 36)                      # width, height of the test images: small, so a warp takes ms
 FORMATS = ("png", "jpg", "webp", "tiff", "bmp")
@@ -245,7 +246,7 @@ def test_a_failure_leaves_the_existing_output_untouched(runner, tmp_path, monkey
         raise OSError(28, "No space left on device")
 
     target = {"encode": (imageio, "encode_image"), "write": (os, "fdopen"), "rename": (os, "replace"),
-              "solve": (__import__("featurewarp_cli.api").api.FeatureWarper, "solve")}[where]
+              "solve": (__import__("featurewarp_cli.engine.warper").engine.warper.FeatureWarper, "solve")}[where]
     monkeypatch.setattr(*target, boom)
     before = listing(tmp_path)
     run = runner("warp", "swirl", image, out, "-m", mask)
@@ -310,10 +311,10 @@ def test_warps_json(runner):
 
 
 def test_help_is_fast_and_consistent():
-    from featurewarp_cli import cli
+    from featurewarp_cli.cli import main as cli
 
     assert cli.MAX_PIXELS == imageio.MAX_PIXELS
-    code = "import sys, featurewarp_cli.cli; print('cv2' in sys.modules)"
+    code = "import sys, featurewarp_cli.cli.main; print('cv2' in sys.modules)"
     imported = subprocess.run([sys.executable, "-c", code], capture_output=True, timeout=60)
     assert imported.stdout.strip() == b"False"        # --help does not load OpenCV
 
@@ -350,7 +351,7 @@ def test_real_pipe_end_to_end(tmp_path):
 def test_python_warnings_are_one_line(runner, tmp_path, monkeypatch):
     import warnings
 
-    from featurewarp_cli import batch
+    from featurewarp_cli.app import pipeline as batch
 
     def warn_then_transparent(text, fmt):
         warnings.warn("overflow encountered in divide", RuntimeWarning)

@@ -7,7 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from featurewarp_cli import diff, imageio
+from featurewarp_cli.app import diff
+from featurewarp_cli.io import images as imageio
 from test_cli import runner, save, textured  # noqa: F401  (fixture)
 
 

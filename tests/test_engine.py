@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from featurewarp_cli import plugins
-from featurewarp_cli.api import FeatureWarper, load_warp, warp
-from featurewarp_cli.grid import signed_areas
-from warps import Param, Warp
+from featurewarp_cli.engine.warper import FeatureWarper, load_warp, warp
+from featurewarp_cli.engine.grid import signed_areas
+from featurewarp_cli.plugins import Param, Warp
 
 FORMULATIONS = ["exact", "paper"]
 PRESET_CASES = [

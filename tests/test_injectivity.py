@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from featurewarp_cli import injectivity
-from featurewarp_cli.api import FeatureWarper, load_warp
-from featurewarp_cli.grid import Grid, signed_areas
+from featurewarp_cli.engine import injectivity
+from featurewarp_cli.engine.warper import FeatureWarper, load_warp
+from featurewarp_cli.engine.grid import Grid, signed_areas
 
 W, H = 160, 120
 

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from featurewarp_cli import plugins
-from featurewarp_cli.api import load_warp
-from featurewarp_cli.grid import Grid, signed_areas
-from warps import Param
+from featurewarp_cli.engine.warper import load_warp
+from featurewarp_cli.engine.grid import Grid, signed_areas
+from featurewarp_cli.plugins import Param
 
 W, H = 160, 120
 

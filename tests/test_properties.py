@@ -18,8 +18,10 @@ import pytest
 from hypothesis import HealthCheck, assume, event, given, settings
 from hypothesis import strategies as st
 
-from featurewarp_cli import diff, imageio, plugins
-from featurewarp_cli.api import FeatureWarper
+from featurewarp_cli.app import diff
+from featurewarp_cli.io import images as imageio
+from featurewarp_cli import plugins
+from featurewarp_cli.engine.warper import FeatureWarper
 
 PRESETS = plugins.names()
 INT_CAP = 256                   # largest integer parameter drawn (they are pixel sizes)

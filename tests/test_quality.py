@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 import shapes
-from featurewarp_cli.api import FeatureWarper, load_warp
-from featurewarp_cli.grid import signed_areas
+from featurewarp_cli.engine.warper import FeatureWarper, load_warp
+from featurewarp_cli.engine.grid import signed_areas
 
 
 @pytest.fixture(scope="module")

@@ -6,9 +6,9 @@ import cv2
 import numpy as np
 import pytest
 
-from featurewarp_cli import render
-from featurewarp_cli.api import FeatureWarper, load_warp, warp
-from featurewarp_cli.grid import Grid
+from featurewarp_cli.render import raster as render
+from featurewarp_cli.engine.warper import FeatureWarper, load_warp, warp
+from featurewarp_cli.engine.grid import Grid
 
 W, H = 160, 120
 
@@ -262,7 +262,7 @@ def test_gray_with_transparent_background_gains_alpha(images):
 
 # --- the compiled rasterizer against the numpy code --------------------------------------------
 
-compiled = pytest.mark.skipif(render._raster is None, reason="featurewarp_cli._raster is not built")
+compiled = pytest.mark.skipif(render._raster is None, reason="featurewarp_cli.render._raster is not built")
 
 
 @pytest.fixture

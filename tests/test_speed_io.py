@@ -13,8 +13,12 @@ import cv2
 import numpy as np
 import pytest
 
-from featurewarp_cli import features, fidelity, imageio, plugins, quality
-from featurewarp_cli.grid import Grid, signed_areas
+from featurewarp_cli.engine import features
+from featurewarp_cli.engine import fidelity
+from featurewarp_cli.io import images as imageio
+from featurewarp_cli import plugins
+from featurewarp_cli.engine import quality
+from featurewarp_cli.engine.grid import Grid, signed_areas
 
 
 # --------------------------------------------------------------------------- PNG writer
@@ -139,13 +143,13 @@ def test_mask_threshold_is_the_float_comparison(rng, dtype, channels):
 
 def test_builtin_table_matches_the_entry_points():
     """plugins.BUILTIN lists exactly what pyproject.toml registers for this package."""
-    registered = {ep.name: ep.value for ep in plugins.entry_points() if ep.value.startswith("warps.")}
+    registered = {ep.name: ep.value for ep in plugins.entry_points() if ep.value.startswith("featurewarp_warps.")}
     assert registered == plugins.BUILTIN
 
 
 def test_warp_command_does_not_scan_entry_points():
     """Resolving and loading a built-in preset imports no importlib.metadata."""
-    code = ("import sys; from featurewarp_cli import cli, plugins; "
+    code = ("import sys; from featurewarp_cli.cli import main as cli; from featurewarp_cli import plugins; "
             "assert cli.PresetGroup(name='warp').get_command(None, 'swirl') is not None; "
             "print('importlib.metadata' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
@@ -239,7 +243,7 @@ def test_feature_pooling_is_a_max_over_each_quads_pixels(rng):
 @pytest.mark.parametrize("cell", [1.0, 3.0, 4.0, 9.5])
 def test_quad_jacobians_are_the_einsum_numbers(rng, cell):
     """targets.quad_jacobians is bit for bit einsum over the gathered corners, as first written."""
-    from featurewarp_cli import targets
+    from featurewarp_cli.engine import targets
 
     grid = Grid.for_image(203, 121, cell)
     warped = grid.nodes() @ rng.normal(size=(2, 2)) + rng.normal(0, cell, (grid.n_nodes, 2))
@@ -266,7 +270,7 @@ def test_input_decodes_while_the_mesh_is_solved(tmp_path, monkeypatch):
     import cv2
     import numpy as np
 
-    from featurewarp_cli import batch
+    from featurewarp_cli.app import pipeline as batch
 
     rng = np.random.default_rng(3)
     image = rng.integers(0, 255, (36, 48, 3), dtype=np.uint8)

@@ -8,10 +8,12 @@ import pytest
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from featurewarp_cli import features as feat
-from featurewarp_cli import render, solver, system
-from featurewarp_cli.api import load_warp
-from featurewarp_cli.grid import Grid
+from featurewarp_cli.engine import features as feat
+from featurewarp_cli.render import raster as render
+from featurewarp_cli.engine import solver
+from featurewarp_cli.engine import system
+from featurewarp_cli.engine.warper import load_warp
+from featurewarp_cli.engine.grid import Grid
 
 
 def mesh_for(width, height, preset, cell=4, **params):
@@ -404,7 +406,7 @@ def test_other_masks_of_the_same_size_reuse_the_analysis_with_soft_features():
     (The exact formulation ties each feature's nodes to one unknown, so its pattern
     depends on the mask; it reuses the analysis for the same mask only.)"""
     pytest.importorskip("featurewarp_cli._cholmod")
-    from featurewarp_cli.api import FeatureWarper
+    from featurewarp_cli.engine.warper import FeatureWarper
 
     y, x = np.mgrid[0:120, 0:160]
     masks = [(x - 50) ** 2 + (y - 60) ** 2 < 20**2, (abs(x - 110) < 25) & (abs(y - 40) < 15)]

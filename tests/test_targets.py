@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from featurewarp_cli import targets
-from featurewarp_cli.features import Features
-from featurewarp_cli.grid import Grid
+from featurewarp_cli.engine import targets
+from featurewarp_cli.engine.features import Features
+from featurewarp_cli.engine.grid import Grid
 
 
 def rotation(deg):

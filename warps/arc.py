@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from . import Param, Warp
+from featurewarp_cli.plugins import Param, Warp
 
 
 class Arc(Warp):

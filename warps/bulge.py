@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import Param, Warp, centre
+from featurewarp_cli.plugins import Param, Warp, centre
 
 
 class Bulge(Warp):

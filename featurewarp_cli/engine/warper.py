@@ -3,7 +3,7 @@
 Examples
 --------
 >>> import numpy as np
->>> from featurewarp_cli.api import FeatureWarper, load_warp, warp
+>>> from featurewarp_cli import FeatureWarper, load_warp, warp
 >>> image = np.zeros((120, 160, 3), np.uint8)
 >>> mask = np.zeros((120, 160), bool); mask[40:80, 60:100] = True
 >>> out = warp(image, mask, "stretch", sy=2)
@@ -30,7 +30,7 @@ import numpy as np
 
 from . import features as feat
 from . import fidelity, injectivity, quality, system, targets
-from . import render as rnd
+from ..render import raster as rnd
 from .grid import Grid, signed_areas
 from .solver import ReducedSystem, factor_concurrently
 
@@ -58,7 +58,7 @@ WINDOW_MAX_FRACTION = 0.5
 
 def load_warp(name: str):
     """The preset class registered under ``name`` in the ``featurewarp.warps`` group."""
-    from .plugins import load
+    from ..plugins import load
 
     return load(name)
 
@@ -513,7 +513,7 @@ class FeatureWarper:
 
     def render(self, image: np.ndarray, mesh: Mesh, interp: str = "cubic", background=None,
                antialias: bool = True) -> np.ndarray:
-        """Resample ``image`` through ``mesh``; see :func:`featurewarp_cli.render.render`.
+        """Resample ``image`` through ``mesh``; see :func:`featurewarp_cli.render.raster.render`.
 
         With ``antialias`` (default) regions the warp shrinks are prefiltered and the
         mesh's silhouette gets partial coverage (alpha, or a blend with ``background``).

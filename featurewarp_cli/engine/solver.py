@@ -15,7 +15,7 @@ indexing and :func:`numpy.bincount`.
 Ordering
 --------
 When L has the pattern of a grid's 5-point Laplacian (what
-:func:`featurewarp_cli.system.normal_matrix` builds: offsets 0, +-1 and +-nx),
+:func:`featurewarp_cli.engine.system.normal_matrix` builds: offsets 0, +-1 and +-nx),
 the free unknowns are numbered in a geometric nested-dissection order of the
 grid cut along diagonals (:func:`grid_nested_dissection`); the shared unknowns
 of tied features, each coupled to every node around its feature, come after
@@ -49,7 +49,7 @@ from contextlib import contextmanager
 import numpy as np
 
 try:
-    from . import _cholmod
+    from .. import _cholmod
 except ImportError:              # not built: SciPy's splu (see ReducedSystem)
     _cholmod = None
 #: Index type of the binding's triplets (CHOLMOD's int API).
@@ -200,7 +200,7 @@ def _grid_width(row: np.ndarray, col: np.ndarray, n: int, nx: int | None = None)
     the pattern of an (n/nx) x nx grid's 5-point stencil (offsets 0, 1, nx), else None.
 
     ``nx``: the grid width when the matrix is known to be a grid's stencil
-    (:class:`featurewarp_cli.system.StencilMatrix`); the entries are then not inspected.
+    (:class:`featurewarp_cli.engine.system.StencilMatrix`); the entries are then not inspected.
     """
     if nx is not None:
         return nx if nx >= 2 and n >= 4 and n > nx else None
@@ -453,7 +453,7 @@ class ReducedSystem:
     ----------
     matrix : (N, N) matrix
         Symmetric positive semi-definite normal matrix L = A^T A: a
-        :class:`featurewarp_cli.system.StencilMatrix` or ``StencilWindow``, or any
+        :class:`featurewarp_cli.engine.system.StencilMatrix` or ``StencilWindow``, or any
         SciPy sparse matrix (tests, benchmarks; read
         with ``tocoo()``). It needs a ``dot`` method.
     unknown : (N,) int ndarray

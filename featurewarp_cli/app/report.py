@@ -6,7 +6,7 @@ import os
 
 import numpy as np
 
-from . import __version__
+from .. import __version__
 
 
 def image_summary(path: str, image: np.ndarray) -> dict:
@@ -29,7 +29,7 @@ def build_report(input_path, output_path, image, result, warp, mesh, timings) ->
     image, result : ndarray
         Input and output images.
     warp : warps.Warp
-    mesh : featurewarp_cli.api.Mesh
+    mesh : featurewarp_cli.engine.warper.Mesh
     timings : dict
         Seconds per stage.
 

@@ -14,8 +14,9 @@ import time
 import cv2
 import numpy as np
 
-from . import fidelity, imageio
-from .batch import Settings, WarpError, background_colour, load_image_and_mask, make_warper, prefetch_engine
+from ..engine import fidelity
+from ..io import images as imageio
+from .pipeline import Settings, WarpError, background_colour, load_image_and_mask, make_warper, prefetch_engine
 
 ANIMATED = {".gif", ".webp", ".png", ".apng"}
 VIDEO = {".mp4": "mp4v", ".avi": "MJPG"}

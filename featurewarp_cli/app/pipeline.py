@@ -16,10 +16,11 @@ import threading
 import time
 from dataclasses import dataclass, field
 
-from . import imageio, plugins
+from .. import plugins
+from ..io import images as imageio
 
 #: The module that :func:`prefetch_engine` imports: the solver (with the CHOLMOD binding) and renderer.
-ENGINE = "featurewarp_cli.api"
+ENGINE = "featurewarp_cli.engine.warper"
 
 
 class WarpError(Exception):
@@ -54,7 +55,7 @@ class Settings:
     params : dict
         The preset's parameter values by name.
     mode, cell, feature_weight, decay, formulation, boundary
-        See :class:`featurewarp_cli.api.FeatureWarper`.
+        See :class:`featurewarp_cli.engine.warper.FeatureWarper`.
     background : str or None
         Colour text for uncovered pixels (see :func:`imageio.parse_colour`);
         None: transparent where the format has alpha, else white.
@@ -236,7 +237,7 @@ class _Ready:
 
 def make_warper(settings: Settings, width: int, height: int, feature_mask):
     """The preset's warp for this image size and a FeatureWarper (bad options: WarpError)."""
-    from .api import FeatureWarper
+    from ..engine.warper import FeatureWarper
 
     try:
         preset = plugins.load(settings.preset)

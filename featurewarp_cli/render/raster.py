@@ -25,7 +25,7 @@ are applied on the way:
 antialiasing, kept for callers that want the map itself.
 
 The per-triangle and per-pixel loops (triangle setup, scanline filling, the
-filter's probes and sums) run in the compiled module :mod:`featurewarp_cli._raster`,
+filter's probes and sums) run in the compiled module :mod:`featurewarp_cli.render._raster`,
 which reproduces the numpy code here bit for bit; when it is not built, the
 numpy code runs instead (slower), with one notice on stderr per process.
 """
@@ -95,7 +95,7 @@ class _Triangles:
     bit-identical bounds: every pixel centre is claimed by at least one of them
     (no cracks) and, off the edge, by one.
 
-    With ``compiled`` (the :mod:`featurewarp_cli._raster` module) only
+    With ``compiled`` (the :mod:`featurewarp_cli.render._raster` module) only
     ``index``, the row ranges and the nodes (``corners``, int32) are stored,
     stably sorted by first row with ``sort`` (the order the bands rasterize them
     in), and :meth:`records` computes the rest for a range of them, in C.

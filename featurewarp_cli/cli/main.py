@@ -1,6 +1,6 @@
 """The ``featurewarp`` command line: parses, checks and prints; the work lives elsewhere.
 
-``warp`` and ``batch`` run :func:`featurewarp_cli.batch.warp_file`; ``diff`` uses
+``warp`` and ``batch`` run :func:`featurewarp_cli.app.pipeline.warp_file`; ``diff`` uses
 :mod:`featurewarp_cli.diff`. Numeric modules are imported inside the commands so
 that ``--help`` stays fast. Only image bytes ever go to stdout when OUTPUT is ``-``;
 every message goes to stderr.
@@ -16,7 +16,7 @@ import warnings
 
 import click
 
-from . import __version__, plugins
+from .. import __version__, plugins
 
 MODES = ("similarity", "rigid", "plain")
 INTERPOLATIONS = ("linear", "cubic", "lanczos")
@@ -124,7 +124,7 @@ def preset_options(preset) -> list[click.Option]:
 
 def settings_from(preset, kwargs: dict):
     """Split a preset command's keyword arguments into Settings, quiet and verbose."""
-    from .batch import Settings
+    from ..app.pipeline import Settings
 
     quiet, verbose = kwargs.pop("quiet"), kwargs.pop("verbose")
     if quiet and verbose:
@@ -134,7 +134,7 @@ def settings_from(preset, kwargs: dict):
 
 
 def click_error(err) -> click.ClickException:
-    """The click exception for a :class:`featurewarp_cli.batch.WarpError` (usage: exit 2, else 1)."""
+    """The click exception for a :class:`featurewarp_cli.app.pipeline.WarpError` (usage: exit 2, else 1)."""
     if err.usage:
         if err.param:
             return click.BadParameter(err.message, param_hint=f"'{err.param}'")
@@ -181,7 +181,7 @@ def warp_command(preset) -> click.Command:
     params += engine_options() + preset_options(preset)
 
     def callback(input, output, mask, report, save_grid, draw_grid, **kwargs):
-        from .batch import WarpError, warp_file
+        from ..app.pipeline import WarpError, warp_file
 
         settings, quiet, verbose = settings_from(preset, kwargs)
         try:
@@ -214,8 +214,8 @@ def batch_command(preset) -> click.Command:
     params += engine_options() + preset_options(preset)
 
     def callback(inputs, out_dir, mask_pattern, suffix, jobs, **kwargs):
-        from .batch import WarpError, plan, run_batch
-        from .imageio import format_name
+        from ..app.pipeline import WarpError, plan, run_batch
+        from ..io.images import format_name
 
         settings, quiet, verbose = settings_from(preset, kwargs)
         try:
@@ -287,7 +287,7 @@ def compare_command(preset) -> click.Command:
     params += [o for o in engine_options() if o.name != "mode"] + preset_options(preset)
 
     def callback(input, output, mask, draw_grid, **kwargs):
-        from .batch import WarpError, compare_file
+        from ..app.pipeline import WarpError, compare_file
 
         kwargs["mode"] = "similarity"
         settings, quiet, verbose = settings_from(preset, kwargs)
@@ -319,8 +319,8 @@ def animate_command(preset) -> click.Command:
     params += [o for o in engine_options() if o.name != "fmt"] + preset_options(preset)
 
     def callback(input, output, mask, vary, frames, fps, **kwargs):
-        from .animate import animate_file, parse_vary
-        from .batch import WarpError
+        from ..app.animate import animate_file, parse_vary
+        from ..app.pipeline import WarpError
 
         kwargs["fmt"] = None
         settings, quiet, verbose = settings_from(preset, kwargs)
@@ -457,8 +457,9 @@ def diff_command(a, b, max_rmse, min_psnr, max_pixels_off, tolerance, diff_image
     counts differ. Without --max-rmse, --min-psnr or --max-pixels-off the images
     must match within --tolerance everywhere. One of A and B may be '-' (stdin).
     """
-    from . import diff, imageio
-    from .batch import WarpError, read_input
+    from ..app import diff
+    from ..io import images as imageio
+    from ..app.pipeline import WarpError, read_input
 
     if a == "-" and b == "-":
         raise click.UsageError("only one of A and B can be '-' (stdin)")
