@@ -90,6 +90,10 @@ class Ties:
         held[on] = self.tied[comp[on]] & (self.pin[comp[on], axis] >= 0)
         return held
 
+    def project(self, ab: np.ndarray) -> np.ndarray:
+        """The nearest admissible (a, b) to each of ``ab`` ((C, 2)): base + N N^T (ab - base)."""
+        return self.base + np.einsum("cij,ckj,ck->ci", self.basis, self.basis, ab - self.base)
+
     def columns(self) -> tuple[np.ndarray, np.ndarray]:
         """(component, direction) of each entry of eta."""
         comp, k = np.nonzero(np.arange(2)[None, :] < np.where(self.tied, self.free, 0)[:, None])

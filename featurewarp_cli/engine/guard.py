@@ -53,6 +53,9 @@ class GuardRecord:
         1: released features at their own shape; 0: at the warp's.
     fallback : bool
         Nothing injective was found; the result is a step from W towards the solution.
+    plain_blend : float
+        1: the solution as found; below 1: every node moved this far from W towards it,
+        so that no component is more distorted than under W.
     """
 
     flipped_before: int = 0
@@ -62,6 +65,7 @@ class GuardRecord:
     released_components: list = field(default_factory=list)
     feature_blend: float = 1.0
     fallback: bool = False
+    plain_blend: float = 1.0
 
 
 @dataclass

@@ -52,14 +52,18 @@ def similarity_fits(source: np.ndarray, target: np.ndarray, labels: np.ndarray, 
 
 
 def triangle_anisotropy(source: np.ndarray, target: np.ndarray, triangles: np.ndarray) -> np.ndarray:
-    """Ratio of the larger to the smaller singular value of each triangle's affine map, (M,)."""
+    """Ratio of the larger to the smaller singular value of each triangle's affine map, (M,)
+    (inf for a degenerate image)."""
     s = source[triangles]
     t = target[triangles]
     ds = np.stack([s[:, 1] - s[:, 0], s[:, 2] - s[:, 0]], axis=2)      # (M, 2, 2) columns = edges
     dt = np.stack([t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]], axis=2)
     jac = dt @ np.linalg.inv(ds)
-    sv = np.linalg.svd(jac, compute_uv=False)
-    return sv[:, 0] / np.maximum(sv[:, 1], 1e-12)
+    # Singular values in closed form (see targets.singular_values).
+    p = np.hypot(jac[:, 0, 0] + jac[:, 1, 1], jac[:, 1, 0] - jac[:, 0, 1])
+    q = np.hypot(jac[:, 0, 0] - jac[:, 1, 1], jac[:, 1, 0] + jac[:, 0, 1])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(np.abs(p - q) > 1e-12 * (p + q), (p + q) / np.abs(p - q), np.inf)
 
 
 def background_rms(target: np.ndarray, warped: np.ndarray, quads: np.ndarray) -> float:

@@ -112,6 +112,7 @@ class SolveRecord:
             "released_components": list(guard.released_components),
             "feature_blend": guard.feature_blend,
             "fallback": guard.fallback,
+            "plain_blend": guard.plain_blend,
             "quality": self.quality,
             "flipped_triangles": self.flipped_triangles,
             "warnings": list(self.warnings),

@@ -26,6 +26,7 @@ import math
 import time
 from dataclasses import dataclass, field
 
+import cv2
 import numpy as np
 
 from . import components, fidelity, guard, quality, system, targets
@@ -42,6 +43,8 @@ BOUNDARIES = ("fixed", "slide")
 #: than NO_OP_WARP px is reported as "the output is the input".
 NO_OP_OUTPUT = 1.0
 NO_OP_WARP = 5.0
+#: ... or within this fraction of W's largest displacement (a swirl pinned by a frame-filling feature).
+NO_OP_FRACTION = 0.05
 
 
 def load_warp(name: str):
@@ -345,15 +348,21 @@ class FeatureWarper:
             self.timings["rhs"] = self.timings.get("rhs", 0.0) + time.perf_counter() - t0
             return edges, rhs, offset
 
-        edges, rhs, offset = constants(ab, ties)
-        x = systems.solve(rhs, offset)
+        def solve(ab):
+            edges, rhs, offset = constants(ab, ties)
+            t0 = time.perf_counter()
+            x = systems.solve(rhs, offset)
+            self.timings["solve"] = self.timings.get("solve", 0.0) + time.perf_counter() - t0
+            return x, edges, rhs, offset
+
+        x, edges, rhs, offset = solve(ab)
         scale_solver = self._scale_solver(state, ties, systems)
         if scale_solver is not None and scale_solver.n_columns:
             gradient = scale_solver.gradient(x, rhs, edges, features, grid.spacing)
             weights = components.prior_weights(features, grid.spacing, self.scale_prior)
-            ab = np.where(ties.tied[:, None], scale_solver.solve(ties.base, gradient, prior, weights), prior)
-            edges, rhs, offset = constants(ab, ties)
-            x = systems.solve(rhs, offset)
+            optimum = np.where(ties.tied[:, None], scale_solver.solve(ties.base, gradient, prior, weights), prior)
+            safe = np.where(ties.tied[:, None], ties.project(prior * _safe_scale(jac, features, prior)), prior)
+            ab, (x, edges, rhs, offset) = _fitting_scales(solve, safe, optimum, state.triangles, warped)
         if not self.injective:
             return x, ties.tied
 
@@ -366,9 +375,13 @@ class FeatureWarper:
         problem = guard.Problem(grid, features, state.triangles, warped, state.normal, state.stiffness,
                                 _window_fixed(state, ties), _window_ties(ties), systems, rhs, offset, edges,
                                 warp_edges, rebuild, self.timings)
+        counted = sum(self.timings.get(k, 0.0) for k in ("solve", "factor", "rhs"))
         t0 = time.perf_counter()
         x = guard.guard(problem, x, record.guard)
-        self.timings["guard"] = time.perf_counter() - t0 - self.timings.get("solve_in_guard", 0.0)
+        if self.formulation == "exact":            # the paper's soft targets are kept as published
+            x = _no_worse_than_plain(state, x, warped, record.guard)
+        inner = sum(self.timings.get(k, 0.0) for k in ("solve", "factor", "rhs")) - counted
+        self.timings["guard"] = time.perf_counter() - t0 - inner      # what the solves inside it did not take
         released = np.isin(np.arange(ties.tied.size), record.guard.released_components)
         return x, ties.tied & ~released
 
@@ -424,6 +437,108 @@ class FeatureWarper:
         return out
 
 
+#: Smallest area, relative to W's, that the scale search lets a triangle keep.
+SCALE_FLOOR = 0.05
+#: Bisection steps of the scale search (and of the move towards W).
+SCALE_BISECTIONS = 8
+#: Cells over which the move towards W tapers off around an offending component.
+TAPER_CELLS = 3
+
+
+def _safe_scale(jac: np.ndarray, features, prior: np.ndarray) -> np.ndarray:
+    """Per component, the factor from the prior's scale down to the warp's smallest principal
+    scale over it (the paper's lambda): a size at which a feature fits wherever W fits it. (C, 1)"""
+    low = targets.paper_scales(jac, features)
+    return (np.minimum(low, np.hypot(prior[:, 0], prior[:, 1])) / np.maximum(np.hypot(prior[:, 0], prior[:, 1]),
+                                                                           1e-12))[:, None]
+
+
+def _fitting_scales(solve, safe: np.ndarray, optimum: np.ndarray, triangles, warped):
+    """The features' similarities: the least-squares ``optimum`` when its solution keeps every
+    triangle above :data:`SCALE_FLOOR` of its area under W; else the furthest point from
+    ``safe`` towards it that does (bisection), or ``safe`` itself.
+
+    Scale and rotation give way before shape: a feature that cannot grow as far as
+    least squares would like stays a similarity, only smaller.
+
+    Returns (ab, solve(ab))."""
+    floor = SCALE_FLOOR * signed_areas(warped, triangles)
+
+    def fits(result):
+        return bool(np.all(signed_areas(result[0], triangles) >= floor))
+
+    best = solve(optimum)
+    if fits(best) or np.allclose(safe, optimum):
+        return optimum, best
+    lo, hi, best_ab = 0.0, 1.0, safe
+    best = solve(safe)
+    if not fits(best):
+        return optimum, solve(optimum)
+    for _ in range(SCALE_BISECTIONS):
+        mid = 0.5 * (lo + hi)
+        ab = safe + mid * (optimum - safe)
+        result = solve(ab)
+        if fits(result):
+            lo, best, best_ab = mid, result, ab
+        else:
+            hi = mid
+    return best_ab, best
+
+
+def _worst_per_component(state: _GridState, points: np.ndarray) -> np.ndarray:
+    """Worst anisotropy of each component's triangles under node positions ``points``: (C,)."""
+    on = state.tri_component >= 0
+    worst = np.zeros(state.features.n_components)
+    np.maximum.at(worst, state.tri_component[on],
+                  quality.triangle_anisotropy(state.nodes, points, state.triangles[on]))
+    return worst
+
+
+def _no_worse_than_plain(state: _GridState, x: np.ndarray, warped: np.ndarray, record) -> np.ndarray:
+    """``x``, or ``x`` moved towards W around the components that came out more anisotropic
+    than under W, as little as makes every component no worse than W without folds.
+
+    The move is ``(1 - t) w (W - x)`` with ``w`` 1 on the offending components' constrained
+    quads, tapering to 0 over :data:`TAPER_CELLS` cells, and t bisected; where no such t
+    exists, every node moves evenly towards W."""
+    plain = _worst_per_component(state, warped) * (1.0 + 1e-9) + 1e-9
+    if np.any(signed_areas(warped, state.triangles) <= 0):
+        return x
+    bad = _worst_per_component(state, x) > plain
+    if not bad.any():
+        return x
+
+    def ok(points):
+        return (bool(np.all(_worst_per_component(state, points) <= plain))
+                and not np.any(signed_areas(points, state.triangles) <= 0))
+
+    features, grid = state.features, state.grid
+    region = (features.component >= 0) & bad[np.maximum(features.component, 0)]
+    nodes = np.zeros(grid.n_nodes)
+    nodes[grid.quads()[region].ravel()] = 1.0
+    size = 2 * TAPER_CELLS + 1
+    weight = np.maximum(nodes.reshape(grid.ny, grid.nx),
+                        cv2.GaussianBlur(cv2.dilate(nodes.reshape(grid.ny, grid.nx), np.ones((3, 3))),
+                                         (size, size), 0)).ravel()[:, None]
+    candidates = [lambda t: x + (1.0 - t) * weight * (warped - x),
+                  lambda t: warped + t * (x - warped)]
+    for move in candidates:
+        if not ok(move(0.0)):
+            continue
+        lo, hi, best = 0.0, 1.0, move(0.0)
+        for _ in range(SCALE_BISECTIONS):
+            mid = 0.5 * (lo + hi)
+            points = move(mid)
+            if ok(points):
+                lo, best = mid, points
+            else:
+                hi = mid
+        record.plain_blend = lo
+        return best
+    record.plain_blend = 0.0
+    return warped
+
+
 def _window_ties(ties: components.Ties) -> np.ndarray:
     """Component whose shared translation a node takes in both axes, or -1 (for window passes)."""
     x, y = ties.unknown_ties(0), ties.unknown_ties(1)
@@ -439,6 +554,9 @@ def _window_fixed(state: _GridState, ties: components.Ties) -> np.ndarray:
 def _warnings(record: SolveRecord, source, target, warped, warp) -> list[str]:
     """One line per thing the caller should know: features not kept or relaxed, a no-op."""
     lines = []
+    if record.guard.plain_blend < 1.0:
+        lines.append(f"features degraded towards the plain warp (blend {record.guard.plain_blend:.2f}) so that "
+                     f"none is more distorted than under it")
     if record.guard.release_rounds:
         lines.append(f"features relaxed towards the plain warp to avoid fold-overs "
                      f"(components {', '.join(map(str, record.guard.released_components))}; "
@@ -450,8 +568,9 @@ def _warnings(record: SolveRecord, source, target, warped, warp) -> list[str]:
     if tuple(warp.canvas) == (warp.width, warp.height):
         moved = float(np.abs(target - source).max(initial=0.0))
         wanted = float(np.abs(warped - source).max(initial=0.0))
-        if moved <= NO_OP_OUTPUT and wanted > NO_OP_WARP:
-            lines.append("the mask covers the region the warp moves; the output is the input")
+        if wanted > NO_OP_WARP and moved <= max(NO_OP_OUTPUT, NO_OP_FRACTION * wanted):
+            lines.append(f"the mask covers the region the warp moves; the output is the input "
+                         f"(pixels move by {moved:.1f} px at most, the warp moves them by up to {wanted:.0f} px)")
     return lines
 
 
