@@ -149,3 +149,27 @@ def test_measure_command_bad_input(runner, tmp_path, astronaut):
     assert missing.code == 2 and len(missing.lines) == 1 and "does not exist" in missing.stderr
     wrong = runner("measure", tmp_path / "in.png", tmp_path / "in.png", "-m", tmp_path / "small.png")
     assert wrong.code == 2 and len(wrong.lines) == 1 and "the mask is 10x10" in wrong.stderr
+
+
+def swirled(image: np.ndarray, degrees: float) -> np.ndarray:
+    """``image`` under the swirl preset (radius 0.5), resampled exactly: its inverse is the
+    swirl by -degrees, since each circle about the centre maps onto itself."""
+    from featurewarp_cli import load_warp
+
+    h, w = image.shape[:2]
+    y, x = np.mgrid[0:h, 0:w].astype(np.float64)
+    back = load_warp("swirl")(w, h, angle=-degrees)(np.column_stack([x.ravel(), y.ravel()]))
+    maps = back.reshape(h, w, 2).astype(np.float32)
+    return cv2.remap(image, maps[:, :, 0], maps[:, :, 1], cv2.INTER_CUBIC, borderMode=cv2.BORDER_REFLECT)
+
+
+def test_a_bent_component_is_told_apart_from_a_kept_one():
+    # The close-up's mask covers 81 % of the frame; a plain swirl leaves its rim in place
+    # and turns the face: the global fit is near the identity, the local fits are not.
+    image = cv2.imread(str(SAMPLES / "closeup.png"))
+    mask = cv2.imread(str(SAMPLES / "closeup_mask.png"), cv2.IMREAD_GRAYSCALE) >= 128
+    (bent,) = measure(image, swirled(image, 180.0), mask)
+    assert bent.explained < 0.95 and bent.local_p90 > 0.15
+    kept, _ = warp_affine(image, anisotropic(1.0, 90.0, 1.3))
+    (fit,) = measure(image, kept, mask)
+    assert fit.explained > 0.98 and fit.local_p90 < 0.05 and fit.distortion < 0.01

@@ -11,10 +11,19 @@ gives the component's
 * scale       sqrt(|det A|);
 * rotation    the angle of A's closest rotation, degrees, clockwise on screen (y down).
 
-A component with too few matches gets no figures and a reason instead: a number made
-up from three keypoints would be worse than none. SIFT is rotation invariant, so
-swirls and arcs are measured as well as stretches; it tolerates moderate anisotropy
-(the fit stays within 0.01 of an exact affine of sigma ratio 2).
+SIFT is rotation invariant but not affine invariant. Two steps keep the fit exact
+under strong anisotropy: when plain matching gives no fit, simulated tilted views of
+the component are matched too (as ASIFT does); and the output is then rectified by
+the fit so far and matched again, where the residual map is near the identity
+(validated: within 0.01 of exact affine maps of sigma ratio up to 2, at any rotation).
+
+A component that did not move as one affine map (a swirl turns the middle of a large
+component and leaves its rim: RANSAC then fits the rim) is told apart by local fits:
+each match's neighbourhood gets its own affine fit; ``explained`` is the share of the
+locally consistent matches that the global map fits, and ``local_p90`` the 90th
+percentile of the local distortions (the counterpart of the mesh's per-triangle
+anisotropy). A component with too few matches gets no figures and a reason instead:
+a number made up from three keypoints would be worse than none.
 
 Only numpy and OpenCV (SIFT is in OpenCV's main module since 4.4).
 
@@ -32,17 +41,20 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from .keypoints import FLAT_GRAY, RATIO, Keypoints, detect, local_fits, refine, seed, tilts, view_matches
+
 #: Fewest RANSAC inliers for a fit; below this a component gets a reason, not figures.
 MIN_INLIERS = 10
-#: Lowe's ratio: a match is kept when its best distance < RATIO * the second best.
-RATIO = 0.75
 #: RANSAC's reprojection threshold in output pixels.
 REPROJECTION_PX = 3.0
+#: A fit whose inliers are fewer than this share of its matches, or whose inliers span
+#: less than this share of the component, is taken as bent: simulated views then add
+#: matches for the local figures.
+BENT_INLIERS = 0.9
+BENT_COVERAGE = 0.5
 #: Both images are scaled down by one common factor so that neither exceeds this many
 #: pixels (the linear part of the fit does not change under a common scale).
 MAX_PIXELS = 4_000_000
-#: Background for transparent output pixels (flat: a checkerboard would make keypoints).
-FLAT_GRAY = 128
 
 
 @dataclass(frozen=True)
@@ -78,8 +90,17 @@ class ComponentFit:
     rms_px : float or None
         Root mean square distance, in output pixels, of the inliers from the map.
     coverage : float or None
-        Area of the inliers' convex hull over the component's area: how much of the
-        component the fit speaks for (a bent component fits only in parts).
+        Area of the inliers' convex hull over the component's area.
+    explained : float or None
+        Share of the component's locally consistent matches (see ``local_p90``) that
+        the fitted map puts within :data:`REPROJECTION_PX`: near 1 when the component
+        moved as one affine map, lower when it was bent (a swirl leaves the rim of a
+        large component in place and turns its middle: the fit then speaks for the
+        rim only, and the hull may still cover it all).
+    local_p90, local_median : float or None
+        90th percentile and median, over the matches, of the distortion of an affine
+        map fitted to each match's neighbourhood (radius max(24 px, sqrt(area) / 4)):
+        the image's counterpart of the mesh's per-triangle anisotropy.
     reason : str or None
         Why there are no figures (too few matches or inliers), else None.
     """
@@ -98,6 +119,9 @@ class ComponentFit:
     reflected: bool = False
     rms_px: float | None = None
     coverage: float | None = None
+    explained: float | None = None
+    local_p90: float | None = None
+    local_median: float | None = None
     reason: str | None = None
 
     def as_dict(self) -> dict:
@@ -136,90 +160,6 @@ def gray8(image: np.ndarray) -> np.ndarray:
     return cv2.cvtColor(image[:, :, :3], cv2.COLOR_BGR2GRAY)
 
 
-@dataclass(frozen=True)
-class Keypoints:
-    """SIFT keypoints: positions (in the pixels of the image they describe) and descriptors.
-
-    Attributes
-    ----------
-    points : (N, 2) float64 ndarray
-        x, y of each keypoint (pixel centres at whole numbers).
-    descriptors : (N, 128) float32 ndarray
-    """
-
-    points: np.ndarray
-    descriptors: np.ndarray
-
-    def __len__(self):
-        return len(self.points)
-
-    def subset(self, which) -> Keypoints:
-        """The keypoints selected by an index or boolean array."""
-        return Keypoints(self.points[which], self.descriptors[which])
-
-
-def detect(gray: np.ndarray, where: np.ndarray | None = None) -> Keypoints:
-    """SIFT keypoints of an 8-bit gray image (only inside ``where``, a uint8 mask, if given)."""
-    found, descriptors = cv2.SIFT_create().detectAndCompute(gray, where)
-    points = np.array([k.pt for k in found], np.float64).reshape(-1, 2)
-    if descriptors is None:
-        descriptors = np.zeros((0, 128), np.float32)
-    return Keypoints(points, descriptors)
-
-
-def tilts() -> list[list[tuple[float, float]]]:
-    """(tilt, angle in degrees) of the affine views simulated when plain SIFT finds no fit.
-
-    ASIFT's sampling (Morel and Yu 2009), one list per tilt: sqrt(2), 2 and 2 sqrt(2),
-    each at angles 72 / tilt degrees apart over [0, 180). With SIFT's own tolerance
-    this covers anisotropy up to about 4.
-    """
-    return [[(tilt, angle) for angle in np.arange(0.0, 180.0, 72.0 / tilt)]
-            for tilt in (np.sqrt(2.0), 2.0, 2.0 * np.sqrt(2.0))]
-
-
-def simulated(gray: np.ndarray, box: tuple, tilt: float, angle: float) -> Keypoints:
-    """Keypoints of ``gray[box]`` seen rotated by ``angle`` and compressed ``tilt`` times along x.
-
-    Positions are mapped back to ``gray``'s pixels, so the keypoints stand for the
-    input as an affine camera with that tilt would see it.
-    """
-    x0, y0, x1, y1 = box
-    crop = gray[y0:y1, x0:x1]
-    h, w = crop.shape
-    rotation = cv2.getRotationMatrix2D(((w - 1) / 2.0, (h - 1) / 2.0), angle, 1.0)
-    corners = np.array([[0, 0, 1], [w - 1, 0, 1], [0, h - 1, 1], [w - 1, h - 1, 1]], float) @ rotation.T
-    rotation[:, 2] -= corners.min(axis=0)
-    size = np.ceil(corners.max(axis=0) - corners.min(axis=0)).astype(int) + 1
-    turned = cv2.warpAffine(crop, rotation, (int(size[0]), int(size[1])), flags=cv2.INTER_LINEAR,
-                            borderValue=FLAT_GRAY)
-    squeezed = cv2.resize(turned, (max(1, int(round(size[0] / tilt))), int(size[1])),
-                          interpolation=cv2.INTER_AREA)
-    found = detect(squeezed)
-    turned_points = np.column_stack([(found.points[:, 0] + 0.5) * size[0] / squeezed.shape[1] - 0.5,
-                                     found.points[:, 1]])
-    back = cv2.invertAffineTransform(rotation)
-    points = turned_points @ back[:, :2].T + back[:, 2] + (x0, y0)
-    return Keypoints(points, found.descriptors)
-
-
-def ratio_matches(query: Keypoints, train: Keypoints, ratio: float = RATIO) -> np.ndarray:
-    """Index pairs (i in query, j in train) whose best match beats the second best by ``ratio``.
-
-    Returns
-    -------
-    (M, 2) int ndarray
-    """
-    if len(query) == 0 or len(train) < 2:
-        return np.zeros((0, 2), int)
-    pairs = cv2.BFMatcher(cv2.NORM_L2).knnMatch(query.descriptors, train.descriptors, k=2)
-    kept = [(m[0].queryIdx, m[0].trainIdx) for m in pairs
-            if len(m) == 2 and m[0].distance < ratio * m[1].distance]
-    return np.array(kept, int).reshape(-1, 2)
-
-
-
-
 def describe(linear: np.ndarray) -> dict:
     """Distortion, scale, rotation, stretches and reflection of a 2x2 linear map.
 
@@ -245,94 +185,13 @@ def describe(linear: np.ndarray) -> dict:
 
 
 
-@dataclass(frozen=True)
-class Fit:
-    """One RANSAC affine fit: the 2x3 matrix and the matched points behind it."""
-
-    matrix: np.ndarray            # (2, 3): output = matrix[:, :2] @ input + matrix[:, 2]
-    src: np.ndarray               # (M, 2) matched input points
-    dst: np.ndarray               # (M, 2) their matches (output, or rectified, pixels)
-    inlier: np.ndarray            # (M,) bool
-
-
-def ransac(src: np.ndarray, dst: np.ndarray, min_inliers: int, threshold: float) -> Fit | str:
-    """Affine fit of ``src`` -> ``dst`` by RANSAC, or the reason why there is none."""
-    if len(src) < min_inliers:
-        return f"{len(src)} keypoint matches, fewer than {min_inliers}"
-    matrix, flags = cv2.estimateAffine2D(src, dst, method=cv2.RANSAC, ransacReprojThreshold=threshold,
-                                         maxIters=5000, confidence=0.999, refineIters=20)
-    inlier = flags.ravel().astype(bool) if flags is not None else np.zeros(len(src), bool)
-    if matrix is None or inlier.sum() < min_inliers:
-        return f"{int(inlier.sum())} RANSAC inliers of {len(src)} matches, fewer than {min_inliers}"
-    if abs(np.linalg.det(matrix[:, :2])) < 1e-9:
-        return "the inliers are collinear: the fit is degenerate"
-    return Fit(matrix, src, dst, inlier)
-
-
-def matched(src: Keypoints, dst: Keypoints, ratio: float) -> tuple[np.ndarray, np.ndarray]:
-    """Matched positions (src points, dst points) that pass the ratio test."""
-    pairs = ratio_matches(src, dst, ratio)
-    return src.points[pairs[:, 0]], dst.points[pairs[:, 1]]
-
-
-def seed(gray_in, component, box, dst: Keypoints, src: Keypoints, opts: dict) -> Fit | str:
-    """A first fit from plain SIFT, else from ASIFT-like simulated views of the component
-    (tilt by tilt, stopping at the first that gives a fit)."""
-    pooled = [matched(src, dst, opts["ratio"])]
-    first = ransac(*pooled[0], opts["min_inliers"], opts["threshold"])
-    if isinstance(first, Fit):
-        return first
-    for views in tilts():
-        for tilt, angle in views:
-            view = simulated(gray_in, box, tilt, angle)
-            cols = np.clip(np.rint(view.points[:, 0]).astype(int), 0, component.shape[1] - 1)
-            rows = np.clip(np.rint(view.points[:, 1]).astype(int), 0, component.shape[0] - 1)
-            pooled.append(matched(view.subset(component[rows, cols] > 0), dst, opts["ratio"]))
-        fit = ransac(np.concatenate([p[0] for p in pooled]), np.concatenate([p[1] for p in pooled]),
-                     opts["min_inliers"], opts["threshold"])
-        if isinstance(fit, Fit):
-            return fit
-    return first
-
-
-def compose(outer: np.ndarray, inner: np.ndarray) -> np.ndarray:
-    """The 2x3 affine map x -> outer(inner(x))."""
-    return outer[:, :2] @ inner + np.hstack([np.zeros((2, 2)), outer[:, 2:]])
-
-
-def refine(gray_out, box, src: Keypoints, fit: Fit, opts: dict) -> Fit | None:
-    """Fit again after undoing ``fit`` on the output: the residual map is near the identity,
-    where SIFT matches best, so the composed map is accurate even for strong anisotropy.
-
-    Only ``box`` (x0, y0, x1, y1) of the input frame is rectified and searched.
-
-    Returns
-    -------
-    Fit or None
-        The composed fit (its ``dst`` in output pixels), or None if the rectified
-        view gives no fit.
-    """
-    x0, y0, x1, y1 = box
-    to_box = cv2.invertAffineTransform(fit.matrix)
-    to_box[:, 2] -= (x0, y0)
-    rectified = cv2.warpAffine(gray_out, to_box, (x1 - x0, y1 - y0), flags=cv2.INTER_LINEAR,
-                               borderValue=FLAT_GRAY)
-    found = detect(rectified)
-    found = Keypoints(found.points + (x0, y0), found.descriptors)
-    residual = ransac(*matched(src, found, opts["ratio"]), opts["min_inliers"], opts["threshold"])
-    if not isinstance(residual, Fit):
-        return None
-    dst = residual.dst @ fit.matrix[:, :2].T + fit.matrix[:, 2]
-    return Fit(compose(fit.matrix, residual.matrix), residual.src, dst, residual.inlier)
-
-
 def fit_component(gray_in, gray_out, component, src: Keypoints, dst: Keypoints, opts: dict) -> dict:
     """Fit one component (a uint8 mask of the input): figures for :class:`ComponentFit`."""
     ys, xs = np.nonzero(component)
     margin = 16
     box = (max(0, xs.min() - margin), max(0, ys.min() - margin),
            min(component.shape[1], xs.max() + margin + 1), min(component.shape[0], ys.max() + margin + 1))
-    fit = seed(gray_in, component, box, dst, src, opts)
+    first = fit = seed(gray_in, component, box, dst, src, opts)
     if isinstance(fit, str):
         return {"reason": fit}
     for _ in range(opts["refinements"]):
@@ -341,11 +200,40 @@ def fit_component(gray_in, gray_out, component, src: Keypoints, dst: Keypoints, 
     linear, translation = fit.matrix[:, :2], fit.matrix[:, 2]
     residual = fit.src[keep] @ linear.T + translation - fit.dst[keep]
     hull = cv2.convexHull(fit.src[keep].astype(np.float32))
-    return describe(linear) | {
+    coverage = float(min(1.0, cv2.contourArea(hull) / len(xs)))
+    pairs = [(first.src, first.dst), (fit.src, fit.dst)]
+    if keep.mean() < BENT_INLIERS or coverage < BENT_COVERAGE:
+        # Bent or partly fitted: where SIFT's plain views miss, simulated tilts find matches.
+        pairs.append(view_matches(gray_in, component, box, dst, opts["ratio"],
+                                  [view for views in tilts() for view in views]))
+    return describe(linear) | local_figures(pairs, fit.matrix, len(xs), opts) | {
         "matches": len(fit.src), "inliers": int(keep.sum()), "linear": linear, "translation": translation,
-        "rms_px": float(np.sqrt(np.mean(np.sum(residual**2, axis=1)))),
-        "coverage": float(min(1.0, cv2.contourArea(hull) / max(1, int(np.count_nonzero(component))))),
+        "rms_px": float(np.sqrt(np.mean(np.sum(residual**2, axis=1)))), "coverage": coverage,
     }
+
+
+def local_figures(pairs, matrix: np.ndarray, pixels: int, opts: dict) -> dict:
+    """How much of the component the global fit explains, and its local distortion.
+
+    The matched (input, output) positions in ``pairs`` are pooled and each gets a
+    local affine fit over a neighbourhood of radius max(24 px, sqrt(area) / 4).
+    ``explained`` is the share of locally consistent matches that the global map
+    ``matrix`` also fits; ``local_p90`` and ``local_median`` are the 90th percentile and
+    the median of the local fits' distortion.
+    """
+    pooled = np.hstack([np.concatenate([p[0] for p in pairs]), np.concatenate([p[1] for p in pairs])])
+    _, once = np.unique(np.round(pooled, 2), axis=0, return_index=True)
+    src, dst = pooled[np.sort(once), :2], pooled[np.sort(once), 2:]
+    radius = max(24.0 * opts["scale"], 0.25 * np.sqrt(pixels))
+    consistent, linear = local_fits(src, dst, radius, opts["threshold"])
+    if consistent.sum() < opts["min_inliers"]:
+        return {"explained": None, "local_p90": None, "local_median": None}
+    sigma = np.linalg.svd(linear[consistent], compute_uv=False)
+    local = sigma[:, 0] / sigma[:, 1] - 1.0
+    residual = src[consistent] @ matrix[:, :2].T + matrix[:, 2] - dst[consistent]
+    explained = np.mean(np.hypot(residual[:, 0], residual[:, 1]) <= opts["threshold"])
+    return {"explained": float(explained), "local_p90": float(np.percentile(local, 90)),
+            "local_median": float(np.median(local))}
 
 
 def measure(image: np.ndarray, output: np.ndarray, mask: np.ndarray, *, min_inliers: int = MIN_INLIERS,
@@ -395,7 +283,7 @@ def measure(image: np.ndarray, output: np.ndarray, mask: np.ndarray, *, min_inli
     src_all = detect(gray_in) if n_labels > 1 else None
     dst = detect(gray_out) if n_labels > 1 else None
     opts = {"min_inliers": min_inliers, "ratio": ratio, "threshold": threshold * factor,
-            "refinements": refinements}
+            "refinements": refinements, "scale": factor}
     fits = []
     for label in range(1, n_labels):
         x, y, bw, bh, area = (int(v) for v in stats[label])

@@ -17,9 +17,11 @@ def component_line(fit) -> str:
     if fit.distortion is None:
         return f"{where}: not measured: {fit.reason}"
     mirrored = ", mirrored" if fit.reflected else ""
+    local = ("" if fit.local_p90 is None else
+             f"; locally {fit.local_p90:.4f} (90th percentile), {100 * fit.explained:.0f} % explained")
     return (f"{where}: distortion {fit.distortion:.4f}, scale {fit.scale:.4f}, rotation "
             f"{fit.rotation:.2f} deg{mirrored}; {fit.inliers} of {fit.matches} matches, rms "
-            f"{fit.rms_px:.2f} px, covering {100 * fit.coverage:.0f} %")
+            f"{fit.rms_px:.2f} px, covering {100 * fit.coverage:.0f} %{local}")
 
 
 @click.command("measure")
@@ -36,8 +38,11 @@ def measure_command(input, output, mask, as_json):
     per component: distortion = sigma_max/sigma_min - 1 of its linear part (0: the
     shape is kept, 1: stretched 2x along one axis), scale, rotation (degrees,
     clockwise), the matches behind the fit and the share of the component they
-    span. A component with too few matches is reported as not measured, with the
-    reason. One of INPUT, OUTPUT and MASK may be '-' (stdin).
+    span; then the 90th percentile of the distortion of local fits (around each
+    match) and the share of locally consistent matches the global fit explains
+    (below 100 %: the region was bent, not moved as one map). A component with
+    too few matches is reported as not measured, with the reason. One of INPUT,
+    OUTPUT and MASK may be '-' (stdin).
     """
     from ..app import measure
     from ..app.pipeline import WarpError, read_input
