@@ -532,6 +532,11 @@ def list_warps(as_json):
         click.echo()
 
 
+from .measure import measure_command  # noqa: E402  (its own file: numerics load when it runs)
+
+cli.add_command(measure_command)
+
+
 def one_line_warning(message, category, filename, lineno, file=None, line=None):
     """Show a Python warning (e.g. numpy's overflow) as one line on stderr."""
     click.echo(f"featurewarp: warning: {message} ({os.path.basename(filename)}:{lineno})", err=True)
