@@ -90,6 +90,15 @@ class Ties:
         held[on] = self.tied[comp[on]] & (self.pin[comp[on], axis] >= 0)
         return held
 
+    def placed(self, axis: int) -> np.ndarray:
+        """(N,) bool: nodes whose coordinate along ``axis`` the component's similarity sets
+        (up to the shared translation, where it is free)."""
+        comp = self.node_component
+        on = comp >= 0
+        placed = np.zeros(on.shape, bool)
+        placed[on] = self.tied[comp[on]]
+        return placed
+
     def project(self, ab: np.ndarray) -> np.ndarray:
         """The nearest admissible (a, b) to each of ``ab`` ((C, 2)): base + N N^T (ab - base)."""
         return self.base + np.einsum("cij,ckj,ck->ci", self.basis, self.basis, ab - self.base)

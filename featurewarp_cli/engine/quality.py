@@ -53,15 +53,24 @@ def similarity_fits(source: np.ndarray, target: np.ndarray, labels: np.ndarray, 
 
 def triangle_anisotropy(source: np.ndarray, target: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     """Ratio of the larger to the smaller singular value of each triangle's affine map, (M,)
-    (inf for a degenerate image)."""
-    s = source[triangles]
-    t = target[triangles]
-    ds = np.stack([s[:, 1] - s[:, 0], s[:, 2] - s[:, 0]], axis=2)      # (M, 2, 2) columns = edges
-    dt = np.stack([t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]], axis=2)
-    jac = dt @ np.linalg.inv(ds)
-    # Singular values in closed form (see targets.singular_values).
-    p = np.hypot(jac[:, 0, 0] + jac[:, 1, 1], jac[:, 1, 0] - jac[:, 0, 1])
-    q = np.hypot(jac[:, 0, 0] - jac[:, 1, 1], jac[:, 1, 0] + jac[:, 0, 1])
+    (inf for a degenerate image).
+
+    The map is J = T S^-1 with S and T the triangle's edge matrices; its singular values
+    come in closed form from p = |(J00 + J11, J10 - J01)| and q = |(J00 - J11, J10 + J01)|
+    (sigma = (p + q) / 2, |p - q| / 2), and J's inverse of S as the 2x2 adjugate.
+    """
+    a, b, c = (np.ascontiguousarray(triangles[:, k]) for k in range(3))
+    sx, sy = np.ascontiguousarray(source[:, 0]), np.ascontiguousarray(source[:, 1])
+    tx, ty = np.ascontiguousarray(target[:, 0]), np.ascontiguousarray(target[:, 1])
+    s00, s10 = sx.take(b) - sx.take(a), sy.take(b) - sy.take(a)          # S's columns: edges ab, ac
+    s01, s11 = sx.take(c) - sx.take(a), sy.take(c) - sy.take(a)
+    t00, t10 = tx.take(b) - tx.take(a), ty.take(b) - ty.take(a)
+    t01, t11 = tx.take(c) - tx.take(a), ty.take(c) - ty.take(a)
+    det = s00 * s11 - s01 * s10
+    j00, j01 = (t00 * s11 - t01 * s10) / det, (t01 * s00 - t00 * s01) / det
+    j10, j11 = (t10 * s11 - t11 * s10) / det, (t11 * s00 - t10 * s01) / det
+    p = np.hypot(j00 + j11, j10 - j01)
+    q = np.hypot(j00 - j11, j10 + j01)
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.where(np.abs(p - q) > 1e-12 * (p + q), (p + q) / np.abs(p - q), np.inf)
 
@@ -160,7 +169,7 @@ def map_anisotropy(maps: np.ndarray) -> np.ndarray:
         return np.where(sv[:, 1] > 0, sv[:, 0] / np.maximum(sv[:, 1], 1e-300), np.inf)
 
 
-def component_figures(source, target, warped, triangles, tri_component, n_components) -> dict:
+def component_figures(source, target, warped, triangles, tri_component, node_component, n_components) -> dict:
     """Per component: how its triangles and its whole region came out, and under W.
 
     Parameters
@@ -170,6 +179,8 @@ def component_figures(source, target, warped, triangles, tri_component, n_compon
     triangles : (M, 3) int ndarray
     tri_component : (M,) int ndarray
         Component of each triangle of a feature quad, -1 for the others.
+    node_component : (N,) int ndarray
+        Component of each node of a feature quad, -1 for the others.
     n_components : int
 
     Returns
@@ -190,11 +201,8 @@ def component_figures(source, target, warped, triangles, tri_component, n_compon
         np.maximum.at(out[name + "anisotropy_worst"], comp, aniso)
         if not name:
             out["anisotropy_mean"] = np.bincount(comp, aniso, minlength=n_components) / count
-        nodes = tris.ravel()
-        labels = np.repeat(comp, 3)
-        node_key = np.unique(labels.astype(np.int64) * source.shape[0] + nodes)
-        labels, nodes = np.divmod(node_key, source.shape[0])
-        fits = affine_fits(source[nodes], points[nodes], labels, n_components)
+        nodes = np.flatnonzero(node_component >= 0)
+        fits = affine_fits(source[nodes], points[nodes], node_component[nodes], n_components)
         out[name + "distortion"] = np.nan_to_num(map_anisotropy(np.nan_to_num(fits)) - 1.0, nan=0.0, posinf=1e9)
         if not name:
             det = fits[:, 0, 0] * fits[:, 1, 1] - fits[:, 0, 1] * fits[:, 1, 0]

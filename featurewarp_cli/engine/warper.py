@@ -262,9 +262,10 @@ class FeatureWarper:
         offset[state.fixed_x, 0] = warped[state.fixed_x, 0]
         offset[state.fixed_y, 1] = warped[state.fixed_y, 1]
         placed = components.placement(ties, state.nodes, warped, ab)
+        on = ties.placed(0)
         for axis, fixed in enumerate((state.fixed_x, state.fixed_y)):
-            on = ((ties.unknown_ties(axis) >= 0) | ties.held(axis)) & ~fixed
-            offset[on, axis] = placed[on, axis]        # border coordinates stay exactly at W
+            free = on & ~fixed                          # border coordinates stay exactly at W
+            offset[free, axis] = placed[free, axis]
         return offset
 
     def solve(self, warp, mode: str = "similarity") -> Mesh:
@@ -405,7 +406,7 @@ class FeatureWarper:
             state.nodes, target, warped, state.triangles, state.grid.quads(), state.node_component,
             features.n_components, ~features.is_constrained, transition)
         figures = quality.component_figures(state.nodes, target, warped, state.triangles, state.tri_component,
-                                            features.n_components)
+                                            state.node_component, features.n_components)
         counts = np.bincount(features.component[features.is_feature], minlength=features.n_components)
         record.components = [
             ComponentRecord(int(counts[c]), bool(tied[c]), *(float(figures[k][c]) for k in (
@@ -440,7 +441,7 @@ class FeatureWarper:
 #: Smallest area, relative to W's, that the scale search lets a triangle keep.
 SCALE_FLOOR = 0.05
 #: Bisection steps of the scale search (and of the move towards W).
-SCALE_BISECTIONS = 8
+SCALE_BISECTIONS = 6
 #: Cells over which the move towards W tapers off around an offending component.
 TAPER_CELLS = 3
 
