@@ -151,11 +151,19 @@ def test_boundary_nodes_are_fixed_to_the_warp(request, formulation, mode, preset
 @pytest.mark.parametrize("preset,params", PRESET_CASES)
 @pytest.mark.parametrize("mask_name", ["blob_mask", "border_mask"])
 def test_default_boundary_stays_on_the_warped_border(request, formulation, preset, params, mask_name):
-    """With default options border nodes stay on W(border): corners exact, each side on its image, in order."""
+    """With default options border nodes stay on W(border): corners exact, each side on its image, in order,
+    except the nodes of features cut by a border whose pins no similarity satisfies (let go of them to
+    keep their shape, and reported as unpinned)."""
     mask = request.getfixturevalue(mask_name)
     w = load_warp(preset)(160, 120, **params)
-    mesh = FeatureWarper(160, 120, mask, formulation=formulation).solve(w)
+    warper = FeatureWarper(160, 120, mask, formulation=formulation)
+    mesh = warper.solve(w)
     target, expected = mesh.target, w(mesh.source)
+    unpinned = [k for k, c in enumerate(mesh.info["components"]) if c["unpinned"]]
+    if unpinned:
+        assert formulation == "exact" and preset in ("arc", "swirl", "bulge")
+        let_go = np.isin(mesh.node_component, unpinned)
+        expected = np.where(let_go[:, None], target, expected)
     for name, idx in sides(mesh.source, 160, 120).items():
         np.testing.assert_array_equal(target[idx[[0, -1]]], expected[idx[[0, -1]]])   # corners
         exact = np.all(target[idx] == expected[idx])

@@ -65,6 +65,9 @@ class Ties:
         Directions of (a, b) that stay free (columns; zero columns unused).
     free : (n_components,) int ndarray
         How many directions are free (0, 1 or 2).
+    unpinned : (n_components,) bool ndarray
+        Components held by pins that no similarity satisfies (an arc's curved sides) whose
+        nodes were let go of their border conditions, so that they keep their shape.
     """
 
     node_component: np.ndarray
@@ -73,6 +76,15 @@ class Ties:
     base: np.ndarray
     basis: np.ndarray
     free: np.ndarray
+    unpinned: np.ndarray
+
+    def let_go(self) -> np.ndarray:
+        """(N,) bool: nodes whose border condition no longer holds (of unpinned components)."""
+        comp = self.node_component
+        on = comp >= 0
+        out = np.zeros(on.shape, bool)
+        out[on] = self.unpinned[comp[on]] & self.tied[comp[on]]
+        return out
 
     def unknown_ties(self, axis: int) -> np.ndarray:
         """(N,) component whose shared translation unknown a node takes along ``axis``, or -1."""
@@ -144,7 +156,8 @@ def _pin_rows(nodes, fixed, target, node_component, n, axis):
     return first, gram, moment, np.bincount(comp, rhs * rhs, minlength=n), np.bincount(comp, minlength=n)
 
 
-def parametrize(nodes, fixed_x, fixed_y, target, node_component, n_components, prior, solve_scale):
+def parametrize(nodes, fixed_x, fixed_y, target, node_component, n_components, prior, solve_scale,
+                unpin: bool = False):
     """The :class:`Ties` of the components under this warp's border conditions.
 
     Parameters
@@ -162,6 +175,10 @@ def parametrize(nodes, fixed_x, fixed_y, target, node_component, n_components, p
         The preset's (a, b) per component (lambda R).
     solve_scale : bool
         Similarity mode: (a, b) are unknowns. False: (a, b) stay at ``prior`` (rigid).
+    unpin : bool
+        A component whose pins no similarity satisfies is let go of them and tied like an
+        interior one (its cut edge leaves W's border a little); False: it is left untied,
+        with soft constraints, and the border stays exactly at W.
     """
     n = n_components
     first_x, gx, mx, sx, cx = _pin_rows(nodes, fixed_x, target, node_component, n, 0)
@@ -183,8 +200,21 @@ def parametrize(nodes, fixed_x, fixed_y, target, node_component, n_components, p
     else:
         base, free, basis = prior.copy(), np.zeros(n, int), np.zeros((n, 2, 2))
     residual = squares - 2.0 * (base * moment).sum(1) + np.einsum("ci,cij,cj->c", base, gram, base)
-    tied = np.sqrt(np.maximum(residual, 0.0) / count) <= PIN_TOLERANCE
-    return Ties(node_component, tied, np.stack([first_x, first_y], 1), base, basis, free)
+    consistent = np.sqrt(np.maximum(residual, 0.0) / count) <= PIN_TOLERANCE
+    pin = np.stack([first_x, first_y], 1)
+    unpinned = ~consistent & unpin
+    if unpinned.any():
+        comp = node_component
+        let_go = (comp >= 0) & unpinned[np.maximum(comp, 0)]
+        if not ((fixed_x & ~let_go).any() and (fixed_y & ~let_go).any()):
+            unpinned[:] = False           # nothing would hold the grid in place: stay untied
+    if unpinned.any():
+        pin[unpinned] = -1
+        base[unpinned] = prior[unpinned]
+        if solve_scale:
+            free[unpinned] = 2
+            basis[unpinned] = np.eye(2)
+    return Ties(node_component, consistent | unpinned, pin, base, basis, free, unpinned)
 
 
 def placement(ties: Ties, nodes: np.ndarray, pins: np.ndarray, ab: np.ndarray) -> np.ndarray:

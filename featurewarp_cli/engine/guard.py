@@ -227,8 +227,8 @@ def _untangle_window(problem: Problem, rhs, offset, tied, x, floor):
     ties = tied[corners]
     rigid = (ties[:, 0] >= 0) & (ties == ties[:, :1]).all(axis=1)    # inside one tied feature
     changing = np.flatnonzero(touched & ~rigid)
-    if changing.size > WINDOW_MAX_FRACTION * n_quads:
-        return None, 0, 0
+    if changing.size == 0 or changing.size > WINDOW_MAX_FRACTION * n_quads:
+        return None, 0, 0                 # nothing the window could move, or not worth a window
     in_system = np.zeros(grid.n_nodes, bool)
     in_system[corners[touched].ravel()] = True
     nodes = np.flatnonzero(in_system)

@@ -16,8 +16,12 @@ class ComponentRecord:
     quads : int
         Its feature quads.
     tied : bool
-        Moved as one similarity (False: soft constraints only, e.g. held by pins
-        that no similarity satisfies, or released by the fold-over guard).
+        Moved as one similarity (False: soft constraints only: held by pins that no
+        similarity satisfies under an explicit ``--boundary fixed``, or released by the
+        fold-over guard).
+    unpinned : bool
+        Cut by a border whose pins no similarity satisfies (an arc's curved sides): let go
+        of them to keep its shape, so its cut edge leaves W's outline a little.
     scale, rotation_deg : float
         Of the affine map that best fits its nodes, source -> canvas.
     distortion : float
@@ -35,6 +39,7 @@ class ComponentRecord:
 
     quads: int
     tied: bool
+    unpinned: bool
     scale: float
     rotation_deg: float
     distortion: float

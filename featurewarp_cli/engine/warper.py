@@ -39,12 +39,13 @@ MODES = ("similarity", "rigid", "plain")
 FORMULATIONS = ("exact", "paper")
 BOUNDARIES = ("fixed", "slide")
 
-#: An output that stays within this many pixels of the input while W moves pixels by more
-#: than NO_OP_WARP px is reported as "the output is the input".
+#: Where W moves pixels by more than NO_OP_WARP px, an output that moves the nodes W moves
+#: (by more than NO_OP_OUTPUT px) by at most NO_OP_OUTPUT px RMS, or by at most NO_OP_FRACTION
+#: of W's RMS displacement there, is reported as "the output is the input" (a swirl whose
+#: disc a frame-filling feature pins).
 NO_OP_OUTPUT = 1.0
 NO_OP_WARP = 5.0
-#: ... or within this fraction of W's largest displacement (a swirl pinned by a frame-filling feature).
-NO_OP_FRACTION = 0.05
+NO_OP_FRACTION = 0.1
 
 
 def load_warp(name: str):
@@ -68,6 +69,9 @@ class Mesh:
         Output (width, height).
     record : SolveRecord or None
         What was done: grid, components, solver, guard, quality, warnings, timings.
+    node_component : (N,) int ndarray or None
+        Feature component of each node of a feature quad (as in ``record.components``), -1
+        for the others.
     """
 
     source: np.ndarray
@@ -75,6 +79,7 @@ class Mesh:
     triangles: np.ndarray
     canvas: tuple[int, int]
     record: SolveRecord | None = None
+    node_component: np.ndarray | None = None
 
     @property
     def info(self) -> dict:
@@ -247,7 +252,7 @@ class FeatureWarper:
     def _systems(self, state: _GridState, ties: components.Ties) -> AxisSystems:
         """The factored systems for these ties (cached per numbering)."""
         unknowns = [system.number_unknowns(fixed | ties.held(axis), ties.unknown_ties(axis))
-                    for axis, fixed in enumerate((state.fixed_x, state.fixed_y))]
+                    for axis, fixed in enumerate(_fixed(state, ties))]
         key = b"".join(u.astype(np.int32).tobytes() for u in unknowns)
         if key not in state.systems:
             t0 = time.perf_counter()
@@ -259,11 +264,12 @@ class FeatureWarper:
     def _offsets(self, state: _GridState, ties: components.Ties, ab: np.ndarray, warped: np.ndarray):
         """q: fixed coordinates at W, tied nodes at their component's similarity."""
         offset = np.zeros_like(warped)
-        offset[state.fixed_x, 0] = warped[state.fixed_x, 0]
-        offset[state.fixed_y, 1] = warped[state.fixed_y, 1]
+        fixed_x, fixed_y = _fixed(state, ties)
+        offset[fixed_x, 0] = warped[fixed_x, 0]
+        offset[fixed_y, 1] = warped[fixed_y, 1]
         placed = components.placement(ties, state.nodes, warped, ab)
         on = ties.placed(0)
-        for axis, fixed in enumerate((state.fixed_x, state.fixed_y)):
+        for axis, fixed in enumerate((fixed_x, fixed_y)):
             free = on & ~fixed                          # border coordinates stay exactly at W
             offset[free, axis] = placed[free, axis]
         return offset
@@ -309,28 +315,30 @@ class FeatureWarper:
         record = SolveRecord(mode, self.formulation, boundary,
                              {"cell": cell, "spacing": list(grid.spacing), "nodes": grid.n_nodes,
                               "quads": int(state.features.weight.size), "pl_error_px": error})
-        tied = np.zeros(state.features.n_components, bool)
+        tied = unpinned = np.zeros(state.features.n_components, bool)
         if mode == "plain" or state.features.n_components == 0:
             target = warped
             record.guard.flipped_before = int(np.count_nonzero(signed_areas(target, state.triangles) <= 0))
         else:
-            target, tied = self._feature_aware(state, warped, mode, record)
+            target, tied, unpinned = self._feature_aware(state, warped, mode, record)
         t1 = time.perf_counter()
-        self._assess(state, target, warped, tied, warp, record)
+        self._assess(state, target, warped, tied, unpinned, warp, record)
         self.timings["quality"] = time.perf_counter() - t1
         record.timings = dict(self.timings)
-        return Mesh(state.nodes, target, state.triangles, tuple(warp.canvas), record)
+        return Mesh(state.nodes, target, state.triangles, tuple(warp.canvas), record, state.node_component)
 
     def _feature_aware(self, state: _GridState, warped: np.ndarray, mode: str, record: SolveRecord):
         """Solve for the features' similarities and the nodes, then guard against folds.
 
-        Returns the node positions and which components stayed tied."""
+        Returns the node positions, which components stayed tied, and which of those were
+        let go of their border conditions."""
         features, grid = state.features, state.grid
         jac = targets.quad_jacobians(grid, warped)
         quad_maps, prior_maps = targets.quad_targets(jac, features, mode, self.formulation)
         prior = components.as_ab(prior_maps)
         ties = components.parametrize(state.nodes, state.fixed_x, state.fixed_y, warped, state.node_component,
-                                      features.n_components, prior, solve_scale=mode == "similarity")
+                                      features.n_components, prior, solve_scale=mode == "similarity",
+                                      unpin=self.boundary is None)
         if self.formulation == "paper":
             ties.tied[:] = False
         ab = np.where(ties.tied[:, None], ties.base, prior)
@@ -365,7 +373,7 @@ class FeatureWarper:
             safe = np.where(ties.tied[:, None], ties.project(prior * _safe_scale(jac, features, prior)), prior)
             ab, (x, edges, rhs, offset) = _fitting_scales(solve, safe, optimum, state.triangles, warped)
         if not self.injective:
-            return x, ties.tied
+            return x, ties.tied, ties.unpinned & ties.tied
 
         def rebuild(new_edges, released):
             loose = components.Ties(**{**ties.__dict__, "tied": ties.tied & ~np.isin(np.arange(ties.tied.size),
@@ -384,7 +392,7 @@ class FeatureWarper:
         inner = sum(self.timings.get(k, 0.0) for k in ("solve", "factor", "rhs")) - counted
         self.timings["guard"] = time.perf_counter() - t0 - inner      # what the solves inside it did not take
         released = np.isin(np.arange(ties.tied.size), record.guard.released_components)
-        return x, ties.tied & ~released
+        return x, ties.tied & ~released, ties.unpinned & ties.tied & ~released
 
     def _scale_solver(self, state: _GridState, ties: components.Ties, systems: AxisSystems):
         """The cached :class:`components.ScaleSolver` for these ties (None without free scales)."""
@@ -398,7 +406,7 @@ class FeatureWarper:
             self.timings["scale_setup"] = time.perf_counter() - t0
         return state.scale_solvers[key]
 
-    def _assess(self, state: _GridState, target, warped, tied, warp, record: SolveRecord) -> None:
+    def _assess(self, state: _GridState, target, warped, tied, unpinned, warp, record: SolveRecord) -> None:
         """Quality figures, per-component records and warnings."""
         features = state.features
         transition = np.tile(features.is_constrained & ~features.is_feature, 2)
@@ -409,7 +417,7 @@ class FeatureWarper:
                                             state.node_component, features.n_components)
         counts = np.bincount(features.component[features.is_feature], minlength=features.n_components)
         record.components = [
-            ComponentRecord(int(counts[c]), bool(tied[c]), *(float(figures[k][c]) for k in (
+            ComponentRecord(int(counts[c]), bool(tied[c]), bool(unpinned[c]), *(float(figures[k][c]) for k in (
                 "scale", "rotation_deg", "distortion", "anisotropy_worst", "anisotropy_mean",
                 "plain_distortion", "plain_anisotropy_worst", "area_ratio")),
                 kept=bool(figures["anisotropy_worst"][c] <= KEPT))
@@ -457,7 +465,7 @@ def _safe_scale(jac: np.ndarray, features, prior: np.ndarray) -> np.ndarray:
 def _fitting_scales(solve, safe: np.ndarray, optimum: np.ndarray, triangles, warped):
     """The features' similarities: the least-squares ``optimum`` when its solution keeps every
     triangle above :data:`SCALE_FLOOR` of its area under W; else the furthest point from
-    ``safe`` towards it that does (bisection), or ``safe`` itself.
+    ``safe`` towards it that does (bisection); the optimum when ``safe`` does not fit either.
 
     Scale and rotation give way before shape: a feature that cannot grow as far as
     least squares would like stays a similarity, only smaller.
@@ -474,7 +482,7 @@ def _fitting_scales(solve, safe: np.ndarray, optimum: np.ndarray, triangles, war
     lo, hi, best_ab = 0.0, 1.0, safe
     best = solve(safe)
     if not fits(best):
-        return optimum, solve(optimum)
+        return optimum, solve(optimum)    # scale is not what crushes: the fold-over guard's turn
     for _ in range(SCALE_BISECTIONS):
         mid = 0.5 * (lo + hi)
         ab = safe + mid * (optimum - safe)
@@ -486,44 +494,62 @@ def _fitting_scales(solve, safe: np.ndarray, optimum: np.ndarray, triangles, war
     return best_ab, best
 
 
-def _worst_per_component(state: _GridState, points: np.ndarray) -> np.ndarray:
-    """Worst anisotropy of each component's triangles under node positions ``points``: (C,)."""
+def _anisotropy(state: _GridState, points: np.ndarray) -> np.ndarray:
+    """Anisotropy of every triangle of a feature quad under ``points`` (inf elsewhere unused): (M,)."""
+    on = state.tri_component >= 0
+    out = np.ones(state.triangles.shape[0])
+    out[on] = quality.triangle_anisotropy(state.nodes, points, state.triangles[on])
+    return out
+
+
+def _worst_per_component(state: _GridState, anisotropy: np.ndarray) -> np.ndarray:
+    """Worst of ``anisotropy`` over each component's triangles: (C,)."""
     on = state.tri_component >= 0
     worst = np.zeros(state.features.n_components)
-    np.maximum.at(worst, state.tri_component[on],
-                  quality.triangle_anisotropy(state.nodes, points, state.triangles[on]))
+    np.maximum.at(worst, state.tri_component[on], anisotropy[on])
     return worst
 
 
-def _no_worse_than_plain(state: _GridState, x: np.ndarray, warped: np.ndarray, record) -> np.ndarray:
-    """``x``, or ``x`` moved towards W around the components that came out more anisotropic
-    than under W, as little as makes every component no worse than W without folds.
+def _taper(state: _GridState, quads: np.ndarray) -> np.ndarray:
+    """(N, 1) weights: 1 on the corners of ``quads`` (grown by one cell), tapering to 0 over
+    :data:`TAPER_CELLS` cells."""
+    grid = state.grid
+    nodes = np.zeros(grid.n_nodes)
+    nodes[grid.quads()[quads].ravel()] = 1.0
+    size = 2 * TAPER_CELLS + 1
+    grown = cv2.dilate(nodes.reshape(grid.ny, grid.nx), np.ones((3, 3)))
+    return np.maximum(grown, cv2.GaussianBlur(grown, (size, size), 0)).ravel()[:, None]
 
-    The move is ``(1 - t) w (W - x)`` with ``w`` 1 on the offending components' constrained
-    quads, tapering to 0 over :data:`TAPER_CELLS` cells, and t bisected; where no such t
-    exists, every node moves evenly towards W."""
-    plain = _worst_per_component(state, warped) * (1.0 + 1e-9) + 1e-9
+
+def _no_worse_than_plain(state: _GridState, x: np.ndarray, warped: np.ndarray, record) -> np.ndarray:
+    """``x``, or ``x`` moved towards W where components came out more anisotropic than under
+    W, as little as makes every component no worse than W, without folds.
+
+    The move is ``(1 - t) w (W - x)`` with ``w`` 1 around the offending triangles (then,
+    if that is not enough, on the offending components), tapering to 0 over
+    :data:`TAPER_CELLS` cells, and t bisected; where neither works, every node moves
+    evenly towards W."""
     if np.any(signed_areas(warped, state.triangles) <= 0):
         return x
-    bad = _worst_per_component(state, x) > plain
-    if not bad.any():
+    plain = _worst_per_component(state, _anisotropy(state, warped)) * (1.0 + 1e-9) + 1e-9
+    comp = np.maximum(state.tri_component, 0)
+    anisotropy = _anisotropy(state, x)
+    worse = (state.tri_component >= 0) & (anisotropy > plain[comp])
+    if not worse.any():
         return x
 
     def ok(points):
-        return (bool(np.all(_worst_per_component(state, points) <= plain))
+        return (bool(np.all(_worst_per_component(state, _anisotropy(state, points)) <= plain))
                 and not np.any(signed_areas(points, state.triangles) <= 0))
 
-    features, grid = state.features, state.grid
-    region = (features.component >= 0) & bad[np.maximum(features.component, 0)]
-    nodes = np.zeros(grid.n_nodes)
-    nodes[grid.quads()[region].ravel()] = 1.0
-    size = 2 * TAPER_CELLS + 1
-    weight = np.maximum(nodes.reshape(grid.ny, grid.nx),
-                        cv2.GaussianBlur(cv2.dilate(nodes.reshape(grid.ny, grid.nx), np.ones((3, 3))),
-                                         (size, size), 0)).ravel()[:, None]
-    candidates = [lambda t: x + (1.0 - t) * weight * (warped - x),
-                  lambda t: warped + t * (x - warped)]
-    for move in candidates:
+    n_quads = state.features.weight.size
+    local = np.zeros(n_quads, bool)
+    local[np.flatnonzero(worse) % n_quads] = True
+    bad = np.isin(state.features.component, np.unique(state.tri_component[worse]))
+    moves = [lambda t, w=_taper(state, local): x + (1.0 - t) * w * (warped - x),
+             lambda t, w=_taper(state, bad & state.features.is_constrained): x + (1.0 - t) * w * (warped - x),
+             lambda t: warped + t * (x - warped)]
+    for move in moves:
         if not ok(move(0.0)):
             continue
         lo, hi, best = 0.0, 1.0, move(0.0)
@@ -546,10 +572,17 @@ def _window_ties(ties: components.Ties) -> np.ndarray:
     return np.where(x == y, x, -1)
 
 
+def _fixed(state: _GridState, ties: components.Ties) -> tuple[np.ndarray, np.ndarray]:
+    """The border conditions in force: the grid's, less those of unpinned components' nodes."""
+    let_go = ties.let_go()
+    return state.fixed_x & ~let_go, state.fixed_y & ~let_go
+
+
 def _window_fixed(state: _GridState, ties: components.Ties) -> np.ndarray:
     """Nodes a window pass may not move: held in either axis, or tied in one axis only."""
     x, y = ties.unknown_ties(0), ties.unknown_ties(1)
-    return state.fixed_x | state.fixed_y | ties.held(0) | ties.held(1) | (x != y)
+    fixed_x, fixed_y = _fixed(state, ties)
+    return fixed_x | fixed_y | ties.held(0) | ties.held(1) | (x != y)
 
 
 def _warnings(record: SolveRecord, source, target, warped, warp) -> list[str]:
@@ -567,11 +600,14 @@ def _warnings(record: SolveRecord, source, target, warped, warp) -> list[str]:
             lines.append(f"feature {k} ({c.quads} quads) not kept: distortion {c.anisotropy_worst:.3f} "
                          f"(plain warp: {c.plain_anisotropy_worst:.3f})")
     if tuple(warp.canvas) == (warp.width, warp.height):
-        moved = float(np.abs(target - source).max(initial=0.0))
-        wanted = float(np.abs(warped - source).max(initial=0.0))
-        if wanted > NO_OP_WARP and moved <= max(NO_OP_OUTPUT, NO_OP_FRACTION * wanted):
-            lines.append(f"the mask covers the region the warp moves; the output is the input "
-                         f"(pixels move by {moved:.1f} px at most, the warp moves them by up to {wanted:.0f} px)")
+        wanted = np.hypot(*(warped - source).T)
+        moving = wanted > NO_OP_OUTPUT
+        if wanted.max(initial=0.0) > NO_OP_WARP:
+            moved = float(np.sqrt(np.mean(np.sum((target - source)[moving] ** 2, axis=1))))
+            asked = float(np.sqrt(np.mean(wanted[moving] ** 2)))
+            if moved <= max(NO_OP_OUTPUT, NO_OP_FRACTION * asked):
+                lines.append(f"the mask covers the region the warp moves; the output is the input "
+                             f"(where the warp moves pixels by {asked:.0f} px RMS, they move by {moved:.1f} px)")
     return lines
 
 
