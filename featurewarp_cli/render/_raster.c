@@ -411,9 +411,11 @@ done:
  * A triangle's inverse map J (source pixels per output pixel) is R(theta) diag(s1, s2)
  * R(phi)^T. With u1 + i v1 = (s1 + s2) e^{i (theta + phi)} and u2 + i v2 =
  * (s1 - s2) e^{i (theta - phi)} (sums and differences of J's entries), s1 and s2 are half
- * the sum and the difference of their moduli p and q, and their product w has the angle
- * 2 theta: the major axis e^{i theta} points along |w| + w, or along i (|w| - conj(w))
- * when Re w < 0 (either way without cancellation). The symmetric tent ignores its sign.
+ * the sum and the difference of their moduli p and q, and their product is
+ * w = (s1^2 - s2^2) e^{2 i theta}. As |w| + w = 2 |w| cos(theta) e^{i theta} and
+ * i (|w| - w) = 2 |w| sin(theta) e^{i theta}, the major axis e^{i theta} points along
+ * (|w| + Re w, Im w), or along (Im w, |w| - Re w) when Re w < 0 (no cancellation either
+ * way). The symmetric tent ignores its sign.
  */
 
 /* The footprint of a minifying J (s1 = (p + q) / 2 above threshold): probes per side k,
