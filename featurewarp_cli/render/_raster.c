@@ -411,9 +411,11 @@ done:
  * A triangle's inverse map J (source pixels per output pixel) is R(theta) diag(s1, s2)
  * R(phi)^T. With u1 + i v1 = (s1 + s2) e^{i (theta + phi)} and u2 + i v2 =
  * (s1 - s2) e^{i (theta - phi)} (sums and differences of J's entries), s1 and s2 are half
- * the sum and the difference of their moduli p and q, and their product w has the angle
- * 2 theta: the major axis e^{i theta} points along |w| + w, or along i (|w| - conj(w))
- * when Re w < 0 (either way without cancellation). The symmetric tent ignores its sign.
+ * the sum and the difference of their moduli p and q, and their product is
+ * w = (s1^2 - s2^2) e^{2 i theta}. As |w| + w = 2 |w| cos(theta) e^{i theta} and
+ * i (|w| - w) = 2 |w| sin(theta) e^{i theta}, the major axis e^{i theta} points along
+ * (|w| + Re w, Im w), or along (Im w, |w| - Re w) when Re w < 0 (no cancellation either
+ * way). The symmetric tent ignores its sign.
  */
 
 /* The footprint of a minifying J (s1 = (p + q) / 2 above threshold): probes per side k,
@@ -423,13 +425,13 @@ footprint(double u1, double v1, double u2, double v2, double p, double q, int km
           float *floats)
 {
     double s1 = (p + q) / 2.0, s2 = fabs(p - q) / 2.0;
-    double m1 = fmax(s1, 1.0), m2 = fmax(s2, 1.0);
+    double m1 = max_nan(s1, 1.0), m2 = max_nan(s2, 1.0);
     /* A tent of half-width 2 (m1 - m2) along the major axis, probes at most m2 apart (the
      * level's prefilter width), at most kmax a side (then a coarser level: m2 grows). */
-    double steps = fmax(2.0, ceil(2.0 * (m1 - m2) / m2 - 1e-9));
+    double steps = max_nan(2.0, ceil(2.0 * (m1 - m2) / m2 - 1e-9));
     if (steps > kmax)
         m2 = 2.0 * m1 / (kmax + 2.0);
-    int32_t k = (int32_t)fmin(steps, (double)kmax);
+    int32_t k = (int32_t)min_nan(steps, (double)kmax);
     double half = 2.0 * (m1 - m2);
     if (half < 1e-3)
         k = 1;
@@ -647,7 +649,7 @@ done:
     return result;
 }
 
-/* np.rint on float32 (round half to even) without a libm call in the common case. */
+/* rintf (round half to even) without a libm call in the common case. */
 static inline float
 round_even(float x)
 {
