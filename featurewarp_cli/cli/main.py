@@ -23,7 +23,8 @@ INTERPOLATIONS = ("linear", "cubic", "lanczos")
 FORMAT_NAMES = ("png", "jpg", "jpeg", "webp", "tif", "tiff", "bmp")
 MAX_PIXELS = 200_000_000          # = imageio.MAX_PIXELS (not imported here: cv2 loads slowly)
 #: Keyword arguments of the commands that are engine or output settings, not preset parameters.
-SETTINGS = ("mode", "cell", "feature_weight", "decay", "formulation", "boundary", "background",
+SETTINGS = ("mode", "cell", "feature_weight", "decay", "formulation", "boundary", "scale_prior", "strict",
+            "background",
             "interp", "fmt", "max_pixels")
 
 
@@ -93,6 +94,17 @@ def engine_options() -> list[click.Option]:
                           "canvas stays exact. Default: slide (for stretch; it amounts to fixed for "
                           "swirl and bulge, whose border stays put, and for arc, whose sides are "
                           "curves and oblique rays)."),
+        click.Option(["--scale-prior"], type=Number(float, 0), default=1.0, show_default=True,
+                     metavar="P",
+                     help="Similarity mode: how firmly each feature's scale and rotation are pulled "
+                          "towards the warp's own (its best-fit rotation and the scale the mode "
+                          "picks). 1 holds them as firmly as the feature's own shape equations; "
+                          "smaller values let features that fill a row or column grow or shrink "
+                          "uniformly so the background is not streaked; 0 leaves them free."),
+        click.Option(["--strict"], is_flag=True,
+                     help="Exit 1 and write nothing when a feature could not be kept, features "
+                          "were relaxed to avoid fold-overs, or the output would equal the input "
+                          "(each is otherwise a warning)."),
         click.Option(["--background"], metavar="COLOR",
                      help="Fill where no source pixel lands: #rrggbb, a colour name, or transparent. "
                           "Default: transparent for PNG, WebP and TIFF output, white otherwise "
