@@ -189,7 +189,6 @@ def describe(linear: np.ndarray) -> dict:
     }
 
 
-
 def fit_component(gray_in, gray_out, component, src: Keypoints, dst: Keypoints, opts: dict) -> dict:
     """Fit one component (a uint8 mask of the input): figures for :class:`ComponentFit`."""
     ys, xs = np.nonzero(component)
