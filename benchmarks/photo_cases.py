@@ -251,7 +251,9 @@ def row_line(row: dict) -> str:
              f"{figure(g.get('feature_blend'), 2)}" if g else "-")
     verdict = {True: "yes", False: "NO", None: "-"}[row.get("no_worse_than_plain")]
     cells = [f"{row['case']:26s}", f"{row['mode']:10s}", f"{row['exit']:>2}", f"{row['seconds']:5.2f}",
-             f"{joined(comps, 'distortion'):>6}", f"{joined(comps, 'local_p90'):>6}",
+             f"{joined(comps, 'distortion'):>6}",
+             f"{'/'.join(figure(v) for v in row.get('reported_distortion') or []) or '-':>6}",
+             f"{joined(comps, 'local_p90'):>6}",
              f"{joined(comps, 'explained', 2):>5}", f"{joined(plain_comps, 'distortion'):>6}",
              f"{joined(plain_comps, 'local_p90'):>6}", f"{joined(row.get('warp', []), 'local_p90'):>6}",
              f"{verdict:>5}", f"{figure(m.get('face', {}).get('distortion')):>6}",
@@ -261,12 +263,13 @@ def row_line(row: dict) -> str:
     return " ".join(cells)
 
 
-HEADER = " ".join([f"{'case':26s}", f"{'mode':10s}", f"{'rc':>2}", f"{'sec':>5}", f"{'dist':>6}",
+HEADER = " ".join([f"{'case':26s}", f"{'mode':10s}", f"{'rc':>2}", f"{'sec':>5}", f"{'dist':>6}", f"{'rep':>6}",
                    f"{'loc90':>6}", f"{'expl':>5}", f"{'plain':>6}", f"{'ploc90':>6}", f"{'Wloc90':>6}",
                    f"{'<=pl':>5}", f"{'face':>6}", f"{'pface':>6}", f"{'scale':>5}", f"{'rot':>6}",
                    f"{'bg max':>6}", f"{'guard':>13}", f"{'w':>2}"])
 LEGEND = """Keypoint affine fit input -> output, per mask component (joined by '/'):
   dist    distortion sigma_max/sigma_min - 1 of the fitted map;    scale, rot (degrees clockwise)
+  rep     the distortion the --report gives for the component (should agree with dist within 0.02)
   loc90   90th percentile of the distortion of local fits around each match
   expl    share of locally consistent matches that the global fit explains (< 1: bent)
   plain, ploc90   dist and loc90 of the --mode plain output;  Wloc90: W's own anisotropy, 90th pct
