@@ -74,5 +74,6 @@ def bench_hard(runs: int, exe: Path, photo: Path, samples: Path, tmp: Path, with
                                      "ratio": ours["median_s"] / theirs["median_s"], "ours_mb": ours["peak_mb"],
                                      "magick_mb": theirs["peak_mb"]})
     for r in result["ratios"]:
-        print(f"  ratio 12MP portrait {r['preset']:6s} {r['ours_s']:7.3f} s / {r['magick_s']:7.3f} s = {r['ratio']:5.2f}x")
+        print(f"  ratio 12MP portrait {r['preset']:6s} {r['ours_s']:7.3f} s / {r['magick_s']:7.3f} s "
+              f"= {r['ratio']:5.2f}x")
     return result
