@@ -6,6 +6,10 @@ Run ``python samples/make_masks.py`` (from anywhere) to rewrite, next to this fi
   two photos (hard-coded polygon vertices below, in pixel coordinates x,y);
 * ``astronaut_body_mask.png``: a loose lasso of the astronaut's head and body, one
   component that runs out of the bottom and the left edge (a portrait cut by the frame);
+* ``astronaut_helmet_mask.png``: the head (as in ``astronaut_mask.png``) and the helmet
+  she holds, which runs out of the bottom and the right edge: a head + object mask
+  covering 22 % of the frame (``make bench`` upscales it to 12 MP, a hard case for
+  the fold-over guard);
 * ``closeup.png`` and ``closeup_mask.png``: a tight crop of the astronaut's head,
   upscaled 2x, and a lasso of head and shoulders covering about 80 % of it (a close-up
   whose subject fills the frame and touches three sides);
@@ -48,6 +52,13 @@ ASTRONAUT_BODY = [
      0,512, 0,372, 10,344, 18,316, 30,288, 44,264, 62,246, 88,234, 108,224,
      108,200, 114,176, 128,156, 146,142, 156,126,
      150,110, 146,88, 147,64, 153,42, 166,25, 186,13, 204,9],
+]
+
+# Astronaut (512x512): the helmet she holds, around its top and left rim, out of the
+# bottom edge and back in along the right edge (its strap touches it).
+HELMET = [
+    [284,512, 281,470, 285,432, 296,400, 314,374, 340,356, 376,344, 420,340, 458,346,
+     486,364, 502,390, 510,418, 512,436, 512,512],
 ]
 
 # Close-up: astronaut.png[y0:y0+h, x0:x0+w] upscaled 2x (bicubic) to 332x392.
@@ -162,7 +173,8 @@ def make_shapes(seed=0):
 def main():
     cv2.imwrite(str(HERE / "closeup.png"), make_closeup(cv2.imread(str(HERE / "astronaut.png"))))
     for name, polygons in (("astronaut", ASTRONAUT), ("astronaut_body", ASTRONAUT_BODY),
-                           ("coins", COINS), ("closeup", CLOSEUP)):
+                           ("astronaut_helmet", ASTRONAUT[:1] + HELMET), ("coins", COINS),
+                           ("closeup", CLOSEUP)):
         photo = cv2.imread(str(HERE / f"{name.split('_')[0]}.png"), cv2.IMREAD_UNCHANGED)
         cv2.imwrite(str(HERE / f"{name}_mask.png"), polygon_mask(photo.shape, polygons))
     img, mask = make_shapes()

@@ -101,6 +101,10 @@ class ComponentFit:
         90th percentile and median, over the matches, of the distortion of an affine
         map fitted to each match's neighbourhood (radius max(24 px, sqrt(area) / 4)):
         the image's counterpart of the mesh's per-triangle anisotropy.
+    local_scales : tuple of float or None
+        10th, 50th and 90th percentiles of the local fits' scale sqrt(|det|): a
+        similarity gives three equal values; a part crushed to save the rest shows
+        as a low first value.
     reason : str or None
         Why there are no figures (too few matches or inliers), else None.
     """
@@ -122,6 +126,7 @@ class ComponentFit:
     explained: float | None = None
     local_p90: float | None = None
     local_median: float | None = None
+    local_scales: tuple | None = None
     reason: str | None = None
 
     def as_dict(self) -> dict:
@@ -184,7 +189,6 @@ def describe(linear: np.ndarray) -> dict:
     }
 
 
-
 def fit_component(gray_in, gray_out, component, src: Keypoints, dst: Keypoints, opts: dict) -> dict:
     """Fit one component (a uint8 mask of the input): figures for :class:`ComponentFit`."""
     ys, xs = np.nonzero(component)
@@ -219,7 +223,8 @@ def local_figures(pairs, matrix: np.ndarray, pixels: int, opts: dict) -> dict:
     local affine fit over a neighbourhood of radius max(24 px, sqrt(area) / 4).
     ``explained`` is the share of locally consistent matches that the global map
     ``matrix`` also fits; ``local_p90`` and ``local_median`` are the 90th percentile and
-    the median of the local fits' distortion.
+    the median of the local fits' distortion, ``local_scales`` the 10th, 50th and 90th
+    percentiles of their scale.
     """
     pooled = np.hstack([np.concatenate([p[0] for p in pairs]), np.concatenate([p[1] for p in pairs])])
     _, once = np.unique(np.round(pooled, 2), axis=0, return_index=True)
@@ -227,13 +232,15 @@ def local_figures(pairs, matrix: np.ndarray, pixels: int, opts: dict) -> dict:
     radius = max(24.0 * opts["scale"], 0.25 * np.sqrt(pixels))
     consistent, linear = local_fits(src, dst, radius, opts["threshold"])
     if consistent.sum() < opts["min_inliers"]:
-        return {"explained": None, "local_p90": None, "local_median": None}
+        return {"explained": None, "local_p90": None, "local_median": None, "local_scales": None}
     sigma = np.linalg.svd(linear[consistent], compute_uv=False)
     local = sigma[:, 0] / sigma[:, 1] - 1.0
+    scales = np.sqrt(sigma[:, 0] * sigma[:, 1])
     residual = src[consistent] @ matrix[:, :2].T + matrix[:, 2] - dst[consistent]
     explained = np.mean(np.hypot(residual[:, 0], residual[:, 1]) <= opts["threshold"])
     return {"explained": float(explained), "local_p90": float(np.percentile(local, 90)),
-            "local_median": float(np.median(local))}
+            "local_median": float(np.median(local)),
+            "local_scales": tuple(float(v) for v in np.percentile(scales, [10, 50, 90]))}
 
 
 def measure(image: np.ndarray, output: np.ndarray, mask: np.ndarray, *, min_inliers: int = MIN_INLIERS,
