@@ -34,8 +34,9 @@ cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
 Image.MAX_IMAGE_PIXELS = None           # the caller's max_pixels decides, not Pillow's default
 
 # Pillow's header readers for the formats OpenCV decodes, imported one by one so that
-# Image.open never loads all of Pillow's plugins. AVIF needs Pillow >= 11.3; without it
-# OpenCV's limit covers AVIF as it does HDR, PAM and OpenEXR.
+# Image.open never loads all of Pillow's plugins. AVIF needs a Pillow with its AVIF plugin
+# (recent releases; 9.3 has none): without it OpenCV's limit covers AVIF, as it does HDR,
+# PAM and OpenEXR.
 for _plugin in ("Avif", "Bmp", "Gif", "Jpeg", "Jpeg2K", "Png", "Ppm", "Sun", "Tiff", "WebP"):
     try:
         importlib.import_module(f"PIL.{_plugin}ImagePlugin")
