@@ -138,8 +138,13 @@ def test_boundary_nodes_are_fixed_to_the_warp(request, formulation, mode, preset
     boundary = on_border(mesh.source, 160, 120)
     assert np.count_nonzero(boundary) >= 2 * (160 + 120) / 8
     np.testing.assert_array_equal(mesh.target[boundary], w(mesh.source[boundary]))
-    # ... while the interior really moved away from W (features were honoured).
-    assert np.abs(mesh.target[~boundary] - w(mesh.source[~boundary])).max() > 0.5
+    # ... while the interior really moved away from W (features were honoured), unless
+    # features held by pins no similarity satisfies came out worse than W and were moved
+    # back towards it (never worse than plain).
+    if mesh.info["plain_blend"] == 1.0:
+        assert np.abs(mesh.target[~boundary] - w(mesh.source[~boundary])).max() > 0.5
+    else:
+        assert all(c["anisotropy_worst"] <= c["plain_anisotropy_worst"] + 1e-6 for c in mesh.info["components"])
 
 
 @pytest.mark.parametrize("formulation", FORMULATIONS)

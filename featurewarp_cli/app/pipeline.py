@@ -54,8 +54,11 @@ class Settings:
         Registered preset name.
     params : dict
         The preset's parameter values by name.
-    mode, cell, feature_weight, decay, formulation, boundary
+    mode, cell, feature_weight, decay, formulation, boundary, scale_prior
         See :class:`featurewarp_cli.engine.warper.FeatureWarper`.
+    strict : bool
+        Turn the solve's warnings (a feature not kept, features relaxed, an output
+        that equals the input) into a failure with nothing written.
     background : str or None
         Colour text for uncovered pixels (see :func:`featurewarp_cli.io.colours.parse_colour`);
         None: transparent where the format has alpha, else white.
@@ -74,6 +77,8 @@ class Settings:
     decay: float = 2.0
     formulation: str = "exact"
     boundary: str | None = None
+    scale_prior: float = 1.0
+    strict: bool = False
     background: str | None = None
     interp: str = "cubic"
     fmt: str | None = None
@@ -245,7 +250,8 @@ def make_warper(settings: Settings, width: int, height: int, feature_mask):
         warp = preset(width, height, **settings.params)
         warper = FeatureWarper(width, height, feature_mask, cell=settings.cell,
                                feature_weight=settings.feature_weight, decay=settings.decay,
-                               formulation=settings.formulation, boundary=settings.boundary)
+                               formulation=settings.formulation, boundary=settings.boundary,
+                               scale_prior=settings.scale_prior)
     except plugins.UnknownPreset as err:
         raise WarpError(str(err), usage=True) from None
     except ValueError as err:
@@ -346,6 +352,9 @@ def warp_file(settings: Settings, input: str, output: str, mask: str | None = No
     if image.shape[:2] != (height, width):
         raise WarpError(f"{input} decodes to {image.shape[1]}x{image.shape[0]}, its header says "
                         f"{width}x{height}")
+    warnings.extend(mesh.record.warnings)
+    if settings.strict and mesh.record.warnings:
+        raise WarpError(f"--strict: {mesh.record.warnings[0]}; nothing written")
     result = warper.render(image, mesh, settings.interp, background)
     if draw_grid:
         from .panel import draw_grid as overlay
@@ -365,6 +374,7 @@ def warp_file(settings: Settings, input: str, output: str, mask: str | None = No
     if report:
         from .report import build_report
 
+        timings["total"] = time.perf_counter() - t0
         doc = build_report(input, out_path, image, result, warp, mesh, timings)
         try:
             write.write_atomic(report, (json.dumps(doc, indent=2) + "\n").encode())

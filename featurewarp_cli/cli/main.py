@@ -24,7 +24,8 @@ from ..io.limits import MAX_PIXELS
 MODES = ("similarity", "rigid", "plain")
 INTERPOLATIONS = ("linear", "cubic", "lanczos")
 #: Keyword arguments of the commands that are engine or output settings, not preset parameters.
-SETTINGS = ("mode", "cell", "feature_weight", "decay", "formulation", "boundary", "background",
+SETTINGS = ("mode", "cell", "feature_weight", "decay", "formulation", "boundary", "scale_prior", "strict",
+            "background",
             "interp", "fmt", "max_pixels")
 
 
@@ -101,6 +102,17 @@ def engine_options() -> list[click.Option]:
                           "canvas stays exact. Default: slide (for stretch; it amounts to fixed for "
                           "swirl and bulge, whose border stays put, and for arc, whose sides are "
                           "curves and oblique rays)."),
+        click.Option(["--scale-prior"], type=Number(float, 0), default=1.0, show_default=True,
+                     metavar="P",
+                     help="Similarity mode: how firmly each feature's scale and rotation are pulled "
+                          "towards the warp's own (its best-fit rotation and the scale the mode "
+                          "picks). 1 holds them as firmly as the feature's own shape equations; "
+                          "smaller values let features that fill a row or column grow or shrink "
+                          "uniformly so the background is not streaked; 0 leaves them free."),
+        click.Option(["--strict"], is_flag=True,
+                     help="Exit 1 and write nothing when a feature could not be kept, features "
+                          "were relaxed to avoid fold-overs, or the output would equal the input "
+                          "(each is otherwise a warning)."),
         click.Option(["--background"], metavar="COLOR",
                      help="Fill where no source pixel lands: #rrggbb, a colour name, or transparent. "
                           "Default: transparent for PNG, WebP and TIFF output, white otherwise "
@@ -527,6 +539,11 @@ def list_warps(as_json):
             default = "unset" if p.default is None else f"{p.default:g}"
             click.echo(f"  --{p.cli_name:<10} {p.type.__name__:<6} default {default:<6} {p.range_text():<18} {p.help}")
         click.echo()
+
+
+from .measure import measure_command  # noqa: E402  (its own file: numerics load when it runs)
+
+cli.add_command(measure_command)
 
 
 def one_line_warning(message, category, filename, lineno, file=None, line=None):
