@@ -191,7 +191,7 @@ def bench_table1(runs: int, grids) -> list[dict]:
 def bench_render(runs: int, photo12: Path, mask12: Path) -> dict:
     from featurewarp_cli.render import raster as rnd
     from featurewarp_cli.engine.warper import FeatureWarper, load_warp
-    from featurewarp_cli.io.images import mask_from_image, read_image
+    from featurewarp_cli.io.decode import mask_from_image, read_image
 
     image = read_image(str(photo12))
     mask = mask_from_image(read_image(str(mask12)))
@@ -231,7 +231,7 @@ REWARP_ANGLES = (55.0, 65.0, 50.0, 70.0, 62.0, 58.0)
 def bench_rewarp(runs: int, photo1: Path, mask1: Path) -> dict:
     """Re-solve + re-render of a 1 MP swirl with new parameters, the factorization reused."""
     from featurewarp_cli.engine.warper import FeatureWarper, load_warp
-    from featurewarp_cli.io.images import mask_from_image, read_image
+    from featurewarp_cli.io.decode import mask_from_image, read_image
 
     image = read_image(str(photo1))
     mask = mask_from_image(read_image(str(mask1)))

@@ -41,6 +41,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from ..io.depth import to_eight_bit
 from .keypoints import FLAT_GRAY, RATIO, Keypoints, detect, local_fits, refine, seed, tilts, view_matches
 
 #: Fewest RANSAC inliers for a fit; below this a component gets a reason, not figures.
@@ -149,10 +150,7 @@ def gray8(image: np.ndarray) -> np.ndarray:
     Alpha is composited over a flat :data:`FLAT_GRAY`, so that the edge of a
     transparent canvas looks like any other edge.
     """
-    if image.dtype == np.uint16:
-        image = (image // 257).astype(np.uint8)
-    elif image.dtype != np.uint8:
-        raise ValueError(f"images must be 8- or 16-bit, not {image.dtype}")
+    image = to_eight_bit(image)            # ValueError for other sample types
     if image.ndim == 2:
         return image
     if image.shape[2] == 4:

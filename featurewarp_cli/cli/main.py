@@ -17,11 +17,12 @@ import warnings
 import click
 
 from .. import __version__, plugins
+from ..io import limits
+from ..io.formats import NAMES as FORMAT_NAMES
+from ..io.limits import MAX_PIXELS
 
 MODES = ("similarity", "rigid", "plain")
 INTERPOLATIONS = ("linear", "cubic", "lanczos")
-FORMAT_NAMES = ("png", "jpg", "jpeg", "webp", "tif", "tiff", "bmp")
-MAX_PIXELS = 200_000_000          # = imageio.MAX_PIXELS (not imported here: cv2 loads slowly)
 #: Keyword arguments of the commands that are engine or output settings, not preset parameters.
 SETTINGS = ("mode", "cell", "feature_weight", "decay", "formulation", "boundary", "scale_prior", "strict",
             "background",
@@ -63,6 +64,13 @@ class Number(click.ParamType):
         if self.minimum is not None and (number < self.minimum or (self.open_min and number == self.minimum)):
             self.fail(f"{value!r} must be {'>' if self.open_min else '>='} {self.minimum}", option, ctx)
         return number
+
+
+def limit_decoders(ctx, param, value):
+    """``--max-pixels`` callback: OpenCV reads its decoders' limit once, when it loads (the
+    commands load it later), and applies it to the formats whose header Pillow cannot read."""
+    limits.limit_opencv_decoders(value)
+    return value
 
 
 def engine_options() -> list[click.Option]:
@@ -115,6 +123,7 @@ def engine_options() -> list[click.Option]:
                      help="Output format; overrides the extension (needed for '-' unless a "
                           "prefix such as png:- is given)."),
         click.Option(["--max-pixels"], type=Number(int, 1), default=MAX_PIXELS, show_default=True,
+                     callback=limit_decoders,
                      metavar="N", help="Refuse inputs with more than N pixels (checked in the file "
                                        "header, before decoding)."),
         click.Option(["-q", "--quiet"], is_flag=True, help="Print nothing but errors."),
@@ -227,7 +236,7 @@ def batch_command(preset) -> click.Command:
 
     def callback(inputs, out_dir, mask_pattern, suffix, jobs, **kwargs):
         from ..app.pipeline import WarpError, plan, run_batch
-        from ..io.images import format_name
+        from ..io.formats import format_name
 
         settings, quiet, verbose = settings_from(preset, kwargs)
         try:
@@ -470,8 +479,8 @@ def diff_command(a, b, max_rmse, min_psnr, max_pixels_off, tolerance, diff_image
     must match within --tolerance everywhere. One of A and B may be '-' (stdin).
     """
     from ..app import diff
-    from ..io import images as imageio
     from ..app.pipeline import WarpError, read_input
+    from ..io import ImageError, encode, formats, write
 
     if a == "-" and b == "-":
         raise click.UsageError("only one of A and B can be '-' (stdin)")
@@ -479,8 +488,8 @@ def diff_command(a, b, max_rmse, min_psnr, max_pixels_off, tolerance, diff_image
         try:
             if diff_image == "-":
                 raise ValueError("cannot be '-' (stdout holds the metrics)")
-            path, fmt = imageio.output_target(diff_image)
-            imageio.check_writable(path)
+            path, fmt = formats.output_target(diff_image)
+            write.check_writable(path)
         except ValueError as err:
             raise click.BadParameter(str(err), param_hint="'--diff-image'") from None
     try:
@@ -495,8 +504,8 @@ def diff_command(a, b, max_rmse, min_psnr, max_pixels_off, tolerance, diff_image
         click.echo("\n".join(result.lines()))
     if diff_image:
         try:
-            imageio.write_atomic(path, imageio.encode_image(diff.highlight(first, result.off), fmt))
-        except (imageio.ImageError, OSError) as err:
+            write.write_atomic(path, encode.encode_image(diff.highlight(first, result.off), fmt))
+        except (ImageError, OSError) as err:
             raise click.ClickException(f"cannot write {path}: {err}") from err
     broken = diff.failures(result, max_rmse, min_psnr, max_pixels_off)
     if broken:

@@ -46,7 +46,7 @@ def measure_command(input, output, mask, as_json):
     """
     from ..app import measure
     from ..app.pipeline import WarpError, read_input
-    from ..io.images import mask_from_image
+    from ..io.decode import mask_from_image
     from .main import click_error
 
     if [input, output, mask].count("-") > 1:
