@@ -32,7 +32,7 @@ from . import features as feat
 from . import fidelity, injectivity, quality, system, targets
 from ..render import raster as rnd
 from .grid import Grid, signed_areas
-from .solver import ReducedSystem, factor_concurrently
+from .solver import AxisSystems, ReducedSystem
 
 MODES = ("similarity", "rigid", "plain")
 FORMULATIONS = ("exact", "paper")
@@ -123,35 +123,6 @@ class _GridState:
     def fixed(self) -> np.ndarray:
         """Nodes with any coordinate held."""
         return self.fixed_x | self.fixed_y
-
-
-class AxisSystems:
-    """The factored system for x and for y: one shared factorization when both
-    coordinates hold the same nodes, two when a sliding border frees one of them.
-    The two are factored at once, in two threads (:func:`solver.factor_concurrently`).
-
-    Parameters
-    ----------
-    matrix : (N, N) matrix
-        The normal matrix (:func:`system.normal_matrix`).
-    unknown_x, unknown_y : (N,) int ndarray
-        Unknown numbering per coordinate (see :class:`solver.ReducedSystem`).
-    """
-
-    def __init__(self, matrix, unknown_x: np.ndarray, unknown_y: np.ndarray):
-        if np.array_equal(unknown_x, unknown_y):
-            self.x = self.y = ReducedSystem(matrix, unknown_x)
-        else:
-            self.x, self.y = factor_concurrently(matrix, [unknown_x, unknown_y])
-        self.method = self.x.method
-        self.factorizations = 1 if self.y is self.x else 2
-
-    def solve(self, rhs: np.ndarray, offset: np.ndarray) -> np.ndarray:
-        """Node positions (N, 2); see :meth:`solver.ReducedSystem.solve`."""
-        if self.y is self.x:
-            return self.x.solve(rhs, offset)
-        return np.concatenate([self.x.solve(rhs[:, :1], offset[:, :1]),
-                               self.y.solve(rhs[:, 1:], offset[:, 1:])], axis=1)
 
 
 class FeatureWarper:
@@ -432,7 +403,7 @@ class FeatureWarper:
         info["fallback"] = True
         return warped + injectivity.max_step(warped, x, tris) * 0.95 * (x - warped), component_maps
 
-    def _normal(self, state: _GridState) -> system.StencilMatrix:
+    def _normal(self, state: _GridState) -> "scipy.sparse.csr_matrix":
         """The normal matrix of the state's weights, built once."""
         if state.normal is None:
             state.normal = system.normal_matrix(state.grid, state.features.weight)
@@ -478,7 +449,7 @@ class FeatureWarper:
         nodes = np.flatnonzero(in_system)
         local_moving = moving[nodes]
         unknown = system.number_unknowns(~local_moving, np.where(local_moving, tied[nodes], -1))
-        matrix = self._normal(state).submatrix(nodes)
+        matrix = self._normal(state)[nodes][:, nodes]
         reduced = ReducedSystem(matrix, unknown)
         held = np.where(local_moving[:, None], offset[nodes], x[nodes])
         local_rhs = rhs[nodes]
