@@ -203,17 +203,28 @@ def test_help_and_warps_import_no_scipy(args):
     assert out.stderr.strip().endswith("[]"), out.stderr
 
 
-@needs_cholmod
-def test_a_warp_process_uses_scikit_sparse(tmp_path):
+def warp_process_modules(tmp_path, *options):
+    """The SciPy packages loaded by a ``featurewarp warp swirl`` process with these options."""
     import cv2
 
     y, x = np.mgrid[0:60, 0:80]
     cv2.imwrite(str(tmp_path / "in.png"), np.dstack([x * 3, y * 4, x + y]).astype(np.uint8))
     cv2.imwrite(str(tmp_path / "mask.png"), (((x - 40) ** 2 + (y - 30) ** 2 < 150) * 255).astype(np.uint8))
+    options = [str(tmp_path / o) if o.endswith(".png") else o for o in options]
     code = ("import sys\nfrom featurewarp_cli.cli.main import main\n"
             f"sys.argv = ['featurewarp', 'warp', 'swirl', {str(tmp_path / 'in.png')!r}, "
-            f"{str(tmp_path / 'out.png')!r}, '--mask', {str(tmp_path / 'mask.png')!r}]\n"
+            f"{str(tmp_path / 'out.png')!r}, *{options!r}]\n"
             "try:\n    main()\nexcept SystemExit as exit:\n    assert not exit.code, exit.code\n"
             f"print({SCIPY_MODULES})\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    assert out.stdout.strip() == "['scipy', 'sksparse']", out.stdout + out.stderr
+    return out.stdout.strip()
+
+
+@needs_cholmod
+def test_a_warp_process_uses_scikit_sparse(tmp_path):
+    assert warp_process_modules(tmp_path, "--mask", "mask.png") == "['scipy', 'sksparse']"
+
+
+@pytest.mark.parametrize("options", [[], ["--mask", "mask.png", "--mode", "plain"]])
+def test_a_warp_that_factors_nothing_imports_no_scipy(tmp_path, options):
+    assert warp_process_modules(tmp_path, *options) == "[]"

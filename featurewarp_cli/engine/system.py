@@ -11,18 +11,21 @@ factorization is :mod:`featurewarp_cli.engine.solver`'s.
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse as sp
 
 from .grid import Grid
 
 
-def normal_matrix(grid: Grid, weights: np.ndarray) -> sp.csr_matrix:
-    """A^T A for quad weights ``weights`` ((K,) ndarray): an (N, N) CSR matrix.
+def normal_matrix(grid: Grid, weights: np.ndarray):
+    """A^T A for quad weights ``weights`` ((K,) ndarray): an (N, N) scipy.sparse CSR matrix.
 
     Every grid edge is stored, whatever its weight, so the pattern is the
     grid's 5-point stencil (node ``j * nx + i`` coupled to its upper, left,
     right and lower neighbours), with each row's entries in column order.
+    (SciPy is imported here, not with the module: a warp that factors
+    nothing does not need it.)
     """
+    import scipy.sparse as sp
+
     qy, qx = grid.quad_shape
     nx, ny = grid.nx, grid.ny
     w2 = (weights * weights).reshape(qy, qx)

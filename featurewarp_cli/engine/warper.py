@@ -32,7 +32,6 @@ from . import features as feat
 from . import fidelity, injectivity, quality, system, targets
 from ..render import raster as rnd
 from .grid import Grid, signed_areas
-from .solver import AxisSystems, ReducedSystem
 
 MODES = ("similarity", "rigid", "plain")
 FORMULATIONS = ("exact", "paper")
@@ -208,8 +207,10 @@ class FeatureWarper:
                                            features, tied)
         return self._states[key]
 
-    def _factor(self, state: _GridState, weights: np.ndarray, tied: np.ndarray) -> AxisSystems:
+    def _factor(self, state: _GridState, weights: np.ndarray, tied: np.ndarray) -> "AxisSystems":
         """Assemble and factor the normal equations for these weights and ties."""
+        from .solver import AxisSystems      # scipy.sparse and scikit-sparse: only when factoring
+
         t0 = time.perf_counter()
         matrix = system.normal_matrix(state.grid, weights)
         if state.normal is None and weights is state.features.weight:
@@ -449,6 +450,8 @@ class FeatureWarper:
         nodes = np.flatnonzero(in_system)
         local_moving = moving[nodes]
         unknown = system.number_unknowns(~local_moving, np.where(local_moving, tied[nodes], -1))
+        from .solver import ReducedSystem
+
         matrix = self._normal(state)[nodes][:, nodes]
         reduced = ReducedSystem(matrix, unknown)
         held = np.where(local_moving[:, None], offset[nodes], x[nodes])
