@@ -4,6 +4,7 @@ promise (no SciPy for --help and warps)."""
 
 from __future__ import annotations
 
+import contextlib
 import subprocess
 import sys
 
@@ -90,6 +91,30 @@ def test_not_positive_definite_is_the_project_exception(supernodal):
     b = np.ones(lower.shape[0])
     full = lower + sp.tril(lower, -1).T
     np.testing.assert_allclose(full @ cholmod.solve(cholmod.factorize(analysis, lower), b), b)   # still serves
+
+
+@needs_cholmod
+def test_openmp_is_off_while_factoring_and_restored_after(monkeypatch):
+    omp = cholmod._openmp_runtime()
+    if omp is None:
+        pytest.skip("CHOLMOD runs without an OpenMP runtime here")
+    before = omp.omp_get_max_active_levels()
+    with cholmod._openmp_off():
+        assert omp.omp_get_max_active_levels() == 0
+    assert omp.omp_get_max_active_levels() == before
+    levels = []
+    off = cholmod._openmp_off
+
+    @contextlib.contextmanager
+    def spy():
+        with off():
+            yield
+            levels.append(omp.omp_get_max_active_levels())
+
+    monkeypatch.setattr(cholmod, "_openmp_off", spy)
+    lower = laplacian_lower(10)
+    cholmod.factorize(cholmod.analyze(lower, "natural", True), lower)
+    assert levels == [0] and omp.omp_get_max_active_levels() == before
 
 
 # ------------------------------------------------------------------ system.py's matrix
