@@ -29,7 +29,7 @@ install:
 	$(BIN)/python -m pip install -q --upgrade pip
 	$(BIN)/python -m pip install -q -e '.[test]'
 	$(BIN)/python -m compileall -q featurewarp_cli warps   # an editable install is not byte-compiled
-	$(BIN)/python -c "import featurewarp_cli._cholmod, featurewarp_cli.render._raster; print('featurewarp installed; CHOLMOD and the compiled rasterizer in use')"
+	$(BIN)/python -c "import sksparse.cholmod, featurewarp_cli.render._raster; print('featurewarp installed; CHOLMOD (scikit-sparse) and the compiled rasterizer in use')"
 
 test:
 	$(BIN)/python -m pytest
