@@ -86,7 +86,7 @@ def test_plain_mode_needs_no_masks(runner, tmp_path):
 @pytest.mark.parametrize("args, words", [
     (["--out-dir", "{tmp}/nowhere"], ["--out-dir", "does not exist"]),
     (["--out-dir", "{tmp}/out", "--mask-pattern", "{nope}.png"], ["--mask-pattern", "nope"]),
-    (["--out-dir", "{tmp}/out", "--jobs", "0"], ["--jobs", ">= 1"]),
+    (["--out-dir", "{tmp}/out", "--jobs", "0"], ["--jobs", "out of range (1 <= N)"]),
     (["--out-dir", "{tmp}/out", "--angle", "inf"], ["--angle", "finite"]),
     (["--out-dir", "{tmp}/out", "--background", "transparent", "--format", "bmp"], []),
 ], ids=["missing out-dir", "bad pattern", "no jobs", "inf angle", "transparent bmp"])

@@ -17,6 +17,7 @@ import time
 from dataclasses import dataclass, field
 
 from .. import plugins
+from ..engine.defaults import DECAY, FEATURE_WEIGHT
 from ..io import images as imageio
 
 #: The module that :func:`prefetch_engine` imports: the solver (with the CHOLMOD binding) and renderer.
@@ -70,8 +71,8 @@ class Settings:
     params: dict = field(default_factory=dict)
     mode: str = "similarity"
     cell: int | None = None
-    feature_weight: float = 10.0
-    decay: float = 2.0
+    feature_weight: float = FEATURE_WEIGHT
+    decay: float = DECAY
     formulation: str = "exact"
     boundary: str | None = None
     background: str | None = None

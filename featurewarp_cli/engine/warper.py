@@ -30,13 +30,11 @@ import numpy as np
 
 from . import features as feat
 from . import fidelity, injectivity, quality, system, targets
+from .defaults import BOUNDARIES, DECAY, FEATURE_WEIGHT, FORMULATIONS, MODES
 from ..render import raster as rnd
 from .grid import Grid, signed_areas
 from .solver import ReducedSystem, factor_concurrently
 
-MODES = ("similarity", "rigid", "plain")
-FORMULATIONS = ("exact", "paper")
-BOUNDARIES = ("fixed", "slide")
 
 #: Bisection steps on how far released features go from the warp's shape to their own.
 BLEND_BISECTIONS = 8
@@ -195,7 +193,7 @@ class FeatureWarper:
     """
 
     def __init__(self, width: int, height: int, mask: np.ndarray | None = None, *,
-                 cell: float | None = None, feature_weight: float = 10.0, decay: float = 2.0,
+                 cell: float | None = None, feature_weight: float = FEATURE_WEIGHT, decay: float = DECAY,
                  formulation: str = "exact", injective: bool = True, boundary: str | None = None):
         if boundary not in (None,) + BOUNDARIES:
             raise ValueError(f"boundary must be one of {', '.join(BOUNDARIES)}, not {boundary!r}")
@@ -528,7 +526,7 @@ class FeatureWarper:
 
 
 def warp(image: np.ndarray, mask: np.ndarray | None, preset: str, *, mode: str = "similarity",
-         cell: int | None = None, feature_weight: float = 10.0, decay: float = 2.0,
+         cell: int | None = None, feature_weight: float = FEATURE_WEIGHT, decay: float = DECAY,
          formulation: str = "exact", boundary: str | None = None, interp: str = "cubic",
          background=None, **params) -> np.ndarray:
     """Warp ``image`` with a preset while the features in ``mask`` keep their shape.
