@@ -9,6 +9,7 @@ stays fast) and print; they turn a :class:`WarpError` into click's exit codes.
 
 from __future__ import annotations
 
+import contextlib
 import inspect
 import sys
 
@@ -46,6 +47,23 @@ def report_warnings(summary: dict, quiet: bool, verbose: bool) -> None:
             click.echo(f"featurewarp: warning: {summary['input']}: {warning}", err=True)
     if verbose:
         click.echo(f"featurewarp: {summary_line(summary)}", err=True)
+
+
+class NoProgress:
+    """The stand-in for a progress bar that is not shown."""
+
+    def update(self, steps: int) -> None:
+        """Count nothing."""
+
+
+def progress_bar(length: int, label: str, quiet: bool):
+    """click's progress bar on stderr when it is a terminal (and not ``quiet``), else :class:`NoProgress`.
+
+    (click < 8.2 has no ``hidden`` argument.)
+    """
+    if quiet or not sys.stderr.isatty():
+        return contextlib.nullcontext(NoProgress())
+    return click.progressbar(length=length, label=label, file=sys.stderr)
 
 
 def preset_command(preset, params: list, callback, doc: str) -> click.Command:
@@ -115,8 +133,7 @@ def batch_command(preset) -> click.Command:
         except WarpError as err:
             raise click_error(err) from err
         failed = 0
-        with click.progressbar(length=len(todo), label="warping", file=sys.stderr,
-                               hidden=quiet or not sys.stderr.isatty()) as bar:
+        with progress_bar(len(todo), "warping", quiet) as bar:
             for job, error, summary in run_batch(settings, todo, jobs):
                 bar.update(1)
                 if error:
@@ -170,8 +187,7 @@ def animate_command(preset) -> click.Command:
         settings, quiet, verbose = settings_from(preset, kwargs)
         try:
             ranges = parse_vary(vary, preset)
-            with click.progressbar(length=frames, label="frames", file=sys.stderr,
-                                   hidden=quiet or not sys.stderr.isatty()) as bar:
+            with progress_bar(frames, "frames", quiet) as bar:
                 summary = animate_file(settings, input, output, mask, ranges, frames, fps, bar.update)
         except WarpError as err:
             raise click_error(err) from err

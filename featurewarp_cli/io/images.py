@@ -18,7 +18,8 @@ import zlib
 import cv2
 import numpy as np
 
-cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
+# Silence OpenCV's own log (level 0); before 4.13 the call is cv2.setLogLevel.
+getattr(cv2.utils, "logging", cv2).setLogLevel(0)
 
 #: Output formats by name: (OpenCV extension, has alpha, fixed encoder parameters).
 #: Every encoder setting is pinned so that the same pixels always give the same bytes.
