@@ -11,13 +11,26 @@ Examples
 (240, 160, 3)
 
 Warping the same image and mask again with other presets or parameters reuses
-the factorization (the system matrix depends on the grid and mask only):
+the factorization: the system matrix depends on the grid and the mask only.
 
 >>> warper = FeatureWarper(160, 120, mask)
->>> a = warper.render(image, warper.solve(load_warp("swirl")(160, 120, angle=90)))
->>> b = warper.render(image, warper.solve(load_warp("swirl")(160, 120, angle=180)))
+>>> a = warper.render(image, warper.solve(load_warp("swirl")(160, 120, angle=45)))
+>>> b = warper.render(image, warper.solve(load_warp("swirl")(160, 120, angle=90)))
+>>> c = warper.render(image, warper.solve(load_warp("bulge")(160, 120, strength=0.5)))
 >>> warper.factorizations
 1
+
+The automatic cell follows the warp's curvature: a swirl by 180 degrees needs a
+finer grid, factored in turn. A sliding border (stretch's) holds x and y at
+different nodes: one factorization per coordinate, shared by every stretch.
+
+>>> mesh = warper.solve(load_warp("swirl")(160, 120, angle=180))
+>>> warper.factorizations
+2
+>>> stretcher = FeatureWarper(160, 120, mask)
+>>> meshes = [stretcher.solve(load_warp("stretch")(160, 120, sx=sx)) for sx in (1.5, 2, 3)]
+>>> stretcher.factorizations
+2
 """
 
 from __future__ import annotations
