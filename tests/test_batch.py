@@ -11,7 +11,6 @@ import numpy as np
 import pytest
 
 from featurewarp_cli.app import pipeline as batch
-from featurewarp_cli.io import images as imageio
 from test_cli import listing, runner, save, scene, square_mask, textured  # noqa: F401  (fixture)
 
 
@@ -151,4 +150,3 @@ def test_run_job_never_raises(tmp_path):
     job = batch.Job(str(tmp_path / "missing.png"), str(tmp_path / "o.png"), None)
     error, summary = batch.run_job(batch.Settings("swirl"), job)
     assert "does not exist" in error and summary is None
-    assert imageio.FORMATS                      # the module imports cleanly in workers too
