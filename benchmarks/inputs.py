@@ -39,14 +39,22 @@ def make_photos(samples: Path, folder: Path) -> dict[str, tuple[Path, Path]]:
         label -> (photo path, mask path), PNG files.
     """
     photo = cv2.imread(str(samples / "astronaut.png"), cv2.IMREAD_UNCHANGED)
-    mask = cv2.imread(str(samples / "astronaut_mask.png"), cv2.IMREAD_GRAYSCALE)
-    if photo is None or mask is None:
-        raise FileNotFoundError(f"samples/astronaut.png or its mask is missing in {samples}")
+    if photo is None:
+        raise FileNotFoundError(f"samples/astronaut.png is missing in {samples}")
     out = {}
     for label, (w, h) in SIZES.items():
         p, m = folder / f"photo-{label}.png", folder / f"mask-{label}.png"
         cv2.imwrite(str(p), cv2.resize(photo, (w, h), interpolation=cv2.INTER_CUBIC))
-        big = cv2.resize(mask, (w, h), interpolation=cv2.INTER_LINEAR)
-        cv2.imwrite(str(m), np.where(big >= 128, 255, 0).astype(np.uint8))
+        upscale_mask(samples / "astronaut_mask.png", (w, h), m)
         out[label] = (p, m)
     return out
+
+
+def upscale_mask(source: Path, size: tuple[int, int], path: Path) -> Path:
+    """Write the mask ``source`` resized to ``size`` (width, height), thresholded at 128, to ``path``."""
+    mask = cv2.imread(str(source), cv2.IMREAD_GRAYSCALE)
+    if mask is None:
+        raise FileNotFoundError(f"{source} is missing")
+    big = cv2.resize(mask, size, interpolation=cv2.INTER_LINEAR)
+    cv2.imwrite(str(path), np.where(big >= 128, 255, 0).astype(np.uint8))
+    return path

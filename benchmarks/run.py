@@ -22,6 +22,9 @@ commands  Whole ``featurewarp warp`` commands (subprocess wall time, peak RSS of
 magick    ImageMagick's plain equivalents on the same files, each run right after
           ours (part of ``commands``), when ``convert`` is installed, and the
           ratios ours / ImageMagick.
+hard      Issue 10's hard cases (benchmarks/hard_cases.py): the 12 MP photo with a
+          head + helmet mask that makes the fold guard work, swirl 180, arc 300 and
+          bulge 2.95, each beside ImageMagick's -swirl / -distort Arc / -implode.
 
 Medians of 5 runs (``--quick``: 3 runs, fewer sizes, 12 MP swirl only). A figure
 whose first run takes over 45 s, or any figure once the time budget (``--budget``,
@@ -55,9 +58,10 @@ import cv2  # noqa: E402
 import numpy as np  # noqa: E402
 
 from benchmarks import targets as tgt  # noqa: E402
+from benchmarks.hard_cases import bench_hard  # noqa: E402
 from benchmarks.inputs import disc_mask, make_photos  # noqa: E402
 
-SECTIONS = ("table1", "render", "rewarp", "commands", "magick")
+SECTIONS = ("table1", "render", "rewarp", "commands", "magick", "hard")
 
 #: The paper's Table 1 (Pentium 4, 3.2 GHz): setup, factor, rhs setup, solve in seconds.
 PAPER_TABLE1 = {
@@ -187,7 +191,7 @@ def bench_table1(runs: int, grids) -> list[dict]:
 def bench_render(runs: int, photo12: Path, mask12: Path) -> dict:
     from featurewarp_cli.render import raster as rnd
     from featurewarp_cli.engine.warper import FeatureWarper, load_warp
-    from featurewarp_cli.io.images import mask_from_image, read_image
+    from featurewarp_cli.io.decode import mask_from_image, read_image
 
     image = read_image(str(photo12))
     mask = mask_from_image(read_image(str(mask12)))
@@ -227,7 +231,7 @@ REWARP_ANGLES = (55.0, 65.0, 50.0, 70.0, 62.0, 58.0)
 def bench_rewarp(runs: int, photo1: Path, mask1: Path) -> dict:
     """Re-solve + re-render of a 1 MP swirl with new parameters, the factorization reused."""
     from featurewarp_cli.engine.warper import FeatureWarper, load_warp
-    from featurewarp_cli.io.images import mask_from_image, read_image
+    from featurewarp_cli.io.decode import mask_from_image, read_image
 
     image = read_image(str(photo1))
     mask = mask_from_image(read_image(str(mask1)))
@@ -373,7 +377,7 @@ def main(argv=None) -> int:
     with tempfile.TemporaryDirectory(prefix="featurewarp-bench-") as tmpdir:
         tmp = Path(tmpdir)
         photos = None
-        if {"render", "rewarp", "commands"} & set(sections):
+        if {"render", "rewarp", "commands", "hard"} & set(sections):
             photos = make_photos(ROOT / "samples", tmp)
         if "table1" in sections:
             report["table1"] = bench_table1(runs, QUICK_GRIDS if args.quick else GRIDS)
@@ -385,6 +389,9 @@ def main(argv=None) -> int:
             commands, magick = bench_commands(runs, exe, photos, tmp, args.quick, "magick" in sections)
             report["commands"], report["magick"] = commands, magick
             report["ratios"] = ratios(commands, magick)
+        if "hard" in sections:
+            report["hard"] = bench_hard(runs, exe, photos["12MP"][0], ROOT / "samples", tmp,
+                                        "magick" in sections, repeat, show)
     report["targets"] = tgt.evaluate(report)
     report["machine"]["loadavg_end"] = os.getloadavg()
     report["seconds"] = time.perf_counter() - started

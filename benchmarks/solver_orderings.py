@@ -49,7 +49,7 @@ import numpy as np  # noqa: E402
 from benchmarks.inputs import disc_mask, make_photos  # noqa: E402
 from featurewarp_cli.engine import warper as api
 from featurewarp_cli.engine import solver  # noqa: E402
-from featurewarp_cli.io.images import mask_from_image, read_image  # noqa: E402
+from featurewarp_cli.io.decode import mask_from_image, read_image  # noqa: E402
 
 CASES = ("table1-1000", "table1-500", "12MP-swirl", "1MP-stretch")
 

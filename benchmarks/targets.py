@@ -1,4 +1,4 @@
-"""The speed and memory targets of issue 4, checked against a benchmark report."""
+"""The speed and memory targets of issues 4 and 10, checked against a benchmark report."""
 
 from __future__ import annotations
 
@@ -45,6 +45,13 @@ def evaluate(report: dict) -> list[dict]:
             rows.append(_row("12 MP swirl 180 / magick -swirl 180", r["ratio"], SWIRL_12MP_RATIO, "x"))
         if r["size"] == "1MP" and r["preset"] == "stretch":
             rows.append(_row("1 MP stretch --sx 2 / magick -liquid-rescale", r["ratio"], STRETCH_1MP_RATIO, "x"))
+    hard = report.get("hard", {})
+    for r in hard.get("runs", []):
+        if r["preset"] == "swirl":
+            rows.append(_row("12 MP portrait (hard mask) swirl 180 peak RSS", r["peak_mb"], SWIRL_12MP_PEAK_MB, "MB"))
+    for r in hard.get("ratios", []):
+        if r["preset"] == "swirl":
+            rows.append(_row("12 MP portrait (hard mask) swirl 180 / magick", r["ratio"], SWIRL_12MP_RATIO, "x"))
     return rows
 
 

@@ -4,6 +4,15 @@ Run ``python samples/make_masks.py`` (from anywhere) to rewrite, next to this fi
 
 * ``astronaut_mask.png`` and ``coins_mask.png``: rough, lasso-like selections for the
   two photos (hard-coded polygon vertices below, in pixel coordinates x,y);
+* ``astronaut_body_mask.png``: a loose lasso of the astronaut's head and body, one
+  component that runs out of the bottom and the left edge (a portrait cut by the frame);
+* ``astronaut_helmet_mask.png``: the head (as in ``astronaut_mask.png``) and the helmet
+  she holds, which runs out of the bottom and the right edge: a head + object mask
+  covering 22 % of the frame (``make bench`` upscales it to 12 MP, a hard case for
+  the fold-over guard);
+* ``closeup.png`` and ``closeup_mask.png``: a tight crop of the astronaut's head,
+  upscaled 2x, and a lasso of head and shoulders covering about 80 % of it (a close-up
+  whose subject fills the frame and touches three sides);
 * ``shapes.png`` and ``shapes_mask.png``: a 640x480 synthetic image with six solid
   shapes on a textured gray background, and its mask (the shapes dilated by ~6 px).
 
@@ -30,6 +39,38 @@ ASTRONAUT = [
     [402,3, 428,3, 442,18, 446,34, 455,38, 462,50, 463,120, 464,200, 464,230, 466,262,
      466,292, 440,295, 404,295, 368,294, 362,262, 360,236, 348,230, 346,214, 354,200,
      370,182, 376,160, 376,112, 378,90, 378,60, 381,42, 386,34, 393,36, 398,22],
+]
+
+# Astronaut (512x512), head and body in one loose lasso: around the hair, the helmet
+# ring and the suit's right shoulder, along the top and left rim of the helmet she
+# holds (it stays out), out of the bottom edge, and up the left edge past the flag,
+# which her left arm almost touches.
+ASTRONAUT_BODY = [
+    [222,8, 248,9, 272,16, 292,30, 304,48, 309,70, 307,92, 302,112, 292,128, 284,142,
+     296,156, 306,176, 311,200, 312,226, 320,238, 338,246, 352,262, 362,286, 368,312,
+     373,336, 352,352, 330,372, 306,384, 294,404, 288,440, 285,480, 284,512,
+     0,512, 0,372, 10,344, 18,316, 30,288, 44,264, 62,246, 88,234, 108,224,
+     108,200, 114,176, 128,156, 146,142, 156,126,
+     150,110, 146,88, 147,64, 153,42, 166,25, 186,13, 204,9],
+]
+
+# Astronaut (512x512): the helmet she holds, around its top and left rim, out of the
+# bottom edge and back in along the right edge (its strap touches it).
+HELMET = [
+    [284,512, 281,470, 285,432, 296,400, 314,374, 340,356, 376,344, 420,340, 458,346,
+     486,364, 502,390, 510,418, 512,436, 512,512],
+]
+
+# Close-up: astronaut.png[y0:y0+h, x0:x0+w] upscaled 2x (bicubic) to 332x392.
+CLOSEUP_CROP = (140, 8, 166, 196)       # x0, y0, w, h in astronaut.png
+# Head and shoulders in closeup.png's pixels: the hair (touching the right edge),
+# the right cheek and neck down to the suit's ring, out of the bottom edge, across
+# the ring to the left edge, and up the neck and the hair's left side.
+CLOSEUP = [
+    [174,4, 212,6, 246,16, 274,32, 298,54, 316,82, 328,112, 332,140, 332,186, 324,216,
+     302,240, 286,262, 280,292, 274,316, 292,334, 306,360, 318,392,
+     0,392, 0,272, 26,266, 58,264, 80,258,
+     74,240, 52,228, 32,202, 20,172, 16,140, 22,104, 36,74, 60,48, 90,28, 122,12, 148,6],
 ]
 
 # Coins (384x303): one loose polygon per coin, in reading order (4 rows of 6). Traced
@@ -97,6 +138,12 @@ def polygon_mask(shape, polygons):
     return mask
 
 
+def make_closeup(astronaut):
+    """Return the close-up: :data:`CLOSEUP_CROP` of ``astronaut`` upscaled 2x (bicubic)."""
+    x0, y0, w, h = CLOSEUP_CROP
+    return cv2.resize(astronaut[y0:y0 + h, x0:x0 + w], (2 * w, 2 * h), interpolation=cv2.INTER_CUBIC)
+
+
 def make_shapes(seed=0):
     """Return (image, mask) for the 640x480 synthetic test image."""
     h, w = 480, 640
@@ -124,8 +171,11 @@ def make_shapes(seed=0):
 
 
 def main():
-    for name, polygons in (("astronaut", ASTRONAUT), ("coins", COINS)):
-        photo = cv2.imread(str(HERE / f"{name}.png"), cv2.IMREAD_UNCHANGED)
+    cv2.imwrite(str(HERE / "closeup.png"), make_closeup(cv2.imread(str(HERE / "astronaut.png"))))
+    for name, polygons in (("astronaut", ASTRONAUT), ("astronaut_body", ASTRONAUT_BODY),
+                           ("astronaut_helmet", ASTRONAUT[:1] + HELMET), ("coins", COINS),
+                           ("closeup", CLOSEUP)):
+        photo = cv2.imread(str(HERE / f"{name.split('_')[0]}.png"), cv2.IMREAD_UNCHANGED)
         cv2.imwrite(str(HERE / f"{name}_mask.png"), polygon_mask(photo.shape, polygons))
     img, mask = make_shapes()
     cv2.imwrite(str(HERE / "shapes.png"), img)

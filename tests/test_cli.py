@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from featurewarp_cli.io import images as imageio
+from featurewarp_cli.io import ImageError, decode, encode, formats
 from featurewarp_cli import plugins
 from featurewarp_cli.cli.main import main
 
@@ -107,8 +107,8 @@ def scene(tmp_path, name="in.png"):
             save(tmp_path / (os.path.splitext(name)[0] + "_mask.png"), square_mask()))
 
 
-def decode(data: bytes) -> np.ndarray:
-    return imageio.decode_image(data, "test")
+def decoded(data: bytes) -> np.ndarray:
+    return decode.decode_image(data, "test")
 
 
 def listing(directory) -> dict:
@@ -122,7 +122,7 @@ def test_warp_writes_the_declared_canvas(runner, tmp_path):
     image, mask = scene(tmp_path)
     run = runner("warp", "stretch", image, tmp_path / "out.png", "--mask", mask, "--sx", "1.5")
     assert (run.code, run.stdout, run.stderr) == (0, b"", "")
-    out = imageio.read_image(str(tmp_path / "out.png"))
+    out = decode.read_image(str(tmp_path / "out.png"))
     assert out.shape[:2] == (SIZE[1], round(SIZE[0] * 1.5))
 
 
@@ -132,7 +132,7 @@ def test_output_may_be_the_input(runner, tmp_path):
     run = runner("warp", "swirl", image, image, "--mask", mask, "--angle", "60")
     assert run.code == 0, run.stderr
     after = open(image, "rb").read()
-    assert after != before and decode(after).shape == decode(before).shape
+    assert after != before and decoded(after).shape == decoded(before).shape
     assert sorted(os.listdir(tmp_path)) == ["in.png", "in_mask.png"]
 
 
@@ -159,10 +159,10 @@ def test_stdin_to_stdout_equals_files(runner, tmp_path):
 
 @pytest.mark.parametrize("source", ["jpg", "webp", "tiff", "bmp"])
 def test_stdin_format_is_sniffed(runner, tmp_path, source):
-    data = imageio.encode_image(textured(), source)
+    data = encode.encode_image(textured(), source)
     run = runner("warp", "stretch", "-", "-", "--format", "png", "--sx", "2", input=data)
     assert run.code == 0, run.stderr
-    assert decode(run.stdout).shape == (SIZE[1], 2 * SIZE[0], 3)
+    assert decoded(run.stdout).shape == (SIZE[1], 2 * SIZE[0], 3)
 
 
 def test_prefix_names_the_format_of_a_file(runner, tmp_path):
@@ -180,14 +180,14 @@ def test_mask_from_stdin(runner, tmp_path):
 
 
 def test_output_target_parsing():
-    assert imageio.output_target("png:-") == ("-", "png")
-    assert imageio.output_target("-", "JPEG") == ("-", "jpg")
-    assert imageio.output_target("a/b.TIF") == ("a/b.TIF", "tiff")
-    assert imageio.output_target("x:y.png") == ("x:y.png", "png")       # not a format prefix
+    assert formats.output_target("png:-") == ("-", "png")
+    assert formats.output_target("-", "JPEG") == ("-", "jpg")
+    assert formats.output_target("a/b.TIF") == ("a/b.TIF", "tiff")
+    assert formats.output_target("x:y.png") == ("x:y.png", "png")       # not a format prefix
     with pytest.raises(ValueError, match="--format"):
-        imageio.output_target("-")
+        formats.output_target("-")
     with pytest.raises(ValueError, match="asks for png"):
-        imageio.output_target("png:-", "jpg")
+        formats.output_target("png:-", "jpg")
 
 
 # --- determinism ----------------------------------------------------------------------------
@@ -206,7 +206,7 @@ def test_same_command_gives_the_same_bytes(runner, tmp_path, fmt):
     assert command(*args).returncode == 0
     outputs.append(args[3].read_bytes())
     assert outputs[0] == outputs[1] == outputs[2]
-    assert decode(outputs[0]).shape[:2] == (SIZE[1], SIZE[0])
+    assert decoded(outputs[0]).shape[:2] == (SIZE[1], SIZE[0])
 
 
 # --- formats and depths ---------------------------------------------------------------------
@@ -214,16 +214,16 @@ def test_same_command_gives_the_same_bytes(runner, tmp_path, fmt):
 def test_sixteen_bit_png_stays_sixteen_bit(runner, tmp_path):
     src = save(tmp_path / "deep.png", textured(dtype=np.uint16))
     assert runner("warp", "swirl", src, tmp_path / "out.png", "--angle", "0").code == 0
-    out = imageio.read_image(str(tmp_path / "out.png"))
+    out = decode.read_image(str(tmp_path / "out.png"))
     assert out.dtype == np.uint16
-    assert np.abs(out.astype(int) - imageio.read_image(src).astype(int)).max() <= 257
+    assert np.abs(out.astype(int) - decode.read_image(src).astype(int)).max() <= 257
 
 
 @pytest.mark.parametrize("fmt", ["jpg", "webp", "bmp"])
 def test_sixteen_bit_is_scaled_for_eight_bit_formats(runner, tmp_path, fmt):
     src = save(tmp_path / "deep.png", textured(dtype=np.uint16))
     assert runner("warp", "swirl", src, tmp_path / f"out.{fmt}", "--angle", "0").code == 0
-    out = imageio.read_image(str(tmp_path / f"out.{fmt}"))
+    out = decode.read_image(str(tmp_path / f"out.{fmt}"))
     assert out.dtype == np.uint8
     assert np.abs(out.astype(int) - textured().astype(int)).mean() < 3
 
@@ -233,7 +233,7 @@ def test_alpha_is_flattened_on_the_background_for_jpeg(runner, tmp_path):
     src = save(tmp_path / "clear.png", rgba)
     run = runner("warp", "swirl", src, tmp_path / "out.bmp", "--angle", "0", "--background", "red")
     assert run.code == 0, run.stderr
-    out = imageio.read_image(str(tmp_path / "out.bmp"))
+    out = decode.read_image(str(tmp_path / "out.bmp"))
     assert out.shape == (SIZE[1], SIZE[0], 3) and (out == (0, 0, 255)).all()
 
 
@@ -248,7 +248,7 @@ def test_a_failure_leaves_the_existing_output_untouched(runner, tmp_path, monkey
     def boom(*args, **kwargs):
         raise OSError(28, "No space left on device")
 
-    target = {"encode": (imageio, "encode_image"), "write": (os, "fdopen"), "rename": (os, "replace"),
+    target = {"encode": (encode, "encode_image"), "write": (os, "fdopen"), "rename": (os, "replace"),
               "solve": (__import__("featurewarp_cli.engine.warper").engine.warper.FeatureWarper, "solve")}[where]
     monkeypatch.setattr(*target, boom)
     before = listing(tmp_path)
@@ -295,7 +295,7 @@ def test_debug_shows_a_traceback_for_processing_errors(runner, tmp_path):
 
 def test_unexpected_errors_are_one_line(runner, tmp_path, monkeypatch):
     image, _ = scene(tmp_path)
-    monkeypatch.setattr(imageio, "mask_from_image", lambda image: 1 / 0)
+    monkeypatch.setattr(decode, "mask_from_image", lambda image: 1 / 0)
     run = runner("warp", "swirl", image, tmp_path / "o.png", "-m", image)
     assert run.code == 1 and run.lines == [
         "featurewarp: error: ZeroDivisionError: division by zero (--debug shows a traceback)"]
@@ -371,8 +371,8 @@ def test_stdin_terminal_is_refused(monkeypatch):
             return True
 
     monkeypatch.setattr(sys, "stdin", Terminal())
-    with pytest.raises(imageio.ImageError, match="stdin is a terminal"):
-        imageio.read_bytes("-")
+    with pytest.raises(ImageError, match="stdin is a terminal"):
+        decode.read_bytes("-")
 
 
 def test_broken_pipe_is_one_line(tmp_path):

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from featurewarp_cli.app import diff
-from featurewarp_cli.io import images as imageio
+from featurewarp_cli.io import decode
 from test_cli import runner, save, textured  # noqa: F401  (fixture)
 
 
@@ -84,7 +84,7 @@ def test_incomparable_images(runner, tmp_path, other, reason):
 def test_diff_image(runner, pair, tmp_path):
     run = runner("diff", *pair, "--diff-image", tmp_path / "d.png", "--quiet")
     assert run.code == 1 and run.stdout == b""
-    picture = imageio.read_image(str(tmp_path / "d.png"))
+    picture = decode.read_image(str(tmp_path / "d.png"))
     red = (picture == (0, 0, 255)).all(axis=2)
     assert picture.shape == (36, 48, 3) and red.sum() == 12 and red[:3, :4].all()
     gray = picture[~red]

@@ -1,4 +1,4 @@
-"""The whole-command speed work: our PNG writer, the plugin fast path, and the faster
+"""The whole-command speed work: the PNG settings, the plugin fast path, and the faster
 metrics, feature analysis and automatic cell, which must give the same numbers as the
 straightforward formulas they replace."""
 
@@ -15,15 +15,16 @@ import pytest
 
 from featurewarp_cli.engine import features
 from featurewarp_cli.engine import fidelity
-from featurewarp_cli.io import images as imageio
+from featurewarp_cli.io import ImageError, decode, encode
+from featurewarp_cli.io.capture import captured_stderr
 from featurewarp_cli import plugins
 from featurewarp_cli.engine import quality
 from featurewarp_cli.engine.grid import Grid, signed_areas
 
 
-# --------------------------------------------------------------------------- PNG writer
+# --------------------------------------------------------------------------- PNG
 
-def decode(data: bytes) -> np.ndarray:
+def opencv_decode(data: bytes) -> np.ndarray:
     return cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
 
 
@@ -53,70 +54,37 @@ def expected_decode(image: np.ndarray) -> np.ndarray:
 @pytest.mark.parametrize("channels", [None, 1, 2, 3, 4])
 @pytest.mark.parametrize("size", [(1, 1), (1, 9), (7, 1), (33, 47), (120, 700)])
 def test_png_is_lossless(rng, dtype, channels, size):
-    """Every depth and channel count decodes to the same samples (noise and smooth ramps)."""
+    """Every depth and channel count decodes to the same samples (noise and smooth ramps),
+    in a PNG that holds the pixels only (no metadata chunk) and comes out the same twice."""
     shape = size if channels is None else size + (channels,)
     top = np.iinfo(dtype).max
     noise = rng.integers(0, top + 1, shape, dtype=dtype)
     ramp = (np.linspace(0, top, size[1])[None, :] * np.ones(size)).astype(dtype)
     ramp = ramp if channels is None else np.repeat(ramp[:, :, None], channels, axis=2)
     for image in (noise, ramp):
-        data = imageio.encode_image(image, "png")
-        assert [kind for kind, _ in chunks(data)] == [b"IHDR", b"IDAT", b"IEND"]
-        back = decode(data)
+        data = encode.encode_image(image, "png")
+        assert {kind for kind, _ in chunks(data)} == {b"IHDR", b"IDAT", b"IEND"}
+        assert encode.encode_image(image, "png") == data
+        back = opencv_decode(data)
         assert back is not None and back.dtype == dtype
         np.testing.assert_array_equal(back, expected_decode(image))
-
-
-def test_png_bands_threads_and_chunks_do_not_change_the_pixels(rng, monkeypatch):
-    """Many bands, any thread count and split IDATs: a valid zlib stream with the same pixels,
-    and the bytes do not depend on the number of threads."""
-    image = rng.integers(0, 256, (61, 37, 3), dtype=np.uint8)
-    image[20:40] = 7                                         # runs for Z_RLE
-    monkeypatch.setattr(imageio, "PNG_BAND_BYTES", 300)       # 2 rows per band: 31 bands
-    monkeypatch.setattr(imageio.os, "cpu_count", lambda: 4)
-    four = imageio.encode_png(image)
-    monkeypatch.setattr(imageio.os, "cpu_count", lambda: 1)
-    assert imageio.encode_png(image) == four
-    stream = b"".join(body for kind, body in chunks(four) if kind == b"IDAT")
-    raw = zlib.decompress(stream)                            # checks the combined Adler-32
-    assert len(raw) == 61 * (1 + 37 * 3) and raw[0] == 4     # Paeth on every row
-    np.testing.assert_array_equal(decode(four), image)
-    monkeypatch.setattr(imageio, "PNG_MAX_CHUNK", 100)
-    split = imageio.encode_png(image)
-    assert sum(kind == b"IDAT" for kind, _ in chunks(split)) > 1
-    np.testing.assert_array_equal(decode(split), image)
 
 
 def test_png_of_a_view_and_of_a_copy_are_the_same(rng):
     """Strided views (a crop, reversed channels) encode like their contiguous copies."""
     big = rng.integers(0, 65536, (50, 80, 4), dtype=np.uint16)
     view = big[5:45:2, 10:70, 2::-1]
-    data = imageio.encode_png(view)
-    assert data == imageio.encode_png(np.ascontiguousarray(view))
-    np.testing.assert_array_equal(decode(data), view)
+    data = encode.encode_image(view, "png")
+    assert data == encode.encode_image(np.ascontiguousarray(view), "png")
+    np.testing.assert_array_equal(opencv_decode(data), view)
 
 
-def test_png_is_smaller_than_opencv_level_1():
-    """The Paeth filter keeps files at least as small as OpenCV's adaptive filters at level 1."""
-    y, x = np.mgrid[0:300, 0:400]
-    image = np.dstack([(x + y) % 256, (x * y // 97) % 256, (3 * x) % 256]).astype(np.uint8)
-    ours = imageio.encode_png(image)
-    ok, theirs = cv2.imencode(".png", image, [cv2.IMWRITE_PNG_COMPRESSION, 1])
-    assert len(ours) <= 1.05 * theirs.size
-
-
-@pytest.mark.parametrize("cut", [0, 1, 4000, 65521, 65522, 99999, 100000])
-def test_adler32_combine(rng, cut):
-    data = rng.integers(0, 256, 100000, dtype=np.uint8).tobytes()
-    combined = imageio._adler32_combine(zlib.adler32(data[:cut]), zlib.adler32(data[cut:]), len(data) - cut)
-    assert combined == zlib.adler32(data)
-
-
-def test_png_refuses_what_it_cannot_store():
-    with pytest.raises(imageio.ImageError):
-        imageio.encode_png(np.zeros((4, 4), np.float32))
-    with pytest.raises(imageio.ImageError):
-        imageio.encode_png(np.zeros((4, 4, 5), np.uint8))
+@pytest.mark.parametrize("fmt", ["png", "jpg", "webp", "tiff", "bmp"])
+def test_encoders_refuse_what_they_cannot_store(fmt):
+    with pytest.raises(ImageError, match="float32"):
+        encode.encode_image(np.zeros((4, 4), np.float32), fmt)
+    with pytest.raises(ImageError, match="5 channels"):
+        encode.encode_image(np.zeros((4, 4, 5), np.uint8), fmt)
 
 
 # --------------------------------------------------------------------------- masks
@@ -136,7 +104,7 @@ def test_mask_threshold_is_the_float_comparison(rng, dtype, channels):
         gray = (cv2.cvtColor(colour, cv2.COLOR_BGR2GRAY) if channels >= 3 else colour[:, :, 0]).astype(np.float64)
         if channels == 4:
             gray = gray * image[:, :, 3] / top
-    np.testing.assert_array_equal(imageio.mask_from_image(image), gray >= 128 * top / 255)
+    np.testing.assert_array_equal(decode.mask_from_image(image), gray >= 128 * top / 255)
 
 
 # --------------------------------------------------------------------------- plugins
@@ -258,7 +226,7 @@ def test_notices_printed_during_a_decode_still_show(capfd):
     warnings; a featurewarp notice printed meanwhile is shown afterwards, not swallowed."""
     import os
 
-    with imageio._captured_stderr() as lines:
+    with captured_stderr() as lines:
         os.write(2, b"featurewarp: a notice from another thread\nlibpng warning: iCCP: something\n")
     assert lines == ["libpng warning: iCCP: something"]
     assert "featurewarp: a notice from another thread" in capfd.readouterr().err

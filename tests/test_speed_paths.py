@@ -56,42 +56,6 @@ def test_render_without_antialiasing_equals_inverse_map_then_resample(preset, pa
     np.testing.assert_array_equal(out, expected)
 
 
-def reference_inverse_map(source, target, triangles, canvas):
-    """Per-triangle barycentric test of every pixel centre (slow, obviously right)."""
-    width, height = canvas
-    coords = np.full((height, width, 2), -1.0)
-    ys, xs = np.mgrid[0:height, 0:width]
-    q = np.stack([xs.ravel(), ys.ravel()], 1).astype(np.float64)
-    for tri in triangles:
-        p, s = target[tri], source[tri]
-        e1, e2 = p[1] - p[0], p[2] - p[0]
-        det = e1[0] * e2[1] - e1[1] * e2[0]
-        if abs(det) < 1e-12:
-            continue
-        lo, hi = np.floor(p.min(0)).astype(int), np.ceil(p.max(0)).astype(int)
-        sel = (q[:, 0] >= lo[0]) & (q[:, 0] <= hi[0]) & (q[:, 1] >= lo[1]) & (q[:, 1] <= hi[1])
-        d = q[sel] - p[0]
-        u = (d[:, 0] * e2[1] - d[:, 1] * e2[0]) / det
-        v = (e1[0] * d[:, 1] - e1[1] * d[:, 0]) / det
-        inside = (u >= -1e-9) & (v >= -1e-9) & (u + v <= 1 + 1e-9)
-        idx = np.flatnonzero(sel)[inside]
-        coords.reshape(-1, 2)[idx] = s[0] + u[inside, None] * (s[1] - s[0]) + v[inside, None] * (s[2] - s[0])
-    return coords
-
-
-@pytest.mark.parametrize("preset, params", [("swirl", {"angle": 300}), ("arc", {"angle": 90}),
-                                            ("stretch", {"sx": 1.7, "sy": 0.6})])
-def test_scanline_inverse_map_matches_barycentric_reference(preset, params):
-    source, target, triangles, canvas = mesh_for(48, 40, preset, cell=3, **params)
-    coords, covered = render.inverse_map(source, target, triangles, canvas)
-    expected = reference_inverse_map(source, target, triangles, canvas)
-    sure = expected[..., 0] > -0.75
-    # Pixel centres within 1e-9 of an edge may go either way; everything else must agree.
-    assert np.count_nonzero(covered != sure) <= 2
-    both = covered & sure
-    np.testing.assert_allclose(coords[both], expected[both], atol=2e-3)
-
-
 def test_shared_edges_leave_no_cracks():
     """A perturbed grid covering the whole canvas covers every pixel."""
     rng = np.random.default_rng(3)

@@ -15,7 +15,10 @@ import cv2
 import numpy as np
 
 from ..engine import fidelity
-from ..io import images as imageio
+from ..io import formats, write
+from ..io.colours import parse_colour
+from ..io.depth import to_eight_bit
+from ..io.encode import encode_image
 from .pipeline import Settings, WarpError, background_colour, load_image_and_mask, make_warper, prefetch_engine
 
 ANIMATED = {".gif", ".webp", ".png", ".apng"}
@@ -82,8 +85,7 @@ def centre_on(image: np.ndarray, size: tuple[int, int], fill) -> np.ndarray:
 
 def to_bgr(image: np.ndarray, alpha: bool) -> np.ndarray:
     """8-bit BGR (or BGRA when ``alpha``) from any gray/BGR/BGRA 8/16-bit image."""
-    if image.dtype == np.uint16:
-        image = (image // 257).astype(np.uint8)
+    image = to_eight_bit(image)
     if image.ndim == 2:
         image = cv2.cvtColor(image, cv2.COLOR_GRAY2BGR)
     if alpha and image.shape[2] == 3:
@@ -117,9 +119,9 @@ def animate_file(settings: Settings, input: str, output: str, mask: str | None, 
     t0 = time.perf_counter()
     kind = output_kind(output)
     if kind != "sequence":
-        imageio.check_writable(output)
+        write.check_writable(output)
     prefetch_engine()
-    image, feature_mask, warnings = load_image_and_mask(settings, imageio.split_prefix(input)[1], mask)
+    image, feature_mask, warnings = load_image_and_mask(settings, formats.split_prefix(input)[1], mask)
     height, width = image.shape[:2]
     per_frame = frame_params(settings, ranges, frames)
     warps = []
@@ -132,7 +134,7 @@ def animate_file(settings: Settings, input: str, output: str, mask: str | None, 
         warper = make_warper(Settings(**{**settings.__dict__, "cell": cell}), width, height, feature_mask)[1]
     fmt = "png" if kind != "video" else "bmp"
     background = background_colour(settings.background, fmt) if kind != "video" else (
-        imageio.parse_colour(settings.background) if settings.background else (255, 255, 255))
+        parse_colour(settings.background) if settings.background else (255, 255, 255))
     alpha = kind != "video" and background is None
     canvas = (max(w.canvas[0] for w in warps), max(w.canvas[1] for w in warps))
     fill = (0, 0, 0, 0) if alpha else tuple(background[::-1]) + (255,)
@@ -150,14 +152,14 @@ def animate_file(settings: Settings, input: str, output: str, mask: str | None, 
 
 
 def write_frames(output: str, kind: str, frames: list[np.ndarray], fps: float) -> None:
-    """Write ``frames`` atomically: each frame of a sequence as :func:`imageio.encode_png`
+    """Write ``frames`` atomically: each frame of a sequence as :func:`featurewarp_cli.io.encode.encode_image` PNG
     bytes, an animation or video as OpenCV encodes it into a temporary file, whose bytes
-    :func:`imageio.write_atomic` then puts in place."""
+    :func:`featurewarp_cli.io.write.write_atomic` then puts in place."""
     if kind == "sequence":
         for index, frame in enumerate(frames):
             path = output % index
-            imageio.check_writable(path)
-            imageio.write_atomic(path, imageio.encode_png(frame))
+            write.check_writable(path)
+            write.write_atomic(path, encode_image(frame, "png"))
         return
     directory = os.path.dirname(os.path.abspath(output))
     ext = os.path.splitext(output)[1].lower()
@@ -179,7 +181,7 @@ def write_frames(output: str, kind: str, frames: list[np.ndarray], fps: float) -
         if not written or os.path.getsize(tmp) == 0:
             raise WarpError(f"OpenCV could not write {output}")
         with open(tmp, "rb") as encoded:         # renamed into place with the usual permissions
-            imageio.write_atomic(output, encoded.read())
+            write.write_atomic(output, encoded.read())
     finally:
         if os.path.exists(tmp):
             os.unlink(tmp)

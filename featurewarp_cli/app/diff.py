@@ -11,6 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..io.depth import on_eight_bit_scale
+
 
 @dataclass(frozen=True)
 class Comparison:
@@ -54,8 +56,7 @@ def channels(image: np.ndarray) -> int:
 
 def normalised(image: np.ndarray) -> np.ndarray:
     """(h, w, C) float64 samples on the 0..255 scale."""
-    scale = 257.0 if image.dtype == np.uint16 else 1.0
-    data = image.astype(np.float64) / scale
+    data = on_eight_bit_scale(image)
     return data[:, :, None] if data.ndim == 2 else data
 
 

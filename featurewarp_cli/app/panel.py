@@ -5,14 +5,15 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from ..io.depth import to_eight_bit
+
 GRID_COLOUR = (255, 200, 0)        # BGR: light blue
 MASK_TINT = (60, 60, 255)          # BGR: red
 
 
 def as_bgr8(image: np.ndarray) -> np.ndarray:
     """An 8-bit BGR version of any gray/BGR/BGRA, 8/16-bit image (alpha over a checkerboard)."""
-    if image.dtype == np.uint16:
-        image = (image // 257).astype(np.uint8)
+    image = to_eight_bit(image)
     if image.ndim == 2:
         return cv2.cvtColor(image, cv2.COLOR_GRAY2BGR)
     if image.shape[2] == 4:

@@ -17,8 +17,8 @@ import time
 from dataclasses import dataclass, field
 
 from .. import plugins
-from ..engine.defaults import DECAY, FEATURE_WEIGHT
-from ..io import images as imageio
+from ..engine.defaults import DECAY, FEATURE_WEIGHT, SCALE_PRIOR
+from ..io import ImageError, colours, decode, encode, formats, limits, write
 
 #: The module that :func:`prefetch_engine` imports: the solver (with the CHOLMOD binding) and renderer.
 ENGINE = "featurewarp_cli.engine.warper"
@@ -55,10 +55,13 @@ class Settings:
         Registered preset name.
     params : dict
         The preset's parameter values by name.
-    mode, cell, feature_weight, decay, formulation, boundary
+    mode, cell, feature_weight, decay, formulation, boundary, scale_prior
         See :class:`featurewarp_cli.engine.warper.FeatureWarper`.
+    strict : bool
+        Turn the solve's warnings (a feature not kept, features relaxed, an output
+        that equals the input) into a failure with nothing written.
     background : str or None
-        Colour text for uncovered pixels (see :func:`imageio.parse_colour`);
+        Colour text for uncovered pixels (see :func:`featurewarp_cli.io.colours.parse_colour`);
         None: transparent where the format has alpha, else white.
     interp : {'linear', 'cubic', 'lanczos'}
     fmt : str or None
@@ -75,19 +78,21 @@ class Settings:
     decay: float = DECAY
     formulation: str = "exact"
     boundary: str | None = None
+    scale_prior: float = SCALE_PRIOR
+    strict: bool = False
     background: str | None = None
     interp: str = "cubic"
     fmt: str | None = None
-    max_pixels: int = imageio.MAX_PIXELS
+    max_pixels: int = limits.MAX_PIXELS
 
 
 def background_colour(text: str | None, fmt: str):
     """(r, g, b) fill for uncovered pixels, or None (transparent), for output format ``fmt``."""
-    has_alpha = imageio.FORMATS[fmt][1]
+    has_alpha = formats.FORMATS[fmt].alpha
     if text is None:
         return None if has_alpha else (255, 255, 255)
     try:
-        rgb = imageio.parse_colour(text)
+        rgb = colours.parse_colour(text)
     except ValueError as err:
         raise WarpError(str(err), "--background", usage=True) from None
     if rgb is None and not has_alpha:
@@ -98,20 +103,22 @@ def background_colour(text: str | None, fmt: str):
 
 def _writable(path: str, param: str) -> None:
     try:
-        imageio.check_writable(path)
+        write.check_writable(path)
     except ValueError as err:
         raise WarpError(str(err), param, usage=True) from None
 
 
-def read_input(path: str, param: str, max_pixels: int | None):
-    """Decode an image argument (``-``: stdin); a missing file is a usage error, a bad one a
-    processing error (:class:`WarpError`). ``param`` names the argument in messages."""
+def read_input(path: str, param: str, max_pixels: int | None, data: bytes | None = None):
+    """Decode an image argument (``-``: stdin; ``data``: its bytes if already read); a missing file
+    is a usage error, a bad one a processing error (:class:`WarpError`); ``param`` names it."""
     if path != "-" and not os.path.isfile(path):
         problem = "does not exist" if not os.path.exists(path) else "is not a file"
         raise WarpError(f"{path} {problem}", param, usage=True)
     try:
-        return imageio.read_image(path, max_pixels)
-    except imageio.ImageError as err:
+        if data is not None:
+            return decode.decode_image(data, path, max_pixels)
+        return decode.read_image(path, max_pixels)
+    except ImageError as err:
         raise WarpError(str(err), None if param == "INPUT" else param) from err
 
 
@@ -132,8 +139,8 @@ def prefetch_engine() -> None:
         threading.Thread(target=work, name="featurewarp-prefetch").start()
 
 
-def load_image_and_mask(settings: Settings, input: str, mask: str | None):
-    """Decode INPUT and its mask (checked against each other).
+def load_image_and_mask(settings: Settings, input: str, mask: str | None, data: bytes | None = None):
+    """Decode INPUT (from ``data``, its bytes if already read) and its mask, checked against each other.
 
     Returns
     -------
@@ -145,7 +152,7 @@ def load_image_and_mask(settings: Settings, input: str, mask: str | None):
     use_mask = mask is not None and settings.mode != "plain"
     if use_mask and mask != "-" and not os.path.isfile(mask):
         raise WarpError(f"{mask} does not exist", "--mask", usage=True)
-    image = read_input(input, "INPUT", settings.max_pixels)
+    image = read_input(input, "INPUT", settings.max_pixels, data)
     height, width = image.shape[:2]
     feature_mask, warnings = _load_mask(settings, mask, (width, height)) if use_mask else (None, [])
     return image, feature_mask, warnings
@@ -154,7 +161,7 @@ def load_image_and_mask(settings: Settings, input: str, mask: str | None):
 def _load_mask(settings: Settings, mask: str, size: tuple[int, int]):
     """The feature mask, checked against the image's (width, height); and warnings."""
     width, height = size
-    feature_mask = imageio.mask_from_image(read_input(mask, "--mask", settings.max_pixels))
+    feature_mask = decode.mask_from_image(read_input(mask, "--mask", settings.max_pixels))
     if feature_mask.shape != (height, width):
         raise WarpError(f"mask is {feature_mask.shape[1]}x{feature_mask.shape[0]} but the "
                         f"image is {width}x{height}", "--mask", usage=True)
@@ -172,8 +179,8 @@ class _Decoding:
 
         def work():
             try:
-                self._image = imageio.decode_image(data, name, max_pixels)
-            except imageio.ImageError as err:
+                self._image = decode.decode_image(data, name, max_pixels)
+            except ImageError as err:
                 self._error = WarpError(str(err))
             except BaseException as err:  # re-raised in the main thread
                 self._error = err
@@ -206,18 +213,17 @@ def start_loading(settings: Settings, input: str, mask: str | None):
     use_mask = mask is not None and settings.mode != "plain"
     if use_mask and mask != "-" and not os.path.isfile(mask):
         raise WarpError(f"{mask} does not exist", "--mask", usage=True)
-    data = size = None
+    data = header = None
     if input != "-" and os.path.isfile(input):
         try:
-            data = imageio.read_bytes(input)
-        except imageio.ImageError:
+            data = decode.read_bytes(input)                  # read once: both paths below use it
+        except ImageError:
             pass                                             # reported by the serial path below
-        size = imageio.image_size(data) if data else None
-    if size is None or min(size) < 1 or (settings.max_pixels and size[0] * size[1] > settings.max_pixels):
-        image, feature_mask, warnings = load_image_and_mask(settings, input, mask)
+        header = decode.read_header(data) if data else None
+    if header is None or (settings.max_pixels and header.width * header.height > settings.max_pixels):
+        image, feature_mask, warnings = load_image_and_mask(settings, input, mask, data)
         return _Ready(image), feature_mask, warnings, (image.shape[1], image.shape[0])
-    if imageio.exif_orientation(data) >= 5:                  # turned a quarter: width and height swap
-        size = size[::-1]
+    size = header.upright_size
     feature_mask, warnings = None, []
     if use_mask:
         try:
@@ -245,14 +251,15 @@ def make_warper(settings: Settings, width: int, height: int, feature_mask):
         warp = preset(width, height, **settings.params)
         warper = FeatureWarper(width, height, feature_mask, cell=settings.cell,
                                feature_weight=settings.feature_weight, decay=settings.decay,
-                               formulation=settings.formulation, boundary=settings.boundary)
+                               formulation=settings.formulation, boundary=settings.boundary,
+                               scale_prior=settings.scale_prior)
     except plugins.UnknownPreset as err:
         raise WarpError(str(err), usage=True) from None
     except ValueError as err:
         raise WarpError(str(err), usage=True) from None
     try:
-        imageio.check_pixels(*warp.canvas, "the output canvas", settings.max_pixels)
-    except imageio.ImageError as err:
+        limits.check_pixels(*warp.canvas, "the output canvas", settings.max_pixels)
+    except ImageError as err:
         raise WarpError(str(err)) from None
     return warp, warper
 
@@ -260,7 +267,7 @@ def make_warper(settings: Settings, width: int, height: int, feature_mask):
 def check_outputs(settings: Settings, output: str, *extra: tuple[str | None, str]):
     """Resolve OUTPUT's path and format and check that it and ``extra`` (path, option) can be written."""
     try:
-        out_path, fmt = imageio.output_target(output, settings.fmt)
+        out_path, fmt = formats.output_target(output, settings.fmt)
     except ValueError as err:
         raise WarpError(str(err), "OUTPUT", usage=True) from None
     if out_path != "-":
@@ -274,8 +281,8 @@ def check_outputs(settings: Settings, output: str, *extra: tuple[str | None, str
 def write_image(out_path: str, fmt: str, image, background) -> None:
     """Encode and write atomically (``-``: stdout); failures are WarpError."""
     try:
-        imageio.write_output(out_path, imageio.encode_image(image, fmt, background or (255, 255, 255)))
-    except (imageio.ImageError, OSError) as err:
+        write.write_output(out_path, encode.encode_image(image, fmt, background or (255, 255, 255)))
+    except (ImageError, OSError) as err:
         raise WarpError(f"cannot write {out_path}: {getattr(err, 'strerror', None) or err}") from err
 
 
@@ -328,7 +335,7 @@ def warp_file(settings: Settings, input: str, output: str, mask: str | None = No
     WarpError
     """
     t0 = time.perf_counter()
-    input = imageio.split_prefix(input)[1]
+    input = formats.split_prefix(input)[1]
     if mask == "-" and input == "-":
         raise WarpError("cannot be '-' when INPUT is '-' (stdin holds the image)", "--mask", usage=True)
     out_path, fmt = check_outputs(settings, output, (report, "--report"), (save_grid, "--save-grid"))
@@ -346,6 +353,9 @@ def warp_file(settings: Settings, input: str, output: str, mask: str | None = No
     if image.shape[:2] != (height, width):
         raise WarpError(f"{input} decodes to {image.shape[1]}x{image.shape[0]}, its header says "
                         f"{width}x{height}")
+    warnings.extend(mesh.record.warnings)
+    if settings.strict and mesh.record.warnings:
+        raise WarpError(f"--strict: {mesh.record.warnings[0]}; nothing written")
     result = warper.render(image, mesh, settings.interp, background)
     if draw_grid:
         from .panel import draw_grid as overlay
@@ -358,16 +368,17 @@ def warp_file(settings: Settings, input: str, output: str, mask: str | None = No
     timings["write"] = time.perf_counter() - t1
     if save_grid:
         try:
-            imageio.write_atomic(save_grid, mesh.to_npz())
+            write.write_atomic(save_grid, mesh.to_npz())
         except OSError as err:
             raise WarpError(f"cannot write {save_grid}: {err.strerror or err}") from err
 
     if report:
         from .report import build_report
 
+        timings["total"] = time.perf_counter() - t0
         doc = build_report(input, out_path, image, result, warp, mesh, timings)
         try:
-            imageio.write_atomic(report, (json.dumps(doc, indent=2) + "\n").encode())
+            write.write_atomic(report, (json.dumps(doc, indent=2) + "\n").encode())
         except OSError as err:
             raise WarpError(f"cannot write report {report}: {err.strerror or err}") from err
     return summary(settings.preset, settings.mode, input, out_path, (width, height), mesh, t0, warnings)
@@ -390,7 +401,7 @@ def compare_file(settings: Settings, input: str, output: str, mask: str | None =
     from . import panel
 
     t0 = time.perf_counter()
-    input = imageio.split_prefix(input)[1]
+    input = formats.split_prefix(input)[1]
     out_path, fmt = check_outputs(settings, output)
     background = background_colour(settings.background, fmt)
     settings = replace(settings, mode="similarity")

@@ -38,7 +38,11 @@ def build_report(input_path, output_path, image, result, warp, mesh, timings) ->
     dict
     """
     info = mesh.info
-    stages = ("load", "grid", "assemble", "factor", "rhs", "solve", "render", "write")
+    stages = ("load", "grid", "factor", "scale_setup", "rhs", "solve", "guard", "quality", "render", "write")
+    seconds = {k: round(float(timings.get(k, 0.0)), 6) for k in stages}
+    if "total" in timings:
+        seconds["total"] = round(float(timings["total"]), 6)
+        seconds["other"] = round(max(0.0, seconds["total"] - sum(seconds[k] for k in stages)), 6)
     return {
         "version": __version__,
         "preset": warp.name,
@@ -52,7 +56,10 @@ def build_report(input_path, output_path, image, result, warp, mesh, timings) ->
         "grid": info["grid"],
         "components": {"count": len(info["components"]), "items": info["components"]},
         "solver": info["solver"],
-        "seconds": {k: round(float(timings.get(k, 0.0)), 6) for k in stages},
+        "seconds": seconds,
+        "features_kept": info["features_kept"],
+        "background_stretch": info["background_stretch"],
+        "warnings": info["warnings"],
         "flipped_triangles": info["flipped_triangles"],
         "fold_guard": {
             "flipped_before": info.get("flipped_before_guard", 0),
@@ -62,6 +69,7 @@ def build_report(input_path, output_path, image, result, warp, mesh, timings) ->
             "release_rounds": info.get("release_rounds", 0),
             "released_components": info.get("released_components", []),
             "feature_blend": info.get("feature_blend", 1.0),
+            "plain_blend": info.get("plain_blend", 1.0),
         },
         "quality": info["quality"],
     }

@@ -29,7 +29,7 @@ def diff_command(a, b, max_rmse, min_psnr, max_pixels_off, tolerance, diff_image
     """
     from ..app import diff
     from ..app.pipeline import WarpError, read_input
-    from ..io import images as imageio
+    from ..io import ImageError, encode, formats, write
 
     if a == "-" and b == "-":
         raise click.UsageError("only one of A and B can be '-' (stdin)")
@@ -37,8 +37,8 @@ def diff_command(a, b, max_rmse, min_psnr, max_pixels_off, tolerance, diff_image
         try:
             if diff_image == "-":
                 raise ValueError("cannot be '-' (stdout holds the metrics)")
-            path, fmt = imageio.output_target(diff_image)
-            imageio.check_writable(path)
+            path, fmt = formats.output_target(diff_image)
+            write.check_writable(path)
         except ValueError as err:
             raise click.BadParameter(str(err), param_hint="'--diff-image'") from None
     try:
@@ -53,8 +53,8 @@ def diff_command(a, b, max_rmse, min_psnr, max_pixels_off, tolerance, diff_image
         click.echo("\n".join(result.lines()))
     if diff_image:
         try:
-            imageio.write_atomic(path, imageio.encode_image(diff.highlight(first, result.off), fmt))
-        except (imageio.ImageError, OSError) as err:
+            write.write_atomic(path, encode.encode_image(diff.highlight(first, result.off), fmt))
+        except (ImageError, OSError) as err:
             raise click.ClickException(f"cannot write {path}: {err}") from err
     broken = diff.failures(result, max_rmse, min_psnr, max_pixels_off)
     if broken:

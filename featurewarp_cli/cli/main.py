@@ -2,8 +2,8 @@
 
 The modules beside this one hold the pieces: :mod:`.options` (the shared options
 and the click type that checks numbers through their declarations),
-:mod:`.presets` (``warp``, ``batch``, ``compare`` and ``animate`` PRESET) and
-:mod:`.diff`. They parse, check and print; the work lives in
+:mod:`.presets` (``warp``, ``batch``, ``compare`` and ``animate`` PRESET),
+:mod:`.diff` and :mod:`.measure`. They parse, check and print; the work lives in
 :mod:`featurewarp_cli.app`, imported inside the commands so that ``--help`` stays
 fast. Only image bytes ever go to stdout when OUTPUT is ``-``; every message goes
 to stderr.
@@ -19,6 +19,7 @@ import click
 
 from .. import __version__, plugins
 from .diff import diff_command
+from .measure import measure_command
 from .presets import AnimateGroup, BatchGroup, CompareGroup, PresetGroup
 
 #: click >= 8.2 raises this (a UsageError, exit 2) for a command run without its
@@ -99,6 +100,7 @@ def animate():
 
 
 cli.add_command(diff_command)
+cli.add_command(measure_command)
 
 
 @cli.command("warps")

@@ -13,16 +13,16 @@ from __future__ import annotations
 import click
 
 from ..engine import defaults
+from ..io import limits
+from ..io.formats import NAMES as FORMAT_NAMES
 from ..plugins import Param
 
 INTERPOLATIONS = ("linear", "cubic", "lanczos")
-FORMAT_NAMES = ("png", "jpg", "jpeg", "webp", "tif", "tiff", "bmp")
-MAX_PIXELS = 200_000_000          # = io.images.MAX_PIXELS (not imported here: cv2 loads slowly)
 #: Keyword arguments of the commands that are engine or output settings, not preset parameters.
-SETTINGS = ("mode", "cell", "feature_weight", "decay", "formulation", "boundary", "background",
-            "interp", "fmt", "max_pixels")
+SETTINGS = ("mode", "cell", "feature_weight", "decay", "formulation", "boundary", "scale_prior", "strict",
+            "background", "interp", "fmt", "max_pixels")
 
-MAX_PIXELS_PARAM = Param("max_pixels", int, MAX_PIXELS,
+MAX_PIXELS_PARAM = Param("max_pixels", int, limits.MAX_PIXELS,
                          "Refuse inputs with more than N pixels (checked in the file header, before decoding).",
                          min=1, metavar="N")
 JOBS = Param("jobs", int, 1, "Worker processes; results are byte-identical to N=1.", min=1, metavar="N")
@@ -68,13 +68,22 @@ def option(param: Param, *names: str):
     return click.option(*(names or [f"--{param.cli_name}"]), **declared(param))
 
 
+def limit_decoders(ctx, param, value):
+    """``--max-pixels`` callback: OpenCV reads its decoders' limit once, when it loads (the
+    commands load it later), and applies it to the formats whose header Pillow cannot read."""
+    limits.limit_opencv_decoders(value)
+    return value
+
+
 def engine_options() -> list[click.Option]:
     """Options ``warp``, ``batch``, ``compare`` and ``animate`` share (built fresh for each command)."""
     return [
         click.Option(["--mode"], type=click.Choice(defaults.MODES), default=defaults.MODES[0], show_default=True,
                      help="similarity: features rotate and scale uniformly with the warp; "
                           "rigid: features also keep their size; plain: the standard warp, mask ignored."),
-        *(param_option(p) for p in defaults.PARAMS),
+        param_option(defaults.CELL_PARAM),
+        param_option(defaults.FEATURE_WEIGHT_PARAM),
+        param_option(defaults.DECAY_PARAM),
         click.Option(["--formulation"], type=click.Choice(defaults.FORMULATIONS), default=defaults.FORMULATIONS[0],
                      show_default=True,
                      help="exact: each feature moves as one similarity, held exactly; paper: the "
@@ -86,6 +95,11 @@ def engine_options() -> list[click.Option]:
                           "canvas stays exact. Default: slide (for stretch; it amounts to fixed for "
                           "swirl and bulge, whose border stays put, and for arc, whose sides are "
                           "curves and oblique rays)."),
+        param_option(defaults.SCALE_PRIOR_PARAM),
+        click.Option(["--strict"], is_flag=True,
+                     help="Exit 1 and write nothing when a feature could not be kept, features "
+                          "were relaxed to avoid fold-overs, or the output would equal the input "
+                          "(each is otherwise a warning)."),
         click.Option(["--background"], metavar="COLOR",
                      help="Fill where no source pixel lands: #rrggbb, a colour name, or transparent. "
                           "Default: transparent for PNG, WebP and TIFF output, white otherwise "
@@ -95,7 +109,7 @@ def engine_options() -> list[click.Option]:
         click.Option(["--format", "fmt"], type=click.Choice(FORMAT_NAMES, case_sensitive=False),
                      help="Output format; overrides the extension (needed for '-' unless a "
                           "prefix such as png:- is given)."),
-        param_option(MAX_PIXELS_PARAM),
+        click.Option(["--max-pixels"], callback=limit_decoders, **declared(MAX_PIXELS_PARAM)),
         click.Option(["-q", "--quiet"], is_flag=True, help="Print nothing but errors."),
         click.Option(["-v", "--verbose"], is_flag=True,
                      help="Print a one-line summary per image on stderr (sizes, solver, seconds)."),

@@ -124,7 +124,7 @@ def batch_command(preset) -> click.Command:
 
     def callback(inputs, out_dir, mask_pattern, suffix, jobs, **kwargs):
         from ..app.pipeline import WarpError, plan, run_batch
-        from ..io.images import format_name
+        from ..io.formats import format_name
 
         settings, quiet, verbose = settings_from(preset, kwargs)
         try:

@@ -39,6 +39,9 @@ BOUNDARIES = ("fixed", "slide")
 FEATURE_WEIGHT = 10.0
 #: rho, the width of the transition band around features, in cells.
 DECAY = 2.0
+#: Weight of the scale-and-rotation prior of similarity mode: 1 holds a component's scale
+#: as firmly as its own shape equations would hold a target scale; 0 leaves it free.
+SCALE_PRIOR = 1.0
 #: The smallest grid cell a caller may ask for, in pixels.
 MIN_CELL = 1.0
 
@@ -58,5 +61,10 @@ DECAY_PARAM = Param(
     "Width of the band around features where the weight falls smoothly from W to 1 "
     "(the paper's rho), in cells.",
     min=0.0, min_open=True, metavar="CELLS")
-#: The numeric engine settings, in the order of the command line's options.
-PARAMS = (CELL_PARAM, FEATURE_WEIGHT_PARAM, DECAY_PARAM)
+SCALE_PRIOR_PARAM = Param(
+    "scale_prior", float, SCALE_PRIOR,
+    "Similarity mode: how firmly each feature's scale and rotation are pulled towards the warp's "
+    "own (its best-fit rotation and the scale the mode picks). 1 holds them as firmly as the "
+    "feature's own shape equations; smaller values let features that fill a row or column grow "
+    "or shrink uniformly so the background is not streaked; 0 leaves them free.",
+    min=0.0, metavar="P")

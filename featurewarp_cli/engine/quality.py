@@ -52,14 +52,27 @@ def similarity_fits(source: np.ndarray, target: np.ndarray, labels: np.ndarray, 
 
 
 def triangle_anisotropy(source: np.ndarray, target: np.ndarray, triangles: np.ndarray) -> np.ndarray:
-    """Ratio of the larger to the smaller singular value of each triangle's affine map, (M,)."""
-    s = source[triangles]
-    t = target[triangles]
-    ds = np.stack([s[:, 1] - s[:, 0], s[:, 2] - s[:, 0]], axis=2)      # (M, 2, 2) columns = edges
-    dt = np.stack([t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]], axis=2)
-    jac = dt @ np.linalg.inv(ds)
-    sv = np.linalg.svd(jac, compute_uv=False)
-    return sv[:, 0] / np.maximum(sv[:, 1], 1e-12)
+    """Ratio of the larger to the smaller singular value of each triangle's affine map, (M,)
+    (inf for a degenerate image).
+
+    The map is J = T S^-1 with S and T the triangle's edge matrices; its singular values
+    come in closed form from p = |(J00 + J11, J10 - J01)| and q = |(J00 - J11, J10 + J01)|
+    (sigma = (p + q) / 2, |p - q| / 2), and J's inverse of S as the 2x2 adjugate.
+    """
+    a, b, c = (np.ascontiguousarray(triangles[:, k]) for k in range(3))
+    sx, sy = np.ascontiguousarray(source[:, 0]), np.ascontiguousarray(source[:, 1])
+    tx, ty = np.ascontiguousarray(target[:, 0]), np.ascontiguousarray(target[:, 1])
+    s00, s10 = sx.take(b) - sx.take(a), sy.take(b) - sy.take(a)          # S's columns: edges ab, ac
+    s01, s11 = sx.take(c) - sx.take(a), sy.take(c) - sy.take(a)
+    t00, t10 = tx.take(b) - tx.take(a), ty.take(b) - ty.take(a)
+    t01, t11 = tx.take(c) - tx.take(a), ty.take(c) - ty.take(a)
+    det = s00 * s11 - s01 * s10
+    j00, j01 = (t00 * s11 - t01 * s10) / det, (t01 * s00 - t00 * s01) / det
+    j10, j11 = (t10 * s11 - t11 * s10) / det, (t11 * s00 - t10 * s01) / det
+    p = np.hypot(j00 + j11, j10 - j01)
+    q = np.hypot(j00 - j11, j10 + j01)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(np.abs(p - q) > 1e-12 * (p + q), (p + q) / np.abs(p - q), np.inf)
 
 
 def background_rms(target: np.ndarray, warped: np.ndarray, quads: np.ndarray) -> float:
@@ -125,3 +138,91 @@ def mesh_quality(source, target, warped, triangles, quads, node_component, n_com
         report["max_anisotropy_near_features"] = float(triangle_anisotropy(source, target, tri).max())
         report["warp_anisotropy_near_features"] = float(triangle_anisotropy(source, warped, tri).max())
     return report
+
+
+def affine_fits(source: np.ndarray, target: np.ndarray, labels: np.ndarray, count: int) -> np.ndarray:
+    """Least-squares affine map source -> target per label: the (count, 2, 2) linear parts.
+
+    A label with fewer than three points, or points on a line, gets NaN.
+    """
+    def per_label(values):
+        return np.bincount(labels, weights=values, minlength=count)
+
+    n = per_label(np.ones(labels.size))
+    safe = np.maximum(n, 1)
+    centre_s = np.stack([per_label(source[:, k]) / safe for k in range(2)], axis=1)
+    centre_t = np.stack([per_label(target[:, k]) / safe for k in range(2)], axis=1)
+    p, q = source - centre_s[labels], target - centre_t[labels]
+    spp = np.stack([np.stack([per_label(p[:, i] * p[:, j]) for j in range(2)], -1) for i in range(2)], -2)
+    sqp = np.stack([np.stack([per_label(q[:, i] * p[:, j]) for j in range(2)], -1) for i in range(2)], -2)
+    det = spp[:, 0, 0] * spp[:, 1, 1] - spp[:, 0, 1] * spp[:, 1, 0]
+    good = (n >= 3) & (det > 1e-9 * np.maximum(spp[:, 0, 0] * spp[:, 1, 1], 1e-300))
+    fits = np.full((count, 2, 2), np.nan)
+    fits[good] = sqp[good] @ np.linalg.inv(spp[good])
+    return fits
+
+
+def map_anisotropy(maps: np.ndarray) -> np.ndarray:
+    """sigma_max / sigma_min of each 2x2 map (inf where singular): (K,)."""
+    sv = np.linalg.svd(maps, compute_uv=False)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(sv[:, 1] > 0, sv[:, 0] / np.maximum(sv[:, 1], 1e-300), np.inf)
+
+
+def component_figures(source, target, warped, triangles, tri_component, node_component, n_components) -> dict:
+    """Per component: how its triangles and its whole region came out, and under W.
+
+    Parameters
+    ----------
+    source, target, warped : (N, 2) ndarray
+        Node positions in the source, in the solution and under W.
+    triangles : (M, 3) int ndarray
+    tri_component : (M,) int ndarray
+        Component of each triangle of a feature quad, -1 for the others.
+    node_component : (N,) int ndarray
+        Component of each node of a feature quad, -1 for the others.
+    n_components : int
+
+    Returns
+    -------
+    dict of (n_components,) ndarrays
+        ``distortion`` and ``plain_distortion`` (affine fit over the component's
+        nodes, sigma_max / sigma_min - 1), ``anisotropy_worst``, ``anisotropy_mean``,
+        ``plain_anisotropy_worst`` (its triangles, - 1), ``scale`` and
+        ``rotation_deg`` of the fit, ``area_ratio``.
+    """
+    on = tri_component >= 0
+    tris, comp = triangles[on], tri_component[on]
+    count = np.maximum(np.bincount(comp, minlength=n_components), 1)
+    out = {}
+    for name, points in (("", target), ("plain_", warped)):
+        aniso = triangle_anisotropy(source, points, tris) - 1.0
+        out[name + "anisotropy_worst"] = np.zeros(n_components)
+        np.maximum.at(out[name + "anisotropy_worst"], comp, aniso)
+        if not name:
+            out["anisotropy_mean"] = np.bincount(comp, aniso, minlength=n_components) / count
+        nodes = np.flatnonzero(node_component >= 0)
+        fits = affine_fits(source[nodes], points[nodes], node_component[nodes], n_components)
+        out[name + "distortion"] = np.nan_to_num(map_anisotropy(np.nan_to_num(fits)) - 1.0, nan=0.0, posinf=1e9)
+        if not name:
+            det = fits[:, 0, 0] * fits[:, 1, 1] - fits[:, 0, 1] * fits[:, 1, 0]
+            out["scale"] = np.sqrt(np.abs(np.nan_to_num(det)))
+            out["rotation_deg"] = np.nan_to_num(np.degrees(np.arctan2(fits[:, 1, 0] - fits[:, 0, 1],
+                                                                       fits[:, 0, 0] + fits[:, 1, 1])))
+    area_t = np.bincount(comp, signed_areas(target, tris), minlength=n_components)
+    area_s = np.bincount(comp, signed_areas(source, tris), minlength=n_components)
+    out["area_ratio"] = area_t / np.maximum(area_s, 1e-12)
+    return out
+
+
+def background_stretch(target: np.ndarray, warped: np.ndarray, triangles: np.ndarray,
+                       background: np.ndarray) -> float:
+    """Largest ratio of a background triangle's area on the canvas to its area under W (1 if none)."""
+    if not background.any():
+        return 1.0
+    tris = triangles[background]
+    reference = signed_areas(warped, tris)
+    valid = reference > 1e-12
+    if not valid.any():
+        return 1.0
+    return float(max(1.0, (signed_areas(target, tris)[valid] / reference[valid]).max()))

@@ -39,32 +39,23 @@ import math
 import time
 from dataclasses import dataclass, field
 
+import cv2
 import numpy as np
 
+from . import components, fidelity, guard, quality, system, targets
 from . import features as feat
-from . import fidelity, injectivity, quality, system, targets
-from .defaults import BOUNDARIES, DECAY, FEATURE_WEIGHT, FORMULATIONS, MODES
-from ..render import raster as rnd
+from .defaults import BOUNDARIES, DECAY, FEATURE_WEIGHT, FORMULATIONS, MODES, SCALE_PRIOR
 from .grid import Grid, signed_areas
+from .record import KEPT, ComponentRecord, SolveRecord
 from .solver import ReducedSystem, factor_concurrently
 
-
-#: Bisection steps on how far released features go from the warp's shape to their own.
-BLEND_BISECTIONS = 8
-UNTANGLED_BISECTIONS = 3
-#: Fraction of its area under the warp that the fold-over guard asks each triangle to keep.
-UNTANGLE_FLOOR = 0.05
-#: The fold-over guard first untangles a window around the folds, reaching this many
-#: times the largest fold's extent beyond it (at least WINDOW_MIN_MARGIN quads), in at
-#: most WINDOW_ITERATIONS steps (cheap ones; a hopeless window stops early for lack of
-#: progress); where that fails, the whole grid. 12 MP swirl 180: 43 window steps on 15 %
-#: of the triangles instead of 36 on all of them; at --cell 4 (750 k nodes) 150 window
-#: steps, 9.8 s, where 60 left 3 folds and the global pass took 27 s in all.
-WINDOW_MARGIN = 0.5
-WINDOW_MIN_MARGIN = 8
-WINDOW_ITERATIONS = 150
-#: Windows larger than this fraction of the grid are left to the global pass.
-WINDOW_MAX_FRACTION = 0.5
+#: Where W moves pixels by more than NO_OP_WARP px, an output that moves the nodes W moves
+#: (by more than NO_OP_OUTPUT px) by at most NO_OP_OUTPUT px RMS, or by at most NO_OP_FRACTION
+#: of W's RMS displacement there, is reported as "the output is the input" (a swirl whose
+#: disc a frame-filling feature pins).
+NO_OP_OUTPUT = 1.0
+NO_OP_WARP = 5.0
+NO_OP_FRACTION = 0.1
 
 
 def load_warp(name: str):
@@ -86,15 +77,24 @@ class Mesh:
         Positively oriented in source space.
     canvas : (int, int)
         Output (width, height).
-    info : dict
-        What was done: grid, components, solver, flips, stage timings.
+    record : SolveRecord or None
+        What was done: grid, components, solver, guard, quality, warnings, timings.
+    node_component : (N,) int ndarray or None
+        Feature component of each node of a feature quad (as in ``record.components``), -1
+        for the others.
     """
 
     source: np.ndarray
     target: np.ndarray
     triangles: np.ndarray
     canvas: tuple[int, int]
-    info: dict = field(default_factory=dict)
+    record: SolveRecord | None = None
+    node_component: np.ndarray | None = None
+
+    @property
+    def info(self) -> dict:
+        """The record as JSON-ready data (:meth:`SolveRecord.to_dict`)."""
+        return self.record.to_dict() if self.record is not None else {}
 
     def flips(self) -> int:
         """Number of triangles whose signed area on the canvas is <= 0."""
@@ -126,20 +126,19 @@ class _GridState:
     fixed_x: np.ndarray
     fixed_y: np.ndarray
     features: feat.Features
-    tied: np.ndarray
-    system: "AxisSystems | None" = None
-    normal: object = None               # the normal matrix, once the fold-over guard needs it
-
-    @property
-    def fixed(self) -> np.ndarray:
-        """Nodes with any coordinate held."""
-        return self.fixed_x | self.fixed_y
+    node_component: np.ndarray            # component of each feature-quad node, -1 elsewhere
+    tri_component: np.ndarray             # component of each triangle of a feature quad, -1 elsewhere
+    normal: object
+    stiffness: np.ndarray
+    systems: dict = field(default_factory=dict)         # factored systems by unknown numbering
+    scale_solvers: dict = field(default_factory=dict)   # components.ScaleSolver by ties
 
 
 class AxisSystems:
     """The factored system for x and for y: one shared factorization when both
-    coordinates hold the same nodes, two when a sliding border frees one of them.
-    The two are factored at once, in two threads (:func:`solver.factor_concurrently`).
+    coordinates hold the same nodes, two when a sliding border or a frame-cut
+    feature frees one of them. The two are factored at once, in two threads
+    (:func:`solver.factor_concurrently`).
 
     Parameters
     ----------
@@ -183,31 +182,39 @@ class FeatureWarper:
     decay : float
         rho: width of the transition band in cells (default 2).
     formulation : {'exact', 'paper'}
-        exact (default): every feature component moves as one similarity
-        (hard constraint), whose rotation is the warp's best fit over the
-        component and whose scale follows :func:`targets.intuitive_scales`.
-        A component that touches a fixed border node keeps soft constraints.
+        exact (default): every feature component moves as one similarity (hard
+        constraint); in similarity mode its scale and rotation are unknowns of
+        the least squares, pulled towards the preset's lambda R by a prior of
+        weight ``scale_prior`` (:mod:`featurewarp_cli.engine.components`). A
+        component cut by the frame keeps its shape as the border condition
+        allows (on a side that slides it slides along it); one held by pins no
+        similarity satisfies keeps soft constraints.
         paper: the paper's soft per-quad targets (lambda R_Q, weight w_F).
     injective : bool
         Guard against fold-overs (default True); see :meth:`solve`.
     boundary : {'fixed', 'slide'} or None
         fixed: border nodes stay where W puts them (the paper). slide: on a side
-        that W maps onto an axis-parallel line, nodes may slide along it, so a
-        feature cut by the border can keep its shape while the canvas stays
-        exact. None (default): the preset's own choice (``warp.boundary``).
+        that W maps onto an axis-parallel line, nodes may slide along it. None
+        (default): the preset's own choice (``warp.boundary``).
+    scale_prior : float
+        Weight of the pull of each component's scale and rotation towards the
+        preset's (similarity mode, exact formulation; default
+        :data:`defaults.SCALE_PRIOR`). 0 lets features grow or shrink freely to
+        spare the background; large values fix them at lambda R.
 
     Attributes
     ----------
     factorizations : int
         How many times a system matrix was factored. Solves that share a grid
-        reuse its factorization; only the fold-over guard factors again.
+        and the same ties reuse the factorization.
     timings : dict
         Seconds spent in each stage by the last solve.
     """
 
     def __init__(self, width: int, height: int, mask: np.ndarray | None = None, *,
                  cell: float | None = None, feature_weight: float = FEATURE_WEIGHT, decay: float = DECAY,
-                 formulation: str = "exact", injective: bool = True, boundary: str | None = None):
+                 formulation: str = "exact", injective: bool = True, boundary: str | None = None,
+                 scale_prior: float = SCALE_PRIOR):
         if boundary not in (None,) + BOUNDARIES:
             raise ValueError(f"boundary must be one of {', '.join(BOUNDARIES)}, not {boundary!r}")
         if mask is not None and mask.shape != (height, width):
@@ -216,6 +223,8 @@ class FeatureWarper:
             raise ValueError(f"feature_weight must be a positive number, not {feature_weight}")
         if not (decay > 0 and math.isfinite(decay)):
             raise ValueError(f"decay must be a positive number, not {decay}")
+        if not (scale_prior >= 0 and math.isfinite(scale_prior)):
+            raise ValueError(f"scale_prior must be a number >= 0, not {scale_prior}")
         if formulation not in FORMULATIONS:
             raise ValueError(f"formulation must be one of {', '.join(FORMULATIONS)}, not {formulation!r}")
         if cell is not None and not (cell >= 1 and math.isfinite(cell)):
@@ -227,13 +236,14 @@ class FeatureWarper:
         self.formulation = formulation
         self.injective = injective
         self.boundary = boundary
+        self.scale_prior = float(scale_prior)
         self.cell = cell
         self.factorizations = 0
         self.timings: dict[str, float] = {}
         self._states: dict[tuple, _GridState] = {}
 
     def _state(self, grid: Grid, warped: np.ndarray, boundary: str) -> _GridState:
-        """Features, border conditions and ties on ``grid`` (built once per grid and border);
+        """Features and border conditions on ``grid`` (built once per grid and border);
         ``warped``: W at the grid's nodes."""
         sides = (False,) * 4
         if boundary == "slide":
@@ -242,67 +252,45 @@ class FeatureWarper:
         if key not in self._states:
             features = feat.analyse(self.mask, grid, self.feature_weight, self.decay)
             fixed_x, fixed_y = system.border_conditions(grid, sides)
-            tied = (system.tie_features(grid, features, fixed_x | fixed_y) if self.formulation == "exact"
-                    else np.full(grid.n_nodes, -1))
-            self._states[key] = _GridState(grid, grid.nodes(), grid.triangles(), fixed_x, fixed_y,
-                                           features, tied)
+            tri_component = np.tile(np.where(features.is_feature, features.component, -1), 2)
+            self._states[key] = _GridState(grid, grid.nodes(), grid.triangles(), fixed_x, fixed_y, features,
+                                           system.feature_nodes(grid, features), tri_component,
+                                           system.normal_matrix(grid, features.weight),
+                                           system.node_stiffness(grid, features.weight))
         return self._states[key]
 
-    def _factor(self, state: _GridState, weights: np.ndarray, tied: np.ndarray) -> AxisSystems:
-        """Assemble and factor the normal equations for these weights and ties."""
-        t0 = time.perf_counter()
-        matrix = system.normal_matrix(state.grid, weights)
-        if state.normal is None and weights is state.features.weight:
-            state.normal = matrix                         # the fold-over guard's products use it
-        t1 = time.perf_counter()
-        reduced = AxisSystems(matrix, system.number_unknowns(state.fixed_x, tied),
-                              system.number_unknowns(state.fixed_y, tied))
-        self.factorizations += reduced.factorizations
-        self.timings["assemble"] = self.timings.get("assemble", 0.0) + t1 - t0
-        self.timings["factor"] = self.timings.get("factor", 0.0) + time.perf_counter() - t1
-        return reduced
+    def _systems(self, state: _GridState, ties: components.Ties) -> AxisSystems:
+        """The factored systems for these ties (cached per numbering)."""
+        unknowns = [system.number_unknowns(fixed | ties.held(axis), ties.unknown_ties(axis))
+                    for axis, fixed in enumerate(_fixed(state, ties))]
+        key = b"".join(u.astype(np.int32).tobytes() for u in unknowns)
+        if key not in state.systems:
+            t0 = time.perf_counter()
+            state.systems[key] = AxisSystems(state.normal, *unknowns)
+            self.factorizations += state.systems[key].factorizations
+            self.timings["factor"] = self.timings.get("factor", 0.0) + time.perf_counter() - t0
+        return state.systems[key]
 
-    def _constants(self, state, weights, edges, tied, component_maps, warped):
-        """A^T b for these edge targets, and q: fixed nodes at W, tied nodes at their
-        component's linear map (see :meth:`solver.ReducedSystem.solve`)."""
-        t0 = time.perf_counter()
-        rhs = system.right_hand_side(state.grid, weights, edges)
+    def _offsets(self, state: _GridState, ties: components.Ties, ab: np.ndarray, warped: np.ndarray):
+        """q: fixed coordinates at W, tied nodes at their component's similarity."""
         offset = np.zeros_like(warped)
-        offset[state.fixed_x, 0] = warped[state.fixed_x, 0]
-        offset[state.fixed_y, 1] = warped[state.fixed_y, 1]
-        on = tied >= 0
-        offset[on] = np.einsum("nij,nj->ni", component_maps[tied[on]], state.nodes[on])
-        self.timings["rhs"] = self.timings.get("rhs", 0.0) + time.perf_counter() - t0
-        return rhs, offset
-
-    def _solver(self, state, reduced, weights, edges, tied, component_maps, warped):
-        """``solve(force=None)``: least-squares node positions for these edge targets, the
-        fixed border and tied features, plus an optional external force per node (N, 2)."""
-        rhs, offset = self._constants(state, weights, edges, tied, component_maps, warped)
-
-        def solve(force=None):
-            t1 = time.perf_counter()
-            result = reduced.solve(rhs if force is None else rhs + force, offset)
-            self.timings["solve"] = self.timings.get("solve", 0.0) + time.perf_counter() - t1
-            return result
-
-        solve.rhs, solve.offset = rhs, offset
-        return solve
-
-    def _linear_solve(self, state, reduced, weights, edges, tied, component_maps, warped) -> np.ndarray:
-        """Least-squares node positions (see :meth:`_solver`)."""
-        return self._solver(state, reduced, weights, edges, tied, component_maps, warped)()
+        fixed_x, fixed_y = _fixed(state, ties)
+        offset[fixed_x, 0] = warped[fixed_x, 0]
+        offset[fixed_y, 1] = warped[fixed_y, 1]
+        placed = components.placement(ties, state.nodes, warped, ab)
+        on = ties.placed(0)
+        for axis, fixed in enumerate((fixed_x, fixed_y)):
+            free = on & ~fixed                          # border coordinates stay exactly at W
+            offset[free, axis] = placed[free, axis]
+        return offset
 
     def solve(self, warp, mode: str = "similarity") -> Mesh:
-        """Feature-aware mesh for ``warp`` (a :class:`warps.Warp` instance).
+        """Feature-aware mesh for ``warp`` (a :class:`featurewarp_cli.plugins.Warp` instance).
 
-        The least-squares solution is returned when it has no fold-over. When
-        it has, the guard releases the constraints around the folds (the
-        components there lose their exact tie, and the quads there are pulled
-        towards the warp with doubling weight) and solves again; it keeps the
-        furthest point on the way from the warp itself (injective on a grid that
-        follows it) to each solution at which no triangle degenerates, so the
-        result never folds.
+        The least-squares solution is returned when it has no fold-over. When it
+        has, the guard (:mod:`featurewarp_cli.engine.guard`) opens the folds near
+        the optimum and, where that fails, relaxes the features around them
+        towards the warp, as little as injectivity allows; the result never folds.
 
         Parameters
         ----------
@@ -316,6 +304,7 @@ class FeatureWarper:
         Returns
         -------
         Mesh
+            Its ``record`` says what was done and what could not be.
         """
         if mode not in MODES:
             raise ValueError(f"mode must be one of {', '.join(MODES)}, not {mode!r}")
@@ -333,194 +322,120 @@ class FeatureWarper:
         warped = warp(grid.nodes())
         state = self._state(grid, warped, boundary)
         self.timings["grid"] = time.perf_counter() - t0
-        info = {
-            "mode": mode,
-            "formulation": self.formulation,
-            "boundary": boundary,
-            "grid": {"cell": cell, "spacing": list(state.grid.spacing), "nodes": state.grid.n_nodes,
-                     "quads": int(state.features.weight.size), "pl_error_px": error},
-            "components": [],
-            "solver": "none",
-            "release_rounds": 0,
-        }
+        record = SolveRecord(mode, self.formulation, boundary,
+                             {"cell": cell, "spacing": list(grid.spacing), "nodes": grid.n_nodes,
+                              "quads": int(state.features.weight.size), "pl_error_px": error})
+        tied = unpinned = np.zeros(state.features.n_components, bool)
         if mode == "plain" or state.features.n_components == 0:
             target = warped
-            info["flipped_before_guard"] = int(np.count_nonzero(injectivity.flipped(target, state.triangles)))
+            record.guard.flipped_before = int(np.count_nonzero(signed_areas(target, state.triangles) <= 0))
         else:
-            target, component_maps = self._feature_aware(state, warped, mode, info)
-            info["components"] = self._describe_components(state, component_maps)
-        mesh = Mesh(state.nodes, target, state.triangles, tuple(warp.canvas), info)
+            target, tied, unpinned = self._feature_aware(state, warped, mode, record)
+        t1 = time.perf_counter()
+        self._assess(state, target, warped, tied, unpinned, warp, record)
+        self.timings["quality"] = time.perf_counter() - t1
+        record.timings = dict(self.timings)
+        return Mesh(state.nodes, target, state.triangles, tuple(warp.canvas), record, state.node_component)
+
+    def _feature_aware(self, state: _GridState, warped: np.ndarray, mode: str, record: SolveRecord):
+        """Solve for the features' similarities and the nodes, then guard against folds.
+
+        Returns the node positions, which components stayed tied, and which of those were
+        let go of their border conditions."""
+        features, grid = state.features, state.grid
+        jac = targets.quad_jacobians(grid, warped)
+        quad_maps, prior_maps = targets.quad_targets(jac, features, mode, self.formulation)
+        prior = components.as_ab(prior_maps)
+        ties = components.parametrize(state.nodes, state.fixed_x, state.fixed_y, warped, state.node_component,
+                                      features.n_components, prior, solve_scale=mode == "similarity",
+                                      unpin=self.boundary is None)
+        if self.formulation == "paper":
+            ties.tied[:] = False
+        ab = np.where(ties.tied[:, None], ties.base, prior)
+        systems = self._systems(state, ties)
+        record.solver = systems.method
+        warp_edges = system.warp_edge_vectors(grid, warped)
+        index = np.maximum(features.component, 0)
+
+        def constants(ab, ties, edges=None):
+            if edges is None:
+                maps = quad_maps if self.formulation == "paper" else components.as_maps(ab)[index]
+                edges = np.where(features.is_constrained[:, None, None], system.edge_vectors(grid, maps), warp_edges)
+            t0 = time.perf_counter()
+            rhs = system.right_hand_side(grid, features.weight, edges)
+            offset = self._offsets(state, ties, ab, warped)
+            self.timings["rhs"] = self.timings.get("rhs", 0.0) + time.perf_counter() - t0
+            return edges, rhs, offset
+
+        def solve(ab):
+            edges, rhs, offset = constants(ab, ties)
+            t0 = time.perf_counter()
+            x = systems.solve(rhs, offset)
+            self.timings["solve"] = self.timings.get("solve", 0.0) + time.perf_counter() - t0
+            return x, edges, rhs, offset
+
+        x, edges, rhs, offset = solve(ab)
+        scale_solver = self._scale_solver(state, ties, systems)
+        if scale_solver is not None and scale_solver.n_columns:
+            gradient = scale_solver.gradient(x, rhs, edges, features, grid.spacing)
+            weights = components.prior_weights(features, grid.spacing, self.scale_prior)
+            optimum = np.where(ties.tied[:, None], scale_solver.solve(ties.base, gradient, prior, weights), prior)
+            safe = np.where(ties.tied[:, None], ties.project(prior * _safe_scale(jac, features, prior)), prior)
+            ab, (x, edges, rhs, offset) = _fitting_scales(solve, safe, optimum, state.triangles, warped)
+        if not self.injective:
+            return x, ties.tied, ties.unpinned & ties.tied
+
+        def rebuild(new_edges, released):
+            loose = components.Ties(**{**ties.__dict__, "tied": ties.tied & ~np.isin(np.arange(ties.tied.size),
+                                                                                      released)})
+            _, new_rhs, new_offset = constants(ab, loose, new_edges)
+            return self._systems(state, loose), new_rhs, new_offset, _window_ties(loose)
+
+        problem = guard.Problem(grid, features, state.triangles, warped, state.normal, state.stiffness,
+                                _window_fixed(state, ties), _window_ties(ties), systems, rhs, offset, edges,
+                                warp_edges, rebuild, self.timings)
+        counted = sum(self.timings.get(k, 0.0) for k in ("solve", "factor", "rhs"))
+        t0 = time.perf_counter()
+        x = guard.guard(problem, x, record.guard)
+        if self.formulation == "exact":            # the paper's soft targets are kept as published
+            x = _no_worse_than_plain(state, x, warped, record.guard)
+        inner = sum(self.timings.get(k, 0.0) for k in ("solve", "factor", "rhs")) - counted
+        self.timings["guard"] = time.perf_counter() - t0 - inner      # what the solves inside it did not take
+        released = np.isin(np.arange(ties.tied.size), record.guard.released_components)
+        return x, ties.tied & ~released, ties.unpinned & ties.tied & ~released
+
+    def _scale_solver(self, state: _GridState, ties: components.Ties, systems: AxisSystems):
+        """The cached :class:`components.ScaleSolver` for these ties (None without free scales)."""
+        if not ties.columns()[0].size:
+            return None
+        key = ties.key()
+        if key not in state.scale_solvers:
+            t0 = time.perf_counter()
+            matrix = state.normal.to_scipy() if hasattr(state.normal, "to_scipy") else state.normal
+            state.scale_solvers[key] = components.ScaleSolver(ties, state.grid, state.features, matrix, systems)
+            self.timings["scale_setup"] = time.perf_counter() - t0
+        return state.scale_solvers[key]
+
+    def _assess(self, state: _GridState, target, warped, tied, unpinned, warp, record: SolveRecord) -> None:
+        """Quality figures, per-component records and warnings."""
         features = state.features
         transition = np.tile(features.is_constrained & ~features.is_feature, 2)
-        info["quality"] = quality.mesh_quality(
-            state.nodes, target, warped, state.triangles, state.grid.quads(),
-            system.feature_nodes(state.grid, features), features.n_components,
-            ~features.is_constrained, transition)
-        info["flipped_triangles"] = info["quality"]["flipped_triangles"]
-        info["timings"] = dict(self.timings)
-        return mesh
-
-    def _feature_aware(self, state: _GridState, warped: np.ndarray, mode: str, info: dict):
-        """Solve with the fold-over guard; returns node positions and component maps."""
-        features, tris = state.features, state.triangles
-        jac = targets.quad_jacobians(state.grid, warped)
-        quad_maps, component_maps = targets.quad_targets(jac, features, mode, self.formulation)
-        edges = np.where(features.is_constrained[:, None, None],
-                         system.edge_vectors(state.grid, quad_maps),
-                         system.warp_edge_vectors(state.grid, warped))
-        if state.system is None:
-            state.system = self._factor(state, features.weight, state.tied)
-        info["solver"] = state.system.method
-        x = self._linear_solve(state, state.system, features.weight, edges, state.tied, component_maps, warped)
-        info["flipped_before_guard"] = int(np.count_nonzero(injectivity.flipped(x, tris)))
-        if not self.injective or info["flipped_before_guard"] == 0:
-            return x, component_maps
-        warp_areas = signed_areas(warped, tris)
-        if warp_areas.min() <= 0:
-            return x, component_maps          # the grid cannot follow the warp: nothing injective to keep
-        floor = UNTANGLE_FLOOR * warp_areas
-        stiffness = system.node_stiffness(state.grid, features.weight)
-
-        def untangled(reduced, edges, tied, start):
-            solve = self._solver(state, reduced, features.weight, edges, tied, component_maps, warped)
-            # Near the folds first: cheap, and usually enough.
-            x, iterations, window_quads = self._untangle_window(state, solve.rhs, solve.offset, tied, start,
-                                                                floor, stiffness)
-            info["untangle_iterations"] = info.get("untangle_iterations", 0) + iterations
-            if x is not None and not injectivity.flipped(x, tris).any():
-                info["untangle_window_quads"] = window_quads
-                return x, True
-            x, iterations = injectivity.untangle(solve, self._normal(state).dot, start, tris, floor, stiffness,
-                                                 areas=lambda points: injectivity.grid_areas(state.grid, points))
-            info["untangle_iterations"] = info.get("untangle_iterations", 0) + iterations
-            return x, not injectivity.flipped(x, tris).any()
-
-        x, ok = untangled(state.system, edges, state.tied, x)
-        if ok:
-            return x, component_maps
-        # Some features cannot keep their shape: untie those near the folds and blend
-        # their targets towards the warp's, as little as injectivity allows.
-        warp_edges = system.warp_edge_vectors(state.grid, warped)
-        released = np.unique(features.component[injectivity.trouble_quads(state.grid, x, tris)
-                                                & features.is_constrained])
-        for round_ in (1, 2):
-            info["release_rounds"] = round_
-            if round_ == 2:
-                released = np.arange(features.n_components)
-            tied = np.where(np.isin(state.tied, released), -1, state.tied)
-            reduced = self._factor(state, features.weight, tied)
-            blend = np.isin(features.component, released) & features.is_constrained
-
-            def blended(s):
-                return np.where(blend[:, None, None], s * edges + (1.0 - s) * warp_edges, edges)
-
-            def solve_at(s):
-                return self._linear_solve(state, reduced, features.weight, blended(s), tied, component_maps,
-                                          warped)
-
-            lo, hi = 0.0, 1.0
-            best = solve_at(0.0)
-            if injectivity.flipped(best, tris).any():
-                continue                      # folds come from features not released yet
-            for _ in range(BLEND_BISECTIONS):        # cheap: plain solves
-                mid = 0.5 * (lo + hi)
-                x = solve_at(mid)
-                if injectivity.flipped(x, tris).any():
-                    hi = mid
-                else:
-                    lo, best = mid, x
-            hi = 1.0
-            for _ in range(UNTANGLED_BISECTIONS):    # further, where untangling opens the folds
-                mid = 0.5 * (lo + hi)
-                x, ok = untangled(reduced, blended(mid), tied, solve_at(mid))
-                if ok:
-                    lo, best = mid, x
-                else:
-                    hi = mid
-            info["feature_blend"] = lo
-            info["released_components"] = [int(c) for c in released]
-            return best, component_maps
-        info["fallback"] = True
-        return warped + injectivity.max_step(warped, x, tris) * 0.95 * (x - warped), component_maps
-
-    def _normal(self, state: _GridState) -> system.StencilMatrix:
-        """The normal matrix of the state's weights, built once."""
-        if state.normal is None:
-            state.normal = system.normal_matrix(state.grid, state.features.weight)
-        return state.normal
-
-    def _untangle_window(self, state: _GridState, rhs, offset, tied, x, floor, stiffness):
-        """:func:`injectivity.untangle` on a window around the folded or crushed triangles.
-
-        A fold is a local defect, so the guard first works on the nodes within
-        :data:`WINDOW_MARGIN` times the largest fold's extent of the folded and
-        crushed triangles, everything else held where it is, except that a
-        tied feature reaching into the window keeps its shared unknown (it may
-        shift as a whole, as in the global pass). The window's system is the
-        rows of the normal matrix for its unknowns: a small fraction of the
-        grid, so each step costs a fraction of a global one.
-
-        Returns
-        -------
-        x : (N, 2) ndarray or None
-            New positions; None when the window would be about as large as the grid.
-        iterations : int
-        quads : int
-            Quads whose shape the window may change.
-        """
-        grid, weights = state.grid, state.features.weight
-        n_quads = weights.size
-        crushed = np.flatnonzero(injectivity.grid_areas(grid, x) < 0.5 * floor) % n_quads
-        quads = np.zeros(n_quads, bool)
-        quads[crushed] = True
-        margin = max(WINDOW_MIN_MARGIN, int(WINDOW_MARGIN * injectivity.extent(grid, crushed)))
-        _, near, inner = injectivity.window(grid, quads, margin)
-        moving = inner & ~state.fixed & (tied < 0)
-        moving |= np.isin(tied, np.unique(tied[near & (tied >= 0)])) & (tied >= 0)
-        corners = grid.quads()
-        touched = moving[corners].any(axis=1)
-        ties = tied[corners]
-        rigid = (ties[:, 0] >= 0) & (ties == ties[:, :1]).all(axis=1)    # inside one tied feature
-        changing = np.flatnonzero(touched & ~rigid)
-        if changing.size > WINDOW_MAX_FRACTION * n_quads:
-            return None, 0, 0
-        in_system = np.zeros(grid.n_nodes, bool)
-        in_system[corners[touched].ravel()] = True
-        nodes = np.flatnonzero(in_system)
-        local_moving = moving[nodes]
-        unknown = system.number_unknowns(~local_moving, np.where(local_moving, tied[nodes], -1))
-        matrix = self._normal(state).submatrix(nodes)
-        reduced = ReducedSystem(matrix, unknown)
-        held = np.where(local_moving[:, None], offset[nodes], x[nodes])
-        local_rhs = rhs[nodes]
-
-        def solve(force):
-            t0 = time.perf_counter()
-            result = reduced.solve(local_rhs + force, held)
-            self.timings["solve"] = self.timings.get("solve", 0.0) + time.perf_counter() - t0
-            return result
-
-        local = np.full(grid.n_nodes, -1)
-        local[nodes] = np.arange(nodes.size)
-        quad_corners = local[corners[changing]]
-        triangles = np.concatenate([quad_corners[:, [0, 1, 2]], quad_corners[:, [0, 2, 3]]])
-        window_floor = np.concatenate([floor[changing], floor[changing + n_quads]])
-        moved, iterations = injectivity.untangle(solve, matrix.dot, x[nodes], triangles, window_floor,
-                                                 stiffness[nodes], max_iterations=WINDOW_ITERATIONS)
-        x = x.copy()
-        x[nodes] = moved
-        return x, iterations, int(changing.size)
-
-    def _describe_components(self, state: _GridState, component_maps: np.ndarray) -> list[dict]:
-        """Per component: quads, target scale and rotation, and whether it is held exactly."""
-        features = state.features
+        record.quality = quality.mesh_quality(
+            state.nodes, target, warped, state.triangles, state.grid.quads(), state.node_component,
+            features.n_components, ~features.is_constrained, transition)
+        figures = quality.component_figures(state.nodes, target, warped, state.triangles, state.tri_component,
+                                            state.node_component, features.n_components)
         counts = np.bincount(features.component[features.is_feature], minlength=features.n_components)
-        exact = np.zeros(features.n_components, bool)
-        exact[state.tied[state.tied >= 0]] = True
-        scales = np.hypot(component_maps[:, 0, 0], component_maps[:, 1, 0])
-        angles = np.degrees(np.arctan2(component_maps[:, 1, 0], component_maps[:, 0, 0]))
-        return [{"quads": int(c), "scale": float(s), "rotation_deg": float(a), "exact": bool(e)}
-                for c, s, a, e in zip(counts, scales, angles, exact)]
+        record.components = [
+            ComponentRecord(int(counts[c]), bool(tied[c]), bool(unpinned[c]), *(float(figures[k][c]) for k in (
+                "scale", "rotation_deg", "distortion", "anisotropy_worst", "anisotropy_mean",
+                "plain_distortion", "plain_anisotropy_worst", "area_ratio")),
+                kept=bool(figures["anisotropy_worst"][c] <= KEPT))
+            for c in range(features.n_components)]
+        record.background_stretch = quality.background_stretch(target, warped, state.triangles,
+                                                               state.tri_component < 0)
+        if record.mode != "plain":
+            record.warnings.extend(_warnings(record, state.nodes, target, warped, warp))
 
     def render(self, image: np.ndarray, mesh: Mesh, interp: str = "cubic", background=None,
                antialias: bool = True) -> np.ndarray:
@@ -529,19 +444,187 @@ class FeatureWarper:
         With ``antialias`` (default) regions the warp shrinks are prefiltered and the
         mesh's silhouette gets partial coverage (alpha, or a blend with ``background``).
         """
+        from ..render import raster
+
         if image.shape[:2] != (self.height, self.width):
             raise ValueError(f"image is {image.shape[1]}x{image.shape[0]}, warper is for {self.width}x{self.height}")
         t0 = time.perf_counter()
-        out = rnd.render(image, mesh.source, mesh.target, mesh.triangles, mesh.canvas, interp, background,
-                         antialias=antialias)
-        mesh.info["timings"]["render"] = time.perf_counter() - t0
+        out = raster.render(image, mesh.source, mesh.target, mesh.triangles, mesh.canvas, interp, background,
+                            antialias=antialias)
+        if mesh.record is not None:
+            mesh.record.timings["render"] = time.perf_counter() - t0
         return out
+
+
+#: Smallest area, relative to W's, that the scale search lets a triangle keep.
+SCALE_FLOOR = 0.05
+#: Bisection steps of the scale search (and of the move towards W).
+SCALE_BISECTIONS = 6
+#: Cells over which the move towards W tapers off around an offending component.
+TAPER_CELLS = 3
+
+
+def _safe_scale(jac: np.ndarray, features, prior: np.ndarray) -> np.ndarray:
+    """Per component, the factor from the prior's scale down to the warp's smallest principal
+    scale over it (the paper's lambda): a size at which a feature fits wherever W fits it. (C, 1)"""
+    low = targets.paper_scales(jac, features)
+    return (np.minimum(low, np.hypot(prior[:, 0], prior[:, 1])) / np.maximum(np.hypot(prior[:, 0], prior[:, 1]),
+                                                                           1e-12))[:, None]
+
+
+def _fitting_scales(solve, safe: np.ndarray, optimum: np.ndarray, triangles, warped):
+    """The features' similarities: the least-squares ``optimum`` when its solution keeps every
+    triangle above :data:`SCALE_FLOOR` of its area under W; else the furthest point from
+    ``safe`` towards it that does (bisection); the optimum when ``safe`` does not fit either.
+
+    Scale and rotation give way before shape: a feature that cannot grow as far as
+    least squares would like stays a similarity, only smaller.
+
+    Returns (ab, solve(ab))."""
+    floor = SCALE_FLOOR * signed_areas(warped, triangles)
+
+    def fits(result):
+        return bool(np.all(signed_areas(result[0], triangles) >= floor))
+
+    best = solve(optimum)
+    if fits(best) or np.allclose(safe, optimum):
+        return optimum, best
+    lo, hi, best_ab = 0.0, 1.0, safe
+    best = solve(safe)
+    if not fits(best):
+        return optimum, solve(optimum)    # scale is not what crushes: the fold-over guard's turn
+    for _ in range(SCALE_BISECTIONS):
+        mid = 0.5 * (lo + hi)
+        ab = safe + mid * (optimum - safe)
+        result = solve(ab)
+        if fits(result):
+            lo, best, best_ab = mid, result, ab
+        else:
+            hi = mid
+    return best_ab, best
+
+
+def _anisotropy(state: _GridState, points: np.ndarray) -> np.ndarray:
+    """Anisotropy of every triangle of a feature quad under ``points`` (inf elsewhere unused): (M,)."""
+    on = state.tri_component >= 0
+    out = np.ones(state.triangles.shape[0])
+    out[on] = quality.triangle_anisotropy(state.nodes, points, state.triangles[on])
+    return out
+
+
+def _worst_per_component(state: _GridState, anisotropy: np.ndarray) -> np.ndarray:
+    """Worst of ``anisotropy`` over each component's triangles: (C,)."""
+    on = state.tri_component >= 0
+    worst = np.zeros(state.features.n_components)
+    np.maximum.at(worst, state.tri_component[on], anisotropy[on])
+    return worst
+
+
+def _taper(state: _GridState, quads: np.ndarray) -> np.ndarray:
+    """(N, 1) weights: 1 on the corners of ``quads`` (grown by one cell), tapering to 0 over
+    :data:`TAPER_CELLS` cells."""
+    grid = state.grid
+    nodes = np.zeros(grid.n_nodes)
+    nodes[grid.quads()[quads].ravel()] = 1.0
+    size = 2 * TAPER_CELLS + 1
+    grown = cv2.dilate(nodes.reshape(grid.ny, grid.nx), np.ones((3, 3)))
+    return np.maximum(grown, cv2.GaussianBlur(grown, (size, size), 0)).ravel()[:, None]
+
+
+def _no_worse_than_plain(state: _GridState, x: np.ndarray, warped: np.ndarray, record) -> np.ndarray:
+    """``x``, or ``x`` moved towards W where components came out more anisotropic than under
+    W, as little as makes every component no worse than W, without folds.
+
+    The move is ``(1 - t) w (W - x)`` with ``w`` 1 around the offending triangles (then,
+    if that is not enough, on the offending components), tapering to 0 over
+    :data:`TAPER_CELLS` cells, and t bisected; where neither works, every node moves
+    evenly towards W."""
+    if np.any(signed_areas(warped, state.triangles) <= 0):
+        return x
+    plain = _worst_per_component(state, _anisotropy(state, warped)) * (1.0 + 1e-9) + 1e-9
+    comp = np.maximum(state.tri_component, 0)
+    anisotropy = _anisotropy(state, x)
+    worse = (state.tri_component >= 0) & (anisotropy > plain[comp])
+    if not worse.any():
+        return x
+
+    def ok(points):
+        return (bool(np.all(_worst_per_component(state, _anisotropy(state, points)) <= plain))
+                and not np.any(signed_areas(points, state.triangles) <= 0))
+
+    n_quads = state.features.weight.size
+    local = np.zeros(n_quads, bool)
+    local[np.flatnonzero(worse) % n_quads] = True
+    bad = np.isin(state.features.component, np.unique(state.tri_component[worse]))
+    moves = [lambda t, w=_taper(state, local): x + (1.0 - t) * w * (warped - x),
+             lambda t, w=_taper(state, bad & state.features.is_constrained): x + (1.0 - t) * w * (warped - x),
+             lambda t: warped + t * (x - warped)]
+    for move in moves:
+        if not ok(move(0.0)):
+            continue
+        lo, hi, best = 0.0, 1.0, move(0.0)
+        for _ in range(SCALE_BISECTIONS):
+            mid = 0.5 * (lo + hi)
+            points = move(mid)
+            if ok(points):
+                lo, best = mid, points
+            else:
+                hi = mid
+        record.plain_blend = lo
+        return best
+    record.plain_blend = 0.0
+    return warped
+
+
+def _window_ties(ties: components.Ties) -> np.ndarray:
+    """Component whose shared translation a node takes in both axes, or -1 (for window passes)."""
+    x, y = ties.unknown_ties(0), ties.unknown_ties(1)
+    return np.where(x == y, x, -1)
+
+
+def _fixed(state: _GridState, ties: components.Ties) -> tuple[np.ndarray, np.ndarray]:
+    """The border conditions in force: the grid's, less those of unpinned components' nodes."""
+    let_go = ties.let_go()
+    return state.fixed_x & ~let_go, state.fixed_y & ~let_go
+
+
+def _window_fixed(state: _GridState, ties: components.Ties) -> np.ndarray:
+    """Nodes a window pass may not move: held in either axis, or tied in one axis only."""
+    x, y = ties.unknown_ties(0), ties.unknown_ties(1)
+    fixed_x, fixed_y = _fixed(state, ties)
+    return fixed_x | fixed_y | ties.held(0) | ties.held(1) | (x != y)
+
+
+def _warnings(record: SolveRecord, source, target, warped, warp) -> list[str]:
+    """One line per thing the caller should know: features not kept or relaxed, a no-op."""
+    lines = []
+    if record.guard.plain_blend < 1.0:
+        lines.append(f"features degraded towards the plain warp (blend {record.guard.plain_blend:.2f}) so that "
+                     f"none is more distorted than under it")
+    if record.guard.release_rounds:
+        lines.append(f"features relaxed towards the plain warp to avoid fold-overs "
+                     f"(components {', '.join(map(str, record.guard.released_components))}; "
+                     f"blend {record.guard.feature_blend:.2f})")
+    for k, c in enumerate(record.components):
+        if not c.kept:
+            lines.append(f"feature {k} ({c.quads} quads) not kept: distortion {c.anisotropy_worst:.3f} "
+                         f"(plain warp: {c.plain_anisotropy_worst:.3f})")
+    if tuple(warp.canvas) == (warp.width, warp.height):
+        wanted = np.hypot(*(warped - source).T)
+        moving = wanted > NO_OP_OUTPUT
+        if wanted.max(initial=0.0) > NO_OP_WARP:
+            moved = float(np.sqrt(np.mean(np.sum((target - source)[moving] ** 2, axis=1))))
+            asked = float(np.sqrt(np.mean(wanted[moving] ** 2)))
+            if moved <= max(NO_OP_OUTPUT, NO_OP_FRACTION * asked):
+                lines.append(f"the mask covers the region the warp moves; the output is the input "
+                             f"(where the warp moves pixels by {asked:.0f} px RMS, they move by {moved:.1f} px)")
+    return lines
 
 
 def warp(image: np.ndarray, mask: np.ndarray | None, preset: str, *, mode: str = "similarity",
          cell: int | None = None, feature_weight: float = FEATURE_WEIGHT, decay: float = DECAY,
          formulation: str = "exact", boundary: str | None = None, interp: str = "cubic",
-         background=None, **params) -> np.ndarray:
+         background=None, scale_prior: float = SCALE_PRIOR, **params) -> np.ndarray:
     """Warp ``image`` with a preset while the features in ``mask`` keep their shape.
 
     Parameters
@@ -550,7 +633,7 @@ def warp(image: np.ndarray, mask: np.ndarray | None, preset: str, *, mode: str =
     mask : (h, w) bool ndarray or None
     preset : str
         Registered preset name ('stretch', 'arc', 'swirl', 'bulge', or a plugin's).
-    mode, cell, feature_weight, decay, formulation, boundary
+    mode, cell, feature_weight, decay, formulation, boundary, scale_prior
         See :class:`FeatureWarper`.
     interp : {'linear', 'cubic', 'lanczos'}
     background : tuple or None
@@ -567,5 +650,5 @@ def warp(image: np.ndarray, mask: np.ndarray | None, preset: str, *, mode: str =
     height, width = image.shape[:2]
     w = load_warp(preset)(width, height, **params)
     warper = FeatureWarper(width, height, mask, cell=cell, feature_weight=feature_weight, decay=decay,
-                           formulation=formulation, boundary=boundary)
+                           formulation=formulation, boundary=boundary, scale_prior=scale_prior)
     return warper.render(image, warper.solve(w, mode), interp, background)

@@ -1,23 +1,24 @@
-/* featurewarp_cli._raster: the per-triangle and per-pixel loops of render.py in C.
+/* featurewarp_cli.render._raster: the per-triangle and per-pixel loops of the renderer.
  *
  *   triangles()   which triangles reach the canvas and their rows, in rasterizing order
  *   records()     their scanline bounds and inverse affine maps, for a band's triangles
- *                 (these two are render._Triangles)
- *   rasterize()   the inverse maps of one band of rows (render._rasterize_band)
- *   footprints()  the footprints of a band's triangles (render._Minification)
+ *                 (these two are raster.Triangles)
+ *   rasterize()   the inverse maps of one band of rows
+ *   footprints()  the footprints of a band's minifying triangles (antialias.Footprints)
  *   aa_count(), aa_probes(), aa_resolve()
- *                 the minification filter (render._antialiased) around the cv2.remap
+ *                 the minification filter (antialias.filter_band) around the cv2.remap
  *                 calls that Python makes: count and place the probes of each pyramid
  *                 level, then take the tent / trilinear sums of their samples.
  *   gather(), scatter()
  *                 the pixels the filter leaves to the plain cv2.remap, where it takes
  *                 most of a band.
  *
- * Every value must equal the numpy code's bit for bit: the same float64 and float32
- * operations in the same order, no fused multiply-add (built with -ffp-contract=off),
- * NaN propagated as np.minimum / np.maximum do, and where two triangles claim a
- * pixel the later one wins, as numpy's fancy assignment leaves it. Arrays come in as
- * C-contiguous buffers (no numpy C API); the loops run without the GIL.
+ * The two triangles sharing an edge compute its bounds with the same operations on the
+ * same numbers, so every pixel centre is claimed by at least one of them (no cracks).
+ * Where two triangles claim a pixel the later one (in rasterizing order) wins. A NaN
+ * coordinate drops its triangle or its spans. The tests compare these loops, with a
+ * tolerance, against a plain barycentric rasterizer and numpy's SVD (tests/reference_render.py).
+ * Arrays come in as C-contiguous buffers (no numpy C API); the loops run without the GIL.
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -49,10 +50,12 @@
 #define ALWAYS_INLINE static inline
 #endif
 
-/* Fields of a triangle's record (float64), as the attributes of render._Triangles:
+/* Fields of a triangle's record (float64), raster.Triangles.FIELDS:
  * lower and upper x-bounds k + m y (two each), J, p0 and s0. */
 enum { LK0, LM0, LK1, LM1, UK0, UM0, UK1, UM1, J00, J01, J10, J11, PX0, PY0, SX0, SY0, NREC };
 
+/* max and min that give NaN when either value is NaN (fmax and fmin do not): a NaN
+ * coordinate then yields no row or span. */
 static inline double max_nan(double a, double b) { return (a > b || a != a) ? a : b; }
 static inline double min_nan(double a, double b) { return (a < b || a != a) ? a : b; }
 
@@ -192,17 +195,16 @@ triangle_rows(const double *target, Py_ssize_t nodes, const Triples *t, long lon
     return count;
 }
 
-/* The kept triangles (index into triangles), in their order or (sort) in the order of
- * a stable sort by first row: the order in which render.py rasterizes its bands, whose
- * triangles are then contiguous. Their nodes are copied to corners in that order, so
+/* The kept triangles (index into triangles) in the order of a stable sort by first row:
+ * the order in which they are rasterized (the later one wins a pixel that two claim), in
+ * which each band's triangles are contiguous. Their nodes are copied to corners in that order, so
  * that records() reads them in sequence rather than all over the triangle array. */
 static PyObject *
 triangles(PyObject *self, PyObject *args)
 {
     PyObject *o_target, *o_tri, *o_index, *o_ylo, *o_yhi, *o_corners;
     long long width, height;
-    int sort;
-    if (!PyArg_ParseTuple(args, "OOLLpOOOO:triangles", &o_target, &o_tri, &width, &height, &sort,
+    if (!PyArg_ParseTuple(args, "OOLLOOOO:triangles", &o_target, &o_tri, &width, &height,
                           &o_index, &o_ylo, &o_yhi, &o_corners))
         return NULL;
     Py_buffer tb = {0}, ind = {0}, ylo = {0}, yhi = {0}, cor = {0};
@@ -230,10 +232,10 @@ triangles(PyObject *self, PyObject *args)
     count = triangle_rows(tb.buf, nodes, &tri, width, height, row, last, start);
     for (long long y = 0; y < height && count >= 0; y++)       /* a counting sort */
         start[y + 1] += start[y];
-    for (Py_ssize_t i = 0, kept = 0; i < m && count >= 0; i++) {
+    for (Py_ssize_t i = 0; i < m && count >= 0; i++) {
         if (row[i] < 0)
             continue;
-        int64_t at = sort ? start[row[i]]++ : kept++;
+        int64_t at = start[row[i]]++;
         index[at] = i;
         lo_out[at] = row[i];
         hi_out[at] = last[i];
@@ -406,9 +408,49 @@ done:
 
 /* ------------------------------------------------------------------ footprints
  *
- * render._Minification: the same float64 operations in the same order (only + - * /
- * and sqrt, which numpy rounds the same way, plus frexp, which is exact).
+ * A triangle's inverse map J (source pixels per output pixel) is R(theta) diag(s1, s2)
+ * R(phi)^T. With u1 + i v1 = (s1 + s2) e^{i (theta + phi)} and u2 + i v2 =
+ * (s1 - s2) e^{i (theta - phi)} (sums and differences of J's entries), s1 and s2 are half
+ * the sum and the difference of their moduli p and q, and their product is
+ * w = (s1^2 - s2^2) e^{2 i theta}. As |w| + w = 2 |w| cos(theta) e^{i theta} and
+ * i (|w| - w) = 2 |w| sin(theta) e^{i theta}, the major axis e^{i theta} points along
+ * (|w| + Re w, Im w), or along (Im w, |w| - Re w) when Re w < 0 (no cancellation either
+ * way). The symmetric tent ignores its sign.
  */
+
+/* The footprint of a minifying J (s1 = (p + q) / 2 above threshold): probes per side k,
+ * the pyramid level log2(m2) = base + frac, and the offset between probes. */
+ALWAYS_INLINE void
+footprint(double u1, double v1, double u2, double v2, double p, double q, int kmax, int32_t *ints,
+          float *floats)
+{
+    double s1 = (p + q) / 2.0, s2 = fabs(p - q) / 2.0;
+    double m1 = max_nan(s1, 1.0), m2 = max_nan(s2, 1.0);
+    /* A tent of half-width 2 (m1 - m2) along the major axis, probes at most m2 apart (the
+     * level's prefilter width), at most kmax a side (then a coarser level: m2 grows). */
+    double steps = max_nan(2.0, ceil(2.0 * (m1 - m2) / m2 - 1e-9));
+    if (steps > kmax)
+        m2 = 2.0 * m1 / (kmax + 2.0);
+    int32_t k = (int32_t)min_nan(steps, (double)kmax);
+    double half = 2.0 * (m1 - m2);
+    if (half < 1e-3)
+        k = 1;
+    double wr = u1 * u2 - v1 * v2, wi = u1 * v2 + v1 * u2, modulus = p * q;
+    double ax = wr >= 0 ? modulus + wr : wi, ay = wr >= 0 ? wi : modulus - wr;
+    double norm = sqrt(ax * ax + ay * ay);
+    if (!(norm > 0))                      /* isotropic (q = 0): any axis */
+        ax = 1.0, ay = 0.0, norm = 1.0;
+    double level = log2(m2), base = floor(level);
+    float frac = (float)(level - base);
+    int32_t blend = frac > 1e-4f;
+    double spacing = half / k / norm;
+    ints[0] = k;
+    ints[1] = (int32_t)base;
+    ints[2] = blend;
+    floats[0] = (float)(spacing * ax);
+    floats[1] = (float)(spacing * ay);
+    floats[2] = frac;
+}
 
 static PyObject *
 footprints(PyObject *self, PyObject *args)
@@ -431,54 +473,18 @@ footprints(PyObject *self, PyObject *args)
     const double *r = rec.buf;
     int32_t *index = ind.buf, *ints = ib.buf, max_level = 0;
     float *floats = fb.buf;
-    /* render._LOG2_SERIES: 2 / (k ln 2), k = 1, 3, ..., 11 */
-    const double c1 = 2.0 / (1.0 * M_LN2), c3 = 2.0 / (3.0 * M_LN2), c5 = 2.0 / (5.0 * M_LN2),
-                 c7 = 2.0 / (7.0 * M_LN2), c9 = 2.0 / (9.0 * M_LN2), c11 = 2.0 / (11.0 * M_LN2);
     Py_BEGIN_ALLOW_THREADS
     for (Py_ssize_t i = 0; i < n; i++, r += NREC) {
         double a = r[J00], b = r[J01], c = r[J10], d = r[J11];
         double u1 = a + d, v1 = c - b, u2 = a - d, v2 = c + b;
         double p = sqrt(u1 * u1 + v1 * v1), q = sqrt(u2 * u2 + v2 * v2), s1 = (p + q) / 2.0;
         index[i] = -1;
-        if (!(s1 > threshold && s1 < largest))
+        if (!(s1 > threshold && s1 < largest))       /* not minifying, NaN or overflow */
             continue;
-        double s2 = fabs(p - q) / 2.0, m1 = max_nan(s1, 1.0), m2 = max_nan(s2, 1.0);
-        /* tent of half-width 2 (m1 - m2), probes at most m2 apart, at most kmax a side */
-        double steps = max_nan(2.0, ceil(2.0 * (m1 - m2) / m2 - 1e-9));
-        if (steps > kmax)
-            m2 = 2.0 * m1 / (kmax + 2.0);
-        int64_t k = (int64_t)min_nan(steps, (double)kmax);
-        double half = 2.0 * (m1 - m2);
-        if (half < 1e-3)
-            k = 1;
-        /* the major axis: square root of the product of the two unit phasors */
-        double p1 = p > 0 ? p : 1.0, q1 = q > 0 ? q : 1.0;
-        double e1x = p > 0 ? u1 / p1 : 1.0, e1y = v1 / p1, e2x = q > 0 ? u2 / q1 : 1.0, e2y = v2 / q1;
-        double zr = e1x * e2x - e1y * e2y, zi = e1x * e2y + e1y * e2x;
-        double rr = sqrt(zr * zr + zi * zi), t, ax, ay;
-        int right = zr >= 0;
-        t = sqrt((right ? rr + zr : rr - zr) / 2.0);
-        double norm = sqrt(rr);
-        ax = (right ? t : fabs(zi) / (2.0 * t)) / norm;
-        ay = (right ? zi / (2.0 * t) : copysign(t, zi)) / norm;
-        /* level log2(m2) = base + frac */
-        int exponent;
-        double x = 2.0 * frexp(m2, &exponent);
-        int32_t base = exponent - 1;
-        t = (x - 1.0) / (x + 1.0);
-        double t2 = t * t;
-        float frac = (float)(t * (c1 + t2 * (c3 + t2 * (c5 + t2 * (c7 + t2 * (c9 + t2 * c11))))));
-        int32_t blend = frac > 1e-4;
-        double spacing = half / (double)k;
         index[i] = (int32_t)count;
-        ints[3 * count] = (int32_t)k;
-        ints[3 * count + 1] = base;
-        ints[3 * count + 2] = blend;
-        floats[3 * count] = (float)(spacing * ax);
-        floats[3 * count + 1] = (float)(spacing * ay);
-        floats[3 * count + 2] = frac;
-        if (base + blend > max_level)
-            max_level = base + blend;
+        footprint(u1, v1, u2, v2, p, q, kmax, ints + 3 * count, floats + 3 * count);
+        int32_t top = ints[3 * count + 1] + ints[3 * count + 2];
+        max_level = top > max_level ? top : max_level;
         count++;
     }
     Py_END_ALLOW_THREADS
@@ -494,7 +500,7 @@ done:
 /* ------------------------------------------------------------------ antialiasing
  *
  * Per triangle: ints (k, base, blend) and floats (step x, step y, frac), as in
- * render._Minification. A pixel with aatri >= 0 takes 2k - 1 probes (j = -(k-1) .. k-1)
+ * antialias.Footprints. A pixel with aatri >= 0 takes 2k - 1 probes (j = -(k-1) .. k-1)
  * at source + j * step on pyramid level base and, when blend, base + 1. The probes of
  * level L are stored from offsets[L] on, pixel after pixel, in the order of the band.
  */
@@ -596,7 +602,7 @@ aa_probes(PyObject *self, PyObject *args)
         goto done;
     }
     for (Py_ssize_t l = 0; l < levels; l++)
-        scale[l] = (float)ldexp(1.0, (int)-l);     /* np.float32(0.5 ** l): level l pixel i sits on 2^l i */
+        scale[l] = (float)ldexp(1.0, (int)-l);     /* 2^-l: level l pixel i sits on 2^l i */
     const int32_t *aatri = aa.buf, *ints = in.buf;
     const int64_t *offsets = off.buf;
     const float *mapx = mx.buf, *mapy = my.buf, *floats = fl.buf;
@@ -643,7 +649,7 @@ done:
     return result;
 }
 
-/* np.rint on float32 (round half to even) without a libm call in the common case. */
+/* rintf (round half to even) without a libm call in the common case. */
 static inline float
 round_even(float x)
 {
@@ -651,7 +657,7 @@ round_even(float x)
 }
 
 /* value = sum over levels of [w_level *] (sum over j of weight_j * sample_j), as
- * render._antialiased takes it; rounded, clipped to [0, top] and written to the pixel
+ * the filter defines it; rounded, clipped to [0, top] and written to the pixel
  * (to channels 0..2 when an alpha channel was added). */
 #define DEFINE_RESOLVE(NAME, T)                                                                 \
     /* One pixel; called with constant probes and blend (below) so that the sums unroll. */   \
@@ -728,8 +734,8 @@ DEFINE_RESOLVE(resolve8, uint8_t)
 DEFINE_RESOLVE(resolve16, uint16_t)
 
 #if defined(__SSE2__)
-/* resolve8 for 3 or 4 channels with every channel in a lane of an SSE register: the same
- * float operations in the same order, lane by lane, so the same results. */
+/* resolve8 for 3 or 4 channels with every channel in a lane of an SSE register (the same
+ * float operations as resolve8_pixel, lane by lane). */
 
 /* A sample's channels (3 or 4 bytes) as floats; reads a 4th byte of a 3-channel sample
  * only when it lies before end. */
@@ -1000,9 +1006,9 @@ done:
 
 static PyMethodDef methods[] = {
     {"triangles", triangles, METH_VARARGS,
-     "triangles(target, triangles, width, height, sort, index, ylo, yhi, corners) -> count\n\n"
-     "The triangles that reach the canvas (their indices), their row ranges and nodes, in\n"
-     "their order or, if sort, stably sorted by first row."},
+     "triangles(target, triangles, width, height, index, ylo, yhi, corners) -> count\n\n"
+     "The triangles that reach the canvas (their indices), their row ranges and nodes,\n"
+     "stably sorted by first row."},
     {"records", records, METH_VARARGS,
      "records(target, source, corners, width, height, sel, rec)\n\n"
      "The records (16 float64: x-bounds, J, p0, s0) of kept triangles sel."},
@@ -1034,7 +1040,7 @@ static PyMethodDef methods[] = {
 
 static struct PyModuleDef module = {
     PyModuleDef_HEAD_INIT, "_raster",
-    "Compiled loops of featurewarp_cli.render (bit-identical to its numpy code).", -1, methods,
+    "The compiled loops of featurewarp_cli.render: rasterizer and antialiasing filter.", -1, methods,
     NULL, NULL, NULL, NULL,
 };
 

@@ -1,0 +1,38 @@
+"""What C libraries (libpng, libjpeg, libtiff) print on stderr, collected instead of shown."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import sys
+import tempfile
+
+
+@contextlib.contextmanager
+def captured_stderr():
+    """Collect what is printed on file descriptor 2 while the block runs.
+
+    Yields a list that holds the printed lines once the block has finished. Our own
+    notices (lines starting with ``featurewarp:``, which another thread may print
+    meanwhile) are shown afterwards instead of being collected.
+    """
+    lines: list[str] = []
+    sys.stderr.flush()                                              # our own messages stay visible
+    try:
+        saved = os.dup(2)
+    except OSError:                                                 # no stderr at all
+        yield lines
+        return
+    with tempfile.TemporaryFile() as tmp:
+        os.dup2(tmp.fileno(), 2)
+        try:
+            yield lines
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            tmp.seek(0)
+            printed = [line for line in tmp.read().decode(errors="replace").splitlines() if line.strip()]
+            ours = [line for line in printed if line.startswith("featurewarp:")]
+            if ours:
+                sys.stderr.write("".join(line + "\n" for line in ours))
+            lines.extend(line for line in printed if not line.startswith("featurewarp:"))

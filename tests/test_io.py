@@ -1,0 +1,147 @@
+"""featurewarp_cli.io: header checks before decoding for every accepted format, EXIF
+orientation, the input read once, colours, and the 16 -> 8-bit rule."""
+
+from __future__ import annotations
+
+import io
+import struct
+
+import cv2
+import numpy as np
+import pytest
+from PIL import Image
+
+from featurewarp_cli.app import pipeline
+from featurewarp_cli.io import ImageError, decode, depth, encode
+from featurewarp_cli.io.colours import parse_colour
+from test_cli import command, square_mask, textured
+
+#: Pillow's save arguments for each format whose header is read before decoding.
+PILLOW_SAVES = {"PNG": {}, "JPEG": {"quality": 95}, "WEBP": {"lossless": True}, "TIFF": {}, "BMP": {},
+                "GIF": {}, "PPM": {}, "JPEG2000": {}, "AVIF": {"quality": 90}}
+
+
+def pillow_file(fmt: str, size=(40, 24), **extra) -> bytes:
+    """A small RGB image saved by Pillow as ``fmt``."""
+    image = Image.fromarray(textured(size)[:, :, ::-1].copy())
+    buffer = io.BytesIO()
+    image.save(buffer, fmt, **PILLOW_SAVES.get(fmt, {}), **extra)
+    return buffer.getvalue()
+
+
+def no_decoding(*args):
+    raise AssertionError("pixels were decoded")
+
+
+@pytest.mark.parametrize("fmt", [f for f in PILLOW_SAVES if f in decode.HEADER_FORMATS])
+def test_every_header_format_is_checked_before_decoding(fmt, monkeypatch):
+    data = pillow_file(fmt)
+    assert decode.read_header(data).upright_size == (40, 24)
+    assert decode.decode_image(data, "x", max_pixels=40 * 24).shape[:2] == (24, 40)   # OpenCV decodes it
+    monkeypatch.setattr(decode.cv2, "imdecode", no_decoding)
+    with pytest.raises(ImageError, match=r"40x24 = 960 pixels, above the limit of 959 \(--max-pixels\)"):
+        decode.decode_image(data, "x", max_pixels=959)
+
+
+def test_pillows_own_bomb_limit_does_not_decide(monkeypatch):
+    """A header above Pillow's default limit (2 * 89 M pixels) is read and judged by max_pixels."""
+    data = bytearray(pillow_file("PNG"))
+    data[16:24] = struct.pack(">II", 20000, 10000)                   # IHDR: 200 M pixels
+    data[29:33] = struct.pack(">I", __import__("zlib").crc32(bytes(data[12:29])))
+    assert decode.read_header(bytes(data)).upright_size == (20000, 10000)
+    monkeypatch.setattr(decode.cv2, "imdecode", no_decoding)
+    with pytest.raises(ImageError, match="--max-pixels"):
+        decode.decode_image(bytes(data), "x", max_pixels=199_999_999)
+
+
+def test_jpeg_with_junk_before_a_segment_is_checked(monkeypatch):
+    """libjpeg skips stray bytes between segments; so must the header check."""
+    data = bytearray(encode.encode_image(textured(), "jpg"))
+    sof = data.index(b"\xff\xc0")
+    data[sof + 5 : sof + 9] = struct.pack(">HH", 32000, 32000)
+    dqt = data.index(b"\xff\xdb")
+    data[dqt:dqt] = b"\x00"
+    monkeypatch.setattr(decode.cv2, "imdecode", no_decoding)
+    with pytest.raises(ImageError, match="32000x32000"):
+        decode.decode_image(bytes(data), "x", max_pixels=1000)
+
+
+@pytest.mark.parametrize("ext", [".pam", ".hdr"])
+def test_formats_without_a_pillow_header_meet_opencvs_limit(tmp_path, ext):
+    """PAM and Radiance HDR: Pillow cannot read them, OpenCV's limit (set from --max-pixels
+    before OpenCV loads) refuses them inside its decoder."""
+    image = textured((30, 20)) if ext == ".pam" else textured((30, 20)).astype(np.float32) / 255
+    path = tmp_path / f"big{ext}"
+    assert cv2.imwrite(str(path), image)
+    assert decode.read_header(path.read_bytes()) is None
+    run = command("warp", "swirl", path, tmp_path / "o.png", "--max-pixels", 599)
+    lines = run.stderr.decode().splitlines()
+    assert run.returncode == 1 and len(lines) == 1, lines
+    assert "above the limit of 599 pixels of the decoder (--max-pixels)" in lines[0]
+    assert not (tmp_path / "o.png").exists()
+
+
+@pytest.mark.parametrize("fmt", ["JPEG", "PNG", "WEBP", "TIFF"])
+@pytest.mark.parametrize("orientation", [1, 3, 6, 7])
+def test_exif_orientation_as_opencv_shows_it(fmt, orientation):
+    """JPEG, PNG (eXIf) and WebP are turned here, TIFF by its decoder: all come out upright
+    as OpenCV's 8-bit colour decoding shows them, and the header's upright size agrees."""
+    if fmt == "TIFF":
+        data = pillow_file(fmt, tiffinfo={0x0112: orientation})
+    else:
+        exif = Image.Exif()
+        exif[0x0112] = orientation
+        data = pillow_file(fmt, exif=exif)
+    image = decode.decode_image(data, "x")
+    upright = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
+    assert np.array_equal(image, upright)
+    assert decode.read_header(data).upright_size == (image.shape[1], image.shape[0])
+
+
+def test_input_is_read_once(tmp_path, monkeypatch):
+    """Both the threaded path (header read) and the serial one (no header Pillow reads) read
+    INPUT's bytes once."""
+    reads = []
+    real = decode.read_bytes
+    monkeypatch.setattr(decode, "read_bytes", lambda path: reads.append(path) or real(path))
+    settings = pipeline.Settings(preset="swirl", params={"angle": 90.0})
+    mask = tmp_path / "m.png"
+    mask.write_bytes(encode.encode_image(square_mask(), "png"))
+    for ext in (".png", ".pam"):
+        source = tmp_path / f"in{ext}"
+        assert cv2.imwrite(str(source), textured())
+        reads.clear()
+        pipeline.warp_file(settings, str(source), str(tmp_path / "o.png"), str(mask))
+        assert reads.count(str(source)) == 1
+
+
+@pytest.mark.parametrize("text, rgb", [("white", (255, 255, 255)), (" Grey ", (128, 128, 128)),
+                                       ("green", (0, 128, 0)), ("skyblue", (135, 206, 235)),
+                                       ("#f80", (255, 136, 0)), ("#0000FF", (0, 0, 255)),
+                                       ("rgb(1, 2, 3)", (1, 2, 3)), ("transparent", None), ("NONE", None)])
+def test_colours(text, rgb):
+    assert parse_colour(text) == rgb
+
+
+@pytest.mark.parametrize("text, words", [("notacolour", "is not a colour"), ("#12", "is not a colour"),
+                                         ("", "is not a colour"), ("rgb(300, 0, 0)", "outside 0..255"),
+                                         ("#ff000080", "alpha")])
+def test_bad_colours(text, words):
+    with pytest.raises(ValueError, match=words):
+        parse_colour(text)
+
+
+def test_sixteen_to_eight_bits_is_rounding():
+    every = np.arange(65536, dtype=np.uint16)
+    assert np.array_equal(depth.to_eight_bit(every), np.round(every / 257.0).astype(np.uint8))
+    assert np.array_equal(np.round(depth.on_eight_bit_scale(every)), depth.to_eight_bit(every))
+    with pytest.raises(ValueError, match="float32"):
+        depth.to_eight_bit(np.zeros(3, np.float32))
+
+
+@pytest.mark.parametrize("fmt", ["webp", "bmp"])
+def test_eight_bit_formats_use_the_rule(fmt):
+    """A 16-bit image in a lossless 8-bit format is stored as the rule says."""
+    image = textured(dtype=np.uint16) + np.arange(48, dtype=np.uint16)[None, :, None]
+    stored = decode.decode_image(encode.encode_image(image, fmt), "x")
+    assert np.array_equal(stored, depth.to_eight_bit(image))

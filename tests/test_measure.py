@@ -1,0 +1,175 @@
+"""The yardstick: distortion measured on the output image by a keypoint affine fit.
+
+Validated on exact affine maps of a real photo (cv2.warpAffine by a known matrix):
+the measured distortion, scale and rotation must match the matrix's.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from featurewarp_cli.app.measure import describe, measure, worst
+from test_cli import runner  # noqa: F401  (fixture)
+
+SAMPLES = Path(__file__).resolve().parent.parent / "samples"
+
+
+@pytest.fixture(scope="module")
+def astronaut():
+    """(image, mask): the astronaut sample and its three-component mask (head, patch, shuttle)."""
+    image = cv2.imread(str(SAMPLES / "astronaut.png"))
+    mask = cv2.imread(str(SAMPLES / "astronaut_mask.png"), cv2.IMREAD_GRAYSCALE) >= 128
+    return image, mask
+
+
+def anisotropic(ratio: float, degrees: float, scale: float = 1.0) -> np.ndarray:
+    """A 2x2 map: stretch by sqrt(ratio) along x and shrink by it along y, then rotate."""
+    t = np.radians(degrees)
+    rotation = np.array([[np.cos(t), -np.sin(t)], [np.sin(t), np.cos(t)]])
+    return scale * rotation @ np.diag([np.sqrt(ratio), 1.0 / np.sqrt(ratio)])
+
+
+def centre_error(fit, matrix: np.ndarray) -> float:
+    """Distance in output pixels between where the fit and ``matrix`` put the component's box centre."""
+    x, y, w, h = fit.bbox
+    centre = np.array([x + (w - 1) / 2.0, y + (h - 1) / 2.0])
+    return float(np.hypot(*(fit.linear @ centre + fit.translation - matrix[:, :2] @ centre - matrix[:, 2])))
+
+
+def warp_affine(image: np.ndarray, linear: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``image`` mapped by ``linear`` onto a canvas that holds all of it; the 2x3 matrix used."""
+    h, w = image.shape[:2]
+    corners = np.array([[0, 0], [w, 0], [0, h], [w, h]], float) @ linear.T
+    matrix = np.hstack([linear, -corners.min(axis=0)[:, None]])
+    size = np.ceil(corners.max(axis=0) - corners.min(axis=0)).astype(int)
+    return cv2.warpAffine(image, matrix, (int(size[0]), int(size[1])), flags=cv2.INTER_CUBIC), matrix
+
+
+@pytest.mark.parametrize("ratio, degrees, scale", [
+    (1.0, 0.0, 1.0), (1.2, 0.0, 1.0), (2.0, 0.0, 1.0), (1.0, 40.0, 0.8), (2.0, 135.0, 1.1)])
+def test_exact_affine_is_measured_within_0_01(astronaut, ratio, degrees, scale):
+    image, mask = astronaut
+    linear = anisotropic(ratio, degrees, scale)
+    output, matrix = warp_affine(image, linear)
+    fits = measure(image, output, mask)
+    assert len(fits) == 3
+    for fit in fits:
+        assert fit.distortion == pytest.approx(ratio - 1.0, abs=0.01), fit
+        assert fit.scale == pytest.approx(scale, abs=0.01)
+        assert fit.rotation == pytest.approx(degrees, abs=0.5)
+        assert np.abs(fit.linear - linear).max() < 0.01
+        assert centre_error(fit, matrix) < 0.5
+        assert fit.inliers >= 10 and not fit.reflected
+
+
+def test_rotation_is_clockwise_on_screen():
+    # y points down: (1, 0) -> (0, 1) turns the x axis towards the bottom, clockwise as seen.
+    assert describe(np.array([[0.0, -1.0], [1.0, 0.0]]))["rotation"] == pytest.approx(90.0)
+
+
+def test_describe_a_mirror():
+    d = describe(np.array([[-2.0, 0.0], [0.0, 2.0]]))
+    assert d["reflected"] and d["distortion"] == pytest.approx(0.0) and d["scale"] == pytest.approx(2.0)
+
+
+def test_a_component_that_fills_the_frame(astronaut):
+    image, _ = astronaut
+    output, _ = warp_affine(image, anisotropic(1.0, -30.0))
+    (fit,) = measure(image, output, np.ones(image.shape[:2], bool))
+    assert fit.distortion == pytest.approx(0.0, abs=0.01) and fit.rotation == pytest.approx(-30.0, abs=0.5)
+    assert fit.coverage > 0.8
+
+
+def test_too_small_for_keypoints_is_not_measured(astronaut):
+    image, _ = astronaut
+    mask = np.zeros(image.shape[:2], bool)
+    mask[300:303, 300:303] = True                   # 9 px on the suit
+    (fit,) = measure(image, image, mask)
+    assert fit.distortion is None and fit.scale is None and fit.linear is None
+    assert "fewer than" in fit.reason
+    assert worst([fit]) is None
+
+
+def test_empty_mask_measures_nothing(astronaut):
+    image, _ = astronaut
+    assert measure(image, image, np.zeros(image.shape[:2], bool)) == []
+
+
+def test_mask_of_another_size_is_refused(astronaut):
+    image, mask = astronaut
+    with pytest.raises(ValueError, match="the mask is 100x512"):
+        measure(image, image, mask[:, :100])
+
+
+def test_downscaled_measure_reports_full_size_figures(astronaut):
+    image, mask = astronaut
+    linear = anisotropic(1.5, 20.0)
+    output, matrix = warp_affine(image, linear)
+    for fit in measure(image, output, mask, max_pixels=image.shape[0] * image.shape[1] // 2):
+        assert fit.distortion == pytest.approx(0.5, abs=0.01)
+        assert centre_error(fit, matrix) < 1.0
+
+
+def test_transparent_canvas_and_16_bit(astronaut):
+    image, mask = astronaut
+    linear = anisotropic(1.2, 10.0)
+    bgra = cv2.cvtColor(image, cv2.COLOR_BGR2BGRA)
+    output, _ = warp_affine(bgra, linear)           # transparent outside the picture
+    fits = measure(image.astype(np.uint16) * 257, output, mask)
+    assert all(f.distortion == pytest.approx(0.2, abs=0.01) for f in fits)
+
+
+def test_measure_command(runner, tmp_path, astronaut):
+    image, mask = astronaut
+    output, _ = warp_affine(image, anisotropic(2.0, 0.0))
+    paths = {}
+    for name, picture in (("in", image), ("out", output), ("mask", mask.astype(np.uint8) * 255)):
+        paths[name] = tmp_path / f"{name}.png"
+        cv2.imwrite(str(paths[name]), picture)
+    run = runner("measure", paths["in"], paths["out"], "-m", paths["mask"], "--json")
+    assert run.code == 0 and run.stderr == ""
+    report = json.loads(run.stdout)
+    assert [c["label"] for c in report["components"]] == [1, 2, 3]
+    assert report["worst_distortion"] == pytest.approx(1.0, abs=0.01)
+    text = runner("measure", paths["in"], paths["out"], "-m", paths["mask"])
+    assert text.code == 0 and len(text.stdout.decode().splitlines()) == 3
+    assert "distortion 1.00" in text.stdout.decode()
+
+
+def test_measure_command_bad_input(runner, tmp_path, astronaut):
+    image, _ = astronaut
+    cv2.imwrite(str(tmp_path / "in.png"), image)
+    cv2.imwrite(str(tmp_path / "small.png"), np.zeros((10, 10), np.uint8))
+    missing = runner("measure", tmp_path / "in.png", tmp_path / "nope.png", "-m", tmp_path / "small.png")
+    assert missing.code == 2 and len(missing.lines) == 1 and "does not exist" in missing.stderr
+    wrong = runner("measure", tmp_path / "in.png", tmp_path / "in.png", "-m", tmp_path / "small.png")
+    assert wrong.code == 2 and len(wrong.lines) == 1 and "the mask is 10x10" in wrong.stderr
+
+
+def swirled(image: np.ndarray, degrees: float) -> np.ndarray:
+    """``image`` under the swirl preset (radius 0.5), resampled exactly: its inverse is the
+    swirl by -degrees, since each circle about the centre maps onto itself."""
+    from featurewarp_cli import load_warp
+
+    h, w = image.shape[:2]
+    y, x = np.mgrid[0:h, 0:w].astype(np.float64)
+    back = load_warp("swirl")(w, h, angle=-degrees)(np.column_stack([x.ravel(), y.ravel()]))
+    maps = back.reshape(h, w, 2).astype(np.float32)
+    return cv2.remap(image, maps[:, :, 0], maps[:, :, 1], cv2.INTER_CUBIC, borderMode=cv2.BORDER_REFLECT)
+
+
+def test_a_bent_component_is_told_apart_from_a_kept_one():
+    # The close-up's mask covers 81 % of the frame; a plain swirl leaves its rim in place
+    # and turns the face: the global fit is near the identity, the local fits are not.
+    image = cv2.imread(str(SAMPLES / "closeup.png"))
+    mask = cv2.imread(str(SAMPLES / "closeup_mask.png"), cv2.IMREAD_GRAYSCALE) >= 128
+    (bent,) = measure(image, swirled(image, 180.0), mask)
+    assert bent.explained < 0.95 and bent.local_p90 > 0.15
+    kept, _ = warp_affine(image, anisotropic(1.0, 90.0, 1.3))
+    (fit,) = measure(image, kept, mask)
+    assert fit.explained > 0.98 and fit.local_p90 < 0.05 and fit.distortion < 0.01

@@ -1,0 +1,131 @@
+"""Real photos (issue 10): frame-cut and frame-filling features, measured on the output image.
+
+The portrait's mask (head and body) touches the bottom and left edges; the close-up's
+covers 81 % of the frame. Distortion is read off the written image by keypoints
+(:mod:`featurewarp_cli.app.measure`), not only off the mesh, and the report must agree.
+"""
+
+from __future__ import annotations
+
+import os
+
+import cv2
+import numpy as np
+import pytest
+
+from featurewarp_cli import FeatureWarper, load_warp
+from featurewarp_cli.app.measure import measure
+from featurewarp_cli.cli.main import cli as main
+
+SAMPLES = os.path.join(os.path.dirname(__file__), os.pardir, "samples")
+
+
+def sample(name: str) -> np.ndarray:
+    image = cv2.imread(os.path.join(SAMPLES, name), cv2.IMREAD_UNCHANGED)
+    assert image is not None, name
+    return image
+
+
+@pytest.fixture(scope="module")
+def portrait():
+    return sample("astronaut.png"), sample("astronaut_body_mask.png") >= 128
+
+
+@pytest.fixture(scope="module")
+def closeup():
+    return sample("closeup.png"), sample("closeup_mask.png") >= 128
+
+
+def warped(image, mask, preset, mode="similarity", **params):
+    h, w = mask.shape
+    warper = FeatureWarper(w, h, mask)
+    mesh = warper.solve(load_warp(preset)(w, h, **params), mode)
+    return warper.render(image, mesh, background=(255, 255, 255)), mesh
+
+
+def test_the_portrait_is_cut_by_the_frame_and_the_closeup_fills_it(portrait, closeup):
+    """The two cases are what they claim to be (guards against a sample that drifts)."""
+    _, mask = portrait
+    assert mask[-1].any() and mask[:, 0].any() and 0.3 < mask.mean() < 0.7
+    assert closeup[1].mean() > 0.8
+
+
+@pytest.mark.parametrize("mode,params", [("similarity", {"sy": 2}), ("similarity", {"sx": 2}),
+                                         ("similarity", {"sx": 0.6}), ("rigid", {"sy": 2}),
+                                         ("rigid", {"sx": 2})])
+def test_frame_cut_portrait_keeps_its_shape_in_the_image(portrait, mode, params):
+    """Every masked region's keypoint-fitted map is a similarity within 0.03 (rigid: scale 1 +- 0.03),
+    and the report's figure agrees with the image's within 0.02."""
+    image, mask = portrait
+    out, mesh = warped(image, mask, "stretch", mode, **params)
+    fits = measure(image, out, mask)
+    assert fits and all(f.distortion is not None for f in fits), [f.reason for f in fits]
+    for fit, component in zip(fits, mesh.info["components"]):
+        assert fit.distortion <= 0.03, (fit.distortion, component)
+        assert abs(component["distortion"] - fit.distortion) <= 0.02
+        assert component["kept"]
+        if mode == "rigid":
+            assert abs(fit.scale - 1.0) <= 0.03
+    assert mesh.info["warnings"] == [] and mesh.flips() == 0
+
+
+def test_rigid_portrait_that_cannot_fit_warns_and_is_no_worse_than_plain(portrait):
+    """Rigid --sx 0.6: a subject wider than the new canvas cannot keep its size: the tool says
+    so and the subject is no more distorted than under the plain stretch."""
+    image, mask = portrait
+    out, mesh = warped(image, mask, "stretch", "rigid", sx=0.6)
+    assert any("not kept" in line for line in mesh.info["warnings"])
+    for component in mesh.info["components"]:
+        assert component["anisotropy_worst"] <= component["plain_anisotropy_worst"] + 1e-6
+    fit = measure(image, out, mask)[0]
+    plain_fit = measure(image, warped(image, mask, "stretch", "plain", sx=0.6)[0], mask)[0]
+    assert fit.distortion < plain_fit.distortion
+
+
+def test_portrait_background_stretch_is_spread(portrait):
+    """With 40 px of room above the head, stretch --sy 2 stretches no background triangle more
+    than 8 times its area under the warp (the stretch is not piled into a few rows)."""
+    image, mask = portrait
+    image = cv2.copyMakeBorder(image, 40, 0, 0, 0, cv2.BORDER_REFLECT)
+    mask = np.pad(mask, ((40, 0), (0, 0)))
+    _, mesh = warped(image, mask, "stretch", sy=2)
+    assert mesh.info["components"][0]["kept"]
+    assert mesh.info["background_stretch"] <= 8.0
+
+
+def test_frame_filling_closeup_swirl_warns_that_the_output_is_the_input(closeup):
+    """A swirl whose disc the mask fills (its rim pinned) leaves the picture as it was: said so."""
+    image, mask = closeup
+    out, mesh = warped(image, mask, "swirl", angle=180)
+    assert any("the output is the input" in line for line in mesh.info["warnings"])
+    assert np.abs(out.astype(int) - image[..., :3]).mean() < 2.0
+
+
+def test_frame_filling_closeup_arc_is_no_worse_than_plain(closeup):
+    """arc 300: no component comes out more distorted than under the plain arc; the tool says
+    that the feature was not kept."""
+    image, mask = closeup
+    _, mesh = warped(image, mask, "arc", angle=300)
+    assert mesh.flips() == 0
+    for component in mesh.info["components"]:
+        assert component["anisotropy_worst"] <= component["plain_anisotropy_worst"] + 1e-6
+    assert mesh.info["warnings"]
+
+
+def test_strict_turns_the_warning_into_exit_1_with_nothing_written(tmp_path):
+    """--strict: where a warning is due the command fails and writes nothing."""
+    out, report = tmp_path / "out.png", tmp_path / "r.json"
+    args = ["warp", "swirl", os.path.join(SAMPLES, "closeup.png"), str(out), "-m",
+            os.path.join(SAMPLES, "closeup_mask.png"), "--angle", "180", "--report", str(report)]
+    from click.testing import CliRunner
+
+    runner = CliRunner()
+    relaxed = runner.invoke(main, args)
+    assert relaxed.exit_code == 0 and "the output is the input" in relaxed.output and out.exists()
+    out.unlink()
+    report.unlink()
+    strict = runner.invoke(main, args + ["--strict"])
+    assert strict.exit_code == 1 and "--strict" in strict.output
+    assert not out.exists() and not report.exists()
+    quiet = runner.invoke(main, args + ["-q"])
+    assert quiet.exit_code == 0 and quiet.output == ""
