@@ -17,7 +17,7 @@ import time
 from dataclasses import dataclass, field
 
 from .. import plugins
-from ..engine.defaults import DECAY, FEATURE_WEIGHT, SCALE_PRIOR
+from ..engine.defaults import DECAY, FEATURE_WEIGHT, FORMULATION, MODE, SCALE_PRIOR
 from ..io import ImageError, colours, decode, encode, formats, limits, write
 
 #: The module that :func:`prefetch_engine` imports: the solver (with the CHOLMOD binding) and renderer.
@@ -72,11 +72,11 @@ class Settings:
 
     preset: str
     params: dict = field(default_factory=dict)
-    mode: str = "similarity"
+    mode: str = MODE
     cell: int | None = None
     feature_weight: float = FEATURE_WEIGHT
     decay: float = DECAY
-    formulation: str = "exact"
+    formulation: str = FORMULATION
     boundary: str | None = None
     scale_prior: float = SCALE_PRIOR
     strict: bool = False

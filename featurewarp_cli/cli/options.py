@@ -78,13 +78,13 @@ def limit_decoders(ctx, param, value):
 def engine_options() -> list[click.Option]:
     """Options ``warp``, ``batch``, ``compare`` and ``animate`` share (built fresh for each command)."""
     return [
-        click.Option(["--mode"], type=click.Choice(defaults.MODES), default=defaults.MODES[0], show_default=True,
+        click.Option(["--mode"], type=click.Choice(defaults.MODES), default=defaults.MODE, show_default=True,
                      help="similarity: features rotate and scale uniformly with the warp; "
                           "rigid: features also keep their size; plain: the standard warp, mask ignored."),
         param_option(defaults.CELL_PARAM),
         param_option(defaults.FEATURE_WEIGHT_PARAM),
         param_option(defaults.DECAY_PARAM),
-        click.Option(["--formulation"], type=click.Choice(defaults.FORMULATIONS), default=defaults.FORMULATIONS[0],
+        click.Option(["--formulation"], type=click.Choice(defaults.FORMULATIONS), default=defaults.FORMULATION,
                      show_default=True,
                      help="exact: each feature moves as one similarity, held exactly; paper: the "
                           "paper's soft per-quad targets (w_F-weighted), for comparison."),

@@ -27,11 +27,13 @@ from __future__ import annotations
 from ..plugins import Param
 
 #: similarity: features rotate and scale uniformly; rigid: they also keep their size;
-#: plain: the warp itself, mask ignored. The first is the default.
+#: plain: the warp itself, mask ignored.
 MODES = ("similarity", "rigid", "plain")
+MODE = "similarity"
 #: exact: each feature component moves as one similarity; paper: the paper's soft
-#: per-quad targets. The first is the default.
+#: per-quad targets.
 FORMULATIONS = ("exact", "paper")
+FORMULATION = "exact"
 #: fixed: border nodes stay on W (the paper); slide: they may slide along the sides W
 #: maps onto axis-parallel lines. The default is the preset's own (``Warp.boundary``).
 BOUNDARIES = ("fixed", "slide")

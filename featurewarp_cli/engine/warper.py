@@ -44,7 +44,7 @@ import numpy as np
 
 from . import components, fidelity, guard, quality, system, targets
 from . import features as feat
-from .defaults import BOUNDARIES, DECAY, FEATURE_WEIGHT, FORMULATIONS, MODES, SCALE_PRIOR
+from .defaults import BOUNDARIES, DECAY, FEATURE_WEIGHT, FORMULATION, FORMULATIONS, MODE, MODES, SCALE_PRIOR
 from .grid import Grid, signed_areas
 from .record import KEPT, ComponentRecord, SolveRecord
 from .solver import ReducedSystem, factor_concurrently
@@ -213,7 +213,7 @@ class FeatureWarper:
 
     def __init__(self, width: int, height: int, mask: np.ndarray | None = None, *,
                  cell: float | None = None, feature_weight: float = FEATURE_WEIGHT, decay: float = DECAY,
-                 formulation: str = "exact", injective: bool = True, boundary: str | None = None,
+                 formulation: str = FORMULATION, injective: bool = True, boundary: str | None = None,
                  scale_prior: float = SCALE_PRIOR):
         if boundary not in (None,) + BOUNDARIES:
             raise ValueError(f"boundary must be one of {', '.join(BOUNDARIES)}, not {boundary!r}")
@@ -284,7 +284,7 @@ class FeatureWarper:
             offset[free, axis] = placed[free, axis]
         return offset
 
-    def solve(self, warp, mode: str = "similarity") -> Mesh:
+    def solve(self, warp, mode: str = MODE) -> Mesh:
         """Feature-aware mesh for ``warp`` (a :class:`featurewarp_cli.plugins.Warp` instance).
 
         The least-squares solution is returned when it has no fold-over. When it
@@ -621,9 +621,9 @@ def _warnings(record: SolveRecord, source, target, warped, warp) -> list[str]:
     return lines
 
 
-def warp(image: np.ndarray, mask: np.ndarray | None, preset: str, *, mode: str = "similarity",
+def warp(image: np.ndarray, mask: np.ndarray | None, preset: str, *, mode: str = MODE,
          cell: int | None = None, feature_weight: float = FEATURE_WEIGHT, decay: float = DECAY,
-         formulation: str = "exact", boundary: str | None = None, interp: str = "cubic",
+         formulation: str = FORMULATION, boundary: str | None = None, interp: str = "cubic",
          background=None, scale_prior: float = SCALE_PRIOR, **params) -> np.ndarray:
     """Warp ``image`` with a preset while the features in ``mask`` keep their shape.
 
