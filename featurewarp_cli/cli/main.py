@@ -22,8 +22,8 @@ from .diff import diff_command
 from .measure import measure_command
 from .presets import AnimateGroup, BatchGroup, CompareGroup, PresetGroup
 
-#: click >= 8.2 raises this (a UsageError, exit 2) for a command run without its
-#: arguments, after printing its help; click 8.1 prints the help and exits 0.
+#: click >= 8.2 raises this UsageError (exit 2), whose message is the help, for a command
+#: run without its arguments; click 8.1 has no such class: it prints the help and exits 0.
 NoArgsIsHelpError = getattr(click.exceptions, "NoArgsIsHelpError", ())
 
 
