@@ -1,4 +1,4 @@
-"""Benchmark inputs: a realistic feature mask and upscaled sample photos."""
+"""Benchmark inputs: upscaled sample photos and masks (synthetic masks: :mod:`samples.scenes`)."""
 
 from __future__ import annotations
 
@@ -9,25 +9,6 @@ import numpy as np
 
 #: Photo sizes (width, height) by label.
 SIZES = {"1MP": (1024, 1024), "12MP": (4000, 3000)}
-
-
-def disc_mask(width: int, height: int, fraction: float = 0.2, seed: int = 1) -> np.ndarray:
-    """Random discs (radius 9 % of the short side) until they cover ``fraction`` of the image.
-
-    Returns
-    -------
-    (height, width) bool ndarray
-    """
-    rng = np.random.default_rng(seed)
-    mask = np.zeros((height, width), np.uint8)
-    radius = max(1, int(0.09 * min(width, height)))
-    for _ in range(10_000):
-        if mask.mean() >= fraction:
-            break
-        cx = rng.uniform(radius, max(radius + 1, width - radius))
-        cy = rng.uniform(radius, max(radius + 1, height - radius))
-        cv2.circle(mask, (int(cx), int(cy)), radius, 1, -1)
-    return mask.astype(bool)
 
 
 def make_photos(samples: Path, folder: Path) -> dict[str, tuple[Path, Path]]:

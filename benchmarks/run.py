@@ -59,7 +59,8 @@ import numpy as np  # noqa: E402
 
 from benchmarks import targets as tgt  # noqa: E402
 from benchmarks.hard_cases import bench_hard  # noqa: E402
-from benchmarks.inputs import disc_mask, make_photos  # noqa: E402
+from benchmarks.inputs import make_photos  # noqa: E402
+from samples.scenes import disc_mask  # noqa: E402
 
 SECTIONS = ("table1", "render", "rewarp", "commands", "magick", "hard")
 

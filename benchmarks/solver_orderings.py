@@ -44,7 +44,8 @@ sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
 
-from benchmarks.inputs import disc_mask, make_photos  # noqa: E402
+from benchmarks.inputs import make_photos  # noqa: E402
+from samples.scenes import disc_mask  # noqa: E402
 from featurewarp_cli.engine import cholmod, solver  # noqa: E402
 from featurewarp_cli.engine import warper as api  # noqa: E402
 from featurewarp_cli.io.decode import mask_from_image, read_image  # noqa: E402

@@ -82,6 +82,12 @@ class Param:
         hi = "" if self.max is None else f" {'<' if self.max_open else '<='} {self.max:g}"
         return f"{lo}{self.metavar}{hi}" if lo or hi else "any real number"
 
+    def default_text(self) -> str:
+        """The default as help shows it: ``unset``, ``24`` or ``0.5``."""
+        if self.default is None:
+            return "unset"
+        return str(self.default) if self.type is int else f"{self.default:g}"
+
     def check(self, value):
         """Convert and validate ``value``; raise ValueError naming the problem."""
         if value is None:

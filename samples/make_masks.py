@@ -14,7 +14,8 @@ Run ``python samples/make_masks.py`` (from anywhere) to rewrite, next to this fi
   upscaled 2x, and a lasso of head and shoulders covering about 80 % of it (a close-up
   whose subject fills the frame and touches three sides);
 * ``shapes.png`` and ``shapes_mask.png``: a 640x480 synthetic image with six solid
-  shapes on a textured gray background, and its mask (the shapes dilated by ~6 px).
+  shapes on a textured gray background, and its mask (the shapes dilated by ~6 px),
+  drawn by ``scenes.py``, the synthetic scene generator the tests and benchmarks use.
 
 Masks are single-channel 8-bit PNGs, 255 = feature, 0 = background. The output is
 deterministic (the background noise uses a fixed seed). Needs only numpy and cv2.
@@ -23,6 +24,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+from scenes import sample_scene       # scenes.py, beside this file
 
 HERE = Path(__file__).resolve().parent
 
@@ -144,32 +146,6 @@ def make_closeup(astronaut):
     return cv2.resize(astronaut[y0:y0 + h, x0:x0 + w], (2 * w, 2 * h), interpolation=cv2.INTER_CUBIC)
 
 
-def make_shapes(seed=0):
-    """Return (image, mask) for the 640x480 synthetic test image."""
-    h, w = 480, 640
-    y, x = np.mgrid[0:h, 0:w].astype(np.float32)
-    noise = np.random.default_rng(seed).normal(0, 6, (h, w))
-    gray = 128 + 22 * np.sin(2 * np.pi * x / 16) * np.sin(2 * np.pi * y / 16) + noise
-    img = cv2.cvtColor(np.clip(gray, 90, 166).astype(np.uint8), cv2.COLOR_GRAY2BGR)
-    shapes = np.zeros((h, w), np.uint8)
-    # (kind, centre x, centre y, radius or half side, BGR colour)
-    for kind, cx, cy, s, colour in [
-        ("disc", 130, 140, 40, (0, 0, 255)),        # red
-        ("square", 320, 140, 36, (0, 200, 0)),      # green, side 73
-        ("disc", 510, 140, 46, (255, 0, 0)),        # blue
-        ("square", 130, 340, 44, (0, 230, 255)),    # yellow, side 89
-        ("disc", 320, 340, 50, (255, 0, 255)),      # magenta
-        ("square", 510, 340, 40, (255, 255, 0)),    # cyan, side 81
-    ]:
-        for target, value in ((img, colour), (shapes, 255)):
-            if kind == "disc":
-                cv2.circle(target, (cx, cy), s, value, -1)
-            else:
-                cv2.rectangle(target, (cx - s, cy - s), (cx + s, cy + s), value, -1)
-    mask = cv2.dilate(shapes, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (13, 13)))
-    return img, mask
-
-
 def main():
     cv2.imwrite(str(HERE / "closeup.png"), make_closeup(cv2.imread(str(HERE / "astronaut.png"))))
     for name, polygons in (("astronaut", ASTRONAUT), ("astronaut_body", ASTRONAUT_BODY),
@@ -177,9 +153,9 @@ def main():
                            ("closeup", CLOSEUP)):
         photo = cv2.imread(str(HERE / f"{name.split('_')[0]}.png"), cv2.IMREAD_UNCHANGED)
         cv2.imwrite(str(HERE / f"{name}_mask.png"), polygon_mask(photo.shape, polygons))
-    img, mask = make_shapes()
+    img, mask = sample_scene()
     cv2.imwrite(str(HERE / "shapes.png"), img)
-    cv2.imwrite(str(HERE / "shapes_mask.png"), mask)
+    cv2.imwrite(str(HERE / "shapes_mask.png"), mask.astype(np.uint8) * 255)
 
 
 if __name__ == "__main__":

@@ -10,13 +10,14 @@ import numpy as np
 import pytest
 
 sys.path.insert(0, os.path.dirname(__file__))
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))   # samples.scenes
 
-from shapes import scene  # noqa: E402
+from samples.scenes import scene  # noqa: E402
 
 #: Two shapes well inside a 200 x 150 image (at least 2 cells from the border).
 SMALL_SHAPES = (
     ("disc", 60, 60, 20, (0, 0, 255)),
-    ("square", 140, 90, 30, (0, 255, 0)),
+    ("square", 140, 90, 15, (0, 255, 0)),
 )
 SMALL_SIZE = (200, 150)
 

@@ -1,45 +1,10 @@
-"""Synthetic test scenes (solid discs and squares on texture) and shape-distortion measures."""
+"""How far the shapes of a synthetic scene (:mod:`samples.scenes`) came out from a disc or a square."""
 
 from __future__ import annotations
 
 import cv2
 import numpy as np
-
-# (kind, centre x, centre y, size, BGR colour); size = radius for discs, side for squares.
-SHAPES = (
-    ("disc", 110, 100, 30, (0, 0, 255)),
-    ("square", 250, 100, 54, (0, 200, 0)),
-    ("disc", 390, 100, 30, (255, 0, 0)),
-    ("square", 110, 260, 54, (0, 255, 255)),
-    ("disc", 250, 260, 30, (255, 0, 255)),
-    ("square", 390, 260, 54, (255, 255, 0)),
-)
-SIZE = (500, 360)
-
-
-def scene(shapes=SHAPES, size=SIZE, dilate=6):
-    """Textured gray background with solid shapes, and the mask (shapes dilated).
-
-    Returns
-    -------
-    image : (h, w, 3) uint8 ndarray
-    mask : (h, w) bool ndarray
-    """
-    w, h = size
-    y, x = np.mgrid[0:h, 0:w]
-    texture = 128 + 30 * np.sin(x / 3.0) * np.cos(y / 4.0) + 10 * np.sin((x + 2 * y) / 7.0)
-    image = np.repeat(texture[:, :, None], 3, axis=2).astype(np.uint8)
-    shapes_mask = np.zeros((h, w), np.uint8)
-    for kind, cx, cy, s, colour in shapes:
-        if kind == "disc":
-            cv2.circle(image, (cx, cy), s, colour, -1, cv2.LINE_AA)
-            cv2.circle(shapes_mask, (cx, cy), s, 255, -1)
-        else:
-            cv2.rectangle(image, (cx - s // 2, cy - s // 2), (cx + s // 2, cy + s // 2), colour, -1)
-            cv2.rectangle(shapes_mask, (cx - s // 2, cy - s // 2), (cx + s // 2, cy + s // 2), 255, -1)
-    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * dilate + 1, 2 * dilate + 1))
-    return image, cv2.dilate(shapes_mask, kernel) > 0
-
+from samples.scenes import SHAPES
 
 def shape_region(image, colour, tolerance=80):
     """Largest connected blob of pixels close to ``colour``: its contour."""

@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 from featurewarp_cli.engine.warper import warp
-from shapes import SHAPES, area, distortions, scene
+from samples.scenes import SHAPES, scene
+from shapes import area, distortions
 
 CASES = [
     ("stretch", (("sy", 2.0),), 0.05),
@@ -95,7 +96,7 @@ FEATUREWARP = os.path.join(os.path.dirname(sys.executable), "featurewarp")
 def cli_inputs(tmp_path_factory):
     """A small PNG scene and its mask on disk."""
     folder = tmp_path_factory.mktemp("cli")
-    shapes = (("disc", 50, 50, 18, (0, 0, 255)), ("square", 110, 70, 30, (0, 255, 0)))
+    shapes = (("disc", 50, 50, 18, (0, 0, 255)), ("square", 110, 70, 15, (0, 255, 0)))
     image, mask = scene(shapes, (160, 120))
     cv2.imwrite(str(folder / "in.png"), image)
     cv2.imwrite(str(folder / "mask.png"), mask.astype(np.uint8) * 255)

@@ -7,7 +7,7 @@ import cv2
 import numpy as np
 import pytest
 
-import shapes
+from samples import scenes
 
 
 def run(*args):
@@ -18,7 +18,7 @@ def run(*args):
 @pytest.fixture(scope="module")
 def files(tmp_path_factory):
     folder = tmp_path_factory.mktemp("anim")
-    image, mask = shapes.scene()
+    image, mask = scenes.scene()
     image, mask = image[::2, ::2], mask[::2, ::2]
     cv2.imwrite(str(folder / "in.png"), image)
     cv2.imwrite(str(folder / "mask.png"), mask.astype(np.uint8) * 255)

@@ -9,6 +9,7 @@ test files (``from test_cli import ...``).
 
 from __future__ import annotations
 
+import inspect
 import json
 import os
 import subprocess
@@ -45,10 +46,12 @@ class Runner:
     """Calls ``main(args)`` as the console script would, capturing stdin, stdout and stderr."""
 
     def __init__(self):
-        self.cli = CliRunner()
+        # click < 8.2 mixes stderr into stdout unless told not to (8.2 dropped the argument).
+        separate = {"mix_stderr": False} if "mix_stderr" in inspect.signature(CliRunner).parameters else {}
+        self.cli = CliRunner(**separate)
 
     def __call__(self, *args, input: bytes | None = None, env: dict | None = None) -> Run:
-        with self.cli.isolation(input=input, env=env) as (out, err, _):
+        with self.cli.isolation(input=input, env=env) as (out, err, *_):
             try:
                 main([str(a) for a in args])
                 code = 0

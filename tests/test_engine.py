@@ -309,7 +309,7 @@ def test_no_fold_overs_where_least_squares_alone_folds(small_scene, formulation,
 
 def test_no_fold_overs_in_the_acceptance_swirl():
     """The acceptance case swirl 120 with default options (16 folds by least squares alone) does not fold."""
-    from shapes import scene
+    from samples.scenes import scene
 
     _, mask = scene()
     h, w = mask.shape

@@ -55,6 +55,7 @@ def test_extreme_swirl_plain_grid_does_not_fold(angle):
     assert mesh.flips() == 0
 
 
+@pytest.mark.slow
 def test_extreme_swirl_with_features_does_not_fold():
     """Swirl 720 with features (the slowest case: sub-pixel grid, features relaxed towards W)."""
     mesh = FeatureWarper(W, H, blobs()).solve(load_warp("swirl")(W, H, angle=720))

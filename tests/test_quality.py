@@ -9,13 +9,14 @@ import numpy as np
 import pytest
 
 import shapes
+from samples import scenes
 from featurewarp_cli.engine.warper import FeatureWarper, load_warp
 from featurewarp_cli.engine.grid import signed_areas
 
 
 @pytest.fixture(scope="module")
 def scene():
-    return shapes.scene()
+    return scenes.scene()
 
 
 def area_ratios(scene, preset, mode="similarity", **params):
@@ -24,7 +25,7 @@ def area_ratios(scene, preset, mode="similarity", **params):
     warper = FeatureWarper(w, h, mask)
     out = warper.render(image, warper.solve(load_warp(preset)(w, h, **params), mode))
     return np.array([shapes.area(out, colour) / shapes.area(image, colour)
-                     for *_, colour in shapes.SHAPES])
+                     for *_, colour in scenes.SHAPES])
 
 
 def test_swirl_keeps_feature_area(scene):
@@ -47,8 +48,8 @@ def test_uniform_scale_scales_features(scene):
 
 def border_cut_scene():
     """A disc cut by the left border and a square cut by the top border."""
-    cut = (("disc", 0, 180, 40, (0, 0, 255)), ("square", 250, 0, 60, (0, 200, 0)))
-    return shapes.scene(cut)
+    cut = (("disc", 0, 180, 40, (0, 0, 255)), ("square", 250, 0, 30, (0, 200, 0)))
+    return scenes.scene(cut)
 
 
 @pytest.mark.parametrize("params", [{"sy": 2}, {"sx": 2}, {"sx": 0.6, "sy": 1.4}])
@@ -110,7 +111,7 @@ def run(*args, **kwargs):
 @pytest.fixture(scope="module")
 def files(tmp_path_factory):
     folder = tmp_path_factory.mktemp("q")
-    image, mask = shapes.scene()
+    image, mask = scenes.scene()
     cv2.imwrite(str(folder / "in.png"), image)
     cv2.imwrite(str(folder / "mask.png"), mask.astype(np.uint8) * 255)
     return folder

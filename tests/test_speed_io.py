@@ -235,6 +235,9 @@ def test_notices_printed_during_a_decode_still_show(capfd):
 def test_input_decodes_while_the_mesh_is_solved(tmp_path, monkeypatch):
     """warp_file starts decoding INPUT in a thread when its header gives the size; the
     result equals the serial path's."""
+    import threading
+    from concurrent.futures import Future
+
     import cv2
     import numpy as np
 
@@ -248,17 +251,18 @@ def test_input_decodes_while_the_mesh_is_solved(tmp_path, monkeypatch):
     cv2.imwrite(str(tmp_path / "m.png"), mask)
     settings = batch.Settings(preset="swirl", params={"angle": 90.0})
     started = []
-    real = batch._Decoding.__init__
+    start = threading.Thread.start
 
-    def spy(self, *args):
-        started.append(True)
-        real(self, *args)
+    def spy(thread):
+        started.append(thread.name)
+        start(thread)
 
-    monkeypatch.setattr(batch._Decoding, "__init__", spy)
+    monkeypatch.setattr(threading.Thread, "start", spy)
     batch.warp_file(settings, str(tmp_path / "in.png"), str(tmp_path / "a.png"), str(tmp_path / "m.png"))
-    assert started
+    assert "featurewarp-decode" in started
     serial = batch.load_image_and_mask(settings, str(tmp_path / "in.png"), str(tmp_path / "m.png"))
-    monkeypatch.setattr(batch, "start_loading", lambda s, i, m: (batch._Ready(serial[0]), serial[1], serial[2],
-                                                                 (48, 36)))
+    decoded = Future()
+    decoded.set_result(serial[0])
+    monkeypatch.setattr(batch, "start_loading", lambda s, i, m: (decoded, serial[1], serial[2], (48, 36)))
     batch.warp_file(settings, str(tmp_path / "in.png"), str(tmp_path / "b.png"), str(tmp_path / "m.png"))
     assert (tmp_path / "a.png").read_bytes() == (tmp_path / "b.png").read_bytes()

@@ -17,6 +17,7 @@ import time
 from dataclasses import dataclass, field
 
 from .. import plugins
+from ..engine.defaults import DECAY, FEATURE_WEIGHT, FORMULATION, MODE, SCALE_PRIOR
 from ..io import ImageError, colours, decode, encode, formats, limits, write
 
 #: What :func:`prefetch_engine` imports: the engine (grid, features, fold-over guard,
@@ -73,13 +74,13 @@ class Settings:
 
     preset: str
     params: dict = field(default_factory=dict)
-    mode: str = "similarity"
+    mode: str = MODE
     cell: int | None = None
-    feature_weight: float = 10.0
-    decay: float = 2.0
-    formulation: str = "exact"
+    feature_weight: float = FEATURE_WEIGHT
+    decay: float = DECAY
+    formulation: str = FORMULATION
     boundary: str | None = None
-    scale_prior: float = 1.0
+    scale_prior: float = SCALE_PRIOR
     strict: bool = False
     background: str | None = None
     interp: str = "cubic"

@@ -47,7 +47,7 @@ def measure_command(input, output, mask, as_json):
     from ..app import measure
     from ..app.pipeline import WarpError, read_input
     from ..io.decode import mask_from_image
-    from .main import click_error
+    from .presets import click_error
 
     if [input, output, mask].count("-") > 1:
         raise click.UsageError("only one of INPUT, OUTPUT and --mask can be '-' (stdin)")

@@ -39,9 +39,6 @@ import numpy as np
 
 #: Pins that a similarity fits with a larger RMS residual (px) leave a component untied.
 PIN_TOLERANCE = 0.01
-#: Default weight of the scale-and-rotation prior (``--scale-prior``): 1 holds a
-#: component's scale as firmly as its own shape equations would hold a target scale.
-SCALE_PRIOR = 1.0
 #: Columns of Phi solved at once.
 _BATCH = 16
 

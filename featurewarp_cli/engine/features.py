@@ -7,6 +7,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from .defaults import DECAY, FEATURE_WEIGHT
 from .grid import Grid
 
 
@@ -43,7 +44,7 @@ def decay(distance: np.ndarray, rho: float) -> np.ndarray:
     return 2.0 * x**3 - 3.0 * x**2 + 1.0
 
 
-def analyse(mask: np.ndarray, grid: Grid, feature_weight: float = 10.0, rho: float = 2.0) -> Features:
+def analyse(mask: np.ndarray, grid: Grid, feature_weight: float = FEATURE_WEIGHT, rho: float = DECAY) -> Features:
     """Classify and weight the quads of ``grid`` from a boolean feature ``mask``.
 
     Parameters

@@ -153,6 +153,39 @@ def area_gradients(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     return np.stack([half_perp(b, c), half_perp(c, a), half_perp(a, b)], axis=1)
 
 
+def penalty_force(x: np.ndarray, triangles: np.ndarray, slopes: np.ndarray) -> np.ndarray:
+    """The force that opens ``triangles``: sum of ``slopes`` times their area gradients, per node.
+
+    Parameters
+    ----------
+    x : (N, 2) ndarray
+    triangles : (M, 3) ndarray of int
+    slopes : (M,) ndarray
+        d penalty / d (-area) of each triangle.
+
+    Returns
+    -------
+    (N, 2) ndarray
+    """
+    contributions = slopes[:, None, None] * area_gradients(x, triangles)
+    corners = triangles.ravel()
+    return np.stack([np.bincount(corners, contributions[:, :, d].ravel(), minlength=x.shape[0])
+                     for d in range(2)], axis=1)
+
+
+def penalty_stiffness(x: np.ndarray, triangles: np.ndarray, stiffness: np.ndarray) -> np.ndarray:
+    """Per triangle, the kappa at which the area penalty is as stiff as the quadratic energy at its corners."""
+    grads = area_gradients(x, triangles)
+    return stiffness[triangles].mean(axis=1) / np.maximum(2.0 * (grads * grads).sum(axis=(1, 2)), 1e-12)
+
+
+def line_search(phi, below: float, alpha: float) -> float:
+    """Halve ``alpha`` until ``phi(alpha) < below``; a result <= 1e-6 means no step was found."""
+    while alpha > 1e-6 and not phi(alpha) < below:
+        alpha *= 0.5
+    return alpha
+
+
 def untangle(solve, hessian, x: np.ndarray, triangles: np.ndarray, floor: np.ndarray,
              stiffness: np.ndarray, max_iterations: int = 80, areas=None) -> tuple[np.ndarray, int]:
     """Open folded or crushed triangles while staying near the least-squares optimum.
@@ -195,19 +228,15 @@ def untangle(solve, hessian, x: np.ndarray, triangles: np.ndarray, floor: np.nda
         The last iterate (check it for folds).
     iterations : int
     """
-    if areas is None:
-        def areas(points):
-            return signed_areas(points, triangles)
-    grads = area_gradients(x, triangles)
-    kappa = stiffness[triangles].mean(axis=1) / np.maximum(2.0 * (grads * grads).sum(axis=(1, 2)), 1e-12)
+    areas = areas or (lambda points: signed_areas(points, triangles))
+    kappa = penalty_stiffness(x, triangles, stiffness)
 
     def penalty(points):
         deficit = np.maximum(0.0, floor - areas(points))
         return float((kappa * deficit * deficit).sum()), deficit
 
     stalled = boosts = 0
-    alpha = 0.5
-    checkpoint = reference = None
+    alpha, checkpoint, reference = 0.5, None, None
     optimum = solve(np.zeros_like(x))
     gradient = hessian(x - optimum)                 # grad E(x) along admissible directions
     for iteration in range(max_iterations):
@@ -223,21 +252,14 @@ def untangle(solve, hessian, x: np.ndarray, triangles: np.ndarray, floor: np.nda
         active = np.flatnonzero(deficit > 0)
         if reference is None or active.size < STALL_RATIO * reference:
             reference, stalled = active.size, 0
-        grads = area_gradients(x, triangles[active])
-        contributions = (2.0 * kappa[active] * deficit[active])[:, None, None] * grads
-        corners = triangles[active].ravel()
-        force = np.stack([np.bincount(corners, contributions[:, :, d].ravel(), minlength=x.shape[0])
-                          for d in range(2)], axis=1)
-        direction = solve(force) - x
+        direction = solve(penalty_force(x, triangles[active], 2.0 * kappa[active] * deficit[active])) - x
         curvature = hessian(direction)
         b, c = float((gradient * direction).sum()), float((curvature * direction).sum())
-        alpha = min(1.0, 2.0 * alpha)
-        while alpha > 1e-6:
-            if alpha * b + 0.5 * alpha * alpha * c + penalty(x + alpha * direction)[0] < pen:
-                x = x + alpha * direction
-                gradient += alpha * curvature
-                break
-            alpha *= 0.5
+        alpha = line_search(lambda a: a * b + 0.5 * a * a * c + penalty(x + a * direction)[0], pen,
+                            min(1.0, 2.0 * alpha))
+        if alpha > 1e-6:
+            x = x + alpha * direction
+            gradient += alpha * curvature
         stalled += 1
         if (stalled >= STALL_STEPS or alpha <= 1e-6) and boosts < 8:
             kappa *= 4.0

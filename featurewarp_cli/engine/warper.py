@@ -11,13 +11,26 @@ Examples
 (240, 160, 3)
 
 Warping the same image and mask again with other presets or parameters reuses
-the factorization (the system matrix depends on the grid and mask only):
+the factorization: the system matrix depends on the grid and the mask only.
 
 >>> warper = FeatureWarper(160, 120, mask)
->>> a = warper.render(image, warper.solve(load_warp("swirl")(160, 120, angle=90)))
->>> b = warper.render(image, warper.solve(load_warp("swirl")(160, 120, angle=180)))
+>>> a = warper.render(image, warper.solve(load_warp("swirl")(160, 120, angle=45)))
+>>> b = warper.render(image, warper.solve(load_warp("swirl")(160, 120, angle=90)))
+>>> c = warper.render(image, warper.solve(load_warp("bulge")(160, 120, strength=0.5)))
 >>> warper.factorizations
 1
+
+The automatic cell follows the warp's curvature: a swirl by 180 degrees needs a
+finer grid, factored in turn. A sliding border (stretch's) holds x and y at
+different nodes: one factorization per coordinate, shared by every stretch.
+
+>>> mesh = warper.solve(load_warp("swirl")(160, 120, angle=180))
+>>> warper.factorizations
+2
+>>> stretcher = FeatureWarper(160, 120, mask)
+>>> meshes = [stretcher.solve(load_warp("stretch")(160, 120, sx=sx)) for sx in (1.5, 2, 3)]
+>>> stretcher.factorizations
+2
 """
 
 from __future__ import annotations
@@ -31,12 +44,9 @@ import numpy as np
 
 from . import components, fidelity, guard, quality, system, targets
 from . import features as feat
+from .defaults import BOUNDARIES, DECAY, FEATURE_WEIGHT, FORMULATION, FORMULATIONS, MODE, MODES, SCALE_PRIOR
 from .grid import Grid, signed_areas
 from .record import KEPT, ComponentRecord, SolveRecord
-
-MODES = ("similarity", "rigid", "plain")
-FORMULATIONS = ("exact", "paper")
-BOUNDARIES = ("fixed", "slide")
 
 #: Where W moves pixels by more than NO_OP_WARP px, an output that moves the nodes W moves
 #: (by more than NO_OP_OUTPUT px) by at most NO_OP_OUTPUT px RMS, or by at most NO_OP_FRACTION
@@ -158,7 +168,7 @@ class FeatureWarper:
     scale_prior : float
         Weight of the pull of each component's scale and rotation towards the
         preset's (similarity mode, exact formulation; default
-        :data:`components.SCALE_PRIOR`). 0 lets features grow or shrink freely to
+        :data:`defaults.SCALE_PRIOR`). 0 lets features grow or shrink freely to
         spare the background; large values fix them at lambda R.
 
     Attributes
@@ -171,9 +181,9 @@ class FeatureWarper:
     """
 
     def __init__(self, width: int, height: int, mask: np.ndarray | None = None, *,
-                 cell: float | None = None, feature_weight: float = 10.0, decay: float = 2.0,
-                 formulation: str = "exact", injective: bool = True, boundary: str | None = None,
-                 scale_prior: float = components.SCALE_PRIOR):
+                 cell: float | None = None, feature_weight: float = FEATURE_WEIGHT, decay: float = DECAY,
+                 formulation: str = FORMULATION, injective: bool = True, boundary: str | None = None,
+                 scale_prior: float = SCALE_PRIOR):
         if boundary not in (None,) + BOUNDARIES:
             raise ValueError(f"boundary must be one of {', '.join(BOUNDARIES)}, not {boundary!r}")
         if mask is not None and mask.shape != (height, width):
@@ -248,7 +258,7 @@ class FeatureWarper:
             offset[free, axis] = placed[free, axis]
         return offset
 
-    def solve(self, warp, mode: str = "similarity") -> Mesh:
+    def solve(self, warp, mode: str = MODE) -> Mesh:
         """Feature-aware mesh for ``warp`` (a :class:`featurewarp_cli.plugins.Warp` instance).
 
         The least-squares solution is returned when it has no fold-over. When it
@@ -585,10 +595,10 @@ def _warnings(record: SolveRecord, source, target, warped, warp) -> list[str]:
     return lines
 
 
-def warp(image: np.ndarray, mask: np.ndarray | None, preset: str, *, mode: str = "similarity",
-         cell: int | None = None, feature_weight: float = 10.0, decay: float = 2.0,
-         formulation: str = "exact", boundary: str | None = None, interp: str = "cubic",
-         background=None, scale_prior: float = components.SCALE_PRIOR, **params) -> np.ndarray:
+def warp(image: np.ndarray, mask: np.ndarray | None, preset: str, *, mode: str = MODE,
+         cell: int | None = None, feature_weight: float = FEATURE_WEIGHT, decay: float = DECAY,
+         formulation: str = FORMULATION, boundary: str | None = None, interp: str = "cubic",
+         background=None, scale_prior: float = SCALE_PRIOR, **params) -> np.ndarray:
     """Warp ``image`` with a preset while the features in ``mask`` keep their shape.
 
     Parameters

@@ -30,7 +30,8 @@ limit_opencv_decoders(MAX_PIXELS, replace=False)        # before cv2 loads; the 
 import cv2  # noqa: E402
 from PIL import Image  # noqa: E402
 
-cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
+# Silence OpenCV's own log (level 0); before 4.13 the call is cv2.setLogLevel.
+getattr(cv2.utils, "logging", cv2).setLogLevel(0)
 Image.MAX_IMAGE_PIXELS = None           # the caller's max_pixels decides, not Pillow's default
 
 # Pillow's header readers for the formats OpenCV decodes, imported one by one so that

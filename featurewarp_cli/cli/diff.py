@@ -1,0 +1,62 @@
+"""``featurewarp diff A B``: compare two images within a tolerance (golden files in CI)."""
+
+from __future__ import annotations
+
+import click
+
+from .options import MAX_PIXELS_OFF, MAX_RMSE, MIN_PSNR, TOLERANCE, option
+from .presets import click_error
+
+
+@click.command("diff")
+@click.argument("a", type=click.Path(dir_okay=False, allow_dash=True))
+@click.argument("b", type=click.Path(dir_okay=False, allow_dash=True))
+@option(MAX_RMSE)
+@option(MIN_PSNR)
+@option(MAX_PIXELS_OFF)
+@option(TOLERANCE)
+@click.option("--diff-image", type=click.Path(dir_okay=False), metavar="PATH",
+              help="Write A in faded gray with the pixels off in red.")
+@click.option("-q", "--quiet", is_flag=True, help="Print no metrics; only the exit status tells.")
+def diff_command(a, b, max_rmse, min_psnr, max_pixels_off, tolerance, diff_image, quiet):
+    """Compare images A and B (e.g. an output with its golden file).
+
+    Prints RMSE, PSNR, the largest absolute difference and the pixels off, on
+    the 0..255 scale (16-bit samples divided by 257), every channel and alpha
+    included. Exit 0 within tolerance, 1 beyond it or when the sizes or channel
+    counts differ. Without --max-rmse, --min-psnr or --max-pixels-off the images
+    must match within --tolerance everywhere. One of A and B may be '-' (stdin).
+    """
+    from ..app import diff
+    from ..app.pipeline import WarpError, read_input
+    from ..io import ImageError, encode, formats, write
+
+    if a == "-" and b == "-":
+        raise click.UsageError("only one of A and B can be '-' (stdin)")
+    if diff_image:
+        try:
+            if diff_image == "-":
+                raise ValueError("cannot be '-' (stdout holds the metrics)")
+            path, fmt = formats.output_target(diff_image)
+            write.check_writable(path)
+        except ValueError as err:
+            raise click.BadParameter(str(err), param_hint="'--diff-image'") from None
+    try:
+        first, second = read_input(a, "A", None), read_input(b, "B", None)
+    except WarpError as err:
+        raise click_error(err) from err
+    reason = diff.mismatch(first, second)
+    if reason:
+        raise click.ClickException(f"{a} and {b} cannot be compared: {reason}")
+    result = diff.compare(first, second, tolerance)
+    if not quiet:
+        click.echo("\n".join(result.lines()))
+    if diff_image:
+        try:
+            write.write_atomic(path, encode.encode_image(diff.highlight(first, result.off), fmt))
+        except (ImageError, OSError) as err:
+            raise click.ClickException(f"cannot write {path}: {err}") from err
+    broken = diff.failures(result, max_rmse, min_psnr, max_pixels_off)
+    if broken:
+        raise click.ClickException(f"{a} and {b} differ beyond tolerance: {'; '.join(broken)}")
+

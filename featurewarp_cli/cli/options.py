@@ -1,0 +1,140 @@
+"""Options the commands share, and the one click type that checks numbers.
+
+Every numeric option is declared as a :class:`featurewarp_cli.plugins.Param`,
+the declaration a preset gives its parameters, and checked by
+:meth:`Param.check` through :class:`ParamValue`: the engine's settings come from
+:mod:`featurewarp_cli.engine.defaults`, the presets' from their classes, and the
+few that only the command line has (``--jobs``, ``--frames``, the diff
+thresholds) are declared below. Nothing here imports numpy or OpenCV.
+"""
+
+from __future__ import annotations
+
+import click
+
+from ..engine import defaults
+from ..io import limits
+from ..io.formats import NAMES as FORMAT_NAMES
+from ..plugins import Param
+
+INTERPOLATIONS = ("linear", "cubic", "lanczos")
+#: Keyword arguments of the commands that are engine or output settings, not preset parameters.
+SETTINGS = ("mode", "cell", "feature_weight", "decay", "formulation", "boundary", "scale_prior", "strict",
+            "background", "interp", "fmt", "max_pixels")
+
+MAX_PIXELS_PARAM = Param("max_pixels", int, limits.MAX_PIXELS,
+                         "Refuse inputs with more than N pixels (checked in the file header, before decoding).",
+                         min=1, metavar="N")
+JOBS = Param("jobs", int, 1, "Worker processes; results are byte-identical to N=1.", min=1, metavar="N")
+FRAMES = Param("frames", int, 24, "Number of frames (START and END included).", min=1, metavar="N")
+FPS = Param("fps", float, 12.0, "Frames per second.", min=0.0, min_open=True)
+MAX_RMSE = Param("max_rmse", float, None, "Pass if RMSE <= X.", min=0.0, metavar="X")
+MIN_PSNR = Param("min_psnr", float, None, "Pass if PSNR >= DB.", metavar="DB")
+MAX_PIXELS_OFF = Param("max_pixels_off", int, None,
+                       "Pass if at most N pixels differ by more than --tolerance in some channel.",
+                       min=0, metavar="N")
+TOLERANCE = Param("tolerance", float, 0.0, "Per-sample difference (0..255 scale) that still counts as equal.",
+                  min=0.0, metavar="T")
+
+
+class ParamValue(click.ParamType):
+    """A click type that converts and checks a value through its :class:`Param` declaration."""
+
+    def __init__(self, param: Param):
+        self.param = param
+        self.name = param.type.__name__
+
+    def convert(self, value, option, ctx):
+        try:
+            return self.param.check(value)
+        except ValueError as err:
+            self.fail(str(err).split(": ", 1)[-1], option, ctx)
+
+
+def declared(param: Param) -> dict:
+    """click's option settings for ``param``: its type, default, metavar, help with default and range."""
+    default = "" if param.default is None else f"default: {param.default_text()}; "
+    return dict(type=ParamValue(param), default=param.default, metavar=param.metavar,
+                help=f"{param.help} [{default}{param.range_text()}]")
+
+
+def param_option(param: Param, *names: str) -> click.Option:
+    """The option ``--NAME`` (or ``names``) declared by ``param``."""
+    return click.Option(list(names) or [f"--{param.cli_name}"], **declared(param))
+
+
+def option(param: Param, *names: str):
+    """The ``@click.option`` decorator of :func:`param_option`."""
+    return click.option(*(names or [f"--{param.cli_name}"]), **declared(param))
+
+
+def limit_decoders(ctx, param, value):
+    """``--max-pixels`` callback: OpenCV reads its decoders' limit once, when it loads (the
+    commands load it later), and applies it to the formats whose header Pillow cannot read."""
+    limits.limit_opencv_decoders(value)
+    return value
+
+
+def engine_options() -> list[click.Option]:
+    """Options ``warp``, ``batch``, ``compare`` and ``animate`` share (built fresh for each command)."""
+    return [
+        click.Option(["--mode"], type=click.Choice(defaults.MODES), default=defaults.MODE, show_default=True,
+                     help="similarity: features rotate and scale uniformly with the warp; "
+                          "rigid: features also keep their size; plain: the standard warp, mask ignored."),
+        param_option(defaults.CELL_PARAM),
+        param_option(defaults.FEATURE_WEIGHT_PARAM),
+        param_option(defaults.DECAY_PARAM),
+        click.Option(["--formulation"], type=click.Choice(defaults.FORMULATIONS), default=defaults.FORMULATION,
+                     show_default=True,
+                     help="exact: each feature moves as one similarity, held exactly; paper: the "
+                          "paper's soft per-quad targets (w_F-weighted), for comparison."),
+        click.Option(["--boundary"], type=click.Choice(defaults.BOUNDARIES),
+                     help="fixed: border nodes stay where the warp puts them (the paper). slide: "
+                          "on a side the warp maps onto an axis-parallel straight line they may "
+                          "slide along it, so features cut by the border keep their shape and the "
+                          "canvas stays exact. Default: slide (for stretch; it amounts to fixed for "
+                          "swirl and bulge, whose border stays put, and for arc, whose sides are "
+                          "curves and oblique rays)."),
+        param_option(defaults.SCALE_PRIOR_PARAM),
+        click.Option(["--strict"], is_flag=True,
+                     help="Exit 1 and write nothing when a feature could not be kept, features "
+                          "were relaxed to avoid fold-overs, or the output would equal the input "
+                          "(each is otherwise a warning)."),
+        click.Option(["--background"], metavar="COLOR",
+                     help="Fill where no source pixel lands: #rrggbb, a colour name, or transparent. "
+                          "Default: transparent for PNG, WebP and TIFF output, white otherwise "
+                          "(formats without alpha also get transparent input pixels flattened on it)."),
+        click.Option(["--interp"], type=click.Choice(INTERPOLATIONS), default="cubic", show_default=True,
+                     help="Resampling filter."),
+        click.Option(["--format", "fmt"], type=click.Choice(FORMAT_NAMES, case_sensitive=False),
+                     help="Output format; overrides the extension (needed for '-' unless a "
+                          "prefix such as png:- is given)."),
+        click.Option(["--max-pixels"], callback=limit_decoders, **declared(MAX_PIXELS_PARAM)),
+        click.Option(["-q", "--quiet"], is_flag=True, help="Print nothing but errors."),
+        click.Option(["-v", "--verbose"], is_flag=True,
+                     help="Print a one-line summary per image on stderr (sizes, solver, seconds)."),
+    ]
+
+
+def preset_options(preset) -> list[click.Option]:
+    """One option per declared parameter of ``preset``."""
+    return [param_option(p) for p in preset.params]
+
+
+def input_output_mask(mask_help: str, output_dash: bool = True) -> list[click.Parameter]:
+    """INPUT, OUTPUT ('-' for stdin and stdout) and ``-m/--mask``."""
+    return [click.Argument(["input"], type=click.Path(dir_okay=False, allow_dash=True)),
+            click.Argument(["output"], type=click.Path(dir_okay=False, allow_dash=output_dash)),
+            click.Option(["-m", "--mask"], type=click.Path(dir_okay=False, allow_dash=True), metavar="PATH",
+                         help=mask_help)]
+
+
+def settings_from(preset, kwargs: dict):
+    """Split a preset command's keyword arguments into Settings, quiet and verbose."""
+    from ..app.pipeline import Settings
+
+    quiet, verbose = kwargs.pop("quiet"), kwargs.pop("verbose")
+    if quiet and verbose:
+        raise click.UsageError("--quiet and --verbose exclude each other")
+    params = {p.name: kwargs.pop(p.name) for p in preset.params}
+    return Settings(preset.name, params, **{k: kwargs.pop(k) for k in SETTINGS}), quiet, verbose

@@ -1,0 +1,257 @@
+"""The per-preset commands (``warp``, ``batch``, ``compare``, ``animate`` PRESET) and their groups.
+
+Each group lists the registered presets and builds a preset's command from its
+declaration when it is named, so that a broken third-party plugin shows up as
+broken instead of taking the command line down. The commands parse, call
+:mod:`featurewarp_cli.app` (imported inside the callbacks, so that ``--help``
+stays fast) and print; they turn a :class:`WarpError` into click's exit codes.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import inspect
+import sys
+
+import click
+
+from .. import plugins
+from .options import (FPS, FRAMES, JOBS, engine_options, input_output_mask, param_option, preset_options,
+                      settings_from)
+
+MASK_HELP = ("Feature mask: pixels with gray value >= 128 (transparent ones count as black) keep their "
+             "shape. Same width and height as INPUT. Without it the plain warp is produced.")
+
+
+def click_error(err) -> click.ClickException:
+    """The click exception for a :class:`featurewarp_cli.app.pipeline.WarpError` (usage: exit 2, else 1)."""
+    if err.usage:
+        if err.param:
+            return click.BadParameter(err.message, param_hint=f"'{err.param}'")
+        return click.UsageError(err.message)
+    return click.ClickException(str(err))
+
+
+def summary_line(s: dict) -> str:
+    """The ``--verbose`` line of one warped image."""
+    (w, h), (cw, ch) = s["size"], s["canvas"]
+    return (f"{s['input']} {w}x{h} -> {s['output']} {cw}x{ch}: {s['preset']} ({s['mode']}), "
+            f"{s['components']} feature components, solver {s['solver']}, "
+            f"{s['flipped_triangles']} flipped triangles, {s['seconds']:.2f} s")
+
+
+def report_warnings(summary: dict, quiet: bool, verbose: bool) -> None:
+    """Print an image's warnings (unless quiet) and its summary line (if verbose) on stderr."""
+    if not quiet:
+        for warning in summary["warnings"]:
+            click.echo(f"featurewarp: warning: {summary['input']}: {warning}", err=True)
+    if verbose:
+        click.echo(f"featurewarp: {summary_line(summary)}", err=True)
+
+
+class NoProgress:
+    """The stand-in for a progress bar that is not shown."""
+
+    def update(self, steps: int) -> None:
+        """Count nothing."""
+
+
+def progress_bar(length: int, label: str, quiet: bool):
+    """click's progress bar on stderr when it is a terminal (and not ``quiet``), else :class:`NoProgress`.
+
+    (click < 8.2 has no ``hidden`` argument.)
+    """
+    if quiet or not sys.stderr.isatty():
+        return contextlib.nullcontext(NoProgress())
+    return click.progressbar(length=length, label=label, file=sys.stderr)
+
+
+def preset_command(preset, params: list, callback, doc: str) -> click.Command:
+    """The command named after ``preset``, with ``params`` then the preset's own options."""
+    return click.Command(preset.name, params=params + preset_options(preset), callback=callback, help=doc,
+                         short_help=preset.summary, no_args_is_help=True)
+
+
+def preset_doc(preset, intro: str = "") -> str:
+    """``intro`` followed by the preset's docstring (or its summary)."""
+    text = inspect.cleandoc(preset.__doc__ or preset.summary)
+    return f"{intro}\n\n{text}" if intro else text
+
+
+def warp_command(preset) -> click.Command:
+    """``featurewarp warp PRESET INPUT OUTPUT``."""
+    params = input_output_mask(MASK_HELP) + [
+        click.Option(["--report"], type=click.Path(dir_okay=False), metavar="PATH",
+                     help="Write a JSON report: sizes, grid, feature components (scale, "
+                          "rotation, residual from a similarity), background deviation from "
+                          "the warp, triangle area ratios, fold-overs before and after the "
+                          "guard, solver, seconds per stage."),
+        click.Option(["--save-grid"], type=click.Path(dir_okay=False), metavar="PATH.npz",
+                     help="Save the mapping: arrays source (N x 2 source pixel positions of "
+                          "the grid nodes), target (N x 2 on the output canvas), triangles "
+                          "(M x 3 node indices, counter-clockwise in source coordinates)."),
+        click.Option(["--grid", "draw_grid"], is_flag=True, help="Draw the deformed grid over the result."),
+    ] + engine_options()
+
+    def callback(input, output, mask, report, save_grid, draw_grid, **kwargs):
+        from ..app.pipeline import WarpError, warp_file
+
+        settings, quiet, verbose = settings_from(preset, kwargs)
+        try:
+            summary = warp_file(settings, input, output, mask, report, save_grid, draw_grid)
+        except WarpError as err:
+            raise click_error(err) from err
+        report_warnings(summary, quiet, verbose)
+
+    return preset_command(preset, params, callback, preset_doc(preset))
+
+
+def batch_command(preset) -> click.Command:
+    """``featurewarp batch PRESET INPUT... --out-dir DIR``."""
+    params = [click.Argument(["inputs"], nargs=-1, required=True, metavar="INPUT...",
+                             type=click.Path(dir_okay=False)),
+              click.Option(["-o", "--out-dir"], required=True, metavar="DIR",
+                           type=click.Path(file_okay=False), help="Folder for the outputs (must exist)."),
+              click.Option(["--mask-pattern"], default="{stem}_mask.png", show_default=True,
+                           metavar="PATTERN",
+                           help="Mask file of each input; {stem} is the input's name without "
+                                "extension; relative to the input's folder unless absolute. "
+                                "A missing mask fails that file. Inputs that are another "
+                                "input's mask are skipped, so 'photos/*.png' works."),
+              click.Option(["--suffix"], default="", metavar="S",
+                           help="Appended to each output's stem: DIR/{stem}S.{ext}."),
+              param_option(JOBS, "-j", "--jobs")] + engine_options()
+
+    def callback(inputs, out_dir, mask_pattern, suffix, jobs, **kwargs):
+        from ..app.pipeline import WarpError, plan, run_batch
+        from ..io.formats import format_name
+
+        settings, quiet, verbose = settings_from(preset, kwargs)
+        try:
+            fmt = format_name(settings.fmt) if settings.fmt else None
+            todo = plan(inputs, out_dir, suffix, fmt, None if settings.mode == "plain" else mask_pattern)
+        except WarpError as err:
+            raise click_error(err) from err
+        failed = 0
+        with progress_bar(len(todo), "warping", quiet) as bar:
+            for job, error, summary in run_batch(settings, todo, jobs):
+                bar.update(1)
+                if error:
+                    failed += 1
+                    click.echo(f"featurewarp: error: {job.input}: {error}", err=True)
+                else:
+                    report_warnings(summary, quiet, verbose)
+        if failed:
+            raise click.ClickException(f"{failed} of {len(todo)} files failed")
+
+    intro = f"Warp every INPUT with {preset.name} into --out-dir, each with its own mask."
+    return preset_command(preset, params, callback, preset_doc(preset, intro))
+
+
+def compare_command(preset) -> click.Command:
+    """``featurewarp compare PRESET INPUT OUTPUT``: the labelled four-way panel."""
+    params = input_output_mask("Feature mask (as for warp).") + [
+        click.Option(["--grid", "draw_grid"], is_flag=True, help="Draw the deformed grid over the three results."),
+    ] + [o for o in engine_options() if o.name != "mode"]
+
+    def callback(input, output, mask, draw_grid, **kwargs):
+        from ..app.pipeline import WarpError, compare_file
+
+        kwargs["mode"] = "similarity"
+        settings, quiet, verbose = settings_from(preset, kwargs)
+        try:
+            summary = compare_file(settings, input, output, mask, draw_grid)
+        except WarpError as err:
+            raise click_error(err) from err
+        report_warnings(summary, quiet, verbose)
+
+    intro = (f"Write one labelled panel: input with the mask tinted | plain | rigid | similarity "
+             f"({preset.name}).")
+    return preset_command(preset, params, callback, preset_doc(preset, intro))
+
+
+def animate_command(preset) -> click.Command:
+    """``featurewarp animate PRESET INPUT OUTPUT --vary NAME=START:END``."""
+    params = input_output_mask("Feature mask (as for warp).", output_dash=False) + [
+        click.Option(["--vary"], multiple=True, required=True, metavar="NAME=START:END",
+                     help="A numeric option of the preset to vary linearly over the frames, "
+                          "e.g. angle=0:360 (repeat for several)."),
+        param_option(FRAMES), param_option(FPS),
+    ] + [o for o in engine_options() if o.name != "fmt"]
+
+    def callback(input, output, mask, vary, frames, fps, **kwargs):
+        from ..app.animate import animate_file, parse_vary
+        from ..app.pipeline import WarpError
+
+        kwargs["fmt"] = None
+        settings, quiet, verbose = settings_from(preset, kwargs)
+        try:
+            ranges = parse_vary(vary, preset)
+            with progress_bar(frames, "frames", quiet) as bar:
+                summary = animate_file(settings, input, output, mask, ranges, frames, fps, bar.update)
+        except WarpError as err:
+            raise click_error(err) from err
+        if not quiet:
+            for warning in summary["warnings"]:
+                click.echo(f"featurewarp: warning: {input}: {warning}", err=True)
+        if verbose:
+            click.echo(f"featurewarp: {output}: {summary['frames']} frames "
+                       f"{summary['canvas'][0]}x{summary['canvas'][1]}, {summary['factorizations']} "
+                       f"factorization(s), {summary['seconds']:.2f} s", err=True)
+
+    intro = (f"Animate {preset.name}: vary its options over frames, factoring once. OUTPUT: .gif, "
+             f".webp or .png (animated), .mp4 or .avi (video), or a numbered PNG sequence "
+             f"such as out-%04d.png.")
+    return preset_command(preset, params, callback, preset_doc(preset, intro))
+
+
+class PresetGroup(click.Group):
+    """A group with one subcommand per registered preset, built from its declaration."""
+
+    make_command = staticmethod(warp_command)
+
+    def list_commands(self, ctx):
+        return list(plugins.names())
+
+    def get_command(self, ctx, name):
+        if not plugins.known(name):
+            return None
+        try:
+            preset = plugins.load(name)
+        except plugins.UnknownPreset as err:
+            message = str(err)
+
+            @click.command(name, help=f"(broken plugin) {message}")
+            def broken():
+                raise click.ClickException(message)
+
+            return broken
+        return self.make_command(preset)
+
+    def resolve_command(self, ctx, args):
+        try:
+            return super().resolve_command(ctx, args)
+        except click.UsageError:
+            if args and args[0] not in plugins.names():
+                raise click.UsageError(
+                    f"unknown preset {args[0]!r}; available: {', '.join(plugins.names())} "
+                    "(see 'featurewarp warps')", ctx) from None
+            raise
+
+
+class BatchGroup(PresetGroup):
+    """``featurewarp batch``: the same presets, each as a batch command."""
+
+    make_command = staticmethod(batch_command)
+
+
+class CompareGroup(PresetGroup):
+    """``featurewarp compare``: the same presets, each as a comparison panel."""
+
+    make_command = staticmethod(compare_command)
+
+
+class AnimateGroup(PresetGroup):
+    """``featurewarp animate``: the same presets, each as an animation command."""
+
+    make_command = staticmethod(animate_command)

@@ -1,0 +1,72 @@
+"""The engine's choices and default settings, declared once.
+
+The engine (:class:`featurewarp_cli.engine.warper.FeatureWarper`), the pipeline's
+settings and the command line's options all read them from here. This module
+imports no numpy, so that the command line can build its options and help from
+it at start-up.
+
+The numeric settings are declared as :class:`featurewarp_cli.plugins.Param`, as
+a preset declares its parameters: one declaration gives the default, the range,
+the help and the check (:meth:`Param.check`) for the command line and the API.
+
+Examples
+--------
+>>> from featurewarp_cli.engine.defaults import DECAY_PARAM, MODES
+>>> MODES[0]
+'similarity'
+>>> DECAY_PARAM.check("3")
+3.0
+>>> DECAY_PARAM.check(0)
+Traceback (most recent call last):
+...
+ValueError: --decay: 0 is out of range (0 < CELLS)
+"""
+
+from __future__ import annotations
+
+from ..plugins import Param
+
+#: similarity: features rotate and scale uniformly; rigid: they also keep their size;
+#: plain: the warp itself, mask ignored.
+MODES = ("similarity", "rigid", "plain")
+MODE = "similarity"
+#: exact: each feature component moves as one similarity; paper: the paper's soft
+#: per-quad targets.
+FORMULATIONS = ("exact", "paper")
+FORMULATION = "exact"
+#: fixed: border nodes stay on W (the paper); slide: they may slide along the sides W
+#: maps onto axis-parallel lines. The default is the preset's own (``Warp.boundary``).
+BOUNDARIES = ("fixed", "slide")
+#: w_F, the weight of the feature equations.
+FEATURE_WEIGHT = 10.0
+#: rho, the width of the transition band around features, in cells.
+DECAY = 2.0
+#: Weight of the scale-and-rotation prior of similarity mode: 1 holds a component's scale
+#: as firmly as its own shape equations would hold a target scale; 0 leaves it free.
+SCALE_PRIOR = 1.0
+#: The smallest grid cell a caller may ask for, in pixels.
+MIN_CELL = 1.0
+
+CELL_PARAM = Param(
+    "cell", float, None,
+    "Grid cell size in pixels. Default: automatic: 4 px, or sqrt(w*h/250000) on big images; "
+    "then divided by sqrt(2) until the grid is within 0.5 px of the analytic warp and the warp "
+    "folds none of its triangles (sub-pixel allowed, at most 4 million nodes).",
+    min=MIN_CELL, metavar="PX")
+FEATURE_WEIGHT_PARAM = Param(
+    "feature_weight", float, FEATURE_WEIGHT,
+    "w_F: each side of the feature equations is multiplied by W, so their squared error "
+    "counts W^2 times.",
+    min=0.0, min_open=True, metavar="W")
+DECAY_PARAM = Param(
+    "decay", float, DECAY,
+    "Width of the band around features where the weight falls smoothly from W to 1 "
+    "(the paper's rho), in cells.",
+    min=0.0, min_open=True, metavar="CELLS")
+SCALE_PRIOR_PARAM = Param(
+    "scale_prior", float, SCALE_PRIOR,
+    "Similarity mode: how firmly each feature's scale and rotation are pulled towards the warp's "
+    "own (its best-fit rotation and the scale the mode picks). 1 holds them as firmly as the "
+    "feature's own shape equations; smaller values let features that fill a row or column grow "
+    "or shrink uniformly so the background is not streaked; 0 leaves them free.",
+    min=0.0, metavar="P")
