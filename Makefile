@@ -29,7 +29,7 @@ install:
 	$(BIN)/python -m pip install -q --upgrade pip
 	$(BIN)/python -m pip install -q -e '.[test]'
 	$(BIN)/python -m compileall -q featurewarp_cli warps   # an editable install is not byte-compiled
-	$(BIN)/python -c "import featurewarp_cli._cholmod, featurewarp_cli.render._raster; print('featurewarp installed; CHOLMOD and the compiled rasterizer in use')"
+	$(BIN)/python -c "import sksparse.cholmod, featurewarp_cli.render._raster; print('featurewarp installed; CHOLMOD (scikit-sparse) and the compiled rasterizer in use')"
 
 test:
 	$(BIN)/python -m pytest
@@ -56,6 +56,9 @@ gallery:
 	$(BIN)/featurewarp compare stretch samples/astronaut.png docs/gallery/stretch.jpg -m samples/astronaut_mask.png --sx 1.6
 	$(BIN)/featurewarp compare stretch samples/coins.png docs/gallery/coins-stretch.jpg -m samples/coins_mask.png --sx 0.6 --sy 1.2
 	$(BIN)/featurewarp compare swirl samples/shapes.png docs/gallery/shapes-swirl-grid.jpg -m samples/shapes_mask.png --angle 150 --grid
+	$(BIN)/featurewarp compare stretch samples/astronaut.png docs/gallery/portrait-wide.jpg -m samples/astronaut_body_mask.png --sx 2
+	$(BIN)/featurewarp compare stretch samples/astronaut.png docs/gallery/portrait-narrow.jpg -m samples/astronaut_body_mask.png --sx 0.6
+	$(BIN)/featurewarp compare arc samples/astronaut.png docs/gallery/helmet-arc.jpg -m samples/astronaut_helmet_mask.png --angle 120 --background "#f0f0f0"
 
 clean:
 	rm -rf out .pytest_cache

@@ -341,12 +341,12 @@ def machine() -> dict:
     info = {"python": platform.python_version(), "numpy": np.__version__, "scipy": scipy.__version__,
             "opencv": cv2.__version__, "cpus": os.cpu_count(), "platform": platform.platform(),
             "loadavg_start": os.getloadavg()}
-    try:
-        from featurewarp_cli import _cholmod
+    from importlib import metadata
 
-        info["cholmod"] = ".".join(map(str, _cholmod.VERSION))      # the system CHOLMOD, via the binding
-    except ImportError:
-        info["cholmod"] = None                                       # SciPy's splu fallback
+    from featurewarp_cli.engine import cholmod
+
+    # CHOLMOD through scikit-sparse, or None: SciPy's splu fallback.
+    info["scikit-sparse"] = metadata.version("scikit-sparse") if cholmod.AVAILABLE else None
     return info
 
 

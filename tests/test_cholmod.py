@@ -1,161 +1,144 @@
-"""The CHOLMOD binding (featurewarp_cli._cholmod), the numpy matrices of system.py, the
-solver around them (threads, SciPy fallback) and the import-time promise (no SciPy)."""
+"""CHOLMOD through scikit-sparse (featurewarp_cli.engine.cholmod), the normal matrix of
+system.py, the solver around them (x and y systems, SciPy fallback) and the import-time
+promise (no SciPy for --help and warps)."""
 
 from __future__ import annotations
 
+import contextlib
 import subprocess
 import sys
-import threading
-from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
 
-from featurewarp_cli.engine import solver
-from featurewarp_cli.engine import system
-from featurewarp_cli.engine.warper import AxisSystems, FeatureWarper, load_warp
+from featurewarp_cli.engine import cholmod, solver, system
 from featurewarp_cli.engine.grid import Grid
+from featurewarp_cli.engine.solver import AxisSystems
+from featurewarp_cli.engine.warper import FeatureWarper, load_warp
 
-cholmod = pytest.importorskip("featurewarp_cli._cholmod")
-INDEX = solver.INDEX             # the binding's index type (int32)
+needs_cholmod = pytest.mark.skipif(not cholmod.AVAILABLE, reason="scikit-sparse is not installed")
 
 
 def random_spd(n, seed, density=0.05):
-    """A random SPD matrix as dense, and the triplets of its lower triangle with every
-    entry split into two duplicates (shuffled)."""
+    """A random SPD matrix as dense, and its lower triangle as CSC."""
     rng = np.random.default_rng(seed)
     a = np.where(rng.random((n, n)) < density, rng.normal(size=(n, n)), 0.0)
     dense = a @ a.T + n * 0.1 * np.eye(n)
-    rows, cols = np.nonzero(np.tril(dense))
-    vals = dense[rows, cols]
-    part = rng.uniform(0.2, 0.8, vals.size)
-    order = rng.permutation(2 * vals.size)
-    rows, cols = np.concatenate([rows, rows])[order], np.concatenate([cols, cols])[order]
-    vals = np.concatenate([vals * part, vals * (1 - part)])[order]
-    return dense, rows.astype(INDEX), cols.astype(INDEX), vals
+    return dense, sp.csc_matrix(np.tril(dense))
 
 
-def laplacian_triplets(side, shift=1e-3):
-    """Lower triangle of a side x side grid Laplacian plus shift * I (SPD)."""
+def laplacian_lower(side, shift=1e-3):
+    """Lower triangle (CSC) of a side x side grid Laplacian plus shift * I (SPD)."""
     grid = Grid.for_image(side - 1, side - 1, 1)
     matrix = system.normal_matrix(grid, np.ones(grid.quad_shape[0] * grid.quad_shape[1]))
-    rows, cols, vals = matrix.lower_triplets()
-    return grid.n_nodes, rows.astype(INDEX), cols.astype(INDEX), np.where(rows == cols, vals + shift, vals)
+    return sp.tril(matrix + shift * sp.identity(grid.n_nodes), format="csc")
 
 
+# ------------------------------------------------------------------ the scikit-sparse module
+
+@needs_cholmod
 @pytest.mark.parametrize("supernodal", [False, True])
-@pytest.mark.parametrize("ordering", ["NATURAL", "DEFAULT", "AMD"])
+@pytest.mark.parametrize("ordering", ["natural", "default", "amd"])
 @pytest.mark.parametrize("n", [1, 7, 120])
 def test_factor_and_solve_match_a_dense_solve(n, ordering, supernodal):
-    dense, rows, cols, vals = random_spd(n, seed=n)
-    factor = cholmod.analyze(n, rows, cols, supernodal, getattr(cholmod, ordering)).factorize(rows, cols, vals)
+    dense, lower = random_spd(n, seed=n)
+    factor = cholmod.factorize(cholmod.analyze(lower, ordering, supernodal), lower)
     rng = np.random.default_rng(1)
     for b in (rng.normal(size=n), rng.normal(size=(n, 1)), rng.normal(size=(n, 3))):
-        x = factor.solve(b)
+        x = cholmod.solve(factor, b)
         assert x.shape == b.shape and x.dtype == np.float64
         np.testing.assert_allclose(x, np.linalg.solve(dense, b), rtol=1e-10, atol=1e-10)
-    out = np.empty((n, 3))
-    assert factor.solve(np.ascontiguousarray(b), out) is out
-    np.testing.assert_allclose(out, np.linalg.solve(dense, b), rtol=1e-10, atol=1e-10)
-    assert (factor.n, factor.supernodal) == (n, supernodal)
 
 
-def test_natural_ordering_keeps_the_order():
-    n, rows, cols, vals = laplacian_triplets(30)
-    for supernodal in (False, True):
-        symbolic = cholmod.analyze(n, rows, cols, supernodal)
-        perm = np.empty(n, INDEX)
-        symbolic.perm(perm)
-        assert np.array_equal(perm, np.arange(n))
-        counts = np.empty(n, INDEX)
-        symbolic.column_counts(counts)
-        assert counts.sum() == symbolic.lnz and counts.min() >= 1
+@needs_cholmod
+def test_unknown_ordering_is_refused():
+    with pytest.raises(ValueError, match="ordering must be one of"):
+        cholmod.analyze(laplacian_lower(4), "best")
 
 
-def test_one_analysis_serves_other_values():
-    n, rows, cols, vals = laplacian_triplets(40)
-    symbolic = cholmod.analyze(n, rows, cols)
-    b = np.random.default_rng(2).normal(size=(n, 2))
-    for scale in (1.0, 3.0):
-        x = symbolic.factorize(rows, cols, vals * scale).solve(b)
-        full = system.symmetric_scipy(rows, cols, vals * scale, n)
-        np.testing.assert_allclose(full @ x, b, rtol=1e-8, atol=1e-8)
-
-
+@needs_cholmod
 @pytest.mark.parametrize("supernodal", [False, True])
-def test_not_positive_definite_raises_and_leaks_nothing(supernodal):
-    n, rows, cols, vals = laplacian_triplets(20)
-    singular = np.where((rows == 5) | (cols == 5), 0.0, vals)       # node 5 cut off: a zero pivot
-    indefinite = np.where(rows == cols, vals - 1.0, vals)
-    symbolic = cholmod.analyze(n, rows, cols, supernodal)
+def test_one_analysis_serves_other_values_and_stays_symbolic(supernodal):
+    lower = laplacian_lower(40)
+    analysis = cholmod.analyze(lower, "natural", supernodal)
+    b = np.random.default_rng(2).normal(size=(lower.shape[0], 2))
+    full = lower + sp.tril(lower, -1).T
+    factors = [cholmod.factorize(analysis, lower * scale) for scale in (1.0, 3.0)]
+    for factor, scale in zip(factors, (1.0, 3.0)):         # the first is still valid
+        np.testing.assert_allclose((full * scale) @ cholmod.solve(factor, b), b, rtol=1e-8, atol=1e-8)
+    assert cholmod.factor_nnz(factors[0]) >= lower.nnz
+
+
+@needs_cholmod
+@pytest.mark.parametrize("supernodal", [False, True])
+def test_not_positive_definite_is_the_project_exception(supernodal):
+    """A zero pivot (node 5 cut off: what a piece of grid with no fixed node gives) with
+    either method; an indefinite matrix with the supernodal LL' (the simplicial method
+    computes LDL', which has no square roots to fail on negative pivots)."""
+    lower = laplacian_lower(20)
+    column = np.repeat(np.arange(lower.shape[1]), np.diff(lower.indptr))
+    singular = lower.copy()
+    singular.data[(lower.indices == 5) | (column == 5)] = 0.0       # same pattern, zero values
+    bad = [singular]
+    if supernodal:
+        bad.append(lower - sp.diags(lower.diagonal() * 1.5, format="csc"))
     assert issubclass(cholmod.NotPositiveDefinite, ArithmeticError)
-    for _ in range(50):
-        for bad in (singular, indefinite):
-            with pytest.raises(cholmod.NotPositiveDefinite, match="not positive definite"):
-                symbolic.factorize(rows, cols, bad)
-    symbolic.factorize(rows, cols, vals).solve(np.ones(n))
-    del symbolic
-    assert cholmod._leaked_bytes() == 0
+    analysis = cholmod.analyze(lower, "natural", supernodal)
+    for matrix in bad:
+        with pytest.raises(cholmod.NotPositiveDefinite, match="not positive definite"):
+            cholmod.factorize(analysis, matrix)
+    b = np.ones(lower.shape[0])
+    full = lower + sp.tril(lower, -1).T
+    np.testing.assert_allclose(full @ cholmod.solve(cholmod.factorize(analysis, lower), b), b)   # still serves
 
 
-def test_bad_arguments_raise():
-    n, rows, cols, vals = laplacian_triplets(6)
-    symbolic = cholmod.analyze(n, rows, cols)
-    with pytest.raises(ValueError, match="lower triangle"):
-        cholmod.analyze(n, cols, rows + (rows == cols))            # an upper-triangle entry
-    with pytest.raises(ValueError, match="lower triangle"):
-        cholmod.analyze(n - 1, rows, cols)                         # out of range
-    with pytest.raises(ValueError, match="same length"):
-        symbolic.factorize(rows, cols, vals[:-1])
-    with pytest.raises(ValueError, match="analysed pattern"):
-        symbolic.factorize(rows[1:], cols[1:], vals[1:])
-    with pytest.raises(TypeError):
-        symbolic.factorize(rows.astype(np.float64), cols, vals)
-    factor = symbolic.factorize(rows, cols, vals)
-    with pytest.raises(ValueError, match="shape"):
-        factor.solve(np.ones(n + 1))
-    with pytest.raises(ValueError, match="shape of b"):
-        factor.solve(np.ones(n), np.ones(n + 1))
-    del symbolic, factor
-    assert cholmod._leaked_bytes() == 0
+@needs_cholmod
+def test_openmp_is_off_while_factoring_and_restored_after(monkeypatch):
+    omp = cholmod._openmp_runtime()
+    if omp is None:
+        pytest.skip("CHOLMOD runs without an OpenMP runtime here")
+    before = omp.omp_get_max_active_levels()
+    with cholmod._openmp_off():
+        assert omp.omp_get_max_active_levels() == 0
+    assert omp.omp_get_max_active_levels() == before
+    levels = []
+    off = cholmod._openmp_off
+
+    @contextlib.contextmanager
+    def spy():
+        with off():
+            yield
+            levels.append(omp.omp_get_max_active_levels())
+
+    monkeypatch.setattr(cholmod, "_openmp_off", spy)
+    lower = laplacian_lower(10)
+    cholmod.factorize(cholmod.analyze(lower, "natural", True), lower)
+    assert levels == [0] and omp.omp_get_max_active_levels() == before
 
 
-@pytest.mark.parametrize("supernodal", [False, True])
-def test_factorizations_in_two_threads_equal_serial_ones(supernodal):
-    n, rows, cols, vals = laplacian_triplets(150)
-    weights = [vals, np.where(rows == cols, vals * 2.0, vals)]
-    symbolic = cholmod.analyze(n, rows, cols, supernodal)
-    b = np.random.default_rng(3).normal(size=(n, 2))
-    serial = [symbolic.factorize(rows, cols, w).solve(b) for w in weights]
-    for _ in range(3):
-        with ThreadPoolExecutor(2) as pool:
-            factors = list(pool.map(lambda w: symbolic.factorize(rows, cols, w), weights))
-            # Solves on one factor from two threads at once, too.
-            solves = list(pool.map(lambda f: f.solve(b), [factors[0], factors[0], factors[1]]))
-        for x, expected in zip(solves, [serial[0], serial[0], serial[1]]):
-            np.testing.assert_array_equal(x, expected)
+# ------------------------------------------------------------------ system.py's matrix
 
-
-# ------------------------------------------------------------------ system.py matrices
-
-def test_stencil_matrix_equals_its_scipy_form():
+def test_normal_matrix_is_a_transpose_a_of_the_edge_equations():
     grid = Grid.for_image(37, 23, 4)
     rng = np.random.default_rng(4)
-    matrix = system.normal_matrix(grid, rng.uniform(1, 10, grid.quad_shape[0] * grid.quad_shape[1]))
-    reference = matrix.to_scipy()
-    assert np.allclose(reference.toarray(), reference.toarray().T)
-    for x in (rng.normal(size=grid.n_nodes), rng.normal(size=(grid.n_nodes, 2))):
-        np.testing.assert_array_equal(matrix.dot(x), reference @ x)
-    nodes = np.flatnonzero(rng.random(grid.n_nodes) < 0.5)
-    sub = matrix.submatrix(nodes)
-    np.testing.assert_array_equal(sub.to_scipy().toarray(), reference[nodes][:, nodes].toarray())
-    x = rng.normal(size=(nodes.size, 2))
-    np.testing.assert_array_equal(sub.dot(x), reference[nodes][:, nodes] @ x)
-    rows, cols, vals = matrix.lower_triplets()
-    assert np.all(rows >= cols) and rows.size == grid.n_nodes + 2 * grid.n_nodes - grid.nx - grid.ny
+    weights = rng.uniform(1, 10, grid.quad_shape[0] * grid.quad_shape[1])
+    # A: one row w (v_b - v_a) per quad edge (top, right, bottom, left).
+    corners = grid.quads()
+    start, end = corners.ravel(), np.roll(corners, -1, axis=1).ravel()
+    w = np.repeat(weights, 4)
+    rows = np.arange(start.size)
+    a = sp.csr_matrix((np.concatenate([-w, w]), (np.concatenate([rows, rows]), np.concatenate([start, end]))),
+                      shape=(start.size, grid.n_nodes))
+    matrix = system.normal_matrix(grid, weights)
+    np.testing.assert_allclose(matrix.toarray(), (a.T @ a).toarray(), rtol=1e-12, atol=1e-12)
+    # Every grid edge is stored (the pattern is the stencil's), each row sorted.
+    assert matrix.nnz == grid.n_nodes + 2 * (2 * grid.n_nodes - grid.nx - grid.ny)
+    assert matrix.has_sorted_indices
+    np.testing.assert_allclose(matrix.diagonal(), system.node_stiffness(grid, weights), rtol=1e-12)
 
 
-# ------------------------------------------------------------------ solver around the binding
+# ------------------------------------------------------------------ solver around the module
 
 def grid_problem(width=160, height=120, cell=4):
     grid = Grid.for_image(width, height, cell)
@@ -173,14 +156,15 @@ def grid_problem(width=160, height=120, cell=4):
     return grid, matrix, system.number_unknowns(fixed, tied), rhs, offset
 
 
-def test_scipy_fallback_when_the_binding_is_missing(monkeypatch, capsys):
+@needs_cholmod
+def test_scipy_fallback_when_scikit_sparse_is_missing(monkeypatch, capsys):
     grid, matrix, unknown, rhs, offset = grid_problem()
     expected = solver.ReducedSystem(matrix, unknown).solve(rhs, offset)
-    monkeypatch.setattr(solver, "_cholmod", None)
+    monkeypatch.setattr(cholmod, "AVAILABLE", False)
     monkeypatch.setattr(solver, "_fallback_noted", False)
     fallback = solver.ReducedSystem(matrix, unknown)
     assert fallback.method == "scipy-splu"
-    assert "CHOLMOD binding" in capsys.readouterr().err
+    assert "scikit-sparse" in capsys.readouterr().err
     np.testing.assert_allclose(fallback.solve(rhs, offset), expected, rtol=1e-9, atol=1e-9)
     solver.ReducedSystem(matrix, unknown)
     assert capsys.readouterr().err == ""                      # one notice per process
@@ -191,50 +175,81 @@ def test_scipy_fallback_when_the_binding_is_missing(monkeypatch, capsys):
     assert mesh.info["solver"] == "scipy-splu" and warper.factorizations == 2 and mesh.flips() == 0
 
 
-def test_axis_systems_factored_in_two_threads_solve_like_serial_ones():
+def test_fallback_of_a_singular_matrix_is_the_project_exception(monkeypatch):
+    monkeypatch.setattr(cholmod, "AVAILABLE", False)
+    monkeypatch.setattr(solver, "_fallback_noted", True)
+    singular = sp.csr_matrix(np.array([[1.0, -1.0, 0.0], [-1.0, 1.0, 0.0], [0.0, 0.0, 1.0]]))
+    with pytest.raises(cholmod.NotPositiveDefinite):
+        solver.ReducedSystem(singular, np.arange(3))
+
+
+def test_a_process_without_scikit_sparse_warps_with_one_notice(tmp_path):
+    """sksparse hidden: the report's solver is scipy-splu, with one notice on stderr."""
+    code = ("import sys; sys.modules['sksparse'] = None\n"
+            "import numpy as np\n"
+            "from featurewarp_cli import FeatureWarper, load_warp\n"
+            "y, x = np.mgrid[0:90, 0:120]\n"
+            "warper = FeatureWarper(120, 90, (x - 60) ** 2 + (y - 40) ** 2 < 20 ** 2, cell=4)\n"
+            "meshes = [warper.solve(load_warp('stretch')(120, 90, sx=s)) for s in (1.6, 0.7)]\n"
+            "meshes.append(FeatureWarper(120, 90, x < 30, cell=5).solve(load_warp('swirl')(120, 90)))\n"
+            "print(sorted({m.info['solver'] for m in meshes}), max(m.flips() for m in meshes))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.split() == ["['scipy-splu']", "0"]
+    assert out.stderr.count("featurewarp:") == 1 and "scikit-sparse" in out.stderr
+
+
+def test_axis_systems_solve_like_one_system_per_axis():
     grid, matrix, unknown, rhs, offset = grid_problem()
     top = np.zeros(grid.n_nodes, bool)
     top[1:grid.nx - 1] = True
     sliding = unknown.copy()
     sliding[top] = unknown.max() + 1 + np.arange(np.count_nonzero(top))
-    solver._symbolic_cache.clear()
     both = AxisSystems(matrix, sliding, unknown)
-    assert both.factorizations == 2
+    assert both.factorizations == 2 and both.method == solver.ReducedSystem(matrix, unknown).method
     x = solver.ReducedSystem(matrix, sliding).solve(rhs[:, :1], offset[:, :1])
     y = solver.ReducedSystem(matrix, unknown).solve(rhs[:, 1:], offset[:, 1:])
     np.testing.assert_array_equal(both.solve(rhs, offset), np.concatenate([x, y], axis=1))
+    one = AxisSystems(matrix, unknown, unknown.copy())
+    assert one.factorizations == 1 and one.x is one.y
 
 
-def test_openmp_and_blas_settings_are_restored_after_threads():
-    omp = solver._openmp_runtime()
-    blas = solver._openblas_runtime()
-    before = (omp.omp_get_max_active_levels() if omp else None,
-              blas.openblas_get_num_threads() if blas else None)
-    barrier = threading.Barrier(2)
+# ------------------------------------------------------------------ imports
 
-    def work():
-        with solver._single_threaded_blas(), solver._without_openmp():
-            barrier.wait()
-            if omp is not None:
-                assert omp.omp_get_max_active_levels() == 0
-            if blas is not None:
-                assert blas.openblas_get_num_threads() == 1
-
-    with ThreadPoolExecutor(2) as pool:
-        for future in [pool.submit(work) for _ in range(2)]:
-            future.result()
-    after = (omp.omp_get_max_active_levels() if omp else None,
-             blas.openblas_get_num_threads() if blas else None)
-    assert after == before
+SCIPY_MODULES = "sorted({m.split('.')[0] for m in sys.modules} & {'scipy', 'sksparse'})"
 
 
-def test_the_engine_does_not_import_scipy():
-    code = ("import sys, numpy as np\n"
-            "from featurewarp_cli.engine.warper import warp\n"
-            "image = np.zeros((90, 120, 3), np.uint8)\n"
-            "mask = np.zeros((90, 120), bool); mask[30:60, 40:80] = True\n"
-            "warp(image, mask, 'stretch', sx=1.5)\n"
-            "warp(image, mask, 'swirl', angle=270, cell=3)\n"
-            "print(sorted(m for m in sys.modules if m.split('.')[0] in ('scipy', 'sksparse')))\n")
+@pytest.mark.parametrize("args", [["--help"], ["warps"]])
+def test_help_and_warps_import_no_scipy(args):
+    code = ("import sys\nfrom featurewarp_cli.cli.main import main\n"
+            f"sys.argv = ['featurewarp', *{args!r}]\n"
+            "try:\n    main()\nexcept SystemExit:\n    pass\n"
+            f"sys.stderr.write(repr({SCIPY_MODULES}))\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    assert out.stdout.strip() == "[]", out.stdout + out.stderr
+    assert out.stderr.strip().endswith("[]"), out.stderr
+
+
+def warp_process_modules(tmp_path, *options):
+    """The SciPy packages loaded by a ``featurewarp warp swirl`` process with these options."""
+    import cv2
+
+    y, x = np.mgrid[0:60, 0:80]
+    cv2.imwrite(str(tmp_path / "in.png"), np.dstack([x * 3, y * 4, x + y]).astype(np.uint8))
+    cv2.imwrite(str(tmp_path / "mask.png"), (((x - 40) ** 2 + (y - 30) ** 2 < 150) * 255).astype(np.uint8))
+    options = [str(tmp_path / o) if o.endswith(".png") else o for o in options]
+    code = ("import sys\nfrom featurewarp_cli.cli.main import main\n"
+            f"sys.argv = ['featurewarp', 'warp', 'swirl', {str(tmp_path / 'in.png')!r}, "
+            f"{str(tmp_path / 'out.png')!r}, *{options!r}]\n"
+            "try:\n    main()\nexcept SystemExit as exit:\n    assert not exit.code, exit.code\n"
+            f"print({SCIPY_MODULES})\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    return out.stdout.strip()
+
+
+@needs_cholmod
+def test_a_warp_process_uses_scikit_sparse(tmp_path):
+    assert warp_process_modules(tmp_path, "--mask", "mask.png") == "['scipy', 'sksparse']"
+
+
+@pytest.mark.parametrize("options", [[], ["--mask", "mask.png", "--mode", "plain"]])
+def test_a_warp_that_factors_nothing_imports_no_scipy(tmp_path, options):
+    assert warp_process_modules(tmp_path, *options) == "[]"

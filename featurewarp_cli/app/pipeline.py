@@ -20,8 +20,10 @@ from .. import plugins
 from ..engine.defaults import DECAY, FEATURE_WEIGHT, FORMULATION, MODE, SCALE_PRIOR
 from ..io import ImageError, colours, decode, encode, formats, limits, write
 
-#: The module that :func:`prefetch_engine` imports: the solver (with the CHOLMOD binding) and renderer.
+#: What :func:`prefetch_engine` imports: the engine (grid, features, fold-over guard,
+#: renderer), then, for a warp that factors, the solver (scipy.sparse and scikit-sparse).
 ENGINE = "featurewarp_cli.engine.warper"
+SOLVER = "featurewarp_cli.engine.solver"
 
 
 class WarpError(Exception):
@@ -122,20 +124,25 @@ def read_input(path: str, param: str, max_pixels: int | None, data: bytes | None
         raise WarpError(str(err), None if param == "INPUT" else param) from err
 
 
-def prefetch_engine() -> None:
-    """Start importing the engine (solver, CHOLMOD, renderer: about 0.06 s) in a thread.
+def prefetch_engine(solver: bool = True) -> None:
+    """Start importing the engine and, with ``solver``, the solver in a thread.
 
     Called just before the images are decoded: OpenCV releases the GIL while it
-    decodes, so the import runs meanwhile instead of after it. A failed import
-    is left to the main thread, whose own import raises the error.
+    decodes, so the imports run meanwhile instead of after it; the solver's
+    (about 0.15 s, most of it scipy.sparse) goes on while the main thread builds
+    the grid and the features. A failed import is left to the main thread, whose
+    own import raises the error.
     """
+    modules = [name for name in (ENGINE, SOLVER if solver else None) if name and name not in sys.modules]
+
     def work():
         try:
-            importlib.import_module(ENGINE)
+            for name in modules:
+                importlib.import_module(name)
         except Exception:  # the main thread imports it again and reports the error
             pass
 
-    if ENGINE not in sys.modules:
+    if modules:
         threading.Thread(target=work, name="featurewarp-prefetch").start()
 
 
@@ -340,7 +347,7 @@ def warp_file(settings: Settings, input: str, output: str, mask: str | None = No
         raise WarpError("cannot be '-' when INPUT is '-' (stdin holds the image)", "--mask", usage=True)
     out_path, fmt = check_outputs(settings, output, (report, "--report"), (save_grid, "--save-grid"))
     background = background_colour(settings.background, fmt)
-    prefetch_engine()
+    prefetch_engine(solver=mask is not None and settings.mode != "plain")
     pending, feature_mask, warnings, (width, height) = start_loading(settings, input, mask)
     timings = {"load": time.perf_counter() - t0}
     try:

@@ -16,7 +16,6 @@ import numpy as np
 
 from . import injectivity, system
 from .grid import signed_areas
-from .solver import ReducedSystem
 
 #: Bisection steps on how far released features go from the warp's shape to their own.
 BLEND_BISECTIONS = 8
@@ -244,7 +243,9 @@ def _untangle_window(problem: Problem, rhs, offset, tied, x, floor, margin_facto
     nodes = np.flatnonzero(in_system)
     local_moving = moving[nodes]
     unknown = system.number_unknowns(~local_moving, np.where(local_moving, tied[nodes], -1))
-    matrix = problem.normal.submatrix(nodes)
+    from .solver import ReducedSystem
+
+    matrix = problem.normal[nodes][:, nodes]
     reduced = ReducedSystem(matrix, unknown)
     held = np.where(local_moving[:, None], offset[nodes], x[nodes])
     local_rhs = rhs[nodes]

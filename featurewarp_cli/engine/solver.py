@@ -6,11 +6,10 @@ a whole feature as one rigid piece whose linear part is already in q). The
 reduced matrix P^T L P depends on L and on which node maps to which unknown,
 never on q, so one factorization serves every warp.
 
-CHOLMOD through the small binding :mod:`featurewarp_cli._cholmod` when it is
-built; SciPy's sparse LU otherwise (imported only then), with one notice on
-stderr per process. Nothing here imports SciPy when the binding is there: the
-reduced matrix is assembled as triplets with numpy, and P and P^T are numpy
-indexing and :func:`numpy.bincount`.
+CHOLMOD factors it, through scikit-sparse (every call to it is in
+:mod:`featurewarp_cli.engine.cholmod`). Where scikit-sparse cannot be imported,
+SciPy's sparse LU does (``splu``; slower), with one notice on stderr per process.
+Matrices are ``scipy.sparse`` matrices.
 
 Ordering
 --------
@@ -19,41 +18,33 @@ When L has the pattern of a grid's 5-point Laplacian (what
 the free unknowns are numbered in a geometric nested-dissection order of the
 grid cut along diagonals (:func:`grid_nested_dissection`); the shared unknowns
 of tied features, each coupled to every node around its feature, come after
-everything else. CHOLMOD then factors with its natural ordering, which skips
-the graph partitioning it would otherwise run (seconds on a million unknowns)
-for a factor about as sparse as METIS's. Other patterns use CHOLMOD's default
-ordering. Symbolic analyses (keyed by the sparsity pattern) and grid orderings
-(keyed by the tied nodes) are kept in a small module-level cache, so
-refactoring a matrix with the same pattern (new weights, same ties) reuses
-both, and the x and y systems of a sliding border share the ordering.
+everything else. The reduced matrix is permuted into that order and CHOLMOD
+factors it with its natural ordering, which skips the ordering it would
+otherwise compute. Measured against CHOLMOD's default ordering (AMD here; METIS
+fills as little as ours but takes seconds to analyse) on the Table 1 grids
+(benchmarks/solver_orderings.py, supernodal, medians of 5, 2 cores):
+500 x 500 nodes: nnz(L) 4.55 M vs 5.30 M, analysis + factor 0.16 s vs 0.24 s;
+1000 x 1000: 21.2 M vs 27.4 M, 0.70 s vs 1.32 s (our ordering itself takes 0.02
+and 0.09 s). Other patterns use CHOLMOD's default ordering. Symbolic
+analyses (keyed by the sparsity pattern) and grid orderings (keyed by the tied
+nodes) are kept in a small module-level cache, so refactoring a matrix with
+the same pattern (new weights, same ties) reuses both, and the x and y systems
+of a sliding border share the ordering.
 
-Threads
--------
-Systems may be factored in several threads at once (the x and y systems of a
-sliding border are): the binding runs CHOLMOD without the GIL, each factor has
-its own CHOLMOD workspace, and the cache computes each entry once (a second
-thread asking for an entry being computed waits for it).
+The x and y systems of a sliding border are factored one after the other:
+scikit-sparse holds the GIL while CHOLMOD factors.
 """
 
 from __future__ import annotations
 
-import ctypes
 import hashlib
-import os
 import sys
-import threading
 from collections import OrderedDict
-from concurrent.futures import Future, ThreadPoolExecutor
-from contextlib import contextmanager
 
 import numpy as np
+import scipy.sparse as sp
 
-try:
-    from .. import _cholmod
-except ImportError:              # not built: SciPy's splu (see ReducedSystem)
-    _cholmod = None
-#: Index type of the binding's triplets (CHOLMOD's int API).
-INDEX = np.int32
+from . import cholmod
 
 _fallback_noted = False
 
@@ -61,19 +52,17 @@ _fallback_noted = False
 _LEAF_NODES = 16
 #: A cut may move this fraction of a piece's extent away from its middle (to cross holes).
 _CUT_WINDOW = 0.1
-#: Largest system factored by CHOLMOD's simplicial method (supernodal above).
-#: Measured on the grid systems (2 cores): up to ~120 k unknowns both factor as
-#: fast, and simplicial solves are twice as fast (7 vs 13 ms for x and y at 68 k);
-#: at 190 k the supernodal factorization is 0.05-0.1 s faster (0.29 vs 0.34-0.39 s)
-#: for solves 20 ms slower (35 vs 15 ms), and a warp solves its full grid once (the
-#: fold-over guard's many solves use a smaller window system).
+#: Largest system factored by CHOLMOD's simplicial method (supernodal above). Grid
+#: systems in the grid order (2 cores, medians of 9, OpenMP off, see cholmod.py):
+#: simplicial vs supernodal factor 0.030 vs 0.032 s at 51 k unknowns, 0.18 vs 0.15 s at
+#: 191 k, 1.42 vs 0.67 s at 772 k; simplicial solves (x and y) are twice as fast
+#: (1.7 vs 6.4 ms at 51 k, 13 vs 28 ms at 191 k), and the fold-over guard's
+#: global pass solves the full grid once per step.
 _SIMPLICIAL_MAX = 150_000
 #: Entries kept in the cache: symbolic analyses (keyed by the reduced matrix's
 #: sparsity pattern) and grid orderings (keyed by the tied nodes).
 _SYMBOLIC_CACHE_SIZE = 8
-#: key -> Future of the value (done, or being computed by one thread).
 _symbolic_cache: OrderedDict = OrderedDict()
-_cache_lock = threading.Lock()
 
 
 def grid_nested_dissection(live: np.ndarray, leaf: int = _LEAF_NODES,
@@ -195,15 +184,9 @@ def _place(order, start, n, cell, r0, r1, c0, c1):
     order[np.repeat(start - (np.cumsum(n) - n), n) + np.arange(nodes.size)] = nodes
 
 
-def _grid_width(row: np.ndarray, col: np.ndarray, n: int, nx: int | None = None) -> int | None:
+def _grid_width(row: np.ndarray, col: np.ndarray, n: int) -> int | None:
     """nx when the lower-triangle entries (row >= col) of an (n, n) matrix lie on
-    the pattern of an (n/nx) x nx grid's 5-point stencil (offsets 0, 1, nx), else None.
-
-    ``nx``: the grid width when the matrix is known to be a grid's stencil
-    (:class:`featurewarp_cli.engine.system.StencilMatrix`); the entries are then not inspected.
-    """
-    if nx is not None:
-        return nx if nx >= 2 and n >= 4 and n > nx else None
+    the pattern of an (n/nx) x nx grid's 5-point stencil (offsets 0, 1, nx), else None."""
     if row.size == 0 or n < 4:
         return None
     offset = row - col
@@ -223,26 +206,15 @@ def _digest(*arrays: np.ndarray) -> str:
 
 
 def _cached(key: tuple, compute):
-    """``_symbolic_cache[key]``, computed by ``compute()`` when missing (least recently used
-    dropped). Thread-safe: one thread computes a missing entry, others asking meanwhile wait."""
-    with _cache_lock:
-        future = _symbolic_cache.get(key)
-        mine = future is None
-        if mine:
-            future = _symbolic_cache[key] = Future()
-            while len(_symbolic_cache) > _SYMBOLIC_CACHE_SIZE:
-                _symbolic_cache.popitem(last=False)
-        else:
-            _symbolic_cache.move_to_end(key)
-    if mine:
-        try:
-            future.set_result(compute())
-        except BaseException as error:
-            with _cache_lock:
-                if _symbolic_cache.get(key) is future:
-                    del _symbolic_cache[key]
-            future.set_exception(error)
-    return future.result()
+    """``_symbolic_cache[key]``, computed by ``compute()`` when missing (least recently
+    used entries dropped)."""
+    if key in _symbolic_cache:
+        _symbolic_cache.move_to_end(key)
+        return _symbolic_cache[key]
+    value = _symbolic_cache[key] = compute()
+    while len(_symbolic_cache) > _SYMBOLIC_CACHE_SIZE:
+        _symbolic_cache.popitem(last=False)
+    return value
 
 
 def _unknown_order(unknown: np.ndarray, n_unknowns: int, nx: int) -> np.ndarray:
@@ -262,185 +234,37 @@ def _unknown_order(unknown: np.ndarray, n_unknowns: int, nx: int) -> np.ndarray:
     return np.concatenate([unknown[nodes], np.flatnonzero(counts != 1)])
 
 
-_omp = None
-_settings_lock = threading.Lock()
+def _cholmod_factor(lower, natural: bool):
+    """CHOLMOD factor of the symmetric matrix whose lower triangle is ``lower`` (CSC),
+    reusing a cached symbolic analysis of the same pattern.
 
-
-class _SharedSetting:
-    """A process-wide runtime setting held at ``value`` while any thread is inside a
-    ``with`` block of it: the first thread in sets it, the last one out restores it
-    (counted under a lock, so nested and concurrent uses are safe)."""
-
-    def __init__(self, get, set_, value):
-        self._get, self._set, self._value = get, set_, value
-        self._users, self._saved = 0, None
-
-    def __enter__(self):
-        with _settings_lock:
-            self._users += 1
-            if self._users == 1:
-                self._saved = self._get()
-                self._set(self._value)
-
-    def __exit__(self, *exc):
-        with _settings_lock:
-            self._users -= 1
-            if self._users == 0:
-                self._set(self._saved)
-
-
-def _openmp_runtime():
-    """The OpenMP runtime loaded in this process (by CHOLMOD), as a ctypes library, or None;
-    with ``per_thread`` set (see :func:`_without_openmp`)."""
-    global _omp
-    if _omp is not None:
-        return _omp or None
-    mode = getattr(os, "RTLD_NOLOAD", None)
-    for name in ("libgomp.so.1", "libomp.so", "libomp.so.5") if mode is not None else ():
-        try:
-            omp = ctypes.CDLL(name, mode=mode)        # only when already loaded
-        except OSError:
-            continue
-        with _settings_lock:
-            omp.per_thread = _per_thread_levels(omp)
-        omp.shared = _SharedSetting(omp.omp_get_max_active_levels, omp.omp_set_max_active_levels, 0)
-        _omp = omp
-        return omp
-    if _cholmod is not None:                           # loaded with CHOLMOD or not at all
-        _omp = False
-    return None
-
-
-def _per_thread_levels(omp) -> bool:
-    """Whether the runtime keeps max-active-levels per thread (libgomp since GCC 11: an
-    ICV of each thread's implicit task) rather than one value for the process."""
-    level = omp.omp_get_max_active_levels()
-    other = 0 if level > 0 else 1
-    thread = threading.Thread(target=omp.omp_set_max_active_levels, args=(other,))
-    thread.start()
-    thread.join()
-    if omp.omp_get_max_active_levels() == level:
-        return True
-    omp.omp_set_max_active_levels(level)
-    return False
-
-
-@contextmanager
-def _without_openmp():
-    """Run the OpenMP loops started from this thread (CHOLMOD's) on one thread.
-
-    Debian's CHOLMOD runs the assembly loops of its supernodal factorization in
-    OpenMP teams of a fixed 4 threads (several small parallel regions per
-    supernode). On 2 cores the start-up and barriers of those teams cost more
-    than the loops: the 1 M-unknown factorization took 1.2 s with them and
-    0.85 s without (medians, other work running; the dense blocks still use
-    the BLAS threads).
-
-    Safe in several threads at once: where the runtime keeps the setting per
-    thread (libgomp does) each thread sets and restores its own; where it keeps
-    one for the process, the first thread in sets it and the last one out
-    restores it (:class:`_SharedSetting`).
+    Up to :data:`_SIMPLICIAL_MAX` unknowns the simplicial factorization is used,
+    above it the supernodal one.
     """
-    omp = _openmp_runtime()
-    if omp is None:
-        yield
-        return
-    if omp.per_thread:
-        levels = omp.omp_get_max_active_levels()
-        omp.omp_set_max_active_levels(0)
-        try:
-            yield
-        finally:
-            omp.omp_set_max_active_levels(levels)
-        return
-    with omp.shared:
-        yield
-
-
-_blas = None
-
-
-def _openblas_runtime():
-    """The system OpenBLAS that CHOLMOD uses, as a ctypes library, or None (another BLAS,
-    or not loaded). NumPy's own OpenBLAS is a different library, not affected."""
-    global _blas
-    if _blas is None:
-        _blas = False
-        mode = getattr(os, "RTLD_NOLOAD", None)
-        for name in ("libopenblas.so.0", "libblas.so.3", "libopenblas.so") if mode is not None else ():
-            try:
-                lib = ctypes.CDLL(name, mode=mode)       # only when already loaded
-                lib.openblas_get_num_threads, lib.openblas_set_num_threads
-            except (OSError, AttributeError):
-                continue
-            lib.shared = _SharedSetting(lib.openblas_get_num_threads, lib.openblas_set_num_threads, 1)
-            _blas = lib
-            break
-    return _blas or None
-
-
-@contextmanager
-def _single_threaded_blas():
-    """Run the system OpenBLAS on one thread (a process-wide :class:`_SharedSetting`).
-
-    Two supernodal factorizations at once with OpenBLAS's own threads ran one
-    after the other (its threaded calls share one server): the x and y systems
-    of a 12 MP stretch (2 x 196 k unknowns) took 0.55 s either way; with one
-    BLAS thread each, 0.31 s in parallel (2 cores).
-    """
-    blas = _openblas_runtime()
-    if blas is None:
-        yield
-        return
-    with blas.shared:
-        yield
-
-
-def factor_concurrently(matrix, unknowns: list) -> list:
-    """A :class:`ReducedSystem` of ``matrix`` for each numbering in ``unknowns``, factored
-    in parallel threads (CHOLMOD runs without the GIL), the BLAS on one thread each.
-
-    Parameters
-    ----------
-    matrix : (N, N) matrix
-    unknowns : list of (N,) int ndarray
-
-    Returns
-    -------
-    list of ReducedSystem
-    """
-    if len(unknowns) < 2 or _cholmod is None:
-        return [ReducedSystem(matrix, unknown) for unknown in unknowns]
-    with _single_threaded_blas(), ThreadPoolExecutor(len(unknowns) - 1,
-                                                     thread_name_prefix="featurewarp-factor") as pool:
-        others = [pool.submit(ReducedSystem, matrix, unknown) for unknown in unknowns[1:]]
-        first = ReducedSystem(matrix, unknowns[0])
-        return [first] + [future.result() for future in others]
-
-
-def _cholmod_factor(n: int, rows: np.ndarray, cols: np.ndarray, vals: np.ndarray, natural: bool, key):
-    """CHOLMOD factor of the n x n symmetric matrix whose lower triangle has the triplets
-    (rows >= cols; duplicates are summed), reusing a cached symbolic analysis of the
-    same pattern (``key``: a hashable that identifies it).
-
-    Up to :data:`_SIMPLICIAL_MAX` unknowns the simplicial factorization is used:
-    its solves are twice as fast (no BLAS calls on small blocks, no idle BLAS
-    threads) for a factorization that is as fast or a little slower; above,
-    the supernodal one.
-    """
+    n = lower.shape[0]
     supernodal = n > _SIMPLICIAL_MAX
-    ordering = _cholmod.NATURAL if natural else _cholmod.DEFAULT
-    symbolic = _cached(("symbolic", n, key, natural, supernodal),
-                       lambda: _cholmod.analyze(n, rows, cols, supernodal, ordering))
-    with _without_openmp():
-        return symbolic.factorize(rows, cols, vals)
+    key = ("symbolic", n, natural, supernodal, _digest(lower.indptr, lower.indices))
+    analysis = _cached(key, lambda: cholmod.analyze(lower, "natural" if natural else "default", supernodal))
+    return cholmod.factorize(analysis, lower)
 
 
-def _lower_triplets(matrix) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(rows, cols, vals) of the lower triangle of a symmetric matrix: a
-    :mod:`featurewarp_cli.system` matrix, or any SciPy sparse matrix."""
-    if hasattr(matrix, "lower_triplets"):
-        return matrix.lower_triplets()
+def _splu_solve(lower):
+    """``solve(b)`` by SciPy's sparse LU of the symmetric matrix with this lower triangle."""
+    from scipy.sparse.linalg import splu
+
+    global _fallback_noted
+    if not _fallback_noted:
+        sys.stderr.write("featurewarp: scikit-sparse (CHOLMOD) cannot be imported; "
+                         "using SciPy's sparse LU, which is slower\n")
+        _fallback_noted = True
+    try:
+        return splu((lower + sp.tril(lower, -1).T).tocsc()).solve
+    except RuntimeError as error:                      # "Factor is exactly singular"
+        raise cholmod.NotPositiveDefinite(f"the matrix is singular ({error})") from None
+
+
+def _lower_entries(matrix) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(rows, cols, vals) of the lower triangle (rows >= cols) of a sparse matrix."""
     coo = matrix.tocoo()
     low = coo.row >= coo.col
     return coo.row[low].astype(np.int64), coo.col[low].astype(np.int64), coo.data[low].astype(np.float64)
@@ -451,11 +275,10 @@ class ReducedSystem:
 
     Parameters
     ----------
-    matrix : (N, N) matrix
-        Symmetric positive semi-definite normal matrix L = A^T A: a
-        :class:`featurewarp_cli.engine.system.StencilMatrix` or ``StencilWindow``, or any
-        SciPy sparse matrix (tests, benchmarks; read
-        with ``tocoo()``). It needs a ``dot`` method.
+    matrix : (N, N) scipy.sparse matrix
+        Symmetric positive semi-definite normal matrix L = A^T A
+        (:func:`featurewarp_cli.engine.system.normal_matrix`, or rows and
+        columns of it).
     unknown : (N,) int ndarray
         Unknown index of each node, or -1 for a fixed node. Several nodes may
         share one unknown.
@@ -469,12 +292,11 @@ class ReducedSystem:
 
     Raises
     ------
-    featurewarp_cli._cholmod.NotPositiveDefinite
-        When P^T L P is not positive definite (with CHOLMOD).
+    featurewarp_cli.engine.cholmod.NotPositiveDefinite
+        When P^T L P is not positive definite (singular, with SciPy's LU).
     """
 
     def __init__(self, matrix, unknown: np.ndarray):
-        global _fallback_noted
         unknown = np.asarray(unknown, dtype=np.int64)
         self.unknown = unknown
         self.n_unknowns = n = int(unknown.max()) + 1 if unknown.size else 0
@@ -486,29 +308,39 @@ class ReducedSystem:
             return
         # Lower triangle of L on the unknowns; an edge between two nodes of one
         # unknown lands twice on its diagonal (once from each triangle of L).
-        size = matrix.shape[0]
-        row, col, val = _lower_triplets(matrix)
-        stencil = getattr(matrix, "nx", None)
-        index = unknown.astype(INDEX)
-        ur, uc = index[row], index[col]
-        keep = (ur >= 0) & (uc >= 0)
-        if stencil is None:
-            keep &= val != 0
-        keep = np.flatnonzero(keep)
+        row, col, val = _lower_entries(matrix)
+        ur, uc = unknown[row], unknown[col]
+        keep = np.flatnonzero((ur >= 0) & (uc >= 0))
         row, col, val, ur, uc = row[keep], col[keep], val[keep], ur[keep], uc[keep]
         val = np.where((ur == uc) & (row != col), 2 * val, val)
-        nx = _grid_width(row, col, size, stencil)
+        nx = _grid_width(row, col, matrix.shape[0])
         position = unknown[unknown >= 0]
         if nx is not None:
-            rank = np.empty(n, dtype=INDEX)
-            rank[_unknown_order(unknown, n, nx)] = np.arange(n, dtype=INDEX)
+            rank = np.empty(n, dtype=np.int64)
+            rank[_unknown_order(unknown, n, nx)] = np.arange(n)
             ur, uc = rank[ur], rank[uc]
             position = rank[position]
             self.ordering = "grid-nested-dissection"
-        # P in the elimination order: the scatter puts each unknown's value on its
-        # nodes, the gather (P^T) sums them back: a copy for the unknowns of one node,
-        # np.bincount (in node order, as a sparse product adds) for the shared ones.
-        # (np.take is several times as fast as fancy indexing on (N, 2) arrays.)
+        self._set_projection(unknown, position, n)
+        # The reduced lower triangle (duplicates summed), in the elimination order.
+        lower = sp.csc_matrix((val, (np.maximum(ur, uc), np.minimum(ur, uc))), shape=(n, n))
+        lower.sort_indices()
+        if cholmod.AVAILABLE:
+            self.method = "cholmod"
+            factor = _cholmod_factor(lower, natural=nx is not None)
+            self._solve = lambda b: cholmod.solve(factor, b)
+        else:
+            self.method = "scipy-splu"
+            self._solve = _splu_solve(lower)
+
+    def _set_projection(self, unknown: np.ndarray, position: np.ndarray, n: int) -> None:
+        """P in the elimination order (``position``: the unknown of each non-fixed node).
+
+        The scatter puts each unknown's value on its nodes, the gather (P^T) sums
+        them back: a copy for the unknowns of one node, np.bincount (in node order,
+        as a sparse product adds) for the shared ones. (np.take is several times as
+        fast as fancy indexing on (N, 2) arrays.)
+        """
         nodes = np.flatnonzero(unknown >= 0)
         self._scatter = np.full(unknown.size, n, dtype=np.int64)   # n: a zero row (fixed nodes)
         self._scatter[nodes] = position
@@ -518,27 +350,6 @@ class ReducedSystem:
         shared = ~single
         self._shared = ((nodes[shared], position[shared], np.unique(position[shared]))
                         if shared.any() else None)
-        rows, cols = np.maximum(ur, uc), np.minimum(ur, uc)
-        if _cholmod is None:
-            from scipy.sparse.linalg import splu
-
-            if not _fallback_noted:
-                sys.stderr.write("featurewarp: the CHOLMOD binding (featurewarp_cli._cholmod) is not built; "
-                                 "using SciPy's sparse LU, which is slower\n")
-                _fallback_noted = True
-            self.method = "scipy-splu"
-            lu = splu(_full_csc(n, rows, cols, val))
-
-            def solve(b, out):
-                out[...] = lu.solve(b)
-
-            self._solve = solve
-        else:
-            self.method = "cholmod"
-            # The pattern of P^T L P: for a stencil, fixed by the grid and the numbering.
-            key = ((size, nx, _digest(unknown)) if stencil is not None and nx is not None
-                   else _digest(rows, cols))
-            self._solve = _cholmod_factor(n, rows, cols, val, natural=nx is not None, key=key).solve
 
     def solve(self, rhs: np.ndarray, offset: np.ndarray) -> np.ndarray:
         """Minimise |A x - b|^2 over x = P z + q.
@@ -558,21 +369,46 @@ class ReducedSystem:
         if self.n_unknowns == 0:
             return offset.copy()
         n = self.n_unknowns
-        residual = rhs.T - self.matrix.dot(offset).T                 # (k, N), rows contiguous
+        residual = rhs.T - (self.matrix @ offset).T                   # (k, N), rows contiguous
         gathered = np.take(residual, self._gather, axis=1)
         if self._shared is not None:
             nodes, position, shared = self._shared
             for j, row in enumerate(residual):
                 gathered[j, shared] = np.bincount(position, row[nodes], minlength=n)[shared]
         z = np.zeros((n + 1, residual.shape[0]))
-        self._solve(np.ascontiguousarray(gathered.T), z[:n])
+        z[:n] = self._solve(gathered.T)                               # (n, k), F-ordered: no copy
         return offset + np.take(z, self._scatter, axis=0)
 
 
-def _full_csc(n: int, rows: np.ndarray, cols: np.ndarray, vals: np.ndarray):
-    """The symmetric n x n matrix with this lower triangle, as SciPy CSC (for splu)."""
-    import scipy.sparse as sp
+class AxisSystems:
+    """The factored system for x and for y: one shared factorization when both
+    coordinates hold the same nodes, two when a sliding border frees one of them
+    (factored one after the other).
 
-    lower = sp.csc_matrix((vals, (rows, cols)), shape=(n, n))
-    lower.sum_duplicates()
-    return (lower + sp.tril(lower, -1).T).tocsc()
+    Parameters
+    ----------
+    matrix : (N, N) scipy.sparse matrix
+        The normal matrix (:func:`featurewarp_cli.engine.system.normal_matrix`).
+    unknown_x, unknown_y : (N,) int ndarray
+        Unknown numbering per coordinate (see :class:`ReducedSystem`).
+
+    Attributes
+    ----------
+    method : str
+        See :class:`ReducedSystem`.
+    factorizations : int
+        1 or 2.
+    """
+
+    def __init__(self, matrix, unknown_x: np.ndarray, unknown_y: np.ndarray):
+        self.x = ReducedSystem(matrix, unknown_x)
+        self.y = self.x if np.array_equal(unknown_x, unknown_y) else ReducedSystem(matrix, unknown_y)
+        self.method = self.x.method
+        self.factorizations = 1 if self.y is self.x else 2
+
+    def solve(self, rhs: np.ndarray, offset: np.ndarray) -> np.ndarray:
+        """Node positions (N, 2); see :meth:`ReducedSystem.solve`."""
+        if self.y is self.x:
+            return self.x.solve(rhs, offset)
+        return np.concatenate([self.x.solve(rhs[:, :1], offset[:, :1]),
+                               self.y.solve(rhs[:, 1:], offset[:, 1:])], axis=1)

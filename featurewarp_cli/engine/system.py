@@ -4,7 +4,8 @@ Each quad contributes four edge equations ``w (v_b - v_a) = w t`` (edges taken
 cyclically: top, right, bottom, left). The normal matrix A^T A is then a
 weighted 5-point graph Laplacian whose edge weights are the sums of w^2 over
 the (one or two) quads sharing the edge; it depends on the grid and the
-weights only, never on the warp.
+weights only, never on the warp. It is a ``scipy.sparse`` matrix; its
+factorization is :mod:`featurewarp_cli.engine.solver`'s.
 """
 
 from __future__ import annotations
@@ -14,176 +15,45 @@ import numpy as np
 from .grid import Grid
 
 
-class StencilMatrix:
-    """A symmetric matrix with the pattern of a grid's 5-point stencil (node ``j * nx + i``
-    coupled to its left, right, upper and lower neighbours), stored as its weights.
+def normal_matrix(grid: Grid, weights: np.ndarray):
+    """A^T A for quad weights ``weights`` ((K,) ndarray): an (N, N) scipy.sparse CSR matrix.
 
-    Parameters
-    ----------
-    diagonal : (N,) ndarray
-    right : (N - 1,) ndarray
-        Entry (k, k + 1) = (k + 1, k); 0 where k ends a grid row (no coupling there).
-    down : (N - nx,) ndarray
-        Entry (k, k + nx) = (k + nx, k).
-    nx : int
-        Nodes per grid row.
-
-    Attributes
-    ----------
-    shape : (int, int)
-    nx, ny : int
+    Every grid edge is stored, whatever its weight, so the pattern is the
+    grid's 5-point stencil (node ``j * nx + i`` coupled to its upper, left,
+    right and lower neighbours), with each row's entries in column order.
+    (SciPy is imported here, not with the module: a warp that factors
+    nothing does not need it.)
     """
-
-    def __init__(self, diagonal: np.ndarray, right: np.ndarray, down: np.ndarray, nx: int):
-        self.diagonal, self.right, self.down = diagonal, right, down
-        self.nx = int(nx)
-        self.ny = diagonal.size // self.nx
-        self.shape = (diagonal.size, diagonal.size)
-        self._lower = None
-
-    def dot(self, x: np.ndarray) -> np.ndarray:
-        """The product with ``x`` ((N,) or (N, k) ndarray).
-
-        Each row's terms are added in the order of its columns (upper, left,
-        itself, right, lower neighbour), as a CSR matrix product adds them. The
-        work runs on ``x.T`` (rows of N values: long inner loops); the result is
-        the transpose of a C-ordered array.
-        """
-        xt = np.ascontiguousarray(np.asarray(x, dtype=np.float64).T)
-        nx, right, down = self.nx, self.right, self.down
-        y = np.zeros(xt.shape)
-        y[..., nx:] -= down * xt[..., :-nx]
-        y[..., 1:] -= right * xt[..., :-1]
-        y += self.diagonal * xt
-        y[..., :-1] -= right * xt[..., 1:]
-        y[..., :-nx] -= down * xt[..., nx:]
-        return y.T
-
-    __matmul__ = dot
-
-    def lower_triplets(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(rows, cols, vals) of the lower triangle (rows >= cols, int64 and float64), one entry
-        per diagonal element and per grid edge, whatever its weight (the pattern is the grid's).
-        Computed once (the x and y systems both read them)."""
-        if self._lower is None:
-            self._lower = self._lower_triplets()
-        return self._lower
-
-    def _lower_triplets(self):
-        n, nx = self.shape[0], self.nx
-        nodes = np.arange(n, dtype=np.int64)
-        left = nodes[1:][nodes[1:] % nx != 0]              # nodes with a left neighbour
-        rows = np.concatenate([nodes, left, nodes[nx:]])
-        cols = np.concatenate([nodes, left - 1, nodes[:-nx]])
-        vals = np.concatenate([self.diagonal, -self.right[left - 1], -self.down])
-        return rows, cols, vals
-
-    def submatrix(self, nodes: np.ndarray) -> "StencilWindow":
-        """The rows and columns ``nodes`` (distinct node indices, usually sorted), as a
-        :class:`StencilWindow`."""
-        nodes = np.asarray(nodes, dtype=np.int64)
-        n, nx, m = self.shape[0], self.nx, nodes.size
-        local = np.full(n + 1, m, dtype=np.int64)           # m: not in the window
-        local[nodes] = np.arange(m)
-        i = nodes % nx
-        # Neighbours of each node in column order: up, left, itself, right, down.
-        exists = np.stack([nodes >= nx, i > 0, np.ones(m, bool), i < nx - 1, nodes < n - nx], axis=1)
-        other = np.where(exists, nodes[:, None] + np.array([-nx, -1, 0, 1, nx]), n)
-        weights = np.stack([-self.down[np.maximum(nodes - nx, 0)], -self.right[np.maximum(nodes - 1, 0)],
-                            self.diagonal[nodes], -self.right[np.minimum(nodes, n - 2)],
-                            -self.down[np.minimum(nodes, n - nx - 1)]], axis=1)
-        neighbours = local[other]
-        return StencilWindow(neighbours, np.where(neighbours < m, weights, 0.0))
-
-    def to_scipy(self):
-        """The matrix as a SciPy CSR matrix (imports SciPy; for tests and benchmarks)."""
-        rows, cols, vals = self.lower_triplets()
-        return symmetric_scipy(rows, cols, vals, self.shape[0])
-
-
-class StencilWindow:
-    """Some rows and the same columns of a :class:`StencilMatrix` (a symmetric matrix of
-    at most five entries per row), as a table of each row's neighbours.
-
-    Parameters
-    ----------
-    neighbours : (m, 5) int ndarray
-        Column (local index) of the entries of each row: its upper, left, own, right
-        and lower neighbour on the grid, or m where that one is not in the window.
-    weights : (m, 5) ndarray
-        The entries; 0 where there is no neighbour.
-
-    Attributes
-    ----------
-    shape : (int, int)
-    """
-
-    def __init__(self, neighbours: np.ndarray, weights: np.ndarray):
-        self.neighbours = neighbours
-        self.weights = weights
-        self.shape = (neighbours.shape[0], neighbours.shape[0])
-        self._neighbours_t = np.ascontiguousarray(neighbours.T)
-        self._weights_t = np.ascontiguousarray(weights.T)
-
-    def dot(self, x: np.ndarray) -> np.ndarray:
-        """The product with ``x`` ((m,) or (m, k) ndarray). Each row's terms are added in
-        the order of their columns when the window's nodes are sorted, as in a CSR product
-        (a missing neighbour adds 0). Computed on ``x.T``, like :meth:`StencilMatrix.dot`."""
-        xt = np.asarray(x, dtype=np.float64).T
-        m = self.shape[0]
-        padded = np.zeros(xt.shape[:-1] + (m + 1,))          # column m: 0 for missing neighbours
-        padded[..., :m] = xt
-        y = np.zeros(xt.shape)
-        for neighbour, weight in zip(self._neighbours_t, self._weights_t):
-            y += weight * np.take(padded, neighbour, axis=-1)
-        return y.T
-
-    __matmul__ = dot
-
-    def lower_triplets(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(rows, cols, vals) of the lower triangle (rows >= cols), row by row."""
-        m = self.shape[0]
-        rows = np.broadcast_to(np.arange(m)[:, None], self.neighbours.shape)
-        low = (self.neighbours <= rows)
-        return rows[low], self.neighbours[low], self.weights[low]
-
-    def to_scipy(self):
-        """The matrix as a SciPy CSR matrix (imports SciPy; for tests and benchmarks)."""
-        rows, cols, vals = self.lower_triplets()
-        return symmetric_scipy(rows, cols, vals, self.shape[0])
-
-
-def symmetric_scipy(rows: np.ndarray, cols: np.ndarray, vals: np.ndarray, n: int):
-    """The symmetric n x n matrix whose lower triangle has these triplets (rows >= cols;
-    duplicates summed), as a SciPy CSR matrix (imports SciPy; for tests and benchmarks)."""
     import scipy.sparse as sp
 
-    off = rows != cols
-    return sp.csr_matrix((np.concatenate([vals, vals[off]]),
-                          (np.concatenate([rows, cols[off]]), np.concatenate([cols, rows[off]]))),
-                         shape=(n, n))
-
-
-def normal_matrix(grid: Grid, weights: np.ndarray) -> StencilMatrix:
-    """A^T A for quad weights ``weights`` ((K,) ndarray): an (N, N) :class:`StencilMatrix`."""
     qy, qx = grid.quad_shape
+    nx, ny = grid.nx, grid.ny
     w2 = (weights * weights).reshape(qy, qx)
-    horizontal = np.zeros((grid.ny, qx))          # edge (j, i) -- (j, i+1)
+    horizontal = np.zeros((ny, qx))               # edge (j, i) -- (j, i+1)
     horizontal[:-1] += w2
     horizontal[1:] += w2
-    vertical = np.zeros((qy, grid.nx))            # edge (j, i) -- (j+1, i)
+    vertical = np.zeros((qy, nx))                 # edge (j, i) -- (j+1, i)
     vertical[:, :-1] += w2
     vertical[:, 1:] += w2
-
-    right = np.zeros((grid.ny, grid.nx))          # weight to the right neighbour
-    right[:, :-1] = horizontal
-    down = vertical.ravel()                       # weight to the node below
-    diagonal = np.zeros((grid.ny, grid.nx))
+    diagonal = np.zeros((ny, nx))
     diagonal[:, :-1] += horizontal
     diagonal[:, 1:] += horizontal
     diagonal[:-1, :] += vertical
     diagonal[1:, :] += vertical
-    return StencilMatrix(diagonal.ravel(), right.ravel()[:-1], down, grid.nx)
+
+    # Each row's five entries in column order: upper, left, itself, right, lower neighbour.
+    values = np.zeros((ny, nx, 5))
+    exists = np.zeros((ny, nx, 5), bool)
+    for k, (rows, cols, value) in enumerate(((slice(1, None), slice(None), -vertical),
+                                             (slice(None), slice(1, None), -horizontal),
+                                             (slice(None), slice(None), diagonal),
+                                             (slice(None), slice(0, -1), -horizontal),
+                                             (slice(0, -1), slice(None), -vertical))):
+        values[rows, cols, k] = value
+        exists[rows, cols, k] = True
+    columns = np.arange(nx * ny).reshape(ny, nx, 1) + np.array([-nx, -1, 0, 1, nx])
+    indptr = np.concatenate([[0], np.cumsum(exists.sum(axis=2).ravel())])
+    return sp.csr_matrix((values[exists], columns[exists], indptr), shape=(nx * ny, nx * ny))
 
 
 def node_stiffness(grid: Grid, weights: np.ndarray) -> np.ndarray:

@@ -47,7 +47,6 @@ from . import features as feat
 from .defaults import BOUNDARIES, DECAY, FEATURE_WEIGHT, FORMULATION, FORMULATIONS, MODE, MODES, SCALE_PRIOR
 from .grid import Grid, signed_areas
 from .record import KEPT, ComponentRecord, SolveRecord
-from .solver import ReducedSystem, factor_concurrently
 
 #: Where W moves pixels by more than NO_OP_WARP px, an output that moves the nodes W moves
 #: (by more than NO_OP_OUTPUT px) by at most NO_OP_OUTPUT px RMS, or by at most NO_OP_FRACTION
@@ -128,40 +127,10 @@ class _GridState:
     features: feat.Features
     node_component: np.ndarray            # component of each feature-quad node, -1 elsewhere
     tri_component: np.ndarray             # component of each triangle of a feature quad, -1 elsewhere
-    normal: object
     stiffness: np.ndarray
+    normal: object = None                 # scipy.sparse normal matrix, built when first factored
     systems: dict = field(default_factory=dict)         # factored systems by unknown numbering
     scale_solvers: dict = field(default_factory=dict)   # components.ScaleSolver by ties
-
-
-class AxisSystems:
-    """The factored system for x and for y: one shared factorization when both
-    coordinates hold the same nodes, two when a sliding border or a frame-cut
-    feature frees one of them. The two are factored at once, in two threads
-    (:func:`solver.factor_concurrently`).
-
-    Parameters
-    ----------
-    matrix : (N, N) matrix
-        The normal matrix (:func:`system.normal_matrix`).
-    unknown_x, unknown_y : (N,) int ndarray
-        Unknown numbering per coordinate (see :class:`solver.ReducedSystem`).
-    """
-
-    def __init__(self, matrix, unknown_x: np.ndarray, unknown_y: np.ndarray):
-        if np.array_equal(unknown_x, unknown_y):
-            self.x = self.y = ReducedSystem(matrix, unknown_x)
-        else:
-            self.x, self.y = factor_concurrently(matrix, [unknown_x, unknown_y])
-        self.method = self.x.method
-        self.factorizations = 1 if self.y is self.x else 2
-
-    def solve(self, rhs: np.ndarray, offset: np.ndarray) -> np.ndarray:
-        """Node positions (N, 2); see :meth:`solver.ReducedSystem.solve`."""
-        if self.y is self.x:
-            return self.x.solve(rhs, offset)
-        return np.concatenate([self.x.solve(rhs[:, :1], offset[:, :1]),
-                               self.y.solve(rhs[:, 1:], offset[:, 1:])], axis=1)
 
 
 class FeatureWarper:
@@ -255,12 +224,17 @@ class FeatureWarper:
             tri_component = np.tile(np.where(features.is_feature, features.component, -1), 2)
             self._states[key] = _GridState(grid, grid.nodes(), grid.triangles(), fixed_x, fixed_y, features,
                                            system.feature_nodes(grid, features), tri_component,
-                                           system.normal_matrix(grid, features.weight),
                                            system.node_stiffness(grid, features.weight))
         return self._states[key]
 
-    def _systems(self, state: _GridState, ties: components.Ties) -> AxisSystems:
-        """The factored systems for these ties (cached per numbering)."""
+    def _systems(self, state: _GridState, ties: components.Ties):
+        """The factored :class:`solver.AxisSystems` for these ties (cached per numbering).
+
+        SciPy and scikit-sparse are imported here, by warps that factor (not by plain mode)."""
+        from .solver import AxisSystems
+
+        if state.normal is None:
+            state.normal = system.normal_matrix(state.grid, state.features.weight)
         unknowns = [system.number_unknowns(fixed | ties.held(axis), ties.unknown_ties(axis))
                     for axis, fixed in enumerate(_fixed(state, ties))]
         key = b"".join(u.astype(np.int32).tobytes() for u in unknowns)
@@ -404,15 +378,15 @@ class FeatureWarper:
         released = np.isin(np.arange(ties.tied.size), record.guard.released_components)
         return x, ties.tied & ~released, ties.unpinned & ties.tied & ~released
 
-    def _scale_solver(self, state: _GridState, ties: components.Ties, systems: AxisSystems):
+    def _scale_solver(self, state: _GridState, ties: components.Ties, systems):
         """The cached :class:`components.ScaleSolver` for these ties (None without free scales)."""
         if not ties.columns()[0].size:
             return None
         key = ties.key()
         if key not in state.scale_solvers:
             t0 = time.perf_counter()
-            matrix = state.normal.to_scipy() if hasattr(state.normal, "to_scipy") else state.normal
-            state.scale_solvers[key] = components.ScaleSolver(ties, state.grid, state.features, matrix, systems)
+            state.scale_solvers[key] = components.ScaleSolver(ties, state.grid, state.features, state.normal,
+                                                              systems)
             self.timings["scale_setup"] = time.perf_counter() - t0
         return state.scale_solvers[key]
 
