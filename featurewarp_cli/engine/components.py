@@ -38,7 +38,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from .grid import signed_areas
-from .targets import paper_scales
 
 #: Pins that a similarity fits with a larger RMS residual (px) leave a component untied.
 PIN_TOLERANCE = 0.01
@@ -428,38 +427,60 @@ SCALE_FLOOR = 0.05
 SCALE_BISECTIONS = 6
 
 
-def safe_scale(jac: np.ndarray, features, prior: np.ndarray) -> np.ndarray:
-    """Per component, the factor from the prior's scale down to the warp's smallest principal
-    scale over it (the paper's lambda): a size at which a feature fits wherever W fits it. (C, 1)"""
-    low = paper_scales(jac, features)
-    return (np.minimum(low, np.hypot(prior[:, 0], prior[:, 1])) / np.maximum(np.hypot(prior[:, 0], prior[:, 1]),
-                                                                           1e-12))[:, None]
+def fitting_scales(solve, prior: np.ndarray, optimum: np.ndarray, triangles, warped):
+    """The features' similarities: the least-squares ``optimum`` unless its solution crushes a
+    triangle that the ``prior``'s solution does not; then the furthest point from the prior
+    towards the optimum that crushes none (bisection).
 
-
-def fitting_scales(solve, safe: np.ndarray, optimum: np.ndarray, triangles, warped):
-    """The features' similarities: the least-squares ``optimum`` when its solution keeps every
-    triangle above :data:`SCALE_FLOOR` of its area under W; else the furthest point from
-    ``safe`` towards it that does (bisection); the optimum when ``safe`` does not fit either.
-
-    Scale and rotation give way before shape: a feature that cannot grow as far as
-    least squares would like stays a similarity, only smaller.
+    A triangle counts as crushed below :data:`SCALE_FLOOR` of its area under W, or below its
+    area in the prior's solution where that is smaller already (folds there are the fold-over
+    guard's to open, as for any solution). So solving for scale and rotation never leaves the
+    background worse off than the preset's own lambda R would: a feature that cannot grow as
+    far as least squares would like stays a similarity, only less grown.
 
     Returns (ab, solve(ab))."""
+    best = solve(optimum)
+    if np.allclose(prior, optimum):
+        return optimum, best
+    start = solve(prior)
+    floor = np.minimum(SCALE_FLOOR * signed_areas(warped, triangles), signed_areas(start[0], triangles))
+
+    def fits(result):
+        return bool(np.all(signed_areas(result[0], triangles) >= floor))
+
+    if fits(best):
+        return optimum, best
+    lo, hi, best_ab, best = 0.0, 1.0, prior, start
+    for _ in range(SCALE_BISECTIONS):
+        mid = 0.5 * (lo + hi)
+        ab = prior + mid * (optimum - prior)
+        result = solve(ab)
+        if fits(result):
+            lo, best, best_ab = mid, result, ab
+        else:
+            hi = mid
+    return best_ab, best
+
+
+def shrink_to_fit(solve, low: np.ndarray, high: np.ndarray, triangles, warped):
+    """The largest similarities between ``low`` and ``high`` ((C, 2) each) whose solution crushes
+    no triangle below :data:`SCALE_FLOOR` of its area under W (bisection), or None when even
+    ``low`` does. For features that cannot keep their shape at the size least squares picked
+    (densely packed coins squeezed to 0.6 of their width): smaller but exact.
+
+    Returns (ab, solve(ab)) or None."""
     floor = SCALE_FLOOR * signed_areas(warped, triangles)
 
     def fits(result):
         return bool(np.all(signed_areas(result[0], triangles) >= floor))
 
-    best = solve(optimum)
-    if fits(best) or np.allclose(safe, optimum):
-        return optimum, best
-    lo, hi, best_ab = 0.0, 1.0, safe
-    best = solve(safe)
+    best = solve(low)
     if not fits(best):
-        return optimum, solve(optimum)    # scale is not what crushes: the fold-over guard's turn
+        return None
+    lo, hi, best_ab = 0.0, 1.0, low
     for _ in range(SCALE_BISECTIONS):
         mid = 0.5 * (lo + hi)
-        ab = safe + mid * (optimum - safe)
+        ab = low + mid * (high - low)
         result = solve(ab)
         if fits(result):
             lo, best, best_ab = mid, result, ab

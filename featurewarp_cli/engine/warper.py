@@ -344,8 +344,8 @@ class FeatureWarper:
             gradient = scale_solver.gradient(x, rhs, edges, features, grid.spacing)
             weights = components.prior_weights(features, grid.spacing, self.scale_prior)
             optimum = np.where(ties.tied[:, None], scale_solver.solve(ties.base, gradient, prior, weights), prior)
-            safe = np.where(ties.tied[:, None], ties.project(prior * components.safe_scale(jac, features, prior)), prior)
-            ab, (x, edges, rhs, offset) = components.fitting_scales(solve, safe, optimum, state.triangles, warped)
+            start = np.where(ties.tied[:, None], ties.project(prior), prior)
+            ab, (x, edges, rhs, offset) = components.fitting_scales(solve, start, optimum, state.triangles, warped)
         if not self.injective:
             return x, ties.tied, ties.unpinned & ties.tied
 
@@ -361,6 +361,15 @@ class FeatureWarper:
         counted = sum(self.timings.get(k, 0.0) for k in ("solve", "factor", "rhs"))
         t0 = time.perf_counter()
         x = guard.guard(problem, x, record.guard)
+        if record.guard.release_rounds and scale_solver is not None and scale_solver.n_columns:
+            # The features could not keep their shape at this scale: smaller, do they?
+            low = np.where(ties.tied[:, None], ties.project(prior * _smallest_scale(jac, features, prior)), prior)
+            shrunk = components.shrink_to_fit(solve, low, ab, state.triangles, warped)
+            if shrunk is not None:
+                ab, (x, edges, rhs, offset) = shrunk
+                record.guard = guard.GuardRecord()
+                problem.rhs, problem.offset, problem.edges = rhs, offset, edges
+                x = guard.guard(problem, x, record.guard)
         if self.formulation == "exact":            # the paper's soft targets are kept as published
             x = guard.no_worse_than_plain(state, x, warped, record.guard)
         inner = sum(self.timings.get(k, 0.0) for k in ("solve", "factor", "rhs")) - counted
@@ -418,6 +427,13 @@ class FeatureWarper:
         if mesh.record is not None:
             mesh.record.timings["render"] = time.perf_counter() - t0
         return out
+
+
+def _smallest_scale(jac: np.ndarray, features, prior: np.ndarray) -> np.ndarray:
+    """Per component, the factor from the prior's scale down to the warp's smallest principal
+    scale over it (the paper's lambda), at which a feature fits wherever W fits it: (C, 1)."""
+    size = np.maximum(np.hypot(prior[:, 0], prior[:, 1]), 1e-12)
+    return (np.minimum(targets.paper_scales(jac, features), size) / size)[:, None]
 
 
 def _window_ties(ties: components.Ties) -> np.ndarray:
