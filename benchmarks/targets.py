@@ -10,6 +10,7 @@ RENDER_12MP_CELL4_S = 0.5        # rendering 12 MP at cell 4
 SWIRL_12MP_RATIO = 0.5           # whole command / ImageMagick -swirl 180
 SWIRL_12MP_PEAK_MB = 800
 STRETCH_1MP_RATIO = 0.1          # whole command / ImageMagick -liquid-rescale 200x100%!
+STRETCH_1MP_FLOOR_RATIO = 1.5    # whole command / its floor (imports, decode, encode; issue 12)
 STARTUP_S = 0.25                 # featurewarp --help, featurewarp warps
 REWARP_1MP_S = 0.15              # API: re-solve + re-render 1 MP with new parameters, factorization reused
 
@@ -37,7 +38,11 @@ def evaluate(report: dict) -> list[dict]:
     commands = report.get("commands", {})
     for name, r in commands.get("startup", {}).items():
         rows.append(_row(f"featurewarp {name} start-up", r["median_s"], STARTUP_S))
+    floor = commands.get("floor")
     for r in commands.get("runs", []):
+        if floor and r["size"] == "1MP" and r["preset"] == "stretch":
+            rows.append(_row("1 MP stretch --sx 2 / its floor", r["median_s"] / floor["median_s"],
+                             STRETCH_1MP_FLOOR_RATIO, "x"))
         if r["size"] == "12MP" and r["preset"] == "swirl" and not r["extra"]:
             rows.append(_row("12 MP swirl 180 peak RSS", r["peak_mb"], SWIRL_12MP_PEAK_MB, "MB"))
     for r in report.get("ratios", []):

@@ -1,4 +1,4 @@
-/* The buffer check shared by featurewarp's C extensions (_raster.c, _cholmod.c). */
+/* The buffer check of featurewarp's C rasterizer (_raster.c). */
 #ifndef FEATUREWARP_BUFFER_H
 #define FEATUREWARP_BUFFER_H
 
