@@ -10,7 +10,7 @@ import sys
 import numpy as np
 import pytest
 
-from featurewarp_cli.app import pipeline as batch
+from featurewarp_cli.app import batch
 from test_cli import listing, runner, save, scene, square_mask, textured  # noqa: F401  (fixture)
 
 

@@ -123,7 +123,8 @@ def batch_command(preset) -> click.Command:
               param_option(JOBS, "-j", "--jobs")] + engine_options()
 
     def callback(inputs, out_dir, mask_pattern, suffix, jobs, **kwargs):
-        from ..app.pipeline import WarpError, plan, run_batch
+        from ..app.batch import plan, run_batch
+        from ..app.pipeline import WarpError
         from ..io.formats import format_name
 
         settings, quiet, verbose = settings_from(preset, kwargs)

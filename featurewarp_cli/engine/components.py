@@ -37,6 +37,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .grid import signed_areas
+from .targets import paper_scales
+
 #: Pins that a similarity fits with a larger RMS residual (px) leave a component untied.
 PIN_TOLERANCE = 0.01
 #: Columns of Phi solved at once.
@@ -417,3 +420,49 @@ class ScaleSolver:
         eta = np.linalg.solve(lhs, -(gradient + pull))
         np.add.at(ab, self.comp, eta[:, None] * self.directions)
         return ab
+
+
+#: Smallest area, relative to W's, that the scale search lets a triangle keep.
+SCALE_FLOOR = 0.05
+#: Bisection steps of the scale search (and of the move towards W).
+SCALE_BISECTIONS = 6
+
+
+def safe_scale(jac: np.ndarray, features, prior: np.ndarray) -> np.ndarray:
+    """Per component, the factor from the prior's scale down to the warp's smallest principal
+    scale over it (the paper's lambda): a size at which a feature fits wherever W fits it. (C, 1)"""
+    low = paper_scales(jac, features)
+    return (np.minimum(low, np.hypot(prior[:, 0], prior[:, 1])) / np.maximum(np.hypot(prior[:, 0], prior[:, 1]),
+                                                                           1e-12))[:, None]
+
+
+def fitting_scales(solve, safe: np.ndarray, optimum: np.ndarray, triangles, warped):
+    """The features' similarities: the least-squares ``optimum`` when its solution keeps every
+    triangle above :data:`SCALE_FLOOR` of its area under W; else the furthest point from
+    ``safe`` towards it that does (bisection); the optimum when ``safe`` does not fit either.
+
+    Scale and rotation give way before shape: a feature that cannot grow as far as
+    least squares would like stays a similarity, only smaller.
+
+    Returns (ab, solve(ab))."""
+    floor = SCALE_FLOOR * signed_areas(warped, triangles)
+
+    def fits(result):
+        return bool(np.all(signed_areas(result[0], triangles) >= floor))
+
+    best = solve(optimum)
+    if fits(best) or np.allclose(safe, optimum):
+        return optimum, best
+    lo, hi, best_ab = 0.0, 1.0, safe
+    best = solve(safe)
+    if not fits(best):
+        return optimum, solve(optimum)    # scale is not what crushes: the fold-over guard's turn
+    for _ in range(SCALE_BISECTIONS):
+        mid = 0.5 * (lo + hi)
+        ab = safe + mid * (optimum - safe)
+        result = solve(ab)
+        if fits(result):
+            lo, best, best_ab = mid, result, ab
+        else:
+            hi = mid
+    return best_ab, best

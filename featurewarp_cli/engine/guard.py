@@ -12,9 +12,10 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 
+import cv2
 import numpy as np
 
-from . import injectivity, system
+from . import injectivity, quality, system
 from .grid import signed_areas
 
 #: Bisection steps on how far released features go from the warp's shape to their own.
@@ -32,6 +33,10 @@ UNTANGLE_FLOOR = 0.05
 WINDOW_MARGINS = (0.5, 1.0)
 WINDOW_MIN_MARGIN = 8
 WINDOW_ITERATIONS = 150
+#: Cells over which the move towards W tapers off around offending triangles, and the
+#: bisection steps of that move (:func:`no_worse_than_plain`).
+TAPER_CELLS = 3
+PLAIN_BISECTIONS = 6
 #: Windows larger than this fraction of the grid are left to the global pass.
 WINDOW_MAX_FRACTION = 0.5
 
@@ -267,3 +272,80 @@ def _untangle_window(problem: Problem, rhs, offset, tied, x, floor, margin_facto
     x = x.copy()
     x[nodes] = moved
     return x, iterations, int(changing.size)
+
+
+# --- never worse than plain -----------------------------------------------------------------
+# ``state`` below is the warper's grid state: ``nodes``, ``triangles``, ``grid``, ``features``
+# and ``tri_component`` (the component of each triangle of a feature quad, -1 elsewhere).
+
+
+def _anisotropy(state, points: np.ndarray) -> np.ndarray:
+    """Anisotropy of every triangle of a feature quad under ``points`` (inf elsewhere unused): (M,)."""
+    on = state.tri_component >= 0
+    out = np.ones(state.triangles.shape[0])
+    out[on] = quality.triangle_anisotropy(state.nodes, points, state.triangles[on])
+    return out
+
+
+def _worst_per_component(state, anisotropy: np.ndarray) -> np.ndarray:
+    """Worst of ``anisotropy`` over each component's triangles: (C,)."""
+    on = state.tri_component >= 0
+    worst = np.zeros(state.features.n_components)
+    np.maximum.at(worst, state.tri_component[on], anisotropy[on])
+    return worst
+
+
+def _taper(state, quads: np.ndarray) -> np.ndarray:
+    """(N, 1) weights: 1 on the corners of ``quads`` (grown by one cell), tapering to 0 over
+    :data:`TAPER_CELLS` cells."""
+    grid = state.grid
+    nodes = np.zeros(grid.n_nodes)
+    nodes[grid.quads()[quads].ravel()] = 1.0
+    size = 2 * TAPER_CELLS + 1
+    grown = cv2.dilate(nodes.reshape(grid.ny, grid.nx), np.ones((3, 3)))
+    return np.maximum(grown, cv2.GaussianBlur(grown, (size, size), 0)).ravel()[:, None]
+
+
+def no_worse_than_plain(state, x: np.ndarray, warped: np.ndarray, record) -> np.ndarray:
+    """``x``, or ``x`` moved towards W where components came out more anisotropic than under
+    W, as little as makes every component no worse than W, without folds.
+
+    The move is ``(1 - t) w (W - x)`` with ``w`` 1 around the offending triangles (then,
+    if that is not enough, on the offending components), tapering to 0 over
+    :data:`TAPER_CELLS` cells, and t bisected; where neither works, every node moves
+    evenly towards W."""
+    if np.any(signed_areas(warped, state.triangles) <= 0):
+        return x
+    plain = _worst_per_component(state, _anisotropy(state, warped)) * (1.0 + 1e-9) + 1e-9
+    comp = np.maximum(state.tri_component, 0)
+    anisotropy = _anisotropy(state, x)
+    worse = (state.tri_component >= 0) & (anisotropy > plain[comp])
+    if not worse.any():
+        return x
+
+    def ok(points):
+        return (bool(np.all(_worst_per_component(state, _anisotropy(state, points)) <= plain))
+                and not np.any(signed_areas(points, state.triangles) <= 0))
+
+    n_quads = state.features.weight.size
+    local = np.zeros(n_quads, bool)
+    local[np.flatnonzero(worse) % n_quads] = True
+    bad = np.isin(state.features.component, np.unique(state.tri_component[worse]))
+    moves = [lambda t, w=_taper(state, local): x + (1.0 - t) * w * (warped - x),
+             lambda t, w=_taper(state, bad & state.features.is_constrained): x + (1.0 - t) * w * (warped - x),
+             lambda t: warped + t * (x - warped)]
+    for move in moves:
+        if not ok(move(0.0)):
+            continue
+        lo, hi, best = 0.0, 1.0, move(0.0)
+        for _ in range(PLAIN_BISECTIONS):
+            mid = 0.5 * (lo + hi)
+            points = move(mid)
+            if ok(points):
+                lo, best = mid, points
+            else:
+                hi = mid
+        record.plain_blend = lo
+        return best
+    record.plain_blend = 0.0
+    return warped

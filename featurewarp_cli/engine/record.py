@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
 
+import numpy as np
+
 from .guard import GuardRecord
 
 
@@ -53,6 +55,13 @@ class ComponentRecord:
 
 #: Largest anisotropy - 1 of a component's triangles for it to count as kept.
 KEPT = 0.02
+#: Where W moves pixels by more than NO_OP_WARP px, an output that moves the nodes W moves
+#: (by more than NO_OP_OUTPUT px) by at most NO_OP_OUTPUT px RMS, or by at most NO_OP_FRACTION
+#: of W's RMS displacement there, is reported as "the output is the input" (a swirl whose
+#: disc a frame-filling feature pins).
+NO_OP_OUTPUT = 1.0
+NO_OP_WARP = 5.0
+NO_OP_FRACTION = 0.1
 
 
 @dataclass
@@ -123,3 +132,29 @@ class SolveRecord:
             "warnings": list(self.warnings),
             "timings": dict(self.timings),
         }
+
+
+def warnings_for(record: "SolveRecord", source, target, warped, warp) -> list[str]:
+    """One line per thing the caller should know: features not kept or relaxed, a no-op."""
+    lines = []
+    if record.guard.plain_blend < 1.0:
+        lines.append(f"features degraded towards the plain warp (blend {record.guard.plain_blend:.2f}) so that "
+                     f"none is more distorted than under it")
+    if record.guard.release_rounds:
+        lines.append(f"features relaxed towards the plain warp to avoid fold-overs "
+                     f"(components {', '.join(map(str, record.guard.released_components))}; "
+                     f"blend {record.guard.feature_blend:.2f})")
+    for k, c in enumerate(record.components):
+        if not c.kept:
+            lines.append(f"feature {k} ({c.quads} quads) not kept: distortion {c.anisotropy_worst:.3f} "
+                         f"(plain warp: {c.plain_anisotropy_worst:.3f})")
+    if tuple(warp.canvas) == (warp.width, warp.height):
+        wanted = np.hypot(*(warped - source).T)
+        moving = wanted > NO_OP_OUTPUT
+        if wanted.max(initial=0.0) > NO_OP_WARP:
+            moved = float(np.sqrt(np.mean(np.sum((target - source)[moving] ** 2, axis=1))))
+            asked = float(np.sqrt(np.mean(wanted[moving] ** 2)))
+            if moved <= max(NO_OP_OUTPUT, NO_OP_FRACTION * asked):
+                lines.append(f"the mask covers the region the warp moves; the output is the input "
+                             f"(where the warp moves pixels by {asked:.0f} px RMS, they move by {moved:.1f} px)")
+    return lines

@@ -106,27 +106,10 @@ def grid_nested_dissection(live: np.ndarray, leaf: int = _LEAF_NODES,
     if ny > nx:                                # tall: as its transpose
         x, y = np.divmod(grid_nested_dissection(live.T, leaf, window), ny)
         return y * nx + x
-    # Blocks at most about twice as wide as high, between separator columns numbered last.
-    blocks = -(-nx // (2 * ny + 2))
-    cuts = np.arange(1, blocks) * (nx + 1) // blocks - 1
-    left = np.concatenate([[0], cuts + 1])     # first column of each block
-    width = np.concatenate([cuts, [nx]]) - left
-    which, row = np.nonzero(live[:, cuts].T)
-    separators = row * nx + cuts[which]
-    y, x = np.nonzero(live)
-    block = np.searchsorted(cuts, x)
-    inside = ~np.isin(x, cuts)
-    y, x, block = y[inside], x[inside], block[inside]
-    order = np.empty(y.size, dtype=np.int64)
-    if not y.size:
+    cell, separators, blocks, size = _rotated_blocks(live)
+    if cell is None:
         return separators
-    # The blocks side by side in rotated coordinates: cell[u, v] is the node at
-    # x' + y = u, x' - y + ny - 1 + size * block = v (x' from its block's first
-    # column), or -1 where there is no live node.
-    size = ny + int(width.max()) - 1
-    xb = x - left[block]
-    cell = np.full((size, size * blocks), -1, dtype=np.int32)
-    cell[xb + y, xb - y + ny - 1 + size * block] = y * nx + x
+    order = np.empty(int(np.count_nonzero(cell >= 0)), dtype=np.int64)
     total = np.zeros((size + 1, size * blocks + 1), dtype=np.int32)
     total[1:, 1:] = cell >= 0
     np.cumsum(total, axis=0, out=total)
@@ -146,20 +129,7 @@ def grid_nested_dissection(live: np.ndarray, leaf: int = _LEAF_NODES,
         if small.any():
             _place(order, start[small], n[small], cell, r0[small], r1[small], c0[small], c1[small])
         r0, r1, c0, c1, n, start = (a[~small] for a in (r0, r1, c0, c1, n, start))
-        # Cut a column (fixed v) of wide pieces, a row of tall ones; candidates near the middle.
-        across = c1 - c0 >= r1 - r0
-        lo, hi = np.where(across, c0, r0), np.where(across, c1, r1)
-        mid = (lo + hi) // 2
-        reach = (window * (hi - lo)).astype(np.int64)
-        first, last = np.maximum(lo, mid - reach), np.minimum(hi - 1, mid + reach)
-        k = last - first + 1
-        piece = np.repeat(np.arange(k.size), k)
-        cut = first[piece] + np.arange(k.sum()) - np.repeat(np.cumsum(k) - k, k)
-        column = across[piece]
-        line = count(np.where(column, r0[piece], cut), np.where(column, r1[piece], cut + 1),
-                     np.where(column, cut, c0[piece]), np.where(column, cut + 1, c1[piece]))
-        # Per piece the emptiest line, the one nearest the middle among equals.
-        cut = cut[np.lexsort((np.abs(cut - mid[piece]), line, piece))[np.cumsum(k) - k]]
+        across, cut = _emptiest_cuts(count, r0, r1, c0, c1, window)
         one = (r0, np.where(across, r1, cut), c0, np.where(across, cut, c1))
         two = (np.where(across, r0, cut + 1), r1, np.where(across, cut + 1, c0), c1)
         n1, n2 = count(*one), count(*two)
@@ -170,6 +140,58 @@ def grid_nested_dissection(live: np.ndarray, leaf: int = _LEAF_NODES,
         keep = n > 0
         r0, r1, c0, c1, n, start = (a[keep] for a in (r0, r1, c0, c1, n, start))
     return np.concatenate([order, separators])
+
+
+def _emptiest_cuts(count, r0, r1, c0, c1, window: float):
+    """Where to cut each piece [r0, r1) x [c0, c1): a column (fixed v) of a wide piece, a row of
+    a tall one, the line with the fewest live nodes within ``window`` of the middle (the one
+    nearest the middle among equals). Returns (across: cut a column, cut: its index)."""
+    across = c1 - c0 >= r1 - r0
+    lo, hi = np.where(across, c0, r0), np.where(across, c1, r1)
+    mid = (lo + hi) // 2
+    reach = (window * (hi - lo)).astype(np.int64)
+    first, last = np.maximum(lo, mid - reach), np.minimum(hi - 1, mid + reach)
+    k = last - first + 1
+    piece = np.repeat(np.arange(k.size), k)
+    cut = first[piece] + np.arange(k.sum()) - np.repeat(np.cumsum(k) - k, k)
+    column = across[piece]
+    line = count(np.where(column, r0[piece], cut), np.where(column, r1[piece], cut + 1),
+                 np.where(column, cut, c0[piece]), np.where(column, cut + 1, c1[piece]))
+    return across, cut[np.lexsort((np.abs(cut - mid[piece]), line, piece))[np.cumsum(k) - k]]
+
+
+def _rotated_blocks(live: np.ndarray):
+    """A wide grid's live nodes in blocks at most about twice as wide as high, side by side
+    in rotated coordinates, and the separator columns between the blocks (numbered last).
+
+    Returns
+    -------
+    cell : (size, size * blocks) int32 ndarray or None
+        ``cell[u, v]`` is the node at x' + y = u, x' - y + ny - 1 + size * block = v (x'
+        from its block's first column), or -1 where there is no live node; None when no
+        live node lies inside a block.
+    separators : (S,) int ndarray
+        Live nodes of the separator columns.
+    blocks, size : int
+    """
+    ny, nx = live.shape
+    blocks = -(-nx // (2 * ny + 2))
+    cuts = np.arange(1, blocks) * (nx + 1) // blocks - 1
+    left = np.concatenate([[0], cuts + 1])     # first column of each block
+    width = np.concatenate([cuts, [nx]]) - left
+    which, row = np.nonzero(live[:, cuts].T)
+    separators = row * nx + cuts[which]
+    y, x = np.nonzero(live)
+    block = np.searchsorted(cuts, x)
+    inside = ~np.isin(x, cuts)
+    y, x, block = y[inside], x[inside], block[inside]
+    size = ny + int(width.max()) - 1
+    if not y.size:
+        return None, separators, blocks, size
+    xb = x - left[block]
+    cell = np.full((size, size * blocks), -1, dtype=np.int32)
+    cell[xb + y, xb - y + ny - 1 + size * block] = y * nx + x
+    return cell, separators, blocks, size
 
 
 def _place(order, start, n, cell, r0, r1, c0, c1):

@@ -39,23 +39,13 @@ import math
 import time
 from dataclasses import dataclass, field
 
-import cv2
 import numpy as np
 
 from . import components, fidelity, guard, quality, system, targets
 from . import features as feat
 from .defaults import BOUNDARIES, DECAY, FEATURE_WEIGHT, FORMULATION, FORMULATIONS, MODE, MODES, SCALE_PRIOR
 from .grid import Grid, signed_areas
-from .record import KEPT, ComponentRecord, SolveRecord
-
-#: Where W moves pixels by more than NO_OP_WARP px, an output that moves the nodes W moves
-#: (by more than NO_OP_OUTPUT px) by at most NO_OP_OUTPUT px RMS, or by at most NO_OP_FRACTION
-#: of W's RMS displacement there, is reported as "the output is the input" (a swirl whose
-#: disc a frame-filling feature pins).
-NO_OP_OUTPUT = 1.0
-NO_OP_WARP = 5.0
-NO_OP_FRACTION = 0.1
-
+from .record import KEPT, ComponentRecord, SolveRecord, warnings_for
 
 def load_warp(name: str):
     """The preset class registered under ``name`` in the ``featurewarp.warps`` group."""
@@ -354,8 +344,8 @@ class FeatureWarper:
             gradient = scale_solver.gradient(x, rhs, edges, features, grid.spacing)
             weights = components.prior_weights(features, grid.spacing, self.scale_prior)
             optimum = np.where(ties.tied[:, None], scale_solver.solve(ties.base, gradient, prior, weights), prior)
-            safe = np.where(ties.tied[:, None], ties.project(prior * _safe_scale(jac, features, prior)), prior)
-            ab, (x, edges, rhs, offset) = _fitting_scales(solve, safe, optimum, state.triangles, warped)
+            safe = np.where(ties.tied[:, None], ties.project(prior * components.safe_scale(jac, features, prior)), prior)
+            ab, (x, edges, rhs, offset) = components.fitting_scales(solve, safe, optimum, state.triangles, warped)
         if not self.injective:
             return x, ties.tied, ties.unpinned & ties.tied
 
@@ -372,7 +362,7 @@ class FeatureWarper:
         t0 = time.perf_counter()
         x = guard.guard(problem, x, record.guard)
         if self.formulation == "exact":            # the paper's soft targets are kept as published
-            x = _no_worse_than_plain(state, x, warped, record.guard)
+            x = guard.no_worse_than_plain(state, x, warped, record.guard)
         inner = sum(self.timings.get(k, 0.0) for k in ("solve", "factor", "rhs")) - counted
         self.timings["guard"] = time.perf_counter() - t0 - inner      # what the solves inside it did not take
         released = np.isin(np.arange(ties.tied.size), record.guard.released_components)
@@ -409,7 +399,7 @@ class FeatureWarper:
         record.background_stretch = quality.background_stretch(target, warped, state.triangles,
                                                                state.tri_component < 0)
         if record.mode != "plain":
-            record.warnings.extend(_warnings(record, state.nodes, target, warped, warp))
+            record.warnings.extend(warnings_for(record, state.nodes, target, warped, warp))
 
     def render(self, image: np.ndarray, mesh: Mesh, interp: str = "cubic", background=None,
                antialias: bool = True) -> np.ndarray:
@@ -430,126 +420,6 @@ class FeatureWarper:
         return out
 
 
-#: Smallest area, relative to W's, that the scale search lets a triangle keep.
-SCALE_FLOOR = 0.05
-#: Bisection steps of the scale search (and of the move towards W).
-SCALE_BISECTIONS = 6
-#: Cells over which the move towards W tapers off around an offending component.
-TAPER_CELLS = 3
-
-
-def _safe_scale(jac: np.ndarray, features, prior: np.ndarray) -> np.ndarray:
-    """Per component, the factor from the prior's scale down to the warp's smallest principal
-    scale over it (the paper's lambda): a size at which a feature fits wherever W fits it. (C, 1)"""
-    low = targets.paper_scales(jac, features)
-    return (np.minimum(low, np.hypot(prior[:, 0], prior[:, 1])) / np.maximum(np.hypot(prior[:, 0], prior[:, 1]),
-                                                                           1e-12))[:, None]
-
-
-def _fitting_scales(solve, safe: np.ndarray, optimum: np.ndarray, triangles, warped):
-    """The features' similarities: the least-squares ``optimum`` when its solution keeps every
-    triangle above :data:`SCALE_FLOOR` of its area under W; else the furthest point from
-    ``safe`` towards it that does (bisection); the optimum when ``safe`` does not fit either.
-
-    Scale and rotation give way before shape: a feature that cannot grow as far as
-    least squares would like stays a similarity, only smaller.
-
-    Returns (ab, solve(ab))."""
-    floor = SCALE_FLOOR * signed_areas(warped, triangles)
-
-    def fits(result):
-        return bool(np.all(signed_areas(result[0], triangles) >= floor))
-
-    best = solve(optimum)
-    if fits(best) or np.allclose(safe, optimum):
-        return optimum, best
-    lo, hi, best_ab = 0.0, 1.0, safe
-    best = solve(safe)
-    if not fits(best):
-        return optimum, solve(optimum)    # scale is not what crushes: the fold-over guard's turn
-    for _ in range(SCALE_BISECTIONS):
-        mid = 0.5 * (lo + hi)
-        ab = safe + mid * (optimum - safe)
-        result = solve(ab)
-        if fits(result):
-            lo, best, best_ab = mid, result, ab
-        else:
-            hi = mid
-    return best_ab, best
-
-
-def _anisotropy(state: _GridState, points: np.ndarray) -> np.ndarray:
-    """Anisotropy of every triangle of a feature quad under ``points`` (inf elsewhere unused): (M,)."""
-    on = state.tri_component >= 0
-    out = np.ones(state.triangles.shape[0])
-    out[on] = quality.triangle_anisotropy(state.nodes, points, state.triangles[on])
-    return out
-
-
-def _worst_per_component(state: _GridState, anisotropy: np.ndarray) -> np.ndarray:
-    """Worst of ``anisotropy`` over each component's triangles: (C,)."""
-    on = state.tri_component >= 0
-    worst = np.zeros(state.features.n_components)
-    np.maximum.at(worst, state.tri_component[on], anisotropy[on])
-    return worst
-
-
-def _taper(state: _GridState, quads: np.ndarray) -> np.ndarray:
-    """(N, 1) weights: 1 on the corners of ``quads`` (grown by one cell), tapering to 0 over
-    :data:`TAPER_CELLS` cells."""
-    grid = state.grid
-    nodes = np.zeros(grid.n_nodes)
-    nodes[grid.quads()[quads].ravel()] = 1.0
-    size = 2 * TAPER_CELLS + 1
-    grown = cv2.dilate(nodes.reshape(grid.ny, grid.nx), np.ones((3, 3)))
-    return np.maximum(grown, cv2.GaussianBlur(grown, (size, size), 0)).ravel()[:, None]
-
-
-def _no_worse_than_plain(state: _GridState, x: np.ndarray, warped: np.ndarray, record) -> np.ndarray:
-    """``x``, or ``x`` moved towards W where components came out more anisotropic than under
-    W, as little as makes every component no worse than W, without folds.
-
-    The move is ``(1 - t) w (W - x)`` with ``w`` 1 around the offending triangles (then,
-    if that is not enough, on the offending components), tapering to 0 over
-    :data:`TAPER_CELLS` cells, and t bisected; where neither works, every node moves
-    evenly towards W."""
-    if np.any(signed_areas(warped, state.triangles) <= 0):
-        return x
-    plain = _worst_per_component(state, _anisotropy(state, warped)) * (1.0 + 1e-9) + 1e-9
-    comp = np.maximum(state.tri_component, 0)
-    anisotropy = _anisotropy(state, x)
-    worse = (state.tri_component >= 0) & (anisotropy > plain[comp])
-    if not worse.any():
-        return x
-
-    def ok(points):
-        return (bool(np.all(_worst_per_component(state, _anisotropy(state, points)) <= plain))
-                and not np.any(signed_areas(points, state.triangles) <= 0))
-
-    n_quads = state.features.weight.size
-    local = np.zeros(n_quads, bool)
-    local[np.flatnonzero(worse) % n_quads] = True
-    bad = np.isin(state.features.component, np.unique(state.tri_component[worse]))
-    moves = [lambda t, w=_taper(state, local): x + (1.0 - t) * w * (warped - x),
-             lambda t, w=_taper(state, bad & state.features.is_constrained): x + (1.0 - t) * w * (warped - x),
-             lambda t: warped + t * (x - warped)]
-    for move in moves:
-        if not ok(move(0.0)):
-            continue
-        lo, hi, best = 0.0, 1.0, move(0.0)
-        for _ in range(SCALE_BISECTIONS):
-            mid = 0.5 * (lo + hi)
-            points = move(mid)
-            if ok(points):
-                lo, best = mid, points
-            else:
-                hi = mid
-        record.plain_blend = lo
-        return best
-    record.plain_blend = 0.0
-    return warped
-
-
 def _window_ties(ties: components.Ties) -> np.ndarray:
     """Component whose shared translation a node takes in both axes, or -1 (for window passes)."""
     x, y = ties.unknown_ties(0), ties.unknown_ties(1)
@@ -567,32 +437,6 @@ def _window_fixed(state: _GridState, ties: components.Ties) -> np.ndarray:
     x, y = ties.unknown_ties(0), ties.unknown_ties(1)
     fixed_x, fixed_y = _fixed(state, ties)
     return fixed_x | fixed_y | ties.held(0) | ties.held(1) | (x != y)
-
-
-def _warnings(record: SolveRecord, source, target, warped, warp) -> list[str]:
-    """One line per thing the caller should know: features not kept or relaxed, a no-op."""
-    lines = []
-    if record.guard.plain_blend < 1.0:
-        lines.append(f"features degraded towards the plain warp (blend {record.guard.plain_blend:.2f}) so that "
-                     f"none is more distorted than under it")
-    if record.guard.release_rounds:
-        lines.append(f"features relaxed towards the plain warp to avoid fold-overs "
-                     f"(components {', '.join(map(str, record.guard.released_components))}; "
-                     f"blend {record.guard.feature_blend:.2f})")
-    for k, c in enumerate(record.components):
-        if not c.kept:
-            lines.append(f"feature {k} ({c.quads} quads) not kept: distortion {c.anisotropy_worst:.3f} "
-                         f"(plain warp: {c.plain_anisotropy_worst:.3f})")
-    if tuple(warp.canvas) == (warp.width, warp.height):
-        wanted = np.hypot(*(warped - source).T)
-        moving = wanted > NO_OP_OUTPUT
-        if wanted.max(initial=0.0) > NO_OP_WARP:
-            moved = float(np.sqrt(np.mean(np.sum((target - source)[moving] ** 2, axis=1))))
-            asked = float(np.sqrt(np.mean(wanted[moving] ** 2)))
-            if moved <= max(NO_OP_OUTPUT, NO_OP_FRACTION * asked):
-                lines.append(f"the mask covers the region the warp moves; the output is the input "
-                             f"(where the warp moves pixels by {asked:.0f} px RMS, they move by {moved:.1f} px)")
-    return lines
 
 
 def warp(image: np.ndarray, mask: np.ndarray | None, preset: str, *, mode: str = MODE,

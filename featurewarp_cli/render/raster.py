@@ -40,8 +40,8 @@ INTERPOLATION = {"linear": cv2.INTER_LINEAR, "cubic": cv2.INTER_CUBIC, "lanczos"
 #: Output pixels per band (rows are grouped so that a band holds about this many).
 BAND_PIXELS = 1 << 18
 #: Bands rendered at once (the compiled loops and OpenCV release the GIL).
-#: 12 MP at cell 4 (swirl 180) on the 2-core machine takes about 0.8 s of CPU
-#: antialiased; two threads bring it to about 0.4 s. The output does not depend on it.
+#: 12 MP at cell 4 (swirl 180) on the 2-core machine takes about 0.5 s of CPU
+#: antialiased; two threads bring it to about 0.3 s. The output does not depend on it.
 THREADS = min(2, os.cpu_count() or 1)
 
 
