@@ -17,7 +17,7 @@ import time
 from dataclasses import dataclass, field
 
 from .. import plugins
-from ..engine.defaults import DECAY, FEATURE_WEIGHT, FORMULATION, MODE, SCALE_PRIOR
+from ..engine.defaults import DECAY, FEATURE_WEIGHT, FORMULATION, INTERPOLATION, MODE, SCALE_PRIOR
 from ..io import ImageError, colours, decode, encode, formats, limits, write
 
 #: What :func:`prefetch_engine` imports: the engine (grid, features, fold-over guard,
@@ -83,7 +83,7 @@ class Settings:
     scale_prior: float = SCALE_PRIOR
     strict: bool = False
     background: str | None = None
-    interp: str = "cubic"
+    interp: str = INTERPOLATION
     fmt: str | None = None
     max_pixels: int = limits.MAX_PIXELS
 

@@ -17,7 +17,6 @@ from ..io import limits
 from ..io.formats import NAMES as FORMAT_NAMES
 from ..plugins import Param
 
-INTERPOLATIONS = ("linear", "cubic", "lanczos")
 #: Keyword arguments of the commands that are engine or output settings, not preset parameters.
 SETTINGS = ("mode", "cell", "feature_weight", "decay", "formulation", "boundary", "scale_prior", "strict",
             "background", "interp", "fmt", "max_pixels")
@@ -104,7 +103,7 @@ def engine_options() -> list[click.Option]:
                      help="Fill where no source pixel lands: #rrggbb, a colour name, or transparent. "
                           "Default: transparent for PNG, WebP and TIFF output, white otherwise "
                           "(formats without alpha also get transparent input pixels flattened on it)."),
-        click.Option(["--interp"], type=click.Choice(INTERPOLATIONS), default="cubic", show_default=True,
+        click.Option(["--interp"], type=click.Choice(defaults.INTERPOLATIONS), default=defaults.INTERPOLATION, show_default=True,
                      help="Resampling filter."),
         click.Option(["--format", "fmt"], type=click.Choice(FORMAT_NAMES, case_sensitive=False),
                      help="Output format; overrides the extension (needed for '-' unless a "

@@ -37,6 +37,9 @@ FORMULATION = "exact"
 #: fixed: border nodes stay on W (the paper); slide: they may slide along the sides W
 #: maps onto axis-parallel lines. The default is the preset's own (``Warp.boundary``).
 BOUNDARIES = ("fixed", "slide")
+#: Resampling filters of the renderer (OpenCV's linear, cubic and Lanczos-4 interpolation).
+INTERPOLATIONS = ("linear", "cubic", "lanczos")
+INTERPOLATION = "cubic"
 #: w_F, the weight of the feature equations.
 FEATURE_WEIGHT = 10.0
 #: rho, the width of the transition band around features, in cells.

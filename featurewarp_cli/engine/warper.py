@@ -43,7 +43,8 @@ import numpy as np
 
 from . import components, fidelity, guard, quality, system, targets
 from . import features as feat
-from .defaults import BOUNDARIES, DECAY, FEATURE_WEIGHT, FORMULATION, FORMULATIONS, MODE, MODES, SCALE_PRIOR
+from .defaults import (BOUNDARIES, DECAY, FEATURE_WEIGHT, FORMULATION, FORMULATIONS, INTERPOLATION, MODE, MODES,
+                       SCALE_PRIOR)
 from .grid import Grid, signed_areas
 from .record import KEPT, ComponentRecord, SolveRecord, warnings_for
 
@@ -410,7 +411,7 @@ class FeatureWarper:
         if record.mode != "plain":
             record.warnings.extend(warnings_for(record, state.nodes, target, warped, warp))
 
-    def render(self, image: np.ndarray, mesh: Mesh, interp: str = "cubic", background=None,
+    def render(self, image: np.ndarray, mesh: Mesh, interp: str = INTERPOLATION, background=None,
                antialias: bool = True) -> np.ndarray:
         """Resample ``image`` through ``mesh``; see :func:`featurewarp_cli.render.raster.render`.
 
@@ -457,7 +458,7 @@ def _window_fixed(state: _GridState, ties: components.Ties) -> np.ndarray:
 
 def warp(image: np.ndarray, mask: np.ndarray | None, preset: str, *, mode: str = MODE,
          cell: int | None = None, feature_weight: float = FEATURE_WEIGHT, decay: float = DECAY,
-         formulation: str = FORMULATION, boundary: str | None = None, interp: str = "cubic",
+         formulation: str = FORMULATION, boundary: str | None = None, interp: str = INTERPOLATION,
          background=None, scale_prior: float = SCALE_PRIOR, **params) -> np.ndarray:
     """Warp ``image`` with a preset while the features in ``mask`` keep their shape.
 
