@@ -121,7 +121,7 @@ class Ties:
 
     def key(self) -> bytes:
         """What the Hessian of eta depends on besides the grid and weights."""
-        return b"".join(np.ascontiguousarray(a).tobytes() for a in (self.tied, self.pin, self.basis))
+        return b"".join(np.ascontiguousarray(a).tobytes() for a in (self.tied, self.pin, self.basis, self.unpinned))
 
 
 def as_ab(maps: np.ndarray) -> np.ndarray:
