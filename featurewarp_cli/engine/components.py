@@ -427,6 +427,23 @@ SCALE_FLOOR = 0.05
 SCALE_BISECTIONS = 6
 
 
+def _furthest_fitting(solve, start: np.ndarray, end: np.ndarray, start_result, floor: np.ndarray, triangles):
+    """The furthest point of the segment start -> end (bisection) whose solution keeps every
+    triangle's area at or above ``floor``, given that ``start``'s (``start_result``) does.
+
+    Returns (ab, solve(ab))."""
+    lo, hi, best_ab, best = 0.0, 1.0, start, start_result
+    for _ in range(SCALE_BISECTIONS):
+        mid = 0.5 * (lo + hi)
+        ab = start + mid * (end - start)
+        result = solve(ab)
+        if np.all(signed_areas(result[0], triangles) >= floor):
+            lo, best, best_ab = mid, result, ab
+        else:
+            hi = mid
+    return best_ab, best
+
+
 def fitting_scales(solve, prior: np.ndarray, optimum: np.ndarray, triangles, warped):
     """The features' similarities: the least-squares ``optimum`` unless its solution crushes a
     triangle that the ``prior``'s solution does not; then the furthest point from the prior
@@ -444,22 +461,9 @@ def fitting_scales(solve, prior: np.ndarray, optimum: np.ndarray, triangles, war
         return optimum, best
     start = solve(prior)
     floor = np.minimum(SCALE_FLOOR * signed_areas(warped, triangles), signed_areas(start[0], triangles))
-
-    def fits(result):
-        return bool(np.all(signed_areas(result[0], triangles) >= floor))
-
-    if fits(best):
+    if np.all(signed_areas(best[0], triangles) >= floor):
         return optimum, best
-    lo, hi, best_ab, best = 0.0, 1.0, prior, start
-    for _ in range(SCALE_BISECTIONS):
-        mid = 0.5 * (lo + hi)
-        ab = prior + mid * (optimum - prior)
-        result = solve(ab)
-        if fits(result):
-            lo, best, best_ab = mid, result, ab
-        else:
-            hi = mid
-    return best_ab, best
+    return _furthest_fitting(solve, prior, optimum, start, floor, triangles)
 
 
 def shrink_to_fit(solve, low: np.ndarray, high: np.ndarray, triangles, warped):
@@ -470,20 +474,7 @@ def shrink_to_fit(solve, low: np.ndarray, high: np.ndarray, triangles, warped):
 
     Returns (ab, solve(ab)) or None."""
     floor = SCALE_FLOOR * signed_areas(warped, triangles)
-
-    def fits(result):
-        return bool(np.all(signed_areas(result[0], triangles) >= floor))
-
-    best = solve(low)
-    if not fits(best):
+    start = solve(low)
+    if not np.all(signed_areas(start[0], triangles) >= floor):
         return None
-    lo, hi, best_ab = 0.0, 1.0, low
-    for _ in range(SCALE_BISECTIONS):
-        mid = 0.5 * (lo + hi)
-        ab = low + mid * (high - low)
-        result = solve(ab)
-        if fits(result):
-            lo, best, best_ab = mid, result, ab
-        else:
-            hi = mid
-    return best_ab, best
+    return _furthest_fitting(solve, low, high, start, floor, triangles)
