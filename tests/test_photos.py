@@ -93,6 +93,23 @@ def test_portrait_background_stretch_is_spread(portrait):
     assert mesh.info["background_stretch"] <= 8.0
 
 
+def test_subject_that_fills_the_height_grows_instead_of_streaking_the_sky(portrait, monkeypatch):
+    """stretch --sy 2 on a portrait with room at the side: the subject grows uniformly (scale
+    above least squares' 1.1) and the strip over the head takes less of the stretch."""
+    from featurewarp_cli.engine import scale_search
+
+    image, mask = portrait
+    image = cv2.copyMakeBorder(image, 11, 0, 0, 500, cv2.BORDER_REFLECT)
+    mask = np.pad(mask, ((11, 0), (0, 500)))
+    _, spread = warped(image, mask, "stretch", sy=2)
+    monkeypatch.setattr(scale_search, "SPREAD_ABOVE", np.inf)
+    _, piled = warped(image, mask, "stretch", sy=2)
+    grown, least_squares = spread.info["components"][0], piled.info["components"][0]
+    assert grown["kept"] and spread.flips() == 0
+    assert grown["scale"] >= least_squares["scale"] + 0.1
+    assert spread.info["background_stretch"] < piled.info["background_stretch"]
+
+
 def test_frame_filling_closeup_swirl_warns_that_the_output_is_the_input(closeup):
     """A swirl whose disc the mask fills (its rim pinned) leaves the picture as it was: said so."""
     image, mask = closeup

@@ -37,8 +37,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .grid import signed_areas
-
 #: Pins that a similarity fits with a larger RMS residual (px) leave a component untied.
 PIN_TOLERANCE = 0.01
 #: Columns of Phi solved at once.
@@ -419,62 +417,3 @@ class ScaleSolver:
         eta = np.linalg.solve(lhs, -(gradient + pull))
         np.add.at(ab, self.comp, eta[:, None] * self.directions)
         return ab
-
-
-#: Smallest area, relative to W's, that the scale search lets a triangle keep.
-SCALE_FLOOR = 0.05
-#: Bisection steps of the scale search (and of the move towards W).
-SCALE_BISECTIONS = 6
-
-
-def _furthest_fitting(solve, start: np.ndarray, end: np.ndarray, start_result, floor: np.ndarray, triangles):
-    """The furthest point of the segment start -> end (bisection) whose solution keeps every
-    triangle's area at or above ``floor``, given that ``start``'s (``start_result``) does.
-
-    Returns (ab, solve(ab))."""
-    lo, hi, best_ab, best = 0.0, 1.0, start, start_result
-    for _ in range(SCALE_BISECTIONS):
-        mid = 0.5 * (lo + hi)
-        ab = start + mid * (end - start)
-        result = solve(ab)
-        if np.all(signed_areas(result[0], triangles) >= floor):
-            lo, best, best_ab = mid, result, ab
-        else:
-            hi = mid
-    return best_ab, best
-
-
-def fitting_scales(solve, prior: np.ndarray, optimum: np.ndarray, triangles, warped):
-    """The features' similarities: the least-squares ``optimum`` unless its solution crushes a
-    triangle that the ``prior``'s solution does not; then the furthest point from the prior
-    towards the optimum that crushes none (bisection).
-
-    A triangle counts as crushed below :data:`SCALE_FLOOR` of its area under W, or below its
-    area in the prior's solution where that is smaller already (folds there are the fold-over
-    guard's to open, as for any solution). So solving for scale and rotation never leaves the
-    background worse off than the preset's own lambda R would: a feature that cannot grow as
-    far as least squares would like stays a similarity, only less grown.
-
-    Returns (ab, solve(ab))."""
-    best = solve(optimum)
-    if np.allclose(prior, optimum):
-        return optimum, best
-    start = solve(prior)
-    floor = np.minimum(SCALE_FLOOR * signed_areas(warped, triangles), signed_areas(start[0], triangles))
-    if np.all(signed_areas(best[0], triangles) >= floor):
-        return optimum, best
-    return _furthest_fitting(solve, prior, optimum, start, floor, triangles)
-
-
-def shrink_to_fit(solve, low: np.ndarray, high: np.ndarray, triangles, warped):
-    """The largest similarities between ``low`` and ``high`` ((C, 2) each) whose solution crushes
-    no triangle below :data:`SCALE_FLOOR` of its area under W (bisection), or None when even
-    ``low`` does. For features that cannot keep their shape at the size least squares picked
-    (densely packed coins squeezed to 0.6 of their width): smaller but exact.
-
-    Returns (ab, solve(ab)) or None."""
-    floor = SCALE_FLOOR * signed_areas(warped, triangles)
-    start = solve(low)
-    if not np.all(signed_areas(start[0], triangles) >= floor):
-        return None
-    return _furthest_fitting(solve, low, high, start, floor, triangles)

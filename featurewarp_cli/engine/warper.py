@@ -41,7 +41,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import components, fidelity, guard, quality, system, targets
+from . import components, fidelity, guard, quality, scale_search, system, targets
 from . import features as feat
 from .defaults import (BOUNDARIES, DECAY, FEATURE_WEIGHT, FORMULATION, FORMULATIONS, INTERPOLATION, MODE, MODES,
                        SCALE_PRIOR)
@@ -346,7 +346,9 @@ class FeatureWarper:
             weights = components.prior_weights(features, grid.spacing, self.scale_prior)
             optimum = np.where(ties.tied[:, None], scale_solver.solve(ties.base, gradient, prior, weights), prior)
             start = np.where(ties.tied[:, None], ties.project(prior), prior)
-            ab, (x, edges, rhs, offset) = components.fitting_scales(solve, start, optimum, state.triangles, warped)
+            ab, (x, edges, rhs, offset) = scale_search.fitting_scales(solve, start, optimum, state.triangles, warped)
+            ab, (x, edges, rhs, offset) = scale_search.spread_stretch(
+                solve, ab, (x, edges, rhs, offset), ties.tied, state.triangles, warped, state.tri_component < 0)
         if not self.injective:
             return x, ties.tied, ties.unpinned & ties.tied
 
@@ -365,7 +367,7 @@ class FeatureWarper:
         if record.guard.release_rounds and scale_solver is not None and scale_solver.n_columns:
             # The features could not keep their shape at this scale: smaller, do they?
             low = np.where(ties.tied[:, None], ties.project(prior * _smallest_scale(jac, features, prior)), prior)
-            shrunk = components.shrink_to_fit(solve, low, ab, state.triangles, warped)
+            shrunk = scale_search.shrink_to_fit(solve, low, ab, state.triangles, warped)
             if shrunk is not None:
                 ab, (x, edges, rhs, offset) = shrunk
                 record.guard = guard.GuardRecord()

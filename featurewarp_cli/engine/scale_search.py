@@ -1,0 +1,158 @@
+"""The searches over the features' similarities that least squares alone gets wrong.
+
+The least-squares optimum of :mod:`featurewarp_cli.engine.components` balances the
+features' shape equations against the background's. Three things it does not see:
+
+- a grown feature may crush the background beside it (:func:`fitting_scales` backs off
+  towards the preset's lambda R until nothing is crushed);
+- a feature that cannot keep its shape at its size may keep it smaller
+  (:func:`shrink_to_fit`, after the fold-over guard had to relax it);
+- where features fill most of a row or column, least squares prefers to pile the whole
+  change of length into the thin strip of background left there (the stretch of a thin
+  strip costs little because it has few quads); :func:`spread_stretch` grows
+  the features uniformly until the largest stretch of a background triangle matches the
+  largest compression, as the scale-and-stretch idea of Wang et al. 2008 asks.
+
+Each is a bisection over a segment of (a, b) values, one back-substitution per step.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .grid import signed_areas
+
+#: Smallest area, relative to W's, that the scale search lets a triangle keep.
+SCALE_FLOOR = 0.05
+#: Bisection steps of the scale search (and of the move towards W).
+SCALE_BISECTIONS = 6
+
+
+def _furthest_fitting(solve, start: np.ndarray, end: np.ndarray, start_result, floor: np.ndarray, triangles):
+    """The furthest point of the segment start -> end (bisection) whose solution keeps every
+    triangle's area at or above ``floor``, given that ``start``'s (``start_result``) does.
+
+    Returns (ab, solve(ab))."""
+    lo, hi, best_ab, best = 0.0, 1.0, start, start_result
+    for _ in range(SCALE_BISECTIONS):
+        mid = 0.5 * (lo + hi)
+        ab = start + mid * (end - start)
+        result = solve(ab)
+        if np.all(signed_areas(result[0], triangles) >= floor):
+            lo, best, best_ab = mid, result, ab
+        else:
+            hi = mid
+    return best_ab, best
+
+
+def fitting_scales(solve, prior: np.ndarray, optimum: np.ndarray, triangles, warped):
+    """The features' similarities: the least-squares ``optimum`` unless its solution crushes a
+    triangle that the ``prior``'s solution does not; then the furthest point from the prior
+    towards the optimum that crushes none (bisection).
+
+    A triangle counts as crushed below :data:`SCALE_FLOOR` of its area under W, or below its
+    area in the prior's solution where that is smaller already (folds there are the fold-over
+    guard's to open, as for any solution). So solving for scale and rotation never leaves the
+    background worse off than the preset's own lambda R would: a feature that cannot grow as
+    far as least squares would like stays a similarity, only less grown.
+
+    Returns (ab, solve(ab))."""
+    best = solve(optimum)
+    if np.allclose(prior, optimum):
+        return optimum, best
+    start = solve(prior)
+    floor = np.minimum(SCALE_FLOOR * signed_areas(warped, triangles), signed_areas(start[0], triangles))
+    if np.all(signed_areas(best[0], triangles) >= floor):
+        return optimum, best
+    return _furthest_fitting(solve, prior, optimum, start, floor, triangles)
+
+
+def shrink_to_fit(solve, low: np.ndarray, high: np.ndarray, triangles, warped):
+    """The largest similarities between ``low`` and ``high`` ((C, 2) each) whose solution crushes
+    no triangle below :data:`SCALE_FLOOR` of its area under W (bisection), or None when even
+    ``low`` does. For features that cannot keep their shape at the size least squares picked
+    (densely packed coins squeezed to 0.6 of their width): smaller but exact.
+
+    Returns (ab, solve(ab)) or None."""
+    floor = SCALE_FLOOR * signed_areas(warped, triangles)
+    start = solve(low)
+    if not np.all(signed_areas(start[0], triangles) >= floor):
+        return None
+    return _furthest_fitting(solve, low, high, start, floor, triangles)
+
+
+#: Background area ratios (canvas / W) up to SPREAD_ABOVE are left as least squares put
+#: them; beyond, :func:`spread_stretch` searches the features' scale.
+SPREAD_ABOVE = 4.0
+#: How far :func:`spread_stretch` may grow the features: up to this factor.
+SPREAD_RANGE = 2.0
+#: Bisection steps of :func:`spread_stretch` (the factor to within 2^-8 of its log range).
+SPREAD_BISECTIONS = 8
+#: Fraction of background triangles at each end that the spread's balance leaves out.
+SPREAD_OUTLIERS = 0.002
+
+
+def _log_extremes(target: np.ndarray, reference: np.ndarray, triangles: np.ndarray) -> tuple[float, float]:
+    """log of the largest and of the smallest area ratio (canvas / W) of ``triangles``, each
+    leaving out the :data:`SPREAD_OUTLIERS` most extreme (single triangles wedged in a
+    notch of the mask are squeezed whatever the scale; the spread is about regions)."""
+    ratio = np.log(np.maximum(signed_areas(target, triangles) / reference, 1e-12))
+    low, high = np.quantile(ratio, [SPREAD_OUTLIERS, 1.0 - SPREAD_OUTLIERS])
+    return float(high), float(low)
+
+
+def spread_stretch(solve, ab: np.ndarray, result, scalable: np.ndarray, triangles: np.ndarray,
+                   warped: np.ndarray, background: np.ndarray):
+    """Grow the features uniformly so the background's stretch is spread.
+
+    When the largest background area ratio against W exceeds :data:`SPREAD_ABOVE` and
+    outweighs the largest compression, the ``scalable`` components' (a, b) are multiplied
+    by one factor m, searched by bisection on [1, SPREAD_RANGE] for the point where the
+    largest stretch equals the largest compression (log max + log min changes sign).
+    Shrinking is not searched here: squeezed features are :func:`shrink_to_fit`'s. No step may crush a triangle below half of :data:`SCALE_FLOOR` of its
+    area under W, or below half its area in ``result`` where that is smaller already.
+
+    Growing a feature stretches the strip over it sideways too, so the area ratio there
+    falls more slowly than the strip's height: a subject that fills the height and most of
+    the width cannot bring it down much (see README, "Known limits").
+
+    Parameters
+    ----------
+    solve : callable
+        (C, 2) (a, b) -> (nodes, ...), the least-squares solution at those similarities.
+    ab, result : (C, 2) ndarray and tuple
+        The similarities found so far and ``solve(ab)``.
+    scalable : (C,) bool ndarray
+        Components whose similarity is an unknown (tied, with a free scale).
+    triangles : (M, 3) int ndarray
+    warped : (N, 2) ndarray
+        The nodes under W.
+    background : (M,) bool ndarray
+        Background triangles.
+
+    Returns
+    -------
+    (ab, solve(ab))
+    """
+    tris = triangles[background]
+    reference = signed_areas(warped, tris)
+    keep = reference > 1e-12
+    tris, reference = tris[keep], reference[keep]
+    if not tris.size or not scalable.any():
+        return ab, result
+    high, low = _log_extremes(result[0], reference, tris)
+    if high <= np.log(SPREAD_ABOVE) or high + low <= 0:
+        return ab, result
+    end = np.log(SPREAD_RANGE)
+    floor = 0.5 * np.minimum(SCALE_FLOOR * signed_areas(warped, triangles), signed_areas(result[0], triangles))
+    lo, hi, best_ab, best = 0.0, 1.0, ab, result
+    for _ in range(SPREAD_BISECTIONS):
+        mid = 0.5 * (lo + hi)
+        trial = np.where(scalable[:, None], ab * np.exp(mid * end), ab)
+        outcome = solve(trial)
+        high, low = _log_extremes(outcome[0], reference, tris)
+        if np.all(signed_areas(outcome[0], triangles) >= floor) and high + low > 0:
+            lo, best, best_ab = mid, outcome, trial
+        else:
+            hi = mid
+    return best_ab, best
