@@ -129,6 +129,19 @@ def test_frame_filling_closeup_arc_is_no_worse_than_plain(closeup):
     assert mesh.info["warnings"]
 
 
+def test_arc_300_keeps_the_head_exact_when_only_the_frame_cut_helmet_must_give(portrait):
+    """Head + helmet mask, arc 300: the helmet (cut by the frame, against curved pins) cannot
+    stay a similarity; relaxing it must not drag the head, which stays exact."""
+    image, _ = portrait
+    mask = sample("astronaut_helmet_mask.png") >= 128
+    _, mesh = warped(image, mask, "arc", angle=300)
+    head, helmet = sorted(mesh.info["components"], key=lambda c: c["quads"])
+    assert mesh.flips() == 0
+    assert head["kept"], head
+    assert helmet["anisotropy_worst"] <= helmet["plain_anisotropy_worst"] + 1e-6
+    assert any("not kept" in line for line in mesh.info["warnings"])
+
+
 def test_strict_turns_the_warning_into_exit_1_with_nothing_written(tmp_path):
     """--strict: where a warning is due the command fails and writes nothing."""
     out, report = tmp_path / "out.png", tmp_path / "r.json"

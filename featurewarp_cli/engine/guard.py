@@ -60,8 +60,11 @@ class GuardRecord:
     fallback : bool
         Nothing injective was found; the result is a step from W towards the solution.
     plain_blend : float
-        1: the solution as found; below 1: every node moved this far from W towards it,
-        so that no component is more distorted than under W.
+        1: the solution as found; below 1: moved this far from W towards it, so that no
+        component is more distorted than under W (the targets of ``degraded_components``
+        where that list is not empty, times the share of a tapered move after it; else the
+        nodes near the offending triangles, or all).
+    degraded_components : list of int
     """
 
     flipped_before: int = 0
@@ -72,6 +75,7 @@ class GuardRecord:
     feature_blend: float = 1.0
     fallback: bool = False
     plain_blend: float = 1.0
+    degraded_components: list = field(default_factory=list)
 
 
 @dataclass
@@ -169,45 +173,67 @@ def _release(problem: Problem, x, floor, record: GuardRecord):
         record.release_rounds = round_
         if round_ == 2:
             released = np.arange(features.n_components)
-        blend = np.isin(features.component, released) & features.is_constrained
-
-        def blended(s):
-            return np.where(blend[:, None, None], s * problem.edges + (1.0 - s) * problem.warp_edges,
-                            problem.edges)
-
-        def constants(s):
-            return problem.rebuild(blended(s), released)
-
-        def solve_at(s):
-            systems, rhs, offset, _ = constants(s)
-            return problem.solver(systems, rhs, offset)()
-
-        lo, hi = 0.0, 1.0
-        best = solve_at(0.0)
-        if injectivity.flipped(best, tris).any():
+        found = blend_search(problem, released, floor, record)
+        if found is None:
             continue                      # folds come from features not released yet
-        for _ in range(BLEND_BISECTIONS):        # cheap: plain solves
-            mid = 0.5 * (lo + hi)
-            x = solve_at(mid)
-            if injectivity.flipped(x, tris).any():
-                hi = mid
-            else:
-                lo, best = mid, x
-        hi = 1.0
-        for _ in range(UNTANGLED_BISECTIONS):    # further, where untangling opens the folds
-            mid = 0.5 * (lo + hi)
-            systems, rhs, offset, tied = constants(mid)
-            x, ok = _untangled(problem, systems, rhs, offset, tied, solve_at(mid), floor, record)
-            if ok:
-                lo, best = mid, x
-            else:
-                hi = mid
-        record.feature_blend = lo
+        best, record.feature_blend = found
         record.released_components = [int(c) for c in released]
         return best
     record.fallback = True
     warped = problem.warped
     return warped + injectivity.max_step(warped, x, tris) * 0.95 * (x - warped)
+
+
+def blend_search(problem: Problem, released: np.ndarray, floor, record: GuardRecord, accept=None):
+    """Untie the components ``released`` and solve with their targets blended ``s`` of their own
+    and ``1 - s`` of W's: the largest s (bisection) whose solution, untangled where needed,
+    has no fold and passes ``accept`` (positions -> bool; default: anything).
+
+    Returns (positions, s), or None when even s = 0 (W's targets) does not pass."""
+    tris = problem.triangles
+    blend = np.isin(problem.features.component, released) & problem.features.is_constrained
+    accept = accept or (lambda points: True)
+
+    def constants(s):
+        edges = np.where(blend[:, None, None], s * problem.edges + (1.0 - s) * problem.warp_edges, problem.edges)
+        return problem.rebuild(edges, released)
+
+    def solve_at(s):
+        systems, rhs, offset, _ = constants(s)
+        return problem.solver(systems, rhs, offset)()
+
+    lo, hi = 0.0, 1.0
+    best = solve_at(0.0)
+    if injectivity.flipped(best, tris).any():
+        systems, rhs, offset, tied = constants(0.0)
+        best, ok = _untangled(problem, systems, rhs, offset, tied, best, floor, record)
+        if not ok or not accept(best):
+            return None
+        return _untangled_blend(problem, constants, solve_at, floor, record, accept, 0.0, best)
+    if not accept(best):
+        return None
+    for _ in range(BLEND_BISECTIONS):        # cheap: plain solves
+        mid = 0.5 * (lo + hi)
+        x = solve_at(mid)
+        if injectivity.flipped(x, tris).any() or not accept(x):
+            hi = mid
+        else:
+            lo, best = mid, x
+    return _untangled_blend(problem, constants, solve_at, floor, record, accept, lo, best)
+
+
+def _untangled_blend(problem, constants, solve_at, floor, record, accept, lo, best):
+    """Bisect the blend beyond ``lo`` (whose positions are ``best``), untangling each trial."""
+    hi = 1.0
+    for _ in range(UNTANGLED_BISECTIONS):
+        mid = 0.5 * (lo + hi)
+        systems, rhs, offset, tied = constants(mid)
+        x, ok = _untangled(problem, systems, rhs, offset, tied, solve_at(mid), floor, record)
+        if ok and accept(x):
+            lo, best = mid, x
+        else:
+            hi = mid
+    return best, lo
 
 
 def _untangle_window(problem: Problem, rhs, offset, tied, x, floor, margin_factor: float):
@@ -306,46 +332,81 @@ def _taper(state, quads: np.ndarray) -> np.ndarray:
     return np.maximum(grown, cv2.GaussianBlur(grown, (size, size), 0)).ravel()[:, None]
 
 
-def no_worse_than_plain(state, x: np.ndarray, warped: np.ndarray, record) -> np.ndarray:
+def no_worse_than_plain(state, x: np.ndarray, warped: np.ndarray, record, problem: Problem | None = None) -> np.ndarray:
     """``x``, or ``x`` moved towards W where components came out more anisotropic than under
     W, as little as makes every component no worse than W, without folds.
 
-    The move is ``(1 - t) w (W - x)`` with ``w`` 1 around the offending triangles (then,
-    if that is not enough, on the offending components), tapering to 0 over
-    :data:`TAPER_CELLS` cells, and t bisected; where neither works, every node moves
-    evenly towards W."""
+    Tried in turn, each with its blend bisected: the move ``(1 - t) w (W - x)`` with ``w``
+    1 around the offending triangles, tapering to 0 over :data:`TAPER_CELLS` cells (then
+    around the offending components); a new solve (``problem``) with only the offending
+    components untied and their targets blended towards W's, so the other features stay
+    as they are, finished by the tapered move where needed; last, every node moved evenly
+    towards W."""
     if np.any(signed_areas(warped, state.triangles) <= 0):
         return x
     plain = _worst_per_component(state, _anisotropy(state, warped)) * (1.0 + 1e-9) + 1e-9
-    comp = np.maximum(state.tri_component, 0)
-    anisotropy = _anisotropy(state, x)
-    worse = (state.tri_component >= 0) & (anisotropy > plain[comp])
-    if not worse.any():
-        return x
 
     def ok(points):
         return (bool(np.all(_worst_per_component(state, _anisotropy(state, points)) <= plain))
                 and not np.any(signed_areas(points, state.triangles) <= 0))
 
+    if ok(x):
+        return x
+    fixed = _tapered_fix(state, x, warped, plain, ok)
+    if fixed is not None:
+        x, record.plain_blend = fixed
+        return x
+    offending = np.unique(state.tri_component[_worse(state, x, plain)])
+    if problem is not None:
+        floor = UNTANGLE_FLOOR * signed_areas(warped, state.triangles)
+        found = blend_search(problem, offending, floor, record,
+                             accept=lambda p: ok(p) or _tapered_fix(state, p, warped, plain, ok) is not None)
+        if found is not None:
+            best, blend = found
+            best, taper = (best, 1.0) if ok(best) else _tapered_fix(state, best, warped, plain, ok)
+            record.degraded_components = [int(c) for c in offending]
+            record.plain_blend = blend * taper
+            return best
+    if ok(warped):
+        x, record.plain_blend = _bisect_move(lambda t: warped + t * (x - warped), ok)
+        return x
+    record.plain_blend = 0.0
+    return warped
+
+
+def _worse(state, points: np.ndarray, plain: np.ndarray) -> np.ndarray:
+    """Feature triangles more anisotropic under ``points`` than their component's worst under W."""
+    return (state.tri_component >= 0) & (_anisotropy(state, points) > plain[np.maximum(state.tri_component, 0)])
+
+
+def _tapered_fix(state, points: np.ndarray, warped: np.ndarray, plain: np.ndarray, ok):
+    """``points`` moved towards W around the offending triangles (then components), tapered,
+    as little as passes ``ok``: (positions, t) as :func:`_bisect_move`, or None where even
+    the whole move does not pass."""
+    worse = _worse(state, points, plain)
     n_quads = state.features.weight.size
     local = np.zeros(n_quads, bool)
     local[np.flatnonzero(worse) % n_quads] = True
-    bad = np.isin(state.features.component, np.unique(state.tri_component[worse]))
-    moves = [lambda t, w=_taper(state, local): x + (1.0 - t) * w * (warped - x),
-             lambda t, w=_taper(state, bad & state.features.is_constrained): x + (1.0 - t) * w * (warped - x),
-             lambda t: warped + t * (x - warped)]
-    for move in moves:
-        if not ok(move(0.0)):
-            continue
-        lo, hi, best = 0.0, 1.0, move(0.0)
-        for _ in range(PLAIN_BISECTIONS):
-            mid = 0.5 * (lo + hi)
-            points = move(mid)
-            if ok(points):
-                lo, best = mid, points
-            else:
-                hi = mid
-        record.plain_blend = lo
-        return best
-    record.plain_blend = 0.0
-    return warped
+    bad = np.isin(state.features.component, np.unique(state.tri_component[worse])) & state.features.is_constrained
+    for region in (local, bad):
+        weight = _taper(state, region)
+
+        def move(t, weight=weight):
+            return points + (1.0 - t) * weight * (warped - points)
+
+        if ok(move(0.0)):
+            return _bisect_move(move, ok)
+    return None
+
+
+def _bisect_move(move, ok) -> tuple[np.ndarray, float]:
+    """(``move(t)``, t) at the largest t in [0, 1] (bisection) that passes ``ok``, given t = 0 does."""
+    lo, hi, best = 0.0, 1.0, move(0.0)
+    for _ in range(PLAIN_BISECTIONS):
+        mid = 0.5 * (lo + hi)
+        points = move(mid)
+        if ok(points):
+            lo, best = mid, points
+        else:
+            hi = mid
+    return best, lo

@@ -127,6 +127,7 @@ class SolveRecord:
             "feature_blend": guard.feature_blend,
             "fallback": guard.fallback,
             "plain_blend": guard.plain_blend,
+            "degraded_components": list(guard.degraded_components),
             "quality": self.quality,
             "flipped_triangles": self.flipped_triangles,
             "warnings": list(self.warnings),
@@ -138,8 +139,10 @@ def warnings_for(record: "SolveRecord", source, target, warped, warp) -> list[st
     """One line per thing the caller should know: features not kept or relaxed, a no-op."""
     lines = []
     if record.guard.plain_blend < 1.0:
-        lines.append(f"features degraded towards the plain warp (blend {record.guard.plain_blend:.2f}) so that "
-                     f"none is more distorted than under it")
+        which = record.guard.degraded_components
+        lines.append(f"features degraded towards the plain warp ("
+                     + (f"components {', '.join(map(str, which))}; " if which else "")
+                     + f"blend {record.guard.plain_blend:.2f}) so that none is more distorted than under it")
     if record.guard.release_rounds:
         lines.append(f"features relaxed towards the plain warp to avoid fold-overs "
                      f"(components {', '.join(map(str, record.guard.released_components))}; "

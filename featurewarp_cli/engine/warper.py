@@ -374,7 +374,7 @@ class FeatureWarper:
                 problem.rhs, problem.offset, problem.edges = rhs, offset, edges
                 x = guard.guard(problem, x, record.guard)
         if self.formulation == "exact":            # the paper's soft targets are kept as published
-            x = guard.no_worse_than_plain(state, x, warped, record.guard)
+            x = guard.no_worse_than_plain(state, x, warped, record.guard, problem)
         inner = sum(self.timings.get(k, 0.0) for k in ("solve", "factor", "rhs")) - counted
         self.timings["guard"] = time.perf_counter() - t0 - inner      # what the solves inside it did not take
         released = np.isin(np.arange(ties.tied.size), record.guard.released_components)
