@@ -28,18 +28,26 @@ SCALE_FLOOR = 0.05
 SCALE_BISECTIONS = 6
 
 
-def _furthest_fitting(solve, start: np.ndarray, end: np.ndarray, start_result, floor: np.ndarray, triangles):
+def _between(start_result, end_result, t: float):
+    """The solution at ``start + t (end - start)`` from the solutions at both ends.
+
+    The least-squares solution and its constants (right-hand side, offsets, edge targets)
+    are affine in (a, b) for fixed ties, so points of a segment cost no solve."""
+    return tuple(a + t * (b - a) for a, b in zip(start_result, end_result))
+
+
+def _furthest_fitting(start: np.ndarray, end: np.ndarray, start_result, end_result, floor: np.ndarray,
+                      triangles):
     """The furthest point of the segment start -> end (bisection) whose solution keeps every
     triangle's area at or above ``floor``, given that ``start``'s (``start_result``) does.
 
-    Returns (ab, solve(ab))."""
+    Returns (ab, solution)."""
     lo, hi, best_ab, best = 0.0, 1.0, start, start_result
     for _ in range(SCALE_BISECTIONS):
         mid = 0.5 * (lo + hi)
-        ab = start + mid * (end - start)
-        result = solve(ab)
+        result = _between(start_result, end_result, mid)
         if np.all(signed_areas(result[0], triangles) >= floor):
-            lo, best, best_ab = mid, result, ab
+            lo, best, best_ab = mid, result, start + mid * (end - start)
         else:
             hi = mid
     return best_ab, best
@@ -64,21 +72,22 @@ def fitting_scales(solve, prior: np.ndarray, optimum: np.ndarray, triangles, war
     floor = np.minimum(SCALE_FLOOR * signed_areas(warped, triangles), signed_areas(start[0], triangles))
     if np.all(signed_areas(best[0], triangles) >= floor):
         return optimum, best
-    return _furthest_fitting(solve, prior, optimum, start, floor, triangles)
+    return _furthest_fitting(prior, optimum, start, best, floor, triangles)
 
 
-def shrink_to_fit(solve, low: np.ndarray, high: np.ndarray, triangles, warped):
-    """The largest similarities between ``low`` and ``high`` ((C, 2) each) whose solution crushes
-    no triangle below :data:`SCALE_FLOOR` of its area under W (bisection), or None when even
-    ``low`` does. For features that cannot keep their shape at the size least squares picked
-    (densely packed coins squeezed to 0.6 of their width): smaller but exact.
+def shrink_to_fit(solve, low: np.ndarray, high: np.ndarray, high_result, triangles, warped):
+    """The largest similarities between ``low`` and ``high`` ((C, 2) each; ``high_result`` is
+    ``solve(high)``) whose solution crushes no triangle below :data:`SCALE_FLOOR` of its
+    area under W (bisection), or None when even ``low`` does. For features that cannot keep
+    their shape at the size least squares picked (densely packed coins squeezed to 0.6 of
+    their width): smaller but exact.
 
     Returns (ab, solve(ab)) or None."""
     floor = SCALE_FLOOR * signed_areas(warped, triangles)
     start = solve(low)
     if not np.all(signed_areas(start[0], triangles) >= floor):
         return None
-    return _furthest_fitting(solve, low, high, start, floor, triangles)
+    return _furthest_fitting(low, high, start, high_result, floor, triangles)
 
 
 #: Background area ratios (canvas / W) up to SPREAD_ABOVE are left as least squares put
@@ -143,16 +152,16 @@ def spread_stretch(solve, ab: np.ndarray, result, scalable: np.ndarray, triangle
     high, low = _log_extremes(result[0], reference, tris)
     if high <= np.log(SPREAD_ABOVE) or high + low <= 0:
         return ab, result
-    end = np.log(SPREAD_RANGE)
     floor = 0.5 * np.minimum(SCALE_FLOOR * signed_areas(warped, triangles), signed_areas(result[0], triangles))
+    grown = solve(np.where(scalable[:, None], ab * SPREAD_RANGE, ab))
     lo, hi, best_ab, best = 0.0, 1.0, ab, result
-    for _ in range(SPREAD_BISECTIONS):
+    for _ in range(SPREAD_BISECTIONS):        # in log m; the solution is affine in m
         mid = 0.5 * (lo + hi)
-        trial = np.where(scalable[:, None], ab * np.exp(mid * end), ab)
-        outcome = solve(trial)
+        factor = SPREAD_RANGE ** mid
+        outcome = _between(result, grown, (factor - 1.0) / (SPREAD_RANGE - 1.0))
         high, low = _log_extremes(outcome[0], reference, tris)
         if np.all(signed_areas(outcome[0], triangles) >= floor) and high + low > 0:
-            lo, best, best_ab = mid, outcome, trial
+            lo, best, best_ab = mid, outcome, np.where(scalable[:, None], ab * factor, ab)
         else:
             hi = mid
     return best_ab, best

@@ -363,11 +363,12 @@ class FeatureWarper:
                                 warp_edges, rebuild, self.timings)
         counted = sum(self.timings.get(k, 0.0) for k in ("solve", "factor", "rhs"))
         t0 = time.perf_counter()
+        solved = (x, edges, rhs, offset)
         x = guard.guard(problem, x, record.guard)
         if record.guard.release_rounds and scale_solver is not None and scale_solver.n_columns:
             # The features could not keep their shape at this scale: smaller, do they?
             low = np.where(ties.tied[:, None], ties.project(prior * _smallest_scale(jac, features, prior)), prior)
-            shrunk = scale_search.shrink_to_fit(solve, low, ab, state.triangles, warped)
+            shrunk = scale_search.shrink_to_fit(solve, low, ab, solved, state.triangles, warped)
             if shrunk is not None:
                 ab, (x, edges, rhs, offset) = shrunk
                 record.guard = guard.GuardRecord()
