@@ -480,3 +480,33 @@ def test_strong_shrink_approaches_the_area_average(kind, depth, sx, sy):
         return np.abs(a.astype(float) - area)[2:-2, 2:-2].mean()
 
     assert error(out) < 0.5 * error(plain)
+
+
+@pytest.mark.parametrize("interp", [cv2.INTER_LINEAR, cv2.INTER_CUBIC, cv2.INTER_LANCZOS4])
+def test_tiled_remap_equals_one_call(monkeypatch, interp):
+    """remap() splits what OpenCV refuses (a side >= 32767) into tiles with source windows;
+    with a small limit forced, the tiles give exactly what one cv2.remap call gives."""
+    from featurewarp_cli.render import remap as remap_module
+
+    rng = np.random.default_rng(3)
+    image = rng.integers(0, 255, (90, 120, 3), np.uint8)
+    my, mx = np.mgrid[0:70, 0:150].astype(np.float32)
+    mx = mx * 0.7 + 5 * np.sin(my / 9) - 2          # reaches past the left edge: replicated
+    my = my * 1.2 + 3 * np.cos(mx / 7)
+    whole = cv2.remap(image, mx, my, interp, borderMode=cv2.BORDER_REPLICATE)
+    monkeypatch.setattr(remap_module, "LIMIT", 23)
+    assert np.array_equal(remap_module.remap(image, mx, my, interp), whole)
+
+
+def test_sides_beyond_opencv_limit_render(tmp_path):
+    """A 40000-px-wide input and a 1 x 500000 canvas: OpenCV's remap asserts below 32767 px per
+    side; the renderer tiles instead of failing."""
+    image = np.tile(np.arange(40000, dtype=np.uint16)[None, :, None] % 251, (2, 1, 3)).astype(np.uint8)
+    warper = FeatureWarper(40000, 2)
+    out = warper.render(image, warper.solve(load_warp("stretch")(40000, 2, sx=0.5), "plain"))
+    assert out.shape[:2] == (2, 20000)
+    column = np.zeros((5000, 1, 3), np.uint8)
+    column[::2] = 255
+    warper = FeatureWarper(1, 5000)
+    tall = warper.render(column, warper.solve(load_warp("stretch")(1, 5000, sy=100), "plain"))
+    assert tall.shape[:2] == (500000, 1)

@@ -31,6 +31,7 @@ import cv2
 import numpy as np
 
 from . import _raster
+from .remap import remap
 
 #: Minification (largest singular value of J) from which a pixel is prefiltered.
 AA_START = 1.1
@@ -125,10 +126,7 @@ def sample_points(image: np.ndarray, mx: np.ndarray, my: np.ndarray, interp: int
         mx = np.concatenate([mx, np.zeros(pad, np.float32)])
         my = np.concatenate([my, np.zeros(pad, np.float32)])
     mx, my = mx.reshape(rows, COMPACT_WIDTH), my.reshape(rows, COMPACT_WIDTH)
-    parts = [cv2.remap(image, mx[r:r + 8192], my[r:r + 8192], interp, borderMode=cv2.BORDER_REPLICATE)
-             for r in range(0, rows, 8192)]            # remap wants fewer than 32767 rows
-    values = parts[0] if len(parts) == 1 else np.concatenate(parts)
-    return values.reshape(-1, channels)[:total]
+    return remap(image, mx, my, interp).reshape(-1, channels)[:total]
 
 
 def filter_band(pyramid: Pyramid, foot: Footprints, aatri: np.ndarray, bx: np.ndarray, by: np.ndarray,

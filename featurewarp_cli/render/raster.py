@@ -34,6 +34,7 @@ import numpy as np
 
 from . import _raster
 from .antialias import COMPACT_WIDTH, Footprints, Pyramid, Silhouette, filter_band, sample_points
+from .remap import remap
 
 INTERPOLATION = {"linear": cv2.INTER_LINEAR, "cubic": cv2.INTER_CUBIC, "lanczos": cv2.INTER_LANCZOS4}
 
@@ -228,13 +229,9 @@ class _BandRenderer:
                 values = sample_points(self.image, px[:m], py[:m], self.flag)[:n]
                 _raster.scatter(aatri, values, self.channels, flat, self.out_channels)
         elif self.out_channels == self.channels:
-            out = cv2.remap(self.image, bx.reshape(-1, width), by.reshape(-1, width), self.flag,
-                            dst=band, borderMode=cv2.BORDER_REPLICATE)
-            if out is not band and not np.shares_memory(out, band):
-                band[...] = out
+            remap(self.image, bx.reshape(-1, width), by.reshape(-1, width), self.flag, dst=band)
         else:
-            out = cv2.remap(self.image, bx.reshape(-1, width), by.reshape(-1, width), self.flag,
-                            borderMode=cv2.BORDER_REPLICATE)
+            out = remap(self.image, bx.reshape(-1, width), by.reshape(-1, width), self.flag)
             band[..., :3] = out[..., None] if self.channels == 1 else out
 
     def _apply_coverage(self, coverage, flat, y0: int) -> bool:
@@ -353,7 +350,8 @@ def resample(image: np.ndarray, coords: np.ndarray, covered: np.ndarray,
     ndarray
         Same dtype as ``image``; same channels, plus alpha where needed.
     """
-    out = cv2.remap(image, coords, None, INTERPOLATION[interp], borderMode=cv2.BORDER_REPLICATE)
+    out = remap(image, np.ascontiguousarray(coords[..., 0]), np.ascontiguousarray(coords[..., 1]),
+                INTERPOLATION[interp])
     if covered.all():
         return out
     if background is None:
