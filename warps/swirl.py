@@ -12,14 +12,19 @@ class Swirl(Warp):
 
     R = radius * min(w, h). The rotation and its derivative fall to zero at R,
     so the swirl joins the unmoved outside smoothly. Each circle about the centre
-    maps onto itself, so the map is injective for every angle. Canvas = input size.
+    maps onto itself, so the map is injective for every angle; the declared range
+    (two turns either way) is where the automatic grid follows it within its node
+    limit and the result has no fold (320x240 with features at 720: 13 s, 0.7 GB).
+    Canvas = input size.
     """
 
     name = "swirl"
     summary = "Twist the centre by an angle, fading smoothly to zero at a radius."
     params = (
-        Param("angle", float, 90.0, "Rotation at the centre in degrees, any real number "
-              "(positive: clockwise on screen).", metavar="DEG"),
+        Param("angle", float, 90.0, "Rotation at the centre in degrees (positive: clockwise on "
+              "screen), at most two turns either way: beyond, the grid that follows the swirl "
+              "outgrows its node limit and features can no longer be kept apart.",
+              min=-720, max=720, metavar="DEG"),
         Param("radius", float, 0.5, "Radius of the swirl as a fraction of min(width, height).",
               min=0.001, max=10),
     )

@@ -10,6 +10,7 @@ import os
 import re
 import tempfile
 import time
+from dataclasses import replace
 
 import cv2
 import numpy as np
@@ -19,7 +20,8 @@ from ..io import formats, write
 from ..io.colours import parse_colour
 from ..io.depth import to_eight_bit
 from ..io.encode import encode_image
-from .pipeline import Settings, WarpError, background_colour, load_image_and_mask, make_warper, prefetch_engine
+from .pipeline import (Settings, WarpError, background_colour, check_solution, load_image_and_mask, make_warper,
+                       prefetch_engine)
 
 ANIMATED = {".gif", ".webp", ".png", ".apng"}
 VIDEO = {".mp4": "mp4v", ".avi": "MJPG"}
@@ -142,6 +144,7 @@ def animate_file(settings: Settings, input: str, output: str, mask: str | None, 
     for warp in warps:
         mesh = warper.solve(warp, settings.mode)
         flips += mesh.info["flipped_triangles"]
+        check_solution(replace(settings, strict=False), mesh)
         frame = to_bgr(warper.render(image, mesh, settings.interp, background), alpha)
         rendered.append(centre_on(frame, canvas, fill))
         if progress:

@@ -70,6 +70,10 @@ class Settings:
         Output format name (``--format``); None: from the output's prefix or extension.
     max_pixels : int
         Largest accepted input width * height.
+    max_memory : int or None
+        Memory budget in bytes (images and grid; see :func:`limits.node_budget`).
+    allow_folds : bool
+        Write a result that still has folded triangles instead of failing.
     """
 
     preset: str
@@ -86,6 +90,8 @@ class Settings:
     interp: str = INTERPOLATION
     fmt: str | None = None
     max_pixels: int = limits.MAX_PIXELS
+    max_memory: int | None = limits.MAX_MEMORY
+    allow_folds: bool = False
 
 
 def background_colour(text: str | None, fmt: str):
@@ -256,19 +262,34 @@ def make_warper(settings: Settings, width: int, height: int, feature_mask):
     try:
         preset = plugins.load(settings.preset)
         warp = preset(width, height, **settings.params)
-        warper = FeatureWarper(width, height, feature_mask, cell=settings.cell,
-                               feature_weight=settings.feature_weight, decay=settings.decay,
-                               formulation=settings.formulation, boundary=settings.boundary,
-                               scale_prior=settings.scale_prior)
     except plugins.UnknownPreset as err:
         raise WarpError(str(err), usage=True) from None
     except ValueError as err:
         raise WarpError(str(err), usage=True) from None
     try:
         limits.check_pixels(*warp.canvas, "the output canvas", settings.max_pixels)
+        max_nodes = limits.node_budget(width, height, tuple(warp.canvas), settings.max_memory)
     except ImageError as err:
         raise WarpError(str(err)) from None
+    try:
+        warper = FeatureWarper(width, height, feature_mask, cell=settings.cell,
+                               feature_weight=settings.feature_weight, decay=settings.decay,
+                               formulation=settings.formulation, boundary=settings.boundary,
+                               scale_prior=settings.scale_prior, max_nodes=max_nodes)
+    except ValueError as err:
+        raise WarpError(str(err), usage=True) from None
     return warp, warper
+
+
+def check_solution(settings: Settings, mesh) -> None:
+    """WarpError when the solve left folded triangles (unless ``allow_folds``) or, under
+    ``strict``, when it warned: nothing is written then."""
+    folded = mesh.flips()
+    if folded and not settings.allow_folds:
+        raise WarpError(f"the result has {folded} folded triangles (the warp turns the image over itself "
+                        f"there); nothing written (--allow-folds writes it anyway)")
+    if settings.strict and mesh.record.warnings:
+        raise WarpError(f"--strict: {mesh.record.warnings[0]}; nothing written")
 
 
 def check_outputs(settings: Settings, output: str, *extra: tuple[str | None, str]):
@@ -361,8 +382,7 @@ def warp_file(settings: Settings, input: str, output: str, mask: str | None = No
         raise WarpError(f"{input} decodes to {image.shape[1]}x{image.shape[0]}, its header says "
                         f"{width}x{height}")
     warnings.extend(mesh.record.warnings)
-    if settings.strict and mesh.record.warnings:
-        raise WarpError(f"--strict: {mesh.record.warnings[0]}; nothing written")
+    check_solution(settings, mesh)
     result = warper.render(image, mesh, settings.interp, background)
     if draw_grid:
         from .panel import draw_grid as overlay
@@ -424,6 +444,7 @@ def compare_file(settings: Settings, input: str, output: str, mask: str | None =
     tiles, labels = [panel.tint(image, feature_mask)], ["input + mask"]
     for mode in ("plain", "rigid", "similarity"):
         mesh = warper.solve(warp, mode)
+        check_solution(settings, mesh)
         result = warper.render(image, mesh, settings.interp, background)
         tiles.append(panel.draw_grid(result, mesh) if draw_grid else result)
         labels.append(f"{mode} {settings.preset}" if mode == "plain" else f"featurewarp {mode}")

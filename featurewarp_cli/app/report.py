@@ -29,7 +29,7 @@ def build_report(input_path, output_path, image, result, warp, mesh, timings) ->
     image, result : ndarray
         Input and output images.
     warp : warps.Warp
-    mesh : featurewarp_cli.engine.warper.Mesh
+    mesh : featurewarp_cli.engine.mesh.Mesh
     timings : dict
         Seconds per stage.
 

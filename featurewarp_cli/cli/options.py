@@ -19,7 +19,7 @@ from ..plugins import Param
 
 #: Keyword arguments of the commands that are engine or output settings, not preset parameters.
 SETTINGS = ("mode", "cell", "feature_weight", "decay", "formulation", "boundary", "scale_prior", "strict",
-            "background", "interp", "fmt", "max_pixels")
+            "background", "interp", "fmt", "max_pixels", "max_memory", "allow_folds")
 
 MAX_PIXELS_PARAM = Param("max_pixels", int, limits.MAX_PIXELS,
                          "Refuse inputs with more than N pixels (checked in the file header, before decoding).",
@@ -34,6 +34,20 @@ MAX_PIXELS_OFF = Param("max_pixels_off", int, None,
                        min=0, metavar="N")
 TOLERANCE = Param("tolerance", float, 0.0, "Per-sample difference (0..255 scale) that still counts as equal.",
                   min=0.0, metavar="T")
+
+
+class ByteSize(click.ParamType):
+    """A size in bytes: a number with an optional K, M, G or T suffix (``--max-memory``)."""
+
+    name = "size"
+
+    def convert(self, value, option, ctx):
+        if isinstance(value, int):
+            return value
+        try:
+            return limits.parse_size(value)
+        except ValueError as err:
+            self.fail(str(err), option, ctx)
 
 
 class ParamValue(click.ParamType):
@@ -109,6 +123,14 @@ def engine_options() -> list[click.Option]:
                      help="Output format; overrides the extension (needed for '-' unless a "
                           "prefix such as png:- is given)."),
         click.Option(["--max-pixels"], callback=limit_decoders, **declared(MAX_PIXELS_PARAM)),
+        click.Option(["--max-memory"], type=ByteSize(), default=limits.MAX_MEMORY, metavar="SIZE",
+                     help="Refuse, before allocating, work whose images and grid would need more "
+                          "memory than SIZE (bytes, or with K, M, G, T); an automatic grid stays "
+                          f"within it. [default: half of this machine's memory, "
+                          f"{limits.MAX_MEMORY / 2**30:.1f}G]"),
+        click.Option(["--allow-folds"], is_flag=True,
+                     help="Write a result even if triangles are still folded over (they never are "
+                          "within the presets' declared ranges); without it that is an error."),
         click.Option(["-q", "--quiet"], is_flag=True, help="Print nothing but errors."),
         click.Option(["-v", "--verbose"], is_flag=True,
                      help="Print a one-line summary per image on stderr (sizes, solver, seconds)."),

@@ -19,7 +19,7 @@ Examples
 >>> DECAY_PARAM.check(0)
 Traceback (most recent call last):
 ...
-ValueError: --decay: 0 is out of range (0 < CELLS)
+ValueError: --decay: 0 is out of range (0 < CELLS <= 1000)
 """
 
 from __future__ import annotations
@@ -59,13 +59,14 @@ CELL_PARAM = Param(
 FEATURE_WEIGHT_PARAM = Param(
     "feature_weight", float, FEATURE_WEIGHT,
     "w_F: each side of the feature equations is multiplied by W, so their squared error "
-    "counts W^2 times.",
-    min=0.0, min_open=True, metavar="W")
+    "counts W^2 times. Up to 10 000: beyond, W^2 outweighs the background's equations by "
+    "more than double precision can keep apart.",
+    min=0.0, min_open=True, max=1e4, metavar="W")
 DECAY_PARAM = Param(
     "decay", float, DECAY,
     "Width of the band around features where the weight falls smoothly from W to 1 "
     "(the paper's rho), in cells.",
-    min=0.0, min_open=True, metavar="CELLS")
+    min=0.0, min_open=True, max=1000.0, metavar="CELLS")
 SCALE_PRIOR_PARAM = Param(
     "scale_prior", float, SCALE_PRIOR,
     "Similarity mode: how firmly each feature's scale and rotation are pulled towards the warp's "

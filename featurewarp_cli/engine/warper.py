@@ -43,67 +43,22 @@ import numpy as np
 
 from . import components, fidelity, guard, quality, scale_search, system, targets
 from . import features as feat
-from .defaults import (BOUNDARIES, DECAY, FEATURE_WEIGHT, FORMULATION, FORMULATIONS, INTERPOLATION, MODE, MODES,
-                       SCALE_PRIOR)
+from .defaults import (BOUNDARIES, DECAY, DECAY_PARAM, FEATURE_WEIGHT, FEATURE_WEIGHT_PARAM, FORMULATION,
+                       FORMULATIONS, INTERPOLATION, MODE, MODES, SCALE_PRIOR, SCALE_PRIOR_PARAM)
 from .grid import Grid, signed_areas
+from .mesh import Mesh
 from .record import KEPT, ComponentRecord, SolveRecord, warnings_for
+
+
+#: Images thinner than this (px) are warped without features: one base cell cannot hold a shape.
+MIN_FEATURE_SIDE = 4
+
 
 def load_warp(name: str):
     """The preset class registered under ``name`` in the ``featurewarp.warps`` group."""
     from ..plugins import load
 
     return load(name)
-
-
-@dataclass
-class Mesh:
-    """A solved mapping: grid nodes in the source and on the output canvas.
-
-    Attributes
-    ----------
-    source : (N, 2) ndarray
-    target : (N, 2) ndarray
-    triangles : (M, 3) ndarray of int
-        Positively oriented in source space.
-    canvas : (int, int)
-        Output (width, height).
-    record : SolveRecord or None
-        What was done: grid, components, solver, guard, quality, warnings, timings.
-    node_component : (N,) int ndarray or None
-        Feature component of each node of a feature quad (as in ``record.components``), -1
-        for the others.
-    """
-
-    source: np.ndarray
-    target: np.ndarray
-    triangles: np.ndarray
-    canvas: tuple[int, int]
-    record: SolveRecord | None = None
-    node_component: np.ndarray | None = None
-
-    @property
-    def info(self) -> dict:
-        """The record as JSON-ready data (:meth:`SolveRecord.to_dict`)."""
-        return self.record.to_dict() if self.record is not None else {}
-
-    def flips(self) -> int:
-        """Number of triangles whose signed area on the canvas is <= 0."""
-        return int(np.count_nonzero(signed_areas(self.target, self.triangles) <= 0))
-
-    def to_npz(self) -> bytes:
-        """The mapping as ``.npz`` bytes (for ``--save-grid``).
-
-        Arrays: ``source`` (N, 2) source pixel positions of the nodes, ``target``
-        (N, 2) their positions on the output canvas, ``triangles`` (M, 3) node
-        indices, counter-clockwise in source coordinates (positive signed area
-        with x and y as pixel coordinates; on screen, where y points down, they
-        appear clockwise).
-        """
-        import io
-
-        buffer = io.BytesIO()
-        np.savez(buffer, source=self.source, target=self.target, triangles=self.triangles.astype(np.int32))
-        return buffer.getvalue()
 
 
 @dataclass
@@ -161,6 +116,10 @@ class FeatureWarper:
         preset's (similarity mode, exact formulation; default
         :data:`defaults.SCALE_PRIOR`). 0 lets features grow or shrink freely to
         spare the background; large values fix them at lambda R.
+    max_nodes : int, optional
+        Largest grid allowed (a memory budget; see :func:`featurewarp_cli.io.limits.node_budget`).
+        The automatic cell stays within it; an explicit ``cell`` beyond it is a ValueError.
+        Default: :data:`fidelity.MAX_NODES` for the automatic cell, no limit for an explicit one.
 
     Attributes
     ----------
@@ -174,23 +133,33 @@ class FeatureWarper:
     def __init__(self, width: int, height: int, mask: np.ndarray | None = None, *,
                  cell: float | None = None, feature_weight: float = FEATURE_WEIGHT, decay: float = DECAY,
                  formulation: str = FORMULATION, injective: bool = True, boundary: str | None = None,
-                 scale_prior: float = SCALE_PRIOR):
+                 scale_prior: float = SCALE_PRIOR, max_nodes: int | None = None):
         if boundary not in (None,) + BOUNDARIES:
             raise ValueError(f"boundary must be one of {', '.join(BOUNDARIES)}, not {boundary!r}")
         if mask is not None and mask.shape != (height, width):
             raise ValueError(f"mask is {mask.shape[1]}x{mask.shape[0]}, image is {width}x{height}")
-        if not (feature_weight > 0 and math.isfinite(feature_weight)):
-            raise ValueError(f"feature_weight must be a positive number, not {feature_weight}")
-        if not (decay > 0 and math.isfinite(decay)):
-            raise ValueError(f"decay must be a positive number, not {decay}")
-        if not (scale_prior >= 0 and math.isfinite(scale_prior)):
-            raise ValueError(f"scale_prior must be a number >= 0, not {scale_prior}")
+        for param, value in ((FEATURE_WEIGHT_PARAM, feature_weight), (DECAY_PARAM, decay),
+                             (SCALE_PRIOR_PARAM, scale_prior)):
+            try:
+                param.check(value)
+            except ValueError as err:
+                raise ValueError(f"{param.name}: {str(err).split(': ', 1)[-1]}") from None
         if formulation not in FORMULATIONS:
             raise ValueError(f"formulation must be one of {', '.join(FORMULATIONS)}, not {formulation!r}")
         if cell is not None and not (cell >= 1 and math.isfinite(cell)):
             raise ValueError(f"cell must be at least 1 px, not {cell}")
+        if cell is not None and max_nodes is not None:
+            nodes = Grid.for_image(width, height, cell).n_nodes
+            if nodes > max_nodes:
+                raise ValueError(f"--cell {cell:g} makes a grid of {nodes} nodes, above the {max_nodes} that the "
+                                 f"memory limit allows (a larger --cell, or a larger --max-memory)")
         self.width, self.height = int(width), int(height)
         self.mask = np.zeros((height, width), bool) if mask is None else np.asarray(mask, bool)
+        self.notes = []
+        if min(width, height) < MIN_FEATURE_SIDE and self.mask.any():
+            self.notes.append(f"the image is {width}x{height}: too thin for a feature to keep a shape "
+                              f"(under {MIN_FEATURE_SIDE} px); the mask is ignored")
+            self.mask = np.zeros((height, width), bool)
         self.feature_weight = float(feature_weight)
         self.decay = float(decay)
         self.formulation = formulation
@@ -198,6 +167,7 @@ class FeatureWarper:
         self.boundary = boundary
         self.scale_prior = float(scale_prior)
         self.cell = cell
+        self.max_nodes = max_nodes
         self.factorizations = 0
         self.timings: dict[str, float] = {}
         self._states: dict[tuple, _GridState] = {}
@@ -278,7 +248,7 @@ class FeatureWarper:
         self.timings = {}
         t0 = time.perf_counter()
         if self.cell is None:
-            cell, error = fidelity.auto_cell(self.width, self.height, warp)
+            cell, error = fidelity.auto_cell(self.width, self.height, warp, self.max_nodes)
         else:
             cell = float(self.cell)
             error = fidelity.pl_error(Grid.for_image(self.width, self.height, cell), warp)
@@ -413,6 +383,7 @@ class FeatureWarper:
                                                                state.tri_component < 0)
         if record.mode != "plain":
             record.warnings.extend(warnings_for(record, state.nodes, target, warped, warp))
+        record.warnings.extend(self.notes)
 
     def render(self, image: np.ndarray, mesh: Mesh, interp: str = INTERPOLATION, background=None,
                antialias: bool = True) -> np.ndarray:

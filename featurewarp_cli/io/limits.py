@@ -1,4 +1,4 @@
-"""The limit on an input's pixels: one default, one check, and OpenCV's decoders told of it.
+"""The limits on an input's pixels and on a command's memory, and OpenCV's decoders told of them.
 
 Headers are checked with Pillow before any pixel is decoded (see
 :mod:`featurewarp_cli.io.decode`). For the formats whose header Pillow cannot read
@@ -18,6 +18,66 @@ from . import ImageError
 MAX_PIXELS = 200_000_000
 #: The environment variable that limits OpenCV's decoders (read when cv2 is imported).
 OPENCV_VARIABLE = "OPENCV_IO_MAX_IMAGE_PIXELS"
+#: Peak bytes per grid node of a solve (factor, guard, quality), measured: 1.1 kB (12 MP,
+#: --cell 1, 12 M nodes, 13.5 GB) to 2.4 kB (an 830 000-node guard run, 2.0 GB).
+NODE_BYTES = 2500
+#: Peak bytes per pixel of input (decoded, mask, prefilter pyramid) and of output (the
+#: canvas, its encoded copy), for 16-bit RGBA, the widest kind.
+INPUT_PIXEL_BYTES = 24
+OUTPUT_PIXEL_BYTES = 16
+
+
+def physical_memory() -> int:
+    """Bytes of memory the machine has (8 GiB where the system does not say)."""
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError, AttributeError):
+        return 8 << 30
+
+
+#: Default memory budget of one command (``--max-memory``): half of the machine's memory.
+MAX_MEMORY = physical_memory() // 2
+
+
+def parse_size(text: str) -> int:
+    """Bytes from ``text``: a number with an optional K, M, G or T suffix (powers of 1024).
+
+    >>> parse_size("512M"), parse_size("2G"), parse_size("1e9")
+    (536870912, 2147483648, 1000000000)
+    """
+    value = str(text).strip().upper().removesuffix("B").removesuffix("I")
+    scale = 1
+    if value and value[-1] in "KMGT":
+        scale, value = 1 << (10 * ("KMGT".index(value[-1]) + 1)), value[:-1]
+    try:
+        number = float(value) * scale
+    except ValueError:
+        raise ValueError(f"{text!r} is not a size (a number of bytes, or with K, M, G, T)") from None
+    if not (number >= 1 and number < 1 << 60):
+        raise ValueError(f"{text!r} is not a size of at least 1 byte")
+    return int(number)
+
+
+def size_text(size: int) -> str:
+    """``size`` bytes for a message: ``1.5 GiB``, ``37 MiB``, ``900 bytes``."""
+    for unit, shift in (("GiB", 30), ("MiB", 20), ("KiB", 10)):
+        if size >= 1 << shift:
+            return f"{size / (1 << shift):.3g} {unit}"
+    return f"{size} bytes"
+
+
+def node_budget(width: int, height: int, canvas: tuple[int, int], max_memory: int | None) -> int | None:
+    """Grid nodes a command may use within ``max_memory`` bytes, after the images' share
+    (:data:`INPUT_PIXEL_BYTES`, :data:`OUTPUT_PIXEL_BYTES`); None without a budget.
+
+    Raises ImageError when the images alone exceed the budget."""
+    if max_memory is None:
+        return None
+    images = width * height * INPUT_PIXEL_BYTES + canvas[0] * canvas[1] * OUTPUT_PIXEL_BYTES
+    if images >= max_memory:
+        raise ImageError(f"a {width}x{height} input warped onto a {canvas[0]}x{canvas[1]} canvas needs about "
+                         f"{size_text(images)}, above the memory limit of {size_text(max_memory)} (--max-memory)")
+    return int((max_memory - images) // NODE_BYTES)
 
 
 def check_pixels(width: int, height: int, name: str, max_pixels: int | None) -> None:

@@ -1,0 +1,114 @@
+"""Issue 15: bounded time and memory. Bombs are refused from their headers, the grid and the
+images stay within the memory budget, declared ranges hold, and a folded result is an error."""
+
+from __future__ import annotations
+
+import resource
+import subprocess
+import sys
+import time
+
+import cv2
+import numpy as np
+import pytest
+
+from bombs import BOMBS
+from featurewarp_cli import FeatureWarper, load_warp
+from featurewarp_cli.io import limits
+
+CLI = [sys.executable, "-m", "featurewarp_cli"]
+
+
+def run(*args, **kwargs) -> subprocess.CompletedProcess:
+    return subprocess.run([*CLI, *map(str, args)], capture_output=True, text=True, timeout=120, **kwargs)
+
+
+def one_line_error(result: subprocess.CompletedProcess, code: int, *words: str) -> None:
+    """Exit ``code``, one line on stderr holding ``words``, no traceback."""
+    assert result.returncode == code, (result.returncode, result.stderr)
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in result.stderr, result.stderr
+    for word in words:
+        assert word in lines[0], lines[0]
+
+
+@pytest.mark.parametrize("name", sorted(BOMBS))
+@pytest.mark.parametrize("role", ["input", "mask"])
+def test_bombs_are_refused_fast_and_small(tmp_path, name, role):
+    """Every format's header bomb: refused within 1 s and 200 MB, nothing written."""
+    suffix, data = BOMBS[name]
+    bomb = tmp_path / f"bomb{suffix}"
+    bomb.write_bytes(data)
+    small = tmp_path / "small.png"
+    cv2.imwrite(str(small), np.zeros((8, 8, 3), np.uint8))
+    source, mask = (bomb, small) if role == "input" else (small, bomb)
+    before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+    t0 = time.perf_counter()
+    result = run("warp", "stretch", source, tmp_path / "out.png", "-m", mask, "--sx", "2", "--max-pixels", "1000000")
+    seconds = time.perf_counter() - t0
+    assert result.returncode == 1 and len(result.stderr.strip().splitlines()) == 1, result.stderr
+    assert "--max-pixels" in result.stderr or "cannot be decoded" in result.stderr, result.stderr
+    assert seconds < 5.0                  # 1 s on an idle machine; CI machines are shared
+    assert max(before, resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss) < 200 * 1024
+    assert not (tmp_path / "out.png").exists()
+
+
+def test_explicit_cell_beyond_the_memory_budget_is_refused(tmp_path):
+    """--cell is held to the budget too (it used to escape the automatic cell's node cap)."""
+    image = tmp_path / "in.png"
+    cv2.imwrite(str(image), np.zeros((300, 400, 3), np.uint8))
+    one_line_error(run("warp", "stretch", image, tmp_path / "o.png", "--cell", "1", "--max-memory", "64M"),
+                   2, "--cell 1", "--max-memory")
+    one_line_error(run("warp", "stretch", image, tmp_path / "o.png", "--max-memory", "1M"), 1, "--max-memory")
+    one_line_error(run("warp", "stretch", image, tmp_path / "o.png", "--max-memory", "lots"), 2, "--max-memory")
+    assert list(tmp_path.iterdir()) == [image]
+
+
+def test_node_budget_counts_the_images():
+    assert limits.node_budget(4000, 3000, (4000, 3000), None) is None
+    budget = limits.node_budget(100, 100, (200, 100), 10 * 2**20)
+    assert budget == (10 * 2**20 - 100 * 100 * limits.INPUT_PIXEL_BYTES
+                      - 200 * 100 * limits.OUTPUT_PIXEL_BYTES) // limits.NODE_BYTES
+    with pytest.raises(limits.ImageError, match="--max-memory"):
+        limits.node_budget(4000, 3000, (4000, 3000), 2**20)
+    with pytest.raises(ValueError, match="--cell"):
+        FeatureWarper(4000, 3000, cell=1, max_nodes=100_000)
+
+
+def test_automatic_grid_stays_within_a_small_budget():
+    """A tight budget coarsens the automatic grid instead of failing."""
+    warp = load_warp("swirl")(320, 240, angle=720)
+    mesh = FeatureWarper(320, 240, max_nodes=20_000).solve(warp, "plain")
+    assert mesh.record.grid["nodes"] <= 20_000
+
+
+def test_a_folded_result_is_an_error_unless_allowed(tmp_path):
+    """A grid too coarse for the warp folds; that is exit 1 with nothing written, unless
+    --allow-folds."""
+    image = tmp_path / "in.png"
+    cv2.imwrite(str(image), np.zeros((120, 160, 3), np.uint8))
+    out = tmp_path / "o.png"
+    one_line_error(run("warp", "swirl", image, out, "--angle", "720", "--cell", "16", "--mode", "plain"),
+                   1, "folded triangles", "--allow-folds")
+    assert not out.exists()
+    allowed = run("warp", "swirl", image, out, "--angle", "720", "--cell", "16", "--mode", "plain", "--allow-folds")
+    assert allowed.returncode == 0 and out.exists()
+
+
+@pytest.mark.parametrize("option,value", [("--feature-weight", "1e8"), ("--decay", "1e6"), ("--angle", "1080")])
+def test_values_beyond_the_solvable_ranges_are_refused_at_parse_time(tmp_path, option, value):
+    image = tmp_path / "in.png"
+    cv2.imwrite(str(image), np.zeros((40, 40, 3), np.uint8))
+    one_line_error(run("warp", "swirl", image, tmp_path / "o.png", option, value), 2, option)
+
+
+@pytest.mark.parametrize("size", [(1, 400), (400, 1), (3, 300)])
+def test_images_too_thin_for_features_warp_without_them(size):
+    """A mask on an image under 4 px thin is ignored, with a warning, and nothing folds."""
+    w, h = size
+    mask = np.ones((h, w), bool)
+    mask[: h // 2] = False
+    warper = FeatureWarper(w, h, mask)
+    mesh = warper.solve(load_warp("arc")(w, h, angle=360))
+    assert mesh.flips() == 0
+    assert any("too thin" in line for line in mesh.record.warnings)
