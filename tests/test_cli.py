@@ -248,7 +248,7 @@ def test_a_failure_leaves_the_existing_output_untouched(runner, tmp_path, monkey
     def boom(*args, **kwargs):
         raise OSError(28, "No space left on device")
 
-    target = {"encode": (encode, "encode_image"), "write": (os, "fdopen"), "rename": (os, "replace"),
+    target = {"encode": (encode, "encode_image"), "write": (os, "write"), "rename": (os, "replace"),
               "solve": (__import__("featurewarp_cli.engine.warper").engine.warper.FeatureWarper, "solve")}[where]
     monkeypatch.setattr(*target, boom)
     before = listing(tmp_path)

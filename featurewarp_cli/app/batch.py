@@ -55,20 +55,50 @@ def plan(inputs, out_dir: str, suffix: str = "", fmt: str | None = None,
         return os.path.join(os.path.dirname(path), name)
 
     _writable(os.path.join(out_dir, "probe"), "--out-dir")
-    masks = {os.path.abspath(mask_of(p)) for p in inputs} if mask_pattern else set()
+    masks = {os.path.realpath(mask_of(p)) for p in inputs} if mask_pattern else set()
     jobs, seen = [], {}
     for path in inputs:
-        if os.path.abspath(path) in masks:
+        if os.path.realpath(path) in masks:
             continue
         stem, ext = os.path.splitext(os.path.basename(path))
         output = os.path.join(out_dir, stem + suffix + ("." + fmt if fmt else ext))
-        key = os.path.abspath(output)
+        key = os.path.realpath(output)
         if key in seen:
             raise WarpError(f"{seen[key]} and {path} would both write {output}; use --suffix or "
                             "separate batches", usage=True)
         seen[key] = path
         jobs.append(Job(path, output, mask_of(path)))
+    read = {os.path.realpath(p): p for job in jobs for p in (job.input, job.mask) if p}
+    for job in jobs:
+        clash = read.get(os.path.realpath(job.output))
+        if clash is not None and clash != job.input:
+            raise WarpError(f"{job.input} would be written to {job.output}, which this batch also reads "
+                            f"({clash}); use another --out-dir or --suffix", usage=True)
     return jobs
+
+
+def _worker_setup() -> None:
+    """In a batch worker: die with the parent (even under SIGKILL), leave Ctrl-C to the parent
+    (which stops the workers at once), and clean up on SIGTERM."""
+    import signal
+
+    try:
+        import ctypes
+
+        ctypes.CDLL(None).prctl(1, signal.SIGKILL)          # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass
+    if os.getppid() == 1:                                    # the parent died before prctl
+        os._exit(1)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+    def stop(signum, frame):
+        from ..io.write import remove_pending
+
+        remove_pending()
+        os._exit(128 + signum)
+
+    signal.signal(signal.SIGTERM, stop)
 
 
 def run_job(settings: Settings, job: Job) -> tuple[str | None, dict | None]:
@@ -96,6 +126,6 @@ def run_batch(settings: Settings, jobs: list[Job], workers: int = 1):
     from concurrent.futures import ProcessPoolExecutor
     from multiprocessing import get_context
 
-    with ProcessPoolExecutor(workers, mp_context=get_context("spawn")) as pool:
+    with ProcessPoolExecutor(workers, mp_context=get_context("spawn"), initializer=_worker_setup) as pool:
         yield from ((job, *outcome) for job, outcome in
                     zip(jobs, pool.map(run_job, [settings] * len(jobs), jobs)))

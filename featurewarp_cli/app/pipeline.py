@@ -11,6 +11,7 @@ from __future__ import annotations
 import importlib
 import json
 import os
+import stat
 import sys
 import threading
 import time
@@ -301,17 +302,52 @@ def check_outputs(settings: Settings, output: str, *extra: tuple[str | None, str
     if out_path != "-":
         _writable(out_path, "OUTPUT")
     for path, param in extra:
-        if path:
+        if path and path != "-":
             _writable(path, param)
     return out_path, fmt
 
 
+def _identity(path: str):
+    """What a path names, for comparing two: (device, inode) of an existing file, else the
+    absolute path with links resolved."""
+    try:
+        info = os.stat(path)
+    except OSError:
+        return os.path.realpath(path)
+    return (info.st_dev, info.st_ino) if stat.S_ISREG(info.st_mode) else None
+
+
+def check_distinct(outputs: list[tuple[str | None, str]], inputs: list[tuple[str | None, str]]) -> None:
+    """Usage error unless the outputs ((path, option) pairs; the first is OUTPUT) name neither an
+    input nor each other, OUTPUT = INPUT excepted (the input is read before anything is
+    written), and at most one of them is stdout. Devices and FIFOs may repeat."""
+    named = [(p, o) for p, o in outputs if p]
+    if sum(p == "-" for p, _ in named) > 1:
+        raise WarpError(f"only one output can go to stdout ('-'): {', '.join(o for p, o in named if p == '-')}",
+                        usage=True)
+    files = [(p, o, _identity(p)) for p, o in named if p != "-"]
+    sources = [(p, o, _identity(p)) for p, o in inputs if p and p != "-"]
+    for k, (path, option, ident) in enumerate(files):
+        if ident is None:
+            continue
+        for other, other_option, other_ident in files[:k] + [s for s in sources
+                                                            if not (k == 0 and s[1] == "INPUT")]:
+            if ident == other_ident:
+                raise WarpError(f"{path} is also {other_option} ({other}); it would be overwritten",
+                                option, usage=True)
+
+
+def encoded(out_path: str, fmt: str, image, background) -> bytes:
+    """``image`` encoded as ``fmt`` (failures are WarpError naming ``out_path``)."""
+    try:
+        return encode.encode_image(image, fmt, background or (255, 255, 255))
+    except ImageError as err:
+        raise WarpError(f"cannot write {out_path}: {err}") from err
+
+
 def write_image(out_path: str, fmt: str, image, background) -> None:
     """Encode and write atomically (``-``: stdout); failures are WarpError."""
-    try:
-        write.write_output(out_path, encode.encode_image(image, fmt, background or (255, 255, 255)))
-    except (ImageError, OSError) as err:
-        raise WarpError(f"cannot write {out_path}: {getattr(err, 'strerror', None) or err}") from err
+    write_all([(out_path, encoded(out_path, fmt, image, background))])
 
 
 def summary(preset: str, mode: str, input: str, out_path: str, size, mesh, t0: float,
@@ -367,6 +403,8 @@ def warp_file(settings: Settings, input: str, output: str, mask: str | None = No
     if mask == "-" and input == "-":
         raise WarpError("cannot be '-' when INPUT is '-' (stdin holds the image)", "--mask", usage=True)
     out_path, fmt = check_outputs(settings, output, (report, "--report"), (save_grid, "--save-grid"))
+    check_distinct([(out_path, "OUTPUT"), (report, "--report"), (save_grid, "--save-grid")],
+                   [(input, "INPUT"), (mask, "--mask")])
     background = background_colour(settings.background, fmt)
     prefetch_engine(solver=mask is not None and settings.mode != "plain")
     pending, feature_mask, warnings, (width, height) = start_loading(settings, input, mask)
@@ -391,9 +429,13 @@ def warp_file(settings: Settings, input: str, output: str, mask: str | None = No
     timings.update(mesh.info["timings"])
 
     t1 = time.perf_counter()
-    write_image(out_path, fmt, result, background)
+    outputs = [(out_path, encoded(out_path, fmt, result, background))]
     timings["write"] = time.perf_counter() - t1
-    _write_extras(save_grid, report, mesh, lambda: _report(input, out_path, image, result, warp, mesh, timings, t0))
+    if save_grid:
+        outputs.append((save_grid, mesh.to_npz()))
+    if report:
+        outputs.append((report, _report(input, out_path, image, result, warp, mesh, timings, t0)))
+    write_all(outputs)
     return summary(settings.preset, settings.mode, input, out_path, (width, height), mesh, t0, warnings)
 
 
@@ -405,15 +447,14 @@ def _report(input, out_path, image, result, warp, mesh, timings, t0) -> bytes:
     return (json.dumps(build_report(input, out_path, image, result, warp, mesh, timings), indent=2) + "\n").encode()
 
 
-def _write_extras(save_grid: str | None, report: str | None, mesh, report_bytes) -> None:
-    """Write ``--save-grid`` and ``--report`` (when asked), atomically; failures are WarpError."""
-    for path, what, data in ((save_grid, "", lambda: mesh.to_npz()), (report, "report ", report_bytes)):
-        if not path:
-            continue
-        try:
-            write.write_atomic(path, data())
-        except OSError as err:
-            raise WarpError(f"cannot write {what}{path}: {err.strerror or err}") from err
+def write_all(outputs: list[tuple[str, bytes]]) -> None:
+    """Write every (path, bytes) or none (:func:`featurewarp_cli.io.write.write_outputs`);
+    failures are WarpError naming the path."""
+    try:
+        write.write_outputs(outputs)
+    except OSError as err:
+        path = err.filename or next((p for p, _ in outputs if p), "")
+        raise WarpError(f"cannot write {path}: {err.strerror or err}") from err
 
 
 def compare_file(settings: Settings, input: str, output: str, mask: str | None = None,
@@ -435,6 +476,7 @@ def compare_file(settings: Settings, input: str, output: str, mask: str | None =
     t0 = time.perf_counter()
     input = formats.split_prefix(input)[1]
     out_path, fmt = check_outputs(settings, output)
+    check_distinct([(out_path, "OUTPUT")], [(input, "INPUT"), (mask, "--mask")])
     background = background_colour(settings.background, fmt)
     settings = replace(settings, mode="similarity")
     prefetch_engine()

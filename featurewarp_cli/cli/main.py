@@ -12,6 +12,7 @@ to stderr.
 from __future__ import annotations
 
 import os
+import signal
 import sys
 import warnings
 
@@ -137,6 +138,24 @@ def one_line_warning(message, category, filename, lineno, file=None, line=None):
     click.echo(f"featurewarp: warning: {message} ({os.path.basename(filename)}:{lineno})", err=True)
 
 
+def stop_on_signal(signum, frame) -> None:
+    """SIGTERM or SIGINT: remove this run's temporary files, stop worker processes, exit at once
+    (128 + the signal's number). Outputs not yet put in place never appear: they wait in
+    unnamed files or in temporary ones removed here."""
+    from ..io import write
+
+    write.remove_pending()
+    import multiprocessing
+
+    for child in multiprocessing.active_children():
+        child.kill()
+    try:
+        os.write(2, f"featurewarp: stopped by {signal.Signals(signum).name}\n".encode())
+    except OSError:
+        pass
+    os._exit(128 + signum)
+
+
 def main(argv=None):
     """Console-script entry point.
 
@@ -151,6 +170,8 @@ def main(argv=None):
             break
         leading.append(arg)
     debug = "--debug" in leading
+    for signum in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(signum, stop_on_signal)
     try:
         with warnings.catch_warnings():
             if not debug:

@@ -1,55 +1,266 @@
-"""Writing outputs: atomically to a file, or to stdout; and the check that a path can be written."""
+"""Writing outputs: staged, then all put in place together; through links; to devices and stdout.
+
+A command's outputs (image, report, grid) are first *staged*: each one's bytes are
+written where they can wait without being seen. Only when every output was staged
+are they *committed*, one after another; any failure before that discards them all,
+so every file that existed stays as it was (all or nothing).
+
+Where an output goes, by what its path is now:
+
+- a regular file, or nothing yet: replaced atomically. The bytes wait in an unnamed
+  file (``O_TMPFILE``) in the target's folder, so an interrupted run leaves nothing
+  behind, even under SIGKILL; at commit it gets a hidden name and is renamed over
+  the target. Where the file system has no ``O_TMPFILE``, a hidden temporary file
+  is used instead and removed on failure and on SIGTERM or SIGINT.
+- a symbolic link: followed, so its target is replaced as above and the link stays.
+- anything else that exists (a FIFO, a character device such as ``/dev/null`` or a
+  terminal, ``/dev/stdout``, ``/dev/fd/N``): opened and written directly, never replaced.
+- ``-``: standard output.
+"""
 
 from __future__ import annotations
 
 import os
+import stat
 import sys
 import tempfile
+from dataclasses import dataclass
+
+#: Prefix of the hidden names of files waiting to be renamed into place.
+TEMP_PREFIX = ".featurewarp-"
+
+
+@dataclass
+class Staged:
+    """One output's bytes, ready to be put in place by :func:`commit`.
+
+    Attributes
+    ----------
+    path : str
+        Where the output goes, as the user named it.
+    kind : {'file', 'direct', 'stdout'}
+        Replaced atomically; written directly (device, FIFO); standard output.
+    target : str
+        The file to replace (``path`` with symbolic links followed), for ``file``.
+    fd : int or None
+        The unnamed file holding the bytes (``O_TMPFILE``), for ``file``.
+    temp : str or None
+        The hidden temporary file holding them where ``O_TMPFILE`` is not available.
+    data : bytes or None
+        The bytes themselves, for ``direct`` and ``stdout``.
+    """
+
+    path: str
+    kind: str
+    target: str = ""
+    fd: int | None = None
+    temp: str | None = None
+    data: bytes | None = None
+
+
+def _mode_for(target: str) -> int:
+    """Permissions for a replaced file: the old file's, else 0666 less the umask."""
+    try:
+        return os.stat(target).st_mode & 0o777
+    except FileNotFoundError:
+        umask = os.umask(0)
+        os.umask(umask)
+        return 0o666 & ~umask
+
+
+def _write_all(fd: int, data: bytes) -> None:
+    view = memoryview(data)
+    while view:
+        view = view[os.write(fd, view):]
+
+
+def _stage_file(path: str, target: str, data: bytes) -> Staged:
+    """The bytes of a regular-file output in an unnamed file (else a hidden one) beside ``target``."""
+    directory = os.path.dirname(target) or "."
+    mode = _mode_for(target)
+    try:
+        fd = os.open(directory, os.O_TMPFILE | os.O_WRONLY | os.O_CLOEXEC, mode)
+    except (AttributeError, OSError):
+        fd = None
+    if fd is not None:
+        try:
+            _write_all(fd, data)
+            os.fchmod(fd, mode)
+        except BaseException:
+            os.close(fd)
+            raise
+        return Staged(path, "file", target, fd=fd)
+    handle, temp = tempfile.mkstemp(prefix=TEMP_PREFIX, suffix=".tmp", dir=directory)
+    try:
+        _write_all(handle, data)
+        os.fchmod(handle, mode)
+    except BaseException:
+        os.close(handle)
+        os.unlink(temp)
+        raise
+    os.close(handle)
+    _PENDING.add(temp)
+    return Staged(path, "file", target, temp=temp)
+
+
+#: Seconds to wait after staging each output (tests use it to signal a run mid-write).
+STAGE_DELAY_VARIABLE = "FEATUREWARP_TEST_STAGE_DELAY"
+
+
+def stage(path: str, data: bytes) -> Staged:
+    """Get ``data`` ready to go to ``path`` (see the module's docstring); OSError on failure."""
+    staged = _stage(path, data)
+    delay = os.environ.get(STAGE_DELAY_VARIABLE)
+    if delay:
+        import time
+
+        time.sleep(float(delay))
+    return staged
+
+
+def _stage(path: str, data: bytes) -> Staged:
+    if path == "-":
+        return Staged(path, "stdout", data=data)
+    mode = _mode_of(path)
+    if mode is not None and not stat.S_ISREG(mode):
+        if stat.S_ISDIR(mode):
+            raise IsADirectoryError(21, "Is a directory", path)
+        return Staged(path, "direct", path, data=data)
+    return _stage_file(path, _replaced(path), data)
+
+
+def _mode_of(path: str) -> int | None:
+    """``st_mode`` of what ``path`` names, links followed (None: nothing there yet)."""
+    try:
+        return os.stat(path).st_mode
+    except (FileNotFoundError, NotADirectoryError):
+        return None
+
+
+def _replaced(path: str) -> str:
+    """The file an atomic write of ``path`` replaces: a link's target (the link stays)."""
+    return os.path.realpath(path) if os.path.islink(path) else os.path.abspath(path)
+
+
+def commit(outputs: list[Staged]) -> None:
+    """Put every staged output in place, in order (OSError on failure; the rest are discarded)."""
+    try:
+        for output in outputs:
+            _commit_one(output)
+    finally:
+        discard(outputs)
+
+
+def _commit_one(output: Staged) -> None:
+    if output.kind == "stdout":
+        try:
+            sys.stdout.buffer.write(output.data)
+            sys.stdout.buffer.flush()
+        except (AttributeError, ValueError):
+            raise OSError(9, "standard output is closed") from None
+    elif output.kind == "direct":
+        with open(output.target, "wb") as handle:
+            handle.write(output.data)
+    elif output.fd is not None:
+        temp = os.path.join(os.path.dirname(output.target), f"{TEMP_PREFIX}{os.getpid()}-{id(output)}.tmp")
+        _PENDING.add(temp)
+        try:
+            _link_unnamed(output.fd, temp)
+            os.replace(temp, output.target)
+        finally:
+            remove_quietly(temp)
+            _PENDING.discard(temp)
+    else:
+        os.replace(output.temp, output.target)
+        _PENDING.discard(output.temp)
+        output.temp = None
+
+
+#: linkat(2) flags and the "current directory" file descriptor (Linux).
+_AT_FDCWD, _AT_SYMLINK_FOLLOW = -100, 0x400
+
+
+def _link_unnamed(fd: int, path: str) -> None:
+    """Give the unnamed file ``fd`` the name ``path``: linkat through /proc/self/fd, following
+    the link (``os.link`` does not follow it on Linux and fails with EXDEV)."""
+    import ctypes
+
+    libc = ctypes.CDLL(None, use_errno=True)
+    if libc.linkat(_AT_FDCWD, f"/proc/self/fd/{fd}".encode(), _AT_FDCWD, os.fsencode(path), _AT_SYMLINK_FOLLOW):
+        error = ctypes.get_errno()
+        raise OSError(error, os.strerror(error), path)
+
+
+def discard(outputs: list[Staged]) -> None:
+    """Drop what was staged and not committed (idempotent)."""
+    for output in outputs:
+        if output.fd is not None:
+            os.close(output.fd)
+            output.fd = None
+        if output.temp is not None:
+            remove_quietly(output.temp)
+            _PENDING.discard(output.temp)
+            output.temp = None
+
+
+def write_outputs(items: list[tuple[str, bytes]]) -> None:
+    """Stage every (path, bytes), then commit them all; nothing changes if staging fails."""
+    staged = []
+    try:
+        for path, data in items:
+            staged.append(stage(path, data))
+    except BaseException:
+        discard(staged)
+        raise
+    commit(staged)
 
 
 def write_atomic(path: str, data: bytes) -> None:
-    """Write ``data`` to ``path`` through a temporary file in the same directory.
-
-    A failure at any point leaves no partial file and leaves an existing ``path`` untouched.
-    """
-    directory = os.path.dirname(os.path.abspath(path))
-    fd, tmp = tempfile.mkstemp(prefix=".featurewarp-", suffix=".tmp", dir=directory)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-        if os.path.exists(path):
-            os.chmod(tmp, os.stat(path).st_mode & 0o777)
-        else:
-            umask = os.umask(0)
-            os.umask(umask)
-            os.chmod(tmp, 0o666 & ~umask)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    """Write one output (see :func:`stage`): a failure leaves an existing ``path`` untouched."""
+    write_outputs([(path, data)])
 
 
 def write_output(path: str, data: bytes) -> None:
-    """Write ``data`` to stdout for ``-``, else atomically to ``path``."""
-    if path == "-":
-        sys.stdout.buffer.write(data)
-        sys.stdout.buffer.flush()
-    else:
-        write_atomic(path, data)
+    """Write ``data`` to stdout for ``-``, else as :func:`write_atomic`."""
+    write_atomic(path, data)
+
+
+def remove_quietly(path: str) -> None:
+    """Remove ``path`` if it is there."""
+    try:
+        os.unlink(path)
+    except OSError:
+        pass
+
+
+#: Hidden temporary files that exist right now (removed by :func:`remove_pending` on a signal).
+_PENDING: set[str] = set()
+
+
+def remove_pending() -> None:
+    """Remove every hidden temporary file this process has not put in place (signal handlers)."""
+    for path in list(_PENDING):
+        remove_quietly(path)
+    _PENDING.clear()
 
 
 def check_writable(path: str) -> None:
-    """Raise ValueError unless a file ``path`` can be created (its directory exists and is writable).
+    """Raise ValueError unless ``path`` can be written: a file that can be created or replaced in
+    an existing, writable folder, or an existing device, FIFO or link to one.
 
-    Writability is probed by creating and removing a temporary file, which is
+    Writability of a folder is probed by creating and removing a temporary file, which is
     also right for root and for read-only file systems.
     """
-    directory = os.path.dirname(os.path.abspath(path))
+    mode = _mode_of(path)
+    if mode is not None and stat.S_ISDIR(mode):
+        raise ValueError(f"{path} is a directory")
+    if mode is not None and not stat.S_ISREG(mode):
+        if not os.access(path, os.W_OK):
+            raise ValueError(f"{path} is not writable")
+        return
+    directory = os.path.dirname(_replaced(path))
     if not os.path.isdir(directory):
         raise ValueError(f"directory {directory} does not exist")
-    if os.path.isdir(path):
-        raise ValueError(f"{path} is a directory")
     try:
         tempfile.TemporaryFile(dir=directory).close()
     except OSError as err:

@@ -1,0 +1,186 @@
+"""Where outputs go (issues 13 and 15): through links, into FIFOs and devices, to stdout; all of
+a command's outputs or none; nothing left behind by SIGTERM or SIGKILL; batch workers die with
+their parent."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from featurewarp_cli.cli.main import cli
+from featurewarp_cli.io import write
+
+CLI = [sys.executable, "-m", "featurewarp_cli"]
+
+
+@pytest.fixture
+def picture(tmp_path) -> Path:
+    path = tmp_path / "in" / "picture.png"
+    path.parent.mkdir()
+    cv2.imwrite(str(path), np.random.default_rng(0).integers(0, 255, (120, 160, 3), np.uint8))
+    return path
+
+
+def invoke(*args):
+    return CliRunner().invoke(cli, [str(a) for a in args])
+
+
+def test_a_symlinked_output_stays_a_link_and_its_target_gets_the_image(picture, tmp_path):
+    target, link = tmp_path / "target.png", tmp_path / "link.png"
+    link.symlink_to(target)
+    assert invoke("warp", "stretch", picture, link, "--sx", "1.5").exit_code == 0
+    assert link.is_symlink() and cv2.imread(str(target)).shape == (120, 240, 3)
+
+
+def test_a_fifo_output_delivers_the_whole_image(picture, tmp_path):
+    fifo = tmp_path / "pipe"
+    os.mkfifo(fifo)
+    received = []
+    reader = threading.Thread(target=lambda: received.append(open(fifo, "rb").read()))
+    reader.start()
+    run = subprocess.run([*CLI, "warp", "stretch", str(picture), f"png:{fifo}", "--sx", "1.5"], timeout=60)
+    reader.join(10)
+    assert run.returncode == 0 and fifo.exists() and not fifo.is_file()
+    assert cv2.imdecode(np.frombuffer(received[0], np.uint8), cv2.IMREAD_COLOR).shape == (120, 240, 3)
+
+
+@pytest.mark.parametrize("report", ["-", "/dev/stdout"])
+def test_report_to_stdout(picture, tmp_path, report):
+    """--report - (or /dev/stdout, which stays a symlink) prints the JSON on stdout."""
+    run = subprocess.run([*CLI, "warp", "stretch", str(picture), str(tmp_path / "o.png"), "--report", report],
+                         capture_output=True, timeout=60)
+    assert run.returncode == 0, run.stderr
+    assert json.loads(run.stdout)["preset"] == "stretch"
+    assert os.path.islink("/dev/stdout")
+
+
+def test_two_outputs_on_stdout_are_refused(picture):
+    run = invoke("warp", "stretch", picture, "png:-", "--report", "-")
+    assert run.exit_code == 2 and "stdout" in run.output
+
+
+@pytest.mark.parametrize("option", ["--report", "--save-grid"])
+def test_an_output_naming_an_input_is_refused(picture, option):
+    before = picture.read_bytes()
+    run = invoke("warp", "stretch", picture, picture.with_name("o.png"), option, picture)
+    assert run.exit_code == 2 and "INPUT" in run.output and "overwritten" in run.output
+    assert picture.read_bytes() == before and not picture.with_name("o.png").exists()
+
+
+def test_output_may_be_input(picture):
+    assert invoke("warp", "stretch", picture, picture, "--sx", "1.5").exit_code == 0
+    assert cv2.imread(str(picture)).shape == (120, 240, 3)
+
+
+def test_a_failed_report_leaves_an_existing_output_as_it_was(picture, tmp_path, monkeypatch):
+    output = tmp_path / "o.png"
+    output.write_bytes(b"precious")
+    staging = write._stage_file
+
+    def full_disk(path, target, data):
+        if path.endswith(".json"):
+            raise OSError(28, "No space left on device", path)
+        return staging(path, target, data)
+
+    monkeypatch.setattr(write, "_stage_file", full_disk)
+    run = invoke("warp", "stretch", picture, output, "--report", tmp_path / "r.json", "--save-grid",
+                 tmp_path / "g.npz")
+    assert run.exit_code == 1 and "No space left on device" in run.output
+    assert output.read_bytes() == b"precious"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["in", "o.png"]
+
+
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGKILL])
+def test_a_signal_during_the_write_leaves_no_file(picture, tmp_path, signum):
+    """Killed while its outputs wait to be put in place: the folder is as it was."""
+    out_dir = tmp_path / "out"
+    out_dir.mkdir()
+    env = {**os.environ, write.STAGE_DELAY_VARIABLE: "30"}
+    process = subprocess.Popen([*CLI, "warp", "stretch", str(picture), str(out_dir / "o.png"), "--report",
+                                str(out_dir / "r.json")], env=env, stderr=subprocess.PIPE)
+    deadline = time.time() + 60
+    while time.time() < deadline and not _has_open_tmpfile(process.pid):
+        time.sleep(0.05)
+    time.sleep(0.2)
+    process.send_signal(signum)
+    process.wait(10)
+    assert process.returncode != 0
+    assert list(out_dir.iterdir()) == []
+
+
+def _has_open_tmpfile(pid: int) -> bool:
+    """Whether ``pid`` holds an unnamed file (O_TMPFILE) or a featurewarp temporary file open."""
+    try:
+        links = [os.readlink(f"/proc/{pid}/fd/{fd}") for fd in os.listdir(f"/proc/{pid}/fd")]
+    except OSError:
+        return False
+    return any("(deleted)" in link or write.TEMP_PREFIX in link for link in links)
+
+
+def _children(pid: int) -> list[int]:
+    out = []
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                fields = Path(f"/proc/{entry}/stat").read_text().rsplit(")", 1)[1].split()
+            except OSError:
+                continue
+            if int(fields[1]) == pid:
+                out.append(int(entry))
+    return out
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"
+
+
+@pytest.mark.slow
+def test_batch_workers_die_with_their_parent(picture, tmp_path):
+    """SIGTERM to a `batch --jobs 2` parent: no worker outlives it by 2 s, no file is left."""
+    for k in range(3):
+        (picture.parent / f"copy{k}.png").write_bytes(picture.read_bytes())
+    out_dir = tmp_path / "out"
+    out_dir.mkdir()
+    env = {**os.environ, write.STAGE_DELAY_VARIABLE: "30"}
+    process = subprocess.Popen([*CLI, "batch", "stretch", *map(str, sorted(picture.parent.iterdir())),
+                                "--out-dir", str(out_dir), "--jobs", "2", "--sx", "1.5"], env=env,
+                               stderr=subprocess.PIPE)
+    deadline = time.time() + 60
+    workers = []
+    while time.time() < deadline:
+        workers = [w for w in _children(process.pid) if _has_open_tmpfile(w)]
+        if workers:
+            break
+        time.sleep(0.1)
+    assert workers, "no worker reached its write"
+    everyone = _children(process.pid)
+    process.send_signal(signal.SIGTERM)
+    process.wait(10)
+    time.sleep(2.0)
+    assert not [pid for pid in everyone if _alive(pid)]
+    assert list(out_dir.iterdir()) == []
+
+
+def test_batch_refuses_to_write_over_another_jobs_input(tmp_path):
+    folder = tmp_path / "pics"
+    folder.mkdir()
+    for name in ("a.png", "a_x.png"):
+        cv2.imwrite(str(folder / name), np.zeros((20, 20, 3), np.uint8))
+    run = invoke("batch", "stretch", folder / "a.png", folder / "a_x.png", "--out-dir", folder, "--suffix", "_x",
+                 "--mask-pattern", "none_{stem}.png")
+    assert run.exit_code == 2 and "also reads" in run.output
