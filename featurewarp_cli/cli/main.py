@@ -181,7 +181,7 @@ def main(argv=None):
         err.show()
         code = err.exit_code
     except click.UsageError as err:
-        click.echo(f"featurewarp: error: {err.format_message()}", err=True)
+        say(f"featurewarp: error: {err.format_message()}")
         code = err.exit_code
     except click.exceptions.Abort:
         click.echo("featurewarp: aborted", err=True)
@@ -198,8 +198,17 @@ def main(argv=None):
             message, code = err.format_message(), err.exit_code
         else:
             message, code = f"{type(err).__name__}: {err} (--debug shows a traceback)", 1
-        click.echo(f"featurewarp: error: {message}", err=True)
+        say(f"featurewarp: error: {message}")
     sys.exit(code if isinstance(code, int) else 0)
+
+
+def say(line: str) -> None:
+    """One line on stderr, whatever the message holds (a file name with a newline stays on
+    one line) and even when stderr is closed."""
+    try:
+        click.echo(line.replace("\r", "\\r").replace("\n", "\\n"), err=True)
+    except (OSError, ValueError, AttributeError):
+        pass
 
 
 if __name__ == "__main__":

@@ -26,7 +26,8 @@ MAX_PIXELS_PARAM = Param("max_pixels", int, limits.MAX_PIXELS,
                          min=1, metavar="N")
 JOBS = Param("jobs", int, 1, "Worker processes; results are byte-identical to N=1.", min=1, metavar="N")
 FRAMES = Param("frames", int, 24, "Number of frames (START and END included).", min=1, metavar="N")
-FPS = Param("fps", float, 12.0, "Frames per second.", min=0.0, min_open=True)
+FPS = Param("fps", float, 12.0, "Frames per second (GIF and video players take 0.01 to 100).",
+            min=0.01, max=100.0)
 MAX_RMSE = Param("max_rmse", float, None, "Pass if RMSE <= X.", min=0.0, metavar="X")
 MIN_PSNR = Param("min_psnr", float, None, "Pass if PSNR >= DB.", metavar="DB")
 MAX_PIXELS_OFF = Param("max_pixels_off", int, None,

@@ -52,6 +52,8 @@ from .record import KEPT, ComponentRecord, SolveRecord, warnings_for
 
 #: Images thinner than this (px) are warped without features: one base cell cannot hold a shape.
 MIN_FEATURE_SIDE = 4
+#: Features (quads holding a mask pixel) covering more than this share of the grid get a warning.
+MASK_COVERAGE = 0.9
 
 
 def load_warp(name: str):
@@ -383,6 +385,11 @@ class FeatureWarper:
                                                                state.tri_component < 0)
         if record.mode != "plain":
             record.warnings.extend(warnings_for(record, state.nodes, target, warped, warp))
+            coverage = float(np.mean(features.is_feature))
+            if coverage > MASK_COVERAGE:
+                record.warnings.append(f"the mask's features cover {100 * coverage:.0f} % of the grid: little background "
+                                       f"is left to take the warp (is the mask inverted, or a JPEG whose "
+                                       f"noise crosses the threshold?)")
         record.warnings.extend(self.notes)
 
     def render(self, image: np.ndarray, mesh: Mesh, interp: str = INTERPOLATION, background=None,

@@ -17,7 +17,8 @@ def captured_stderr():
     meanwhile) are shown afterwards instead of being collected.
     """
     lines: list[str] = []
-    sys.stderr.flush()                                              # our own messages stay visible
+    if sys.stderr is not None:
+        sys.stderr.flush()                                          # our own messages stay visible
     try:
         saved = os.dup(2)
     except OSError:                                                 # no stderr at all
@@ -33,6 +34,6 @@ def captured_stderr():
             tmp.seek(0)
             printed = [line for line in tmp.read().decode(errors="replace").splitlines() if line.strip()]
             ours = [line for line in printed if line.startswith("featurewarp:")]
-            if ours:
+            if ours and sys.stderr is not None:
                 sys.stderr.write("".join(line + "\n" for line in ours))
             lines.extend(line for line in printed if not line.startswith("featurewarp:"))

@@ -18,6 +18,7 @@ from __future__ import annotations
 import importlib
 import io
 import sys
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -99,6 +100,8 @@ def read_bytes(path: str) -> bytes:
         When the file cannot be read.
     """
     if path == "-":
+        if sys.stdin is None or getattr(sys.stdin, "closed", False):
+            raise ImageError("stdin is closed; pipe an image into it (or give a file name)")
         if sys.stdin.isatty():
             raise ImageError("stdin is a terminal; pipe an image into it (or give a file name)")
         return sys.stdin.buffer.read()
@@ -135,7 +138,8 @@ def read_header(data: bytes) -> Header | None:
     Header(format='PNG', width=5, height=3, orientation=1)
     """
     try:
-        with Image.open(io.BytesIO(data), formats=HEADER_FORMATS) as image:
+        with warnings.catch_warnings(), Image.open(io.BytesIO(data), formats=HEADER_FORMATS) as image:
+            warnings.simplefilter("ignore")            # a broken tag is the decoder's to judge
             size = image.size
             if image.format == "TIFF":          # Pillow reports a turned TIFF's size as shown
                 size = image.tag_v2.get(256, size[0]), image.tag_v2.get(257, size[1])

@@ -1,0 +1,162 @@
+"""Issue 15: the one-line rule everywhere, and a seeded mutation fuzz of the decode path and of
+the presets' parameters within their declared ranges."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import time
+
+import cv2
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from featurewarp_cli import FeatureWarper, load_warp, plugins
+from featurewarp_cli.cli.main import cli
+from featurewarp_cli.io import ImageError, decode
+
+CLI = [sys.executable, "-m", "featurewarp_cli"]
+
+
+def picture(width: int = 48, height: int = 36) -> np.ndarray:
+    y, x = np.mgrid[0:height, 0:width]
+    return np.dstack([x * 5 % 256, y * 7 % 256, (x + y) * 3 % 256]).astype(np.uint8)
+
+
+def encoded(fmt: str) -> bytes:
+    ok, data = cv2.imencode("." + fmt, picture())
+    assert ok
+    return data.tobytes()
+
+
+def mutations(data: bytes, rng: np.random.Generator, count: int):
+    """``count`` mutants of ``data``: flipped bytes, a truncation, junk inserted, a chunk repeated."""
+    for _ in range(count):
+        mutant = bytearray(data)
+        kind = rng.integers(4)
+        if kind == 0:
+            for at in rng.integers(0, len(mutant), rng.integers(1, 8)):
+                mutant[at] = int(rng.integers(256))
+        elif kind == 1:
+            mutant = mutant[: rng.integers(1, len(mutant))]
+        elif kind == 2:
+            at = int(rng.integers(0, len(mutant)))
+            mutant[at:at] = rng.integers(0, 256, rng.integers(1, 64)).astype(np.uint8).tobytes()
+        else:
+            a, b = sorted(rng.integers(0, len(mutant), 2))
+            mutant[b:b] = mutant[a:b][:4096]
+        yield bytes(mutant)
+
+
+@pytest.mark.parametrize("fmt", ["png", "jpg", "webp", "tiff", "bmp", "ppm"])
+def test_decoder_fuzz(fmt):
+    """Mutated files decode to an image or raise ImageError, never anything else, each quickly."""
+    rng = np.random.default_rng(sum(map(ord, fmt)))
+    for mutant in mutations(encoded(fmt), rng, 60):
+        t0 = time.perf_counter()
+        try:
+            image = decode.decode_image(mutant, "fuzz", max_pixels=10_000)
+        except ImageError:
+            pass
+        else:
+            assert image.dtype in (np.uint8, np.uint16) and image.size
+        assert time.perf_counter() - t0 < 2.0
+
+
+def test_cli_fuzz_one_line_and_nothing_left(tmp_path):
+    """Mutated inputs and masks through the CLI: exit 0, 1 or 2, at most one error line, no
+    traceback, and the output folder holds the output or nothing."""
+    rng = np.random.default_rng(15)
+    mask = tmp_path / "mask.png"
+    cv2.imwrite(str(mask), (picture()[..., 0] > 128).astype(np.uint8) * 255)
+    out_dir = tmp_path / "out"
+    out_dir.mkdir()
+    runner = CliRunner()
+    for k, mutant in enumerate(mutations(encoded("png"), rng, 12)):
+        source = tmp_path / f"m{k}.png"
+        source.write_bytes(mutant)
+        for args in (["warp", "swirl", source, out_dir / "o.png", "-m", mask],
+                     ["warp", "stretch", mask, out_dir / "o.png", "-m", source, "--sx", "1.5"]):
+            run = runner.invoke(cli, [str(a) for a in args])
+            errors = [line for line in run.output.splitlines() if "error" in line]
+            assert run.exit_code in (0, 1, 2) and len(errors) <= 1 and "Traceback" not in run.output, run.output
+            assert sorted(p.name for p in out_dir.iterdir()) in ([], ["o.png"])
+            assert (run.exit_code == 0) == (out_dir / "o.png").exists()
+            (out_dir / "o.png").unlink(missing_ok=True)
+
+
+def _random_value(param, rng):
+    low = param.min if param.min is not None else -1000.0
+    high = param.max if param.max is not None else 1000.0
+    if param.type is int:
+        high = min(high, 4 * 48)
+        return int(rng.integers(max(1, int(low)), int(high) + 1))
+    value = float(rng.uniform(low, high)) if rng.random() < 0.7 else float(rng.choice([low, high]))
+    if param.min_open and value == low:
+        value = low + 1e-3 * (high - low)
+    return value
+
+
+@pytest.mark.parametrize("name", ["stretch", "arc", "swirl", "bulge"])
+def test_preset_parameter_fuzz(name):
+    """Random values within each built-in preset's declared ranges (extremes included): a
+    fold-free mesh in bounded time, with features and without."""
+    rng = np.random.default_rng(len(name))
+    preset = load_warp(name)
+    mask = np.zeros((36, 48), bool)
+    mask[10:20, 12:26] = True
+    for _ in range(6):
+        values = {p.name: _random_value(p, rng) for p in preset.params if p.name not in ("width", "height")}
+        warp = preset(48, 36, **values)
+        t0 = time.perf_counter()
+        mesh = FeatureWarper(48, 36, mask).solve(warp)
+        assert mesh.flips() == 0, (name, values, mesh.info["fold_guard"])
+        assert time.perf_counter() - t0 < 20.0, (name, values)
+
+
+def test_closed_stdin_and_newline_names_are_one_line(tmp_path):
+    run = subprocess.run([*CLI, "warp", "swirl", "-", str(tmp_path / "o.png")], stdin=subprocess.DEVNULL,
+                         capture_output=True, text=True, timeout=60)
+    assert run.returncode == 1 and len(run.stderr.splitlines()) == 1
+    closed = subprocess.run(" ".join([*CLI, "warp", "swirl", "-", str(tmp_path / "o.png")]) + " <&-", shell=True,
+                            capture_output=True, text=True, timeout=60)
+    assert closed.returncode == 1 and closed.stderr.splitlines() == [
+        "featurewarp: error: stdin is closed; pipe an image into it (or give a file name)"]
+    odd = CliRunner().invoke(cli, ["warp", "swirl", str(tmp_path / "no\nsuch.png"), str(tmp_path / "o.png")])
+    assert odd.exit_code == 2
+
+
+def test_newline_in_a_name_stays_on_one_line(tmp_path):
+    run = subprocess.run([*CLI, "warp", "swirl", str(tmp_path / "no\nsuch.png"), str(tmp_path / "o.png")],
+                         capture_output=True, text=True, timeout=60)
+    assert run.returncode == 2 and len(run.stderr.splitlines()) == 1 and "no\\nsuch.png" in run.stderr
+
+
+@pytest.mark.parametrize("fps", ["1e-9", "0", "1e9", "nan"])
+def test_animate_fps_out_of_range_is_a_usage_error(tmp_path, fps):
+    source = tmp_path / "in.png"
+    cv2.imwrite(str(source), picture())
+    run = CliRunner().invoke(cli, ["animate", "swirl", str(source), str(tmp_path / "o.gif"), "--vary",
+                                   "angle=0:90", "--frames", "2", "--fps", fps])
+    assert run.exit_code == 2 and "--fps" in run.output and not (tmp_path / "o.gif").exists()
+
+
+def test_a_noisy_mask_that_covers_the_picture_is_said(tmp_path):
+    """A JPEG mask whose grey background crosses the threshold with its noise: the warning
+    says so, and --strict fails with nothing written."""
+    rng = np.random.default_rng(0)
+    source, mask, out = tmp_path / "in.png", tmp_path / "mask.jpg", tmp_path / "o.png"
+    cv2.imwrite(str(source), picture(160, 120))
+    cv2.imwrite(str(mask), np.clip(126 + rng.normal(0, 3, (120, 160)), 0, 255).astype(np.uint8))
+    run = CliRunner().invoke(cli, ["warp", "swirl", str(source), str(out), "-m", str(mask)])
+    assert run.exit_code == 0 and "of the grid" in run.output
+    strict = CliRunner().invoke(cli, ["warp", "swirl", str(source), str(out), "-m", str(mask), "--strict"])
+    assert strict.exit_code == 1
+
+
+def test_every_builtin_preset_declares_bounded_ranges():
+    """Every float parameter of the built-in presets has both bounds (a promise needs them)."""
+    for name in ("stretch", "arc", "swirl", "bulge"):
+        for param in plugins.load(name).params:
+            assert param.min is not None and param.max is not None, (name, param.name)
