@@ -160,3 +160,34 @@ def test_every_builtin_preset_declares_bounded_ranges():
     for name in ("stretch", "arc", "swirl", "bulge"):
         for param in plugins.load(name).params:
             assert param.min is not None and param.max is not None, (name, param.name)
+
+
+def test_png_exif_orientation_after_the_pixels_is_applied():
+    """A PNG whose eXIf chunk (orientation 6: turn clockwise) follows its pixel data is turned
+    upright, as a JPEG's EXIF is, without decoding twice."""
+    import struct
+    import zlib
+
+    from PIL import Image
+
+    stored = np.zeros((20, 40, 3), np.uint8)
+    stored[:, :10] = 255                                    # white on the left as stored
+    png = cv2.imencode(".png", stored)[1].tobytes()
+    exif = Image.Exif()
+    exif[0x0112] = 6
+    payload = exif.tobytes()
+    chunk = struct.pack(">I", len(payload)) + b"eXIf" + payload + struct.pack(">I", zlib.crc32(b"eXIf" + payload))
+    end = png.rindex(b"IEND") - 4
+    upright = decode.decode_image(png[:end] + chunk + png[end:], "exif.png")
+    assert upright.shape == (40, 20, 3)
+    assert (upright[:10] == 255).all() and (upright[10:] == 0).all()   # the left edge is now the top
+
+
+def test_animated_input_says_the_first_frame_is_used(tmp_path):
+    from PIL import Image
+
+    frames = [Image.fromarray(np.full((12, 16, 3), v, np.uint8)) for v in (0, 255)]
+    source = tmp_path / "anim.gif"
+    frames[0].save(source, "GIF", save_all=True, append_images=frames[1:])
+    run = CliRunner().invoke(cli, ["warp", "swirl", str(source), str(tmp_path / "o.png")])
+    assert run.exit_code == 0 and "the first is used" in run.output

@@ -238,10 +238,12 @@ def start_loading(settings: Settings, input: str, mask: str | None):
         image, feature_mask, warnings = load_image_and_mask(settings, input, mask, data)
         return _Ready(image), feature_mask, warnings, (image.shape[1], image.shape[0])
     size = header.upright_size
-    feature_mask, warnings = None, []
+    feature_mask = None
+    warnings = ["the input has several frames (animated or multi-page); the first is used"] if header.animated else []
     if use_mask:
         try:
-            feature_mask, warnings = _load_mask(settings, mask, size)
+            feature_mask, mask_warnings = _load_mask(settings, mask, size)
+            warnings += mask_warnings
         except WarpError:
             load_image_and_mask(settings, input, mask)       # the image's own error comes first
             raise

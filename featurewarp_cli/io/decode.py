@@ -78,12 +78,16 @@ class Header:
         The stored size.
     orientation : int
         EXIF orientation 1..8 (1: upright as stored).
+    animated : bool
+        More than one frame or page (animated GIF, PNG or WebP, multi-page TIFF); the
+        decoders take the first.
     """
 
     format: str
     width: int
     height: int
     orientation: int = 1
+    animated: bool = False
 
     @property
     def upright_size(self) -> tuple[int, int]:
@@ -112,15 +116,35 @@ def read_bytes(path: str) -> bytes:
         raise ImageError(f"cannot read {path}: {err.strerror or err}") from None
 
 
-def _orientation(image: Image.Image) -> int:
+def _orientation(image: Image.Image, data: bytes) -> int:
     """EXIF orientation of an opened (not decoded) image; 1 when none applies."""
-    if image.format not in ORIENTED or (image.format == "PNG" and "exif" not in image.info):
-        return 1            # (a PNG's eXIf chunk after the pixels: reading it would decode them)
+    if image.format not in ORIENTED:
+        return 1
     try:
-        value = image.getexif().get(_EXIF_ORIENTATION, 1)
+        if image.format == "PNG" and "exif" not in image.info:
+            exif = Image.Exif()             # an eXIf chunk after the pixels: Pillow would decode them
+            exif.load(_png_chunk(data, b"eXIf") or b"")
+        else:
+            exif = image.getexif()
+        value = exif.get(_EXIF_ORIENTATION, 1)
     except Exception:  # a broken EXIF block: the pixels are shown as stored
         return 1
     return value if value in ORIENTATIONS else 1
+
+
+def _png_chunk(data: bytes, kind: bytes) -> bytes | None:
+    """The payload of the first chunk of type ``kind`` in PNG bytes (None if there is none);
+    chunk headers only are read, the pixels are skipped."""
+    at = 8
+    while at + 8 <= len(data):
+        length = int.from_bytes(data[at:at + 4], "big")
+        name = data[at + 4:at + 8]
+        if name == kind:
+            return data[at + 8:at + 8 + length]
+        if name == b"IEND":
+            return None
+        at += 12 + length
+    return None
 
 
 def read_header(data: bytes) -> Header | None:
@@ -143,7 +167,7 @@ def read_header(data: bytes) -> Header | None:
             size = image.size
             if image.format == "TIFF":          # Pillow reports a turned TIFF's size as shown
                 size = image.tag_v2.get(256, size[0]), image.tag_v2.get(257, size[1])
-            return Header(image.format, *size, _orientation(image))
+            return Header(image.format, *size, _orientation(image, data), bool(getattr(image, "is_animated", False)))
     except Exception:  # UnidentifiedImageError, or whatever a broken header raises in a plugin
         return None
 
