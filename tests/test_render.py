@@ -136,7 +136,7 @@ def test_antialiased_silhouette(textured_bgr, background):
     warper = FeatureWarper(W, H)
     mesh = warper.solve(load_warp("arc")(W, H, angle=150))
     _, covered = inverse(mesh)
-    out = warper.render(textured_bgr, mesh, background=background).astype(int)
+    out = warper.render(textured_bgr, mesh, background=background, order="bgr").astype(int)
     ring = np.ones((5, 5), np.uint8)
     far_out = cv2.dilate(covered.astype(np.uint8), ring) == 0
     deep_in = cv2.erode(covered.astype(np.uint8), ring, borderType=cv2.BORDER_CONSTANT, borderValue=0) == 1
@@ -148,7 +148,7 @@ def test_antialiased_silhouette(textured_bgr, background):
     else:
         expected = np.array(background[::-1])
         assert (out[far_out] == expected).all()
-        plain = warper.render(textured_bgr, mesh, background=background, antialias=False).astype(int)
+        plain = warper.render(textured_bgr, mesh, background=background, antialias=False, order="bgr").astype(int)
         assert (out[deep_in] != expected).any(axis=-1).mean() > 0.9
         assert np.abs(out - plain)[~far_out & ~deep_in].max() > 0
 
@@ -226,7 +226,7 @@ def test_background_fills_uncovered_pixels_exactly(images, rgb, kind, depth):
     warper = FeatureWarper(W, H)
     mesh = warper.solve(w)
     _, covered = inverse(mesh)
-    out = warper.render(image, mesh, background=rgb, antialias=False)
+    out = warper.render(image, mesh, background=rgb, antialias=False, order="bgr")
     assert out.dtype == image.dtype and channels(out) == channels(image)
     factor = 257 if depth == "uint16" else 1
     expected = [rgb[2] * factor, rgb[1] * factor, rgb[0] * factor]
@@ -250,16 +250,21 @@ def test_background_on_gray_is_its_luma(images):
 
 
 def test_gray_with_transparent_background_gains_alpha(images):
-    """Without antialiasing, a gray image with uncovered pixels and no background comes out gray-as-BGRA with alpha 0 there."""
+    """Without antialiasing, a gray image with uncovered pixels and no background gains alpha 0 there:
+    as BGRA for the command line's files, as grey + alpha in the API."""
     w = load_warp("arc")(W, H, angle=150)
     warper = FeatureWarper(W, H)
     mesh = warper.solve(w)
     _, covered = inverse(mesh)
     gray = images[("uint8", "gray")]
-    out = warper.render(gray, mesh, background=None, antialias=False)
+    out = warper.render(gray, mesh, background=None, antialias=False, order="bgr")
     assert out.shape[2] == 4
     np.testing.assert_array_equal(out[..., 3] == 0, ~covered)
     assert (out[..., 0] == out[..., 1]).all() and (out[..., 1] == out[..., 2]).all()
+    api = warper.render(gray, mesh, background=None, antialias=False)        # the API: grey stays grey
+    assert api.shape[2] == 2
+    np.testing.assert_array_equal(api[..., 1] == 0, ~covered)
+    np.testing.assert_array_equal(api[..., 0], out[..., 0])
 
 
 # --- the compiled rasterizer against the reference (tests/reference_render.py) ----------------
@@ -510,3 +515,38 @@ def test_sides_beyond_opencv_limit_render(tmp_path):
     warper = FeatureWarper(1, 5000)
     tall = warper.render(column, warper.solve(load_warp("stretch")(1, 5000, sy=100), "plain"))
     assert tall.shape[:2] == (500000, 1)
+
+
+def test_the_api_speaks_rgb_and_keeps_dtype_and_grey():
+    """issue 13: an RGB image with background (255, 0, 0) gets red where uncovered; a float32
+    image in [0, 1] comes back float32 in [0, 1]; a grey image keeps one channel when a
+    background is given; colour names work; bad values and dtypes are ValueErrors."""
+    rng = np.random.default_rng(1)
+    rgb = rng.integers(0, 255, (H, W, 3), np.uint8)
+    mask = np.zeros((H, W), bool)
+    mask[20:40, 30:60] = True
+    red = warp(rgb, mask, "arc", angle=150, background=(255, 0, 0))
+    corner = red[0, 0] if (red[0, 0] != 0).any() else red[-1, 0]
+    assert tuple(corner) == (255, 0, 0)
+    assert tuple(warp(rgb, mask, "arc", angle=150, background="white")[0, 0]) == (255, 255, 255)
+    floats = warp(rgb.astype(np.float32) / 255, mask, "swirl", angle=60)
+    assert floats.dtype == np.float32 and 0.0 <= floats.min() and floats.max() <= 1.0
+    assert np.abs(floats * 255 - warp(rgb, mask, "swirl", angle=60)).max() < 1.0
+    grey = warp(rgb[..., 0], mask, "arc", angle=150, background=(0, 0, 0))
+    assert grey.ndim == 2 or grey.shape[2] == 1
+    for bad in ((300, 0, 0), (1, 2), "nocolour"):
+        with pytest.raises(ValueError):
+            warp(rgb, mask, "arc", angle=150, background=bad)
+    for image in (rgb.astype(np.complex64), rng.integers(0, 255, (H, W, 5), np.uint8), rgb.astype(np.float32) * 2):
+        with pytest.raises(ValueError):
+            warp(image, mask, "swirl", angle=60)
+
+
+def test_one_mask_rule_in_the_api():
+    """bool as is; integers at or above 128/255 of their maximum (as the CLI); floats at or above 0.5."""
+    from featurewarp_cli.engine.arrays import mask_array
+
+    values = np.array([[0, 127, 128, 255]], np.uint8)
+    assert mask_array(values, (1, 4)).tolist() == [[False, False, True, True]]
+    assert mask_array(values.astype(np.uint16) * 257, (1, 4)).tolist() == [[False, False, True, True]]
+    assert mask_array(np.array([[0.2, 0.5]]), (1, 2)).tolist() == [[False, True]]

@@ -145,7 +145,7 @@ def animate_file(settings: Settings, input: str, output: str, mask: str | None, 
         mesh = warper.solve(warp, settings.mode)
         flips += mesh.info["flipped_triangles"]
         check_solution(replace(settings, strict=False), mesh)
-        frame = to_bgr(warper.render(image, mesh, settings.interp, background), alpha)
+        frame = to_bgr(warper.render(image, mesh, settings.interp, background, order="bgr"), alpha)
         rendered.append(centre_on(frame, canvas, fill))
         if progress:
             progress(1)

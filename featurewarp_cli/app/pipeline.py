@@ -423,7 +423,7 @@ def warp_file(settings: Settings, input: str, output: str, mask: str | None = No
                         f"{width}x{height}")
     warnings.extend(mesh.record.warnings)
     check_solution(settings, mesh)
-    result = warper.render(image, mesh, settings.interp, background)
+    result = warper.render(image, mesh, settings.interp, background, order="bgr")
     if draw_grid:
         from .panel import draw_grid as overlay
 
@@ -489,7 +489,7 @@ def compare_file(settings: Settings, input: str, output: str, mask: str | None =
     for mode in ("plain", "rigid", "similarity"):
         mesh = warper.solve(warp, mode)
         check_solution(settings, mesh)
-        result = warper.render(image, mesh, settings.interp, background)
+        result = warper.render(image, mesh, settings.interp, background, order="bgr")
         tiles.append(panel.draw_grid(result, mesh) if draw_grid else result)
         labels.append(f"{mode} {settings.preset}" if mode == "plain" else f"featurewarp {mode}")
     write_image(out_path, fmt, panel.labelled_panel(tiles, labels), (255, 255, 255))

@@ -41,7 +41,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import components, fidelity, guard, quality, scale_search, system, targets
+from . import arrays, components, fidelity, guard, quality, scale_search, system, targets
 from . import features as feat
 from .defaults import (BOUNDARIES, DECAY, DECAY_PARAM, FEATURE_WEIGHT, FEATURE_WEIGHT_PARAM, FORMULATION,
                        FORMULATIONS, INTERPOLATION, MODE, MODES, SCALE_PRIOR, SCALE_PRIOR_PARAM)
@@ -156,7 +156,7 @@ class FeatureWarper:
                 raise ValueError(f"--cell {cell:g} makes a grid of {nodes} nodes, above the {max_nodes} that the "
                                  f"memory limit allows (a larger --cell, or a larger --max-memory)")
         self.width, self.height = int(width), int(height)
-        self.mask = np.zeros((height, width), bool) if mask is None else np.asarray(mask, bool)
+        self.mask = np.zeros((height, width), bool) if mask is None else arrays.mask_array(mask, (height, width))
         self.notes = []
         if min(width, height) < MIN_FEATURE_SIDE and self.mask.any():
             self.notes.append(f"the image is {width}x{height}: too thin for a feature to keep a shape "
@@ -393,22 +393,38 @@ class FeatureWarper:
         record.warnings.extend(self.notes)
 
     def render(self, image: np.ndarray, mesh: Mesh, interp: str = INTERPOLATION, background=None,
-               antialias: bool = True) -> np.ndarray:
+               antialias: bool = True, order: str = "rgb") -> np.ndarray:
         """Resample ``image`` through ``mesh``; see :func:`featurewarp_cli.render.raster.render`.
 
-        With ``antialias`` (default) regions the warp shrinks are prefiltered and the
-        mesh's silhouette gets partial coverage (alpha, or a blend with ``background``).
+        Parameters
+        ----------
+        image : (h, w) or (h, w, C) ndarray
+            Grey, grey + alpha, RGB or RGBA (:mod:`featurewarp_cli.engine.arrays` has the
+            rules): uint8, uint16, bool, integers, or floats in [0, 1]; returned in the same
+            dtype, grey staying grey.
+        mesh : Mesh
+        interp : {'linear', 'cubic', 'lanczos'}
+        background : (r, g, b) of 0..255, colour text, or None
+            Fill where no source pixel lands; None: transparent (alpha added where needed).
+        antialias : bool
+            Prefilter regions the warp shrinks and give the mesh's silhouette partial
+            coverage (alpha, or a blend with ``background``).
+        order : {'rgb', 'bgr'}
+            The image's channel order: 'rgb' for the API; 'bgr' (uint8 or uint16 only) for
+            images as OpenCV reads them, which the command line uses.
         """
         from ..render import raster
 
         if image.shape[:2] != (self.height, self.width):
             raise ValueError(f"image is {image.shape[1]}x{image.shape[0]}, warper is for {self.width}x{self.height}")
         t0 = time.perf_counter()
-        out = raster.render(image, mesh.source, mesh.target, mesh.triangles, mesh.canvas, interp, background,
+        channels = 1 if image.ndim == 2 else image.shape[2]
+        samples, fill, dtype = arrays.prepare(image, background) if order == "rgb" else (image, background, None)
+        out = raster.render(samples, mesh.source, mesh.target, mesh.triangles, mesh.canvas, interp, fill,
                             antialias=antialias)
         if mesh.record is not None:
             mesh.record.timings["render"] = time.perf_counter() - t0
-        return out
+        return arrays.finish(out, channels, dtype) if order == "rgb" else out
 
 
 def _smallest_scale(jac: np.ndarray, features, prior: np.ndarray) -> np.ndarray:
@@ -445,16 +461,19 @@ def warp(image: np.ndarray, mask: np.ndarray | None, preset: str, *, mode: str =
 
     Parameters
     ----------
-    image : (h, w) or (h, w, C) ndarray, uint8 or uint16
-    mask : (h, w) bool ndarray or None
+    image : (h, w) or (h, w, C) ndarray
+        Grey, grey + alpha, RGB or RGBA; uint8, uint16, bool, integers, or floats in
+        [0, 1] (returned in the same dtype; see :mod:`featurewarp_cli.engine.arrays`).
+    mask : (h, w) ndarray or None
+        Feature pixels: bool as is; integers at or above 128/255 of their maximum; floats >= 0.5.
     preset : str
         Registered preset name ('stretch', 'arc', 'swirl', 'bulge', or a plugin's).
     mode, cell, feature_weight, decay, formulation, boundary, scale_prior
         See :class:`FeatureWarper`.
     interp : {'linear', 'cubic', 'lanczos'}
-    background : tuple or None
-        Fill for pixels no source pixel lands on, in the output's channel order;
-        None: transparent (alpha added where needed).
+    background : (r, g, b) of 0..255, colour text such as ``"white"``, or None
+        Fill for pixels no source pixel lands on; None: transparent (alpha added where
+        needed: RGBA for colour, grey + alpha for grey).
     **params
         The preset's parameters.
 

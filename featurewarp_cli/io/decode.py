@@ -159,7 +159,7 @@ def read_header(data: bytes) -> Header | None:
     --------
     >>> import cv2, numpy as np
     >>> read_header(cv2.imencode(".png", np.zeros((3, 5), np.uint8))[1].tobytes())
-    Header(format='PNG', width=5, height=3, orientation=1)
+    Header(format='PNG', width=5, height=3, orientation=1, animated=False)
     """
     try:
         with warnings.catch_warnings(), Image.open(io.BytesIO(data), formats=HEADER_FORMATS) as image:
