@@ -184,3 +184,13 @@ def test_batch_refuses_to_write_over_another_jobs_input(tmp_path):
     run = invoke("batch", "stretch", folder / "a.png", folder / "a_x.png", "--out-dir", folder, "--suffix", "_x",
                  "--mask-pattern", "none_{stem}.png")
     assert run.exit_code == 2 and "also reads" in run.output
+
+
+def test_stdout_takes_the_input_format(picture, tmp_path):
+    """'-' as OUTPUT without --format: the input's own format (a JPEG gives JPEG bytes)."""
+    jpeg = tmp_path / "p.jpg"
+    cv2.imwrite(str(jpeg), cv2.imread(str(picture)))
+    for source, magic in ((picture, b"\x89PNG"), (jpeg, b"\xff\xd8")):
+        run = subprocess.run([*CLI, "warp", "stretch", str(source), "-", "--sx", "1.2"], capture_output=True,
+                             timeout=60)
+        assert run.returncode == 0 and run.stdout.startswith(magic)

@@ -11,7 +11,6 @@ from __future__ import annotations
 import importlib
 import json
 import os
-import stat
 import sys
 import threading
 import time
@@ -20,6 +19,7 @@ from dataclasses import dataclass, field
 from .. import plugins
 from ..engine.defaults import DECAY, FEATURE_WEIGHT, FORMULATION, INTERPOLATION, MODE, SCALE_PRIOR
 from ..io import ImageError, colours, decode, encode, formats, limits, write
+from .outputs import check_distinct, format_of
 
 #: What :func:`prefetch_engine` imports: the engine (grid, features, fold-over guard,
 #: renderer), then, for a warp that factors, the solver (scipy.sparse and scikit-sparse).
@@ -295,10 +295,16 @@ def check_solution(settings: Settings, mesh) -> None:
         raise WarpError(f"--strict: {mesh.record.warnings[0]}; nothing written")
 
 
-def check_outputs(settings: Settings, output: str, *extra: tuple[str | None, str]):
-    """Resolve OUTPUT's path and format and check that it and ``extra`` (path, option) can be written."""
+def check_outputs(settings: Settings, output: str, *extra: tuple[str | None, str], like: str | None = None):
+    """Resolve OUTPUT's path and format and check that it and ``extra`` (path, option) can be written.
+
+    ``-`` as OUTPUT without ``--format`` or a prefix takes the format of the file ``like``
+    (INPUT), read from its first bytes."""
+    fmt = settings.fmt
+    if fmt is None and output == "-" and like not in (None, "-"):
+        fmt = format_of(like)
     try:
-        out_path, fmt = formats.output_target(output, settings.fmt)
+        out_path, fmt = formats.output_target(output, fmt)
     except ValueError as err:
         raise WarpError(str(err), "OUTPUT", usage=True) from None
     if out_path != "-":
@@ -307,36 +313,6 @@ def check_outputs(settings: Settings, output: str, *extra: tuple[str | None, str
         if path and path != "-":
             _writable(path, param)
     return out_path, fmt
-
-
-def _identity(path: str):
-    """What a path names, for comparing two: (device, inode) of an existing file, else the
-    absolute path with links resolved."""
-    try:
-        info = os.stat(path)
-    except OSError:
-        return os.path.realpath(path)
-    return (info.st_dev, info.st_ino) if stat.S_ISREG(info.st_mode) else None
-
-
-def check_distinct(outputs: list[tuple[str | None, str]], inputs: list[tuple[str | None, str]]) -> None:
-    """Usage error unless the outputs ((path, option) pairs; the first is OUTPUT) name neither an
-    input nor each other, OUTPUT = INPUT excepted (the input is read before anything is
-    written), and at most one of them is stdout. Devices and FIFOs may repeat."""
-    named = [(p, o) for p, o in outputs if p]
-    if sum(p == "-" for p, _ in named) > 1:
-        raise WarpError(f"only one output can go to stdout ('-'): {', '.join(o for p, o in named if p == '-')}",
-                        usage=True)
-    files = [(p, o, _identity(p)) for p, o in named if p != "-"]
-    sources = [(p, o, _identity(p)) for p, o in inputs if p and p != "-"]
-    for k, (path, option, ident) in enumerate(files):
-        if ident is None:
-            continue
-        for other, other_option, other_ident in files[:k] + [s for s in sources
-                                                            if not (k == 0 and s[1] == "INPUT")]:
-            if ident == other_ident:
-                raise WarpError(f"{path} is also {other_option} ({other}); it would be overwritten",
-                                option, usage=True)
 
 
 def encoded(out_path: str, fmt: str, image, background) -> bytes:
@@ -404,7 +380,8 @@ def warp_file(settings: Settings, input: str, output: str, mask: str | None = No
     input = formats.split_prefix(input)[1]
     if mask == "-" and input == "-":
         raise WarpError("cannot be '-' when INPUT is '-' (stdin holds the image)", "--mask", usage=True)
-    out_path, fmt = check_outputs(settings, output, (report, "--report"), (save_grid, "--save-grid"))
+    out_path, fmt = check_outputs(settings, output, (report, "--report"), (save_grid, "--save-grid"),
+                                  like=input)
     check_distinct([(out_path, "OUTPUT"), (report, "--report"), (save_grid, "--save-grid")],
                    [(input, "INPUT"), (mask, "--mask")])
     background = background_colour(settings.background, fmt)
@@ -477,7 +454,7 @@ def compare_file(settings: Settings, input: str, output: str, mask: str | None =
 
     t0 = time.perf_counter()
     input = formats.split_prefix(input)[1]
-    out_path, fmt = check_outputs(settings, output)
+    out_path, fmt = check_outputs(settings, output, like=input)
     check_distinct([(out_path, "OUTPUT")], [(input, "INPUT"), (mask, "--mask")])
     background = background_colour(settings.background, fmt)
     settings = replace(settings, mode="similarity")

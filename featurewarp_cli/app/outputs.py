@@ -1,0 +1,50 @@
+"""Checks on a command's outputs: their formats, and that they name no input nor each other."""
+
+from __future__ import annotations
+
+import os
+import stat
+
+from ..io import decode, formats
+
+
+def format_of(path: str) -> str | None:
+    """The output format name of an image file's own format (its header), or None."""
+    try:
+        with open(path, "rb") as handle:
+            header = decode.read_header(handle.read(1 << 16))
+    except OSError:
+        return None
+    return formats.format_name(header.format) if header is not None else None
+
+
+def _identity(path: str):
+    """What a path names, for comparing two: (device, inode) of an existing file, else the
+    absolute path with links resolved."""
+    try:
+        info = os.stat(path)
+    except OSError:
+        return os.path.realpath(path)
+    return (info.st_dev, info.st_ino) if stat.S_ISREG(info.st_mode) else None
+
+
+def check_distinct(outputs: list[tuple[str | None, str]], inputs: list[tuple[str | None, str]]) -> None:
+    """Usage error unless the outputs ((path, option) pairs; the first is OUTPUT) name neither an
+    input nor each other, OUTPUT = INPUT excepted (the input is read before anything is
+    written), and at most one of them is stdout. Devices and FIFOs may repeat."""
+    from .pipeline import WarpError
+
+    named = [(p, o) for p, o in outputs if p]
+    if sum(p == "-" for p, _ in named) > 1:
+        raise WarpError(f"only one output can go to stdout ('-'): {', '.join(o for p, o in named if p == '-')}",
+                        usage=True)
+    files = [(p, o, _identity(p)) for p, o in named if p != "-"]
+    sources = [(p, o, _identity(p)) for p, o in inputs if p and p != "-"]
+    for k, (path, option, ident) in enumerate(files):
+        if ident is None:
+            continue
+        for other, other_option, other_ident in files[:k] + [s for s in sources
+                                                            if not (k == 0 and s[1] == "INPUT")]:
+            if ident == other_ident:
+                raise WarpError(f"{path} is also {other_option} ({other}); it would be overwritten",
+                                option, usage=True)
