@@ -172,9 +172,30 @@ def load_image_and_mask(settings: Settings, input: str, mask: str | None, data: 
     return image, feature_mask, warnings
 
 
+def check_file_size(path: str, param: str, max_memory: int | None, max_pixels: int | None) -> None:
+    """Before a file is read whole: refuse it when its header (in its first 64 KiB) claims more
+    than ``max_pixels`` or the file alone exceeds the memory budget (a sparse file of GBs)."""
+    try:
+        size = os.path.getsize(path)
+        with open(path, "rb") as handle:
+            header = decode.read_header(handle.read(1 << 16))
+    except OSError:
+        return                                               # reading it says what is wrong
+    if max_memory is not None and size > max_memory:
+        raise WarpError(f"{path} is {limits.size_text(size)}, above the memory limit of "
+                        f"{limits.size_text(max_memory)} (--max-memory)")
+    if header is not None:
+        try:
+            limits.check_pixels(header.width, header.height, path, max_pixels)
+        except ImageError as err:
+            raise WarpError(str(err)) from None
+
+
 def _load_mask(settings: Settings, mask: str, size: tuple[int, int]):
     """The feature mask, checked against the image's (width, height); and warnings."""
     width, height = size
+    if mask != "-" and os.path.isfile(mask):
+        check_file_size(mask, "--mask", settings.max_memory, settings.max_pixels)
     feature_mask = decode.mask_from_image(read_input(mask, "--mask", settings.max_pixels))
     if feature_mask.shape != (height, width):
         raise WarpError(f"mask is {feature_mask.shape[1]}x{feature_mask.shape[0]} but the "
@@ -229,6 +250,7 @@ def start_loading(settings: Settings, input: str, mask: str | None):
         raise WarpError(f"{mask} does not exist", "--mask", usage=True)
     data = header = None
     if input != "-" and os.path.isfile(input):
+        check_file_size(input, "INPUT", settings.max_memory, settings.max_pixels)
         try:
             data = decode.read_bytes(input)                  # read once: both paths below use it
         except ImageError:
