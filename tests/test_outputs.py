@@ -194,3 +194,60 @@ def test_stdout_takes_the_input_format(picture, tmp_path):
         run = subprocess.run([*CLI, "warp", "stretch", str(source), "-", "--sx", "1.2"], capture_output=True,
                              timeout=60)
         assert run.returncode == 0 and run.stdout.startswith(magic)
+
+
+def _tagged_jpeg(path: Path, orientation: int = 1) -> bytes:
+    """A JPEG with an ICC profile (Pillow's sRGB, as a stand-in for Adobe RGB) and EXIF."""
+    from PIL import Image, ImageCms
+
+    profile = ImageCms.ImageCmsProfile(ImageCms.createProfile("sRGB")).tobytes()
+    exif = Image.Exif()
+    exif[0x0112] = orientation
+    exif[0x010F] = "TestMaker"
+    pixels = np.random.default_rng(2).integers(0, 255, (60, 80, 3), np.uint8)
+    Image.fromarray(pixels).save(path, quality=90, icc_profile=profile, exif=exif.tobytes())
+    return profile
+
+
+def test_icc_and_exif_are_kept_and_strip_drops_them(tmp_path):
+    """The ICC profile survives warp (so colours do not shift in viewers), EXIF too with its
+    orientation reset to 1 (the pixels are turned already); --strip drops both."""
+    from PIL import Image
+
+    source = tmp_path / "tagged.jpg"
+    profile = _tagged_jpeg(source, orientation=6)
+    for suffix in ("jpg", "png", "webp", "tiff"):
+        out = tmp_path / f"o.{suffix}"
+        assert invoke("warp", "swirl", source, out, "--angle", "60").exit_code == 0
+        with Image.open(out) as image:
+            assert image.info.get("icc_profile") == profile, suffix
+            assert image.size == (60, 80)                     # turned upright once, not twice
+            if suffix in ("jpg", "webp"):
+                exif = image.getexif()
+                assert exif.get(0x0112) == 1 and exif.get(0x010F) == "TestMaker"
+    stripped = tmp_path / "s.jpg"
+    assert invoke("warp", "swirl", source, stripped, "--angle", "60", "--strip").exit_code == 0
+    with Image.open(stripped) as image:
+        assert "icc_profile" not in image.info and not len(image.getexif())
+
+
+def test_quality_sets_the_jpeg_tables_and_makes_webp_lossy(tmp_path):
+    """--quality 80: the JPEG's quantization tables are libjpeg's for 80 (what identify's %Q
+    reads back) and the file is smaller; WebP becomes lossy."""
+    from PIL import Image
+
+    source = tmp_path / "in.png"
+    cv2.imwrite(str(source), np.random.default_rng(3).integers(0, 255, (60, 80, 3), np.uint8))
+    default, q80 = tmp_path / "d.jpg", tmp_path / "q80.jpg"
+    assert invoke("warp", "swirl", source, default, "--angle", "60").exit_code == 0
+    assert invoke("warp", "swirl", source, q80, "--angle", "60", "--quality", "80").exit_code == 0
+    reference = tmp_path / "ref.jpg"
+    cv2.imwrite(str(reference), cv2.imread(str(source)), [cv2.IMWRITE_JPEG_QUALITY, 80])
+    with Image.open(q80) as ours, Image.open(reference) as theirs:
+        assert ours.quantization == theirs.quantization
+    assert q80.stat().st_size < default.stat().st_size
+    lossless, lossy = tmp_path / "l.webp", tmp_path / "q.webp"
+    assert invoke("warp", "swirl", source, lossless, "--angle", "60").exit_code == 0
+    assert invoke("warp", "swirl", source, lossy, "--angle", "60", "--quality", "50").exit_code == 0
+    assert lossy.stat().st_size < lossless.stat().st_size / 2
+    assert invoke("warp", "swirl", source, lossy, "--quality", "101").exit_code == 2

@@ -5,7 +5,7 @@ from __future__ import annotations
 import os
 import stat
 
-from ..io import decode, formats
+from ..io import ImageError, decode, encode, formats, write
 
 
 def format_of(path: str) -> str | None:
@@ -48,3 +48,32 @@ def check_distinct(outputs: list[tuple[str | None, str]], inputs: list[tuple[str
             if ident == other_ident:
                 raise WarpError(f"{path} is also {other_option} ({other}); it would be overwritten",
                                 option, usage=True)
+
+
+def encoded(out_path: str, fmt: str, image, background, quality: int | None = None, icc: bytes | None = None,
+            exif: bytes | None = None) -> bytes:
+    """``image`` encoded as ``fmt``, with a quality and metadata to keep (failures are WarpError
+    naming ``out_path``)."""
+    from .pipeline import WarpError
+
+    try:
+        return encode.encode_image(image, fmt, background or (255, 255, 255), quality, icc, exif)
+    except ImageError as err:
+        raise WarpError(f"cannot write {out_path}: {err}") from err
+
+
+def write_image(out_path: str, fmt: str, image, background) -> None:
+    """Encode and write atomically (``-``: stdout); failures are WarpError."""
+    write_all([(out_path, encoded(out_path, fmt, image, background))])
+
+
+def write_all(outputs: list[tuple[str, bytes]]) -> None:
+    """Write every (path, bytes) or none (:func:`featurewarp_cli.io.write.write_outputs`);
+    failures are WarpError naming the path."""
+    from .pipeline import WarpError
+
+    try:
+        write.write_outputs(outputs)
+    except OSError as err:
+        path = err.filename or next((p for p, _ in outputs if p), "")
+        raise WarpError(f"cannot write {path}: {err.strerror or err}") from err

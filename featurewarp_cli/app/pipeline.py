@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 from .. import plugins
 from ..engine.defaults import DECAY, FEATURE_WEIGHT, FORMULATION, INTERPOLATION, MODE, SCALE_PRIOR
 from ..io import ImageError, colours, decode, encode, formats, limits, write
-from .outputs import check_distinct, format_of
+from .outputs import check_distinct, encoded, format_of, write_all, write_image
 
 #: What :func:`prefetch_engine` imports: the engine (grid, features, fold-over guard,
 #: renderer), then, for a warp that factors, the solver (scipy.sparse and scikit-sparse).
@@ -75,6 +75,10 @@ class Settings:
         Memory budget in bytes (images and grid; see :func:`limits.node_budget`).
     allow_folds : bool
         Write a result that still has folded triangles instead of failing.
+    quality : int or None
+        JPEG and WebP quality 1..100 (WebP lossy when given).
+    strip : bool
+        Drop the input's ICC profile and EXIF instead of keeping them.
     """
 
     preset: str
@@ -93,6 +97,8 @@ class Settings:
     max_pixels: int = limits.MAX_PIXELS
     max_memory: int | None = limits.MAX_MEMORY
     allow_folds: bool = False
+    quality: int | None = None
+    strip: bool = False
 
 
 def background_colour(text: str | None, fmt: str):
@@ -209,8 +215,9 @@ def _load_mask(settings: Settings, mask: str, size: tuple[int, int]):
 class _Decoding:
     """INPUT decoding in a thread (OpenCV releases the GIL): ``result()`` waits for the image."""
 
-    def __init__(self, data: bytes, name: str, max_pixels: int | None):
+    def __init__(self, data: bytes, name: str, max_pixels: int | None, header=None):
         self._image = self._error = None
+        self.header = header
 
         def work():
             try:
@@ -258,7 +265,7 @@ def start_loading(settings: Settings, input: str, mask: str | None):
         header = decode.read_header(data) if data else None
     if header is None or (settings.max_pixels and header.width * header.height > settings.max_pixels):
         image, feature_mask, warnings = load_image_and_mask(settings, input, mask, data)
-        return _Ready(image), feature_mask, warnings, (image.shape[1], image.shape[0])
+        return _Ready(image, header), feature_mask, warnings, (image.shape[1], image.shape[0])
     size = header.upright_size
     feature_mask = None
     warnings = ["the input has several frames (animated or multi-page); the first is used"] if header.animated else []
@@ -269,12 +276,13 @@ def start_loading(settings: Settings, input: str, mask: str | None):
         except WarpError:
             load_image_and_mask(settings, input, mask)       # the image's own error comes first
             raise
-    return _Decoding(data, input, settings.max_pixels), feature_mask, warnings, size
+    return _Decoding(data, input, settings.max_pixels, header), feature_mask, warnings, size
 
 
 class _Ready:
-    def __init__(self, image):
+    def __init__(self, image, header=None):
         self._image = image
+        self.header = header
 
     def result(self):
         return self._image
@@ -335,19 +343,6 @@ def check_outputs(settings: Settings, output: str, *extra: tuple[str | None, str
         if path and path != "-":
             _writable(path, param)
     return out_path, fmt
-
-
-def encoded(out_path: str, fmt: str, image, background) -> bytes:
-    """``image`` encoded as ``fmt`` (failures are WarpError naming ``out_path``)."""
-    try:
-        return encode.encode_image(image, fmt, background or (255, 255, 255))
-    except ImageError as err:
-        raise WarpError(f"cannot write {out_path}: {err}") from err
-
-
-def write_image(out_path: str, fmt: str, image, background) -> None:
-    """Encode and write atomically (``-``: stdout); failures are WarpError."""
-    write_all([(out_path, encoded(out_path, fmt, image, background))])
 
 
 def summary(preset: str, mode: str, input: str, out_path: str, size, mesh, t0: float,
@@ -430,7 +425,9 @@ def warp_file(settings: Settings, input: str, output: str, mask: str | None = No
     timings.update(mesh.info["timings"])
 
     t1 = time.perf_counter()
-    outputs = [(out_path, encoded(out_path, fmt, result, background))]
+    kept = None if settings.strip else getattr(pending, "header", None)
+    outputs = [(out_path, encoded(out_path, fmt, result, background, settings.quality,
+                                  getattr(kept, "icc", None), getattr(kept, "exif", None)))]
     timings["write"] = time.perf_counter() - t1
     if save_grid:
         outputs.append((save_grid, mesh.to_npz()))
@@ -446,16 +443,6 @@ def _report(input, out_path, image, result, warp, mesh, timings, t0) -> bytes:
 
     timings["total"] = time.perf_counter() - t0
     return (json.dumps(build_report(input, out_path, image, result, warp, mesh, timings), indent=2) + "\n").encode()
-
-
-def write_all(outputs: list[tuple[str, bytes]]) -> None:
-    """Write every (path, bytes) or none (:func:`featurewarp_cli.io.write.write_outputs`);
-    failures are WarpError naming the path."""
-    try:
-        write.write_outputs(outputs)
-    except OSError as err:
-        path = err.filename or next((p for p, _ in outputs if p), "")
-        raise WarpError(f"cannot write {path}: {err.strerror or err}") from err
 
 
 def compare_file(settings: Settings, input: str, output: str, mask: str | None = None,

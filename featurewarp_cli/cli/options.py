@@ -19,11 +19,13 @@ from ..plugins import Param
 
 #: Keyword arguments of the commands that are engine or output settings, not preset parameters.
 SETTINGS = ("mode", "cell", "feature_weight", "decay", "formulation", "boundary", "scale_prior", "strict",
-            "background", "interp", "fmt", "max_pixels", "max_memory", "allow_folds")
+            "background", "interp", "fmt", "max_pixels", "max_memory", "allow_folds", "quality", "strip")
 
 MAX_PIXELS_PARAM = Param("max_pixels", int, limits.MAX_PIXELS,
                          "Refuse inputs with more than N pixels (checked in the file header, before decoding).",
                          min=1, metavar="N")
+QUALITY = Param("quality", int, None, "JPEG and WebP quality (WebP becomes lossy when it is given; "
+                "default: JPEG 95, WebP lossless); other formats ignore it.", min=1, max=100, metavar="N")
 JOBS = Param("jobs", int, 1, "Worker processes; results are byte-identical to N=1.", min=1, metavar="N")
 FRAMES = Param("frames", int, 24, "Number of frames (START and END included).", min=1, metavar="N")
 FPS = Param("fps", float, 12.0, "Frames per second (GIF and video players take 0.01 to 100).",
@@ -124,6 +126,10 @@ def engine_options() -> list[click.Option]:
                      help="Output format; overrides the extension (needed for '-' unless a "
                           "prefix such as png:- is given)."),
         click.Option(["--max-pixels"], callback=limit_decoders, **declared(MAX_PIXELS_PARAM)),
+        param_option(QUALITY),
+        click.Option(["--strip"], is_flag=True,
+                     help="Drop the input's ICC colour profile and EXIF (kept by default, EXIF with "
+                          "its orientation reset, for JPEG, PNG, WebP and TIFF output)."),
         click.Option(["--max-memory"], type=ByteSize(), default=limits.MAX_MEMORY, metavar="SIZE",
                      help="Refuse, before allocating, work whose images and grid would need more "
                           "memory than SIZE (bytes, or with K, M, G, T); an automatic grid stays "

@@ -19,7 +19,7 @@ import importlib
 import io
 import sys
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -81,6 +81,9 @@ class Header:
     animated : bool
         More than one frame or page (animated GIF, PNG or WebP, multi-page TIFF); the
         decoders take the first.
+    icc, exif : bytes or None
+        The ICC colour profile and the EXIF block (its orientation set to 1: the decoded
+        pixels are upright), for the output to keep.
     """
 
     format: str
@@ -88,6 +91,8 @@ class Header:
     height: int
     orientation: int = 1
     animated: bool = False
+    icc: bytes | None = field(default=None, repr=False)
+    exif: bytes | None = field(default=None, repr=False)
 
     @property
     def upright_size(self) -> tuple[int, int]:
@@ -132,6 +137,21 @@ def _orientation(image: Image.Image, data: bytes) -> int:
     return value if value in ORIENTATIONS else 1
 
 
+def _upright_exif(image: Image.Image) -> bytes | None:
+    """The image's EXIF block with its orientation set to 1, or None (none, or broken)."""
+    if image.format not in ORIENTED or (image.format == "PNG" and "exif" not in image.info):
+        return None
+    try:
+        exif = image.getexif()
+        if not len(exif):
+            return None
+        if _EXIF_ORIENTATION in exif:
+            exif[_EXIF_ORIENTATION] = 1
+        return exif.tobytes()
+    except Exception:  # a broken EXIF block is not kept
+        return None
+
+
 def _png_chunk(data: bytes, kind: bytes) -> bytes | None:
     """The payload of the first chunk of type ``kind`` in PNG bytes (None if there is none);
     chunk headers only are read, the pixels are skipped."""
@@ -167,7 +187,8 @@ def read_header(data: bytes) -> Header | None:
             size = image.size
             if image.format == "TIFF":          # Pillow reports a turned TIFF's size as shown
                 size = image.tag_v2.get(256, size[0]), image.tag_v2.get(257, size[1])
-            return Header(image.format, *size, _orientation(image, data), bool(getattr(image, "is_animated", False)))
+            return Header(image.format, *size, _orientation(image, data), bool(getattr(image, "is_animated", False)),
+                          image.info.get("icc_profile") or None, _upright_exif(image))
     except Exception:  # UnidentifiedImageError, or whatever a broken header raises in a plugin
         return None
 

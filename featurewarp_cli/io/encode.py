@@ -42,7 +42,12 @@ def flatten(image: np.ndarray, rgb=(255, 255, 255)) -> np.ndarray:
     return np.round(out).astype(image.dtype)
 
 
-def encode_image(image: np.ndarray, fmt: str, background=(255, 255, 255)) -> bytes:
+#: Formats whose ICC profile and EXIF block are kept (through Pillow, for 8-bit samples).
+METADATA_FORMATS = {"jpg": "JPEG", "png": "PNG", "webp": "WEBP", "tiff": "TIFF"}
+
+
+def encode_image(image: np.ndarray, fmt: str, background=(255, 255, 255), quality: int | None = None,
+                 icc: bytes | None = None, exif: bytes | None = None) -> bytes:
     """Encode ``image`` as format ``fmt`` (a name of :data:`FORMATS`) with fixed settings.
 
     Parameters
@@ -52,6 +57,12 @@ def encode_image(image: np.ndarray, fmt: str, background=(255, 255, 255)) -> byt
     fmt : str
     background : (r, g, b)
         Colour that alpha is composited over for formats without alpha.
+    quality : int, optional
+        1..100 for JPEG (default 95) and WebP (lossy when given; default lossless); other
+        formats ignore it.
+    icc, exif : bytes, optional
+        An ICC profile and an EXIF block to store (JPEG, PNG, WebP, TIFF with 8-bit samples,
+        written by Pillow; OpenCV's encoders drop them).
 
     Returns
     -------
@@ -72,8 +83,35 @@ def encode_image(image: np.ndarray, fmt: str, background=(255, 255, 255)) -> byt
         image = flatten(image, background)
     if FORMATS[fmt].eight_bit:
         image = to_eight_bit(image)
+    if (icc or exif) and fmt in METADATA_FORMATS and image.dtype == np.uint8:
+        return _pillow_encode(image, fmt, quality, icc, exif)
+    settings = list(SETTINGS[fmt])
+    if quality is not None and fmt in ("jpg", "webp"):
+        settings[1] = int(quality)
     with captured_stderr():
-        ok, buf = cv2.imencode(FORMATS[fmt].extension, image, SETTINGS[fmt])
+        ok, buf = cv2.imencode(FORMATS[fmt].extension, image, settings)
     if not ok:
         raise ImageError(f"cannot encode the result as {fmt}")
     return buf.tobytes()
+
+
+def _pillow_encode(image: np.ndarray, fmt: str, quality: int | None, icc: bytes | None,
+                   exif: bytes | None) -> bytes:
+    """8-bit BGR(A) or grey pixels as ``fmt`` bytes with their ICC profile and EXIF, by Pillow,
+    with the same settings as OpenCV's path where Pillow has them."""
+    import io
+
+    from PIL import Image
+
+    if image.ndim == 3:
+        image = cv2.cvtColor(image, cv2.COLOR_BGRA2RGBA if image.shape[2] == 4 else cv2.COLOR_BGR2RGB)
+    options = {"icc_profile": icc} if icc else {}
+    if exif:
+        options["exif"] = exif
+    options.update({"jpg": {"quality": quality or 95, "optimize": False, "progressive": False},
+                    "png": {"compress_level": 1},
+                    "webp": {"quality": quality} if quality else {"lossless": True, "quality": 100},
+                    "tiff": {"compression": "tiff_lzw"}}[fmt])
+    buffer = io.BytesIO()
+    Image.fromarray(image).save(buffer, METADATA_FORMATS[fmt], **options)
+    return buffer.getvalue()
