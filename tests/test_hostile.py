@@ -191,3 +191,12 @@ def test_animated_input_says_the_first_frame_is_used(tmp_path):
     frames[0].save(source, "GIF", save_all=True, append_images=frames[1:])
     run = CliRunner().invoke(cli, ["warp", "swirl", str(source), str(tmp_path / "o.png")])
     assert run.exit_code == 0 and "the first is used" in run.output
+
+
+def test_debug_is_accepted_after_the_command(tmp_path):
+    """--debug after the subcommand is the global flag (it was 'no such option')."""
+    source = tmp_path / "in.png"
+    cv2.imwrite(str(source), picture())
+    run = subprocess.run([*CLI, "warp", "swirl", str(source), str(tmp_path / "o.png"), "--debug"],
+                         capture_output=True, text=True, timeout=60)
+    assert run.returncode == 0 and run.stderr == ""

@@ -550,3 +550,29 @@ def test_one_mask_rule_in_the_api():
     assert mask_array(values, (1, 4)).tolist() == [[False, False, True, True]]
     assert mask_array(values.astype(np.uint16) * 257, (1, 4)).tolist() == [[False, False, True, True]]
     assert mask_array(np.array([[0.2, 0.5]]), (1, 2)).tolist() == [[False, True]]
+
+
+def test_nearest_copies_labels_only(tmp_path):
+    """--interp nearest on a label map: every output value is one of the input's (or the
+    background), with no blend at the mesh's edge."""
+    labels = np.zeros((H, W), np.uint8)
+    labels[:, W // 3:] = 50
+    labels[H // 2:, : W // 2] = 200
+    mask = np.zeros((H, W), bool)
+    mask[10:30, 10:30] = True
+    out = warp(labels, mask, "arc", angle=150, interp="nearest", background=(0, 0, 0))
+    assert set(np.unique(out)) <= {0, 50, 200}
+    out = warp(labels, mask, "swirl", angle=120, interp="nearest")
+    assert set(np.unique(out)) <= {0, 50, 200}
+
+
+def test_static_gif_output(tmp_path):
+    from click.testing import CliRunner
+
+    from featurewarp_cli.cli.main import cli
+
+    source = tmp_path / "in.png"
+    cv2.imwrite(str(source), np.random.default_rng(4).integers(0, 255, (H, W, 3), np.uint8))
+    run = CliRunner().invoke(cli, ["warp", "swirl", str(source), str(tmp_path / "o.gif")])
+    assert run.exit_code == 0, run.output
+    assert cv2.imread(str(tmp_path / "o.gif")).shape == (H, W, 3)

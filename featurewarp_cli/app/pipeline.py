@@ -66,7 +66,7 @@ class Settings:
     background : str or None
         Colour text for uncovered pixels (see :func:`featurewarp_cli.io.colours.parse_colour`);
         None: transparent where the format has alpha, else white.
-    interp : {'linear', 'cubic', 'lanczos'}
+    interp : {'nearest', 'linear', 'cubic', 'lanczos'}
     fmt : str or None
         Output format name (``--format``); None: from the output's prefix or extension.
     max_pixels : int

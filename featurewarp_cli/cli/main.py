@@ -160,16 +160,14 @@ def main(argv=None):
     """Console-script entry point.
 
     Every error is one line on stderr: exit 2 for usage errors, 1 for processing
-    failures (and for anything unexpected). ``featurewarp --debug ...`` also
-    prints the traceback of processing failures.
+    failures (and for anything unexpected). ``--debug``, before the command or
+    anywhere after it (up to a ``--``), also prints the traceback of processing failures.
     """
     argv = sys.argv[1:] if argv is None else list(argv)
-    leading = []
-    for arg in argv:                       # global options come before the command
-        if not arg.startswith("-"):
-            break
-        leading.append(arg)
-    debug = "--debug" in leading
+    end = argv.index("--") if "--" in argv else len(argv)
+    debug = "--debug" in argv[:end]
+    if debug:                              # accepted after the command too: moved in front of it
+        argv = ["--debug"] + [arg for arg in argv[:end] if arg != "--debug"] + argv[end:]
     for signum in (signal.SIGTERM, signal.SIGINT):
         signal.signal(signum, stop_on_signal)
     try:

@@ -37,8 +37,10 @@ FORMULATION = "exact"
 #: fixed: border nodes stay on W (the paper); slide: they may slide along the sides W
 #: maps onto axis-parallel lines. The default is the preset's own (``Warp.boundary``).
 BOUNDARIES = ("fixed", "slide")
-#: Resampling filters of the renderer (OpenCV's linear, cubic and Lanczos-4 interpolation).
-INTERPOLATIONS = ("linear", "cubic", "lanczos")
+#: Resampling filters of the renderer (OpenCV's nearest-neighbour, linear, cubic and Lanczos-4
+#: interpolation). Nearest copies source values only (label maps, pixel art): no prefilter,
+#: no feathered silhouette.
+INTERPOLATIONS = ("nearest", "linear", "cubic", "lanczos")
 INTERPOLATION = "cubic"
 #: w_F, the weight of the feature equations.
 FEATURE_WEIGHT = 10.0

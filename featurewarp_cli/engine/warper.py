@@ -403,7 +403,9 @@ class FeatureWarper:
             rules): uint8, uint16, bool, integers, or floats in [0, 1]; returned in the same
             dtype, grey staying grey.
         mesh : Mesh
-        interp : {'linear', 'cubic', 'lanczos'}
+        interp : {'nearest', 'linear', 'cubic', 'lanczos'}
+            'nearest' copies source values only (label maps, pixel art), so it also turns
+            ``antialias`` off.
         background : (r, g, b) of 0..255, colour text, or None
             Fill where no source pixel lands; None: transparent (alpha added where needed).
         antialias : bool
@@ -421,7 +423,7 @@ class FeatureWarper:
         channels = 1 if image.ndim == 2 else image.shape[2]
         samples, fill, dtype = arrays.prepare(image, background) if order == "rgb" else (image, background, None)
         out = raster.render(samples, mesh.source, mesh.target, mesh.triangles, mesh.canvas, interp, fill,
-                            antialias=antialias)
+                            antialias=antialias and interp != "nearest")       # nearest: source values only
         if mesh.record is not None:
             mesh.record.timings["render"] = time.perf_counter() - t0
         return arrays.finish(out, channels, dtype) if order == "rgb" else out
@@ -470,7 +472,7 @@ def warp(image: np.ndarray, mask: np.ndarray | None, preset: str, *, mode: str =
         Registered preset name ('stretch', 'arc', 'swirl', 'bulge', or a plugin's).
     mode, cell, feature_weight, decay, formulation, boundary, scale_prior
         See :class:`FeatureWarper`.
-    interp : {'linear', 'cubic', 'lanczos'}
+    interp : {'nearest', 'linear', 'cubic', 'lanczos'}
     background : (r, g, b) of 0..255, colour text such as ``"white"``, or None
         Fill for pixels no source pixel lands on; None: transparent (alpha added where
         needed: RGBA for colour, grey + alpha for grey).

@@ -28,6 +28,7 @@ SETTINGS = {
     "webp": [cv2.IMWRITE_WEBP_QUALITY, 101],
     "tiff": [cv2.IMWRITE_TIFF_COMPRESSION, 5],                     # 5: LZW
     "bmp": [],
+    "gif": [],
 }
 
 

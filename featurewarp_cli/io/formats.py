@@ -25,11 +25,12 @@ FORMATS = {
     "webp": Format(".webp", alpha=True, eight_bit=True),
     "tiff": Format(".tiff", alpha=True, eight_bit=False),
     "bmp": Format(".bmp", alpha=False, eight_bit=True),
+    "gif": Format(".gif", alpha=False, eight_bit=True),      # one static frame, OpenCV's palette
 }
 #: Other spellings of the format names (also accepted as file extensions).
 ALIASES = {"jpeg": "jpg", "tif": "tiff"}
 #: Every name ``--format`` accepts.
-NAMES = ("png", "jpg", "jpeg", "webp", "tif", "tiff", "bmp")
+NAMES = ("png", "jpg", "jpeg", "webp", "tif", "tiff", "bmp", "gif")
 
 
 def format_name(text: str) -> str | None:

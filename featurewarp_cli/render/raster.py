@@ -36,7 +36,8 @@ from . import _raster
 from .antialias import COMPACT_WIDTH, Footprints, Pyramid, Silhouette, filter_band, sample_points
 from .remap import remap
 
-INTERPOLATION = {"linear": cv2.INTER_LINEAR, "cubic": cv2.INTER_CUBIC, "lanczos": cv2.INTER_LANCZOS4}
+INTERPOLATION = {"nearest": cv2.INTER_NEAREST, "linear": cv2.INTER_LINEAR, "cubic": cv2.INTER_CUBIC,
+                 "lanczos": cv2.INTER_LANCZOS4}
 
 #: Output pixels per band (rows are grouped so that a band holds about this many).
 BAND_PIXELS = 1 << 18
@@ -271,7 +272,7 @@ def render(image: np.ndarray, source: np.ndarray, target: np.ndarray, triangles:
     triangles : (M, 3) ndarray of int
     canvas : (int, int)
         Output (width, height).
-    interp : {'linear', 'cubic', 'lanczos'}
+    interp : {'nearest', 'linear', 'cubic', 'lanczos'}
     background : (r, g, b) tuple of 0..255, or None
         Fill colour where no triangle lands; None means transparent (an alpha
         channel is added when the image has none and some pixel is not fully
@@ -340,7 +341,7 @@ def resample(image: np.ndarray, coords: np.ndarray, covered: np.ndarray,
     ----------
     image : (h, w) or (h, w, C) ndarray, uint8 or uint16
     coords, covered : as returned by :func:`inverse_map`
-    interp : {'linear', 'cubic', 'lanczos'}
+    interp : {'nearest', 'linear', 'cubic', 'lanczos'}
     background : (r, g, b) tuple of 0..255, or None
         Fill colour where no triangle lands; None means transparent (an alpha
         channel is added when the image has none and some pixel is uncovered).
