@@ -40,7 +40,7 @@ from typing import TYPE_CHECKING, ClassVar
 if TYPE_CHECKING:                   # numpy is imported on first use: --help needs none of it
     import numpy as np
 
-__all__ = ["Param", "Warp", "load", "names", "known", "UnknownPreset", "GROUP", "BUILTIN"]
+__all__ = ["Param", "Warp", "load", "names", "known", "shadowing", "UnknownPreset", "GROUP", "BUILTIN"]
 
 
 
@@ -225,6 +225,12 @@ def entry_points() -> list:
 def names() -> tuple[str, ...]:
     """Names of all registered presets, sorted."""
     return tuple(sorted(set(BUILTIN) | {ep.name for ep in entry_points()}))
+
+
+def shadowing() -> list[tuple[str, str]]:
+    """(name, entry point) of installed plugins that register a built-in's name (ignored: the
+    built-in names always mean the built-ins)."""
+    return [(ep.name, ep.value) for ep in entry_points() if ep.name in BUILTIN and ep.value != BUILTIN[ep.name]]
 
 
 def known(name: str) -> bool:

@@ -200,3 +200,39 @@ def test_debug_is_accepted_after_the_command(tmp_path):
     run = subprocess.run([*CLI, "warp", "swirl", str(source), str(tmp_path / "o.png"), "--debug"],
                          capture_output=True, text=True, timeout=60)
     assert run.returncode == 0 and run.stderr == ""
+
+
+class _EntryPoint:
+    """A stand-in for an installed plugin's entry point."""
+
+    def __init__(self, name, value, error=None):
+        self.name, self.value, self.error = name, value, error
+
+    def load(self):
+        raise self.error
+
+
+def test_a_broken_plugin_shows_its_load_error_when_used(monkeypatch, tmp_path):
+    """`featurewarp warp broken IN OUT`: the plugin's import error, not 'unexpected extra arguments'."""
+    broken = _EntryPoint("ripple", "theirpkg.ripple:Ripple", ImportError("No module named 'theirpkg'"))
+    monkeypatch.setattr(plugins, "entry_points", lambda: [broken])
+    plugins.names.cache_clear()
+    plugins.load.cache_clear()
+    try:
+        run = CliRunner().invoke(cli, ["warp", "ripple", str(tmp_path / "in.png"), str(tmp_path / "o.png"),
+                                       "--amount", "3"])
+        assert run.exit_code == 1 and "failed to load" in run.output and "theirpkg" in run.output, run.output
+    finally:
+        plugins.names.cache_clear()
+        plugins.load.cache_clear()
+
+
+def test_a_plugin_that_shadows_a_builtin_is_warned_about(monkeypatch):
+    shadow = _EntryPoint("swirl", "theirpkg.swirl:Swirl")
+    monkeypatch.setattr(plugins, "entry_points", lambda: [shadow])
+    plugins.names.cache_clear()
+    try:
+        run = CliRunner().invoke(cli, ["warps"])
+        assert run.exit_code == 0 and "built-in name 'swirl'" in run.output
+    finally:
+        plugins.names.cache_clear()

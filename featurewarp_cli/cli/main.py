@@ -108,6 +108,8 @@ cli.add_command(measure_command)
 @click.option("--json", "as_json", is_flag=True, help="Print machine-readable JSON.")
 def list_warps(as_json):
     """List every registered preset with its options, defaults and ranges."""
+    for name, value in plugins.shadowing():
+        say(f"featurewarp: warning: a plugin registers the built-in name {name!r} ({value}); the built-in is used")
     entries = []
     for name in plugins.names():
         try:

@@ -222,8 +222,10 @@ class PresetGroup(click.Group):
         except plugins.UnknownPreset as err:
             message = str(err)
 
-            @click.command(name, help=f"(broken plugin) {message}")
-            def broken():
+            @click.command(name, help=f"(broken plugin) {message}",
+                           context_settings={"ignore_unknown_options": True, "allow_extra_args": True})
+            @click.argument("args", nargs=-1, type=click.UNPROCESSED)
+            def broken(args):                      # whatever it is given, the load error is the news
                 raise click.ClickException(message)
 
             return broken
