@@ -236,3 +236,29 @@ def test_a_plugin_that_shadows_a_builtin_is_warned_about(monkeypatch):
         assert run.exit_code == 0 and "built-in name 'swirl'" in run.output
     finally:
         plugins.names.cache_clear()
+
+
+def test_progress_line_names_the_stages_and_is_erased(monkeypatch):
+    """In a terminal a long run shows its stage and time on one redrawn line, erased at the end;
+    nothing is drawn off a terminal or with -q."""
+    import io
+
+    from featurewarp_cli import stages
+    from featurewarp_cli.cli import progress
+
+    monkeypatch.setattr(progress, "DELAY", 0.0)
+    stream = io.StringIO()
+    line = progress.ProgressLine(stream)
+    stages.listen(line.enter)
+    line.thread.start()
+    stages.enter("guard")
+    time.sleep(0.5)
+    stages.forget(line.enter)
+    line.close()
+    text = stream.getvalue()
+    assert "\rfeaturewarp: guard" in text and text.endswith("\r\033[K")
+    with progress.progress_line(quiet=True) as shown:
+        assert shown is None
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: False, raising=False)
+    with progress.progress_line(quiet=False) as shown:
+        assert shown is None

@@ -16,7 +16,7 @@ import threading
 import time
 from dataclasses import dataclass, field
 
-from .. import plugins
+from .. import plugins, stages
 from ..engine.defaults import DECAY, FEATURE_WEIGHT, FORMULATION, INTERPOLATION, MODE, SCALE_PRIOR
 from ..io import ImageError, colours, decode, encode, formats, limits, write
 from .outputs import check_distinct, encoded, format_of, write_all, write_image
@@ -424,6 +424,7 @@ def warp_file(settings: Settings, input: str, output: str, mask: str | None = No
         result = overlay(result, mesh)
     timings.update(mesh.info["timings"])
 
+    stages.enter("write")
     t1 = time.perf_counter()
     kept = None if settings.strip else getattr(pending, "header", None)
     outputs = [(out_path, encoded(out_path, fmt, result, background, settings.quality,

@@ -18,6 +18,7 @@ import click
 from .. import plugins
 from .options import (FPS, FRAMES, JOBS, engine_options, input_output_mask, param_option, preset_options,
                       settings_from)
+from .progress import progress_line
 
 MASK_HELP = ("Feature mask: pixels with gray value >= 128 (transparent ones count as black) keep their "
              "shape. Same width and height as INPUT. Without it the plain warp is produced.")
@@ -98,7 +99,8 @@ def warp_command(preset) -> click.Command:
 
         settings, quiet, verbose = settings_from(preset, kwargs)
         try:
-            summary = warp_file(settings, input, output, mask, report, save_grid, draw_grid)
+            with progress_line(quiet):
+                summary = warp_file(settings, input, output, mask, report, save_grid, draw_grid)
         except WarpError as err:
             raise click_error(err) from err
         report_warnings(summary, quiet, verbose)
@@ -161,7 +163,8 @@ def compare_command(preset) -> click.Command:
         kwargs["mode"] = "similarity"
         settings, quiet, verbose = settings_from(preset, kwargs)
         try:
-            summary = compare_file(settings, input, output, mask, draw_grid)
+            with progress_line(quiet):
+                summary = compare_file(settings, input, output, mask, draw_grid)
         except WarpError as err:
             raise click_error(err) from err
         report_warnings(summary, quiet, verbose)

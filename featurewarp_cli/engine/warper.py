@@ -41,6 +41,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .. import stages
 from . import arrays, components, fidelity, guard, quality, scale_search, system, targets
 from . import features as feat
 from .defaults import (BOUNDARIES, DECAY, DECAY_PARAM, FEATURE_WEIGHT, FEATURE_WEIGHT_PARAM, FORMULATION,
@@ -202,6 +203,7 @@ class FeatureWarper:
                     for axis, fixed in enumerate(_fixed(state, ties))]
         key = b"".join(u.astype(np.int32).tobytes() for u in unknowns)
         if key not in state.systems:
+            stages.enter("factor")
             t0 = time.perf_counter()
             state.systems[key] = AxisSystems(state.normal, *unknowns)
             self.factorizations += state.systems[key].factorizations
@@ -248,6 +250,7 @@ class FeatureWarper:
         if (warp.width, warp.height) != (self.width, self.height):
             raise ValueError(f"warp is for {warp.width}x{warp.height}, warper for {self.width}x{self.height}")
         self.timings = {}
+        stages.enter("grid")
         t0 = time.perf_counter()
         if self.cell is None:
             cell, error = fidelity.auto_cell(self.width, self.height, warp, self.max_nodes)
@@ -334,6 +337,7 @@ class FeatureWarper:
                                 _window_fixed(state, ties), _window_ties(ties), systems, rhs, offset, edges,
                                 warp_edges, rebuild, self.timings)
         counted = sum(self.timings.get(k, 0.0) for k in ("solve", "factor", "rhs"))
+        stages.enter("guard")
         t0 = time.perf_counter()
         solved = (x, edges, rhs, offset)
         x = guard.guard(problem, x, record.guard)
@@ -419,6 +423,7 @@ class FeatureWarper:
 
         if image.shape[:2] != (self.height, self.width):
             raise ValueError(f"image is {image.shape[1]}x{image.shape[0]}, warper is for {self.width}x{self.height}")
+        stages.enter("render")
         t0 = time.perf_counter()
         channels = 1 if image.ndim == 2 else image.shape[2]
         samples, fill, dtype = arrays.prepare(image, background) if order == "rgb" else (image, background, None)
