@@ -50,15 +50,15 @@ bench:
 # The README's pictures: plain vs featurewarp panels on the astronaut sample.
 gallery:
 	mkdir -p docs/gallery
-	$(BIN)/featurewarp compare swirl samples/astronaut.png docs/gallery/swirl.jpg -m samples/astronaut_mask.png --angle 120
-	$(BIN)/featurewarp compare arc samples/astronaut.png docs/gallery/arc.jpg -m samples/astronaut_mask.png --angle 120 --background "#f0f0f0"
-	$(BIN)/featurewarp compare bulge samples/astronaut.png docs/gallery/bulge.jpg -m samples/astronaut_mask.png --strength 0.8
-	$(BIN)/featurewarp compare stretch samples/astronaut.png docs/gallery/stretch.jpg -m samples/astronaut_mask.png --sx 1.6
-	$(BIN)/featurewarp compare stretch samples/coins.png docs/gallery/coins-stretch.jpg -m samples/coins_mask.png --sx 0.6 --sy 1.2
-	$(BIN)/featurewarp compare swirl samples/shapes.png docs/gallery/shapes-swirl-grid.jpg -m samples/shapes_mask.png --angle 150 --grid
-	$(BIN)/featurewarp compare stretch samples/astronaut.png docs/gallery/portrait-wide.jpg -m samples/astronaut_body_mask.png --sx 2
-	$(BIN)/featurewarp compare stretch samples/astronaut.png docs/gallery/portrait-narrow.jpg -m samples/astronaut_body_mask.png --sx 0.6
-	$(BIN)/featurewarp compare arc samples/astronaut.png docs/gallery/helmet-arc.jpg -m samples/astronaut_helmet_mask.png --angle 120 --background "#f0f0f0"
+	$(BIN)/featurewarp compare swirl samples/astronaut.png docs/gallery/swirl.jpg -m samples/astronaut_mask.png --angle 120 --panel-width 1464
+	$(BIN)/featurewarp compare arc samples/astronaut.png docs/gallery/arc.jpg -m samples/astronaut_mask.png --angle 120 --background "#f0f0f0" --panel-width 1464
+	$(BIN)/featurewarp compare bulge samples/astronaut.png docs/gallery/bulge.jpg -m samples/astronaut_mask.png --strength 0.8 --panel-width 1464
+	$(BIN)/featurewarp compare stretch samples/astronaut.png docs/gallery/stretch.jpg -m samples/astronaut_mask.png --sx 1.6 --panel-width 1464
+	$(BIN)/featurewarp compare stretch samples/coins.png docs/gallery/coins-stretch.jpg -m samples/coins_mask.png --sx 0.6 --sy 1.2 --panel-width 1464
+	$(BIN)/featurewarp compare swirl samples/shapes.png docs/gallery/shapes-swirl-grid.jpg -m samples/shapes_mask.png --angle 150 --grid --panel-width 1464
+	$(BIN)/featurewarp compare stretch samples/astronaut.png docs/gallery/portrait-wide.jpg -m samples/astronaut_body_mask.png --sx 2 --panel-width 1464
+	$(BIN)/featurewarp compare stretch samples/astronaut.png docs/gallery/portrait-narrow.jpg -m samples/astronaut_body_mask.png --sx 0.6 --panel-width 1464
+	$(BIN)/featurewarp compare arc samples/astronaut.png docs/gallery/helmet-arc.jpg -m samples/astronaut_helmet_mask.png --angle 120 --background "#f0f0f0" --panel-width 1464
 
 clean:
 	rm -rf out .pytest_cache

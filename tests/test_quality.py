@@ -134,7 +134,8 @@ def test_save_grid_writes_the_mapping(files):
 
 
 def test_compare_writes_a_four_way_panel(files):
-    """compare: one panel, input | plain | rigid | similarity, with caption bars; --grid draws lines."""
+    """compare: one panel, input | plain | rigid | similarity, each view at the input's resolution,
+    with caption bars; --grid draws lines; --panel-width scales it."""
     plain = files / "panel.png"
     gridded = files / "panel-grid.png"
     for path, extra in ((plain, []), (gridded, ["--grid"])):
@@ -142,9 +143,14 @@ def test_compare_writes_a_four_way_panel(files):
                   "--angle", "90", *extra)
         assert out.returncode == 0, out.stderr
     a, b = cv2.imread(str(plain)), cv2.imread(str(gridded))
-    assert a.shape == b.shape and a.shape[0] == 360 + 28
-    assert a.shape[1] > 4 * 360                    # four tiles side by side
+    source = cv2.imread(str(files / "in.png"))
+    assert a.shape == b.shape and a.shape[0] >= source.shape[0] + 28        # views at the input's pixels
+    assert a.shape[1] > 4 * source.shape[1]                                 # four views side by side
     assert np.abs(a.astype(int) - b.astype(int)).max() > 100   # the grid lines are visible
+    small = files / "small.png"
+    out = run("compare", "arc", str(files / "in.png"), str(small), "-m", str(files / "mask.png"), "--angle", "90",
+              "--panel-width", "600")
+    assert out.returncode == 0 and cv2.imread(str(small)).shape[1] == 600
 
 
 def test_compare_rejects_mode(files):

@@ -46,3 +46,32 @@ def test_readme_block_runs_as_written(tmp_path, index):
         command = [sys.executable, "-c", body]
     run = subprocess.run(command, cwd=tmp_path, env=env, capture_output=True, text=True, timeout=240)
     assert run.returncode == 0, f"{kind} block {index}:\n{body}\n--- stderr:\n{run.stderr[-2000:]}"
+
+
+def gallery_commands() -> list[str]:
+    """The ``featurewarp compare`` lines of the Makefile's gallery target."""
+    text = (ROOT / "Makefile").read_text()
+    target = text[text.index("\ngallery:"):]
+    return [line.strip().replace("$(BIN)/featurewarp ", "featurewarp ", 1)
+            for line in target.splitlines()[1:] if line.startswith("\t$(BIN)/featurewarp compare")]
+
+
+@pytest.mark.slow
+def test_the_committed_gallery_is_what_make_gallery_makes(tmp_path):
+    """Each picture in docs/gallery is what its Makefile line makes now (JPEG: within RMSE 2)."""
+    import cv2
+    import numpy as np
+
+    commands = gallery_commands()
+    assert len(commands) >= 8
+    (tmp_path / "samples").symlink_to(ROOT / "samples")
+    (tmp_path / "docs" / "gallery").mkdir(parents=True)
+    env = {**os.environ, "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ['PATH']}"}
+    run = subprocess.run(["bash", "-e", "-c", "\n".join(commands)], cwd=tmp_path, env=env, capture_output=True,
+                         text=True, timeout=600)
+    assert run.returncode == 0, run.stderr[-2000:]
+    for made in sorted((tmp_path / "docs" / "gallery").iterdir()):
+        committed = cv2.imread(str(ROOT / "docs" / "gallery" / made.name)).astype(float)
+        fresh = cv2.imread(str(made)).astype(float)
+        assert committed.shape == fresh.shape, made.name
+        assert np.sqrt(np.mean((committed - fresh) ** 2)) <= 2.0, made.name

@@ -69,20 +69,31 @@ def tint(image: np.ndarray, mask: np.ndarray | None, strength: float = 0.45) -> 
     return out
 
 
-def labelled_panel(images: list[np.ndarray], labels: list[str], height: int = 360) -> np.ndarray:
-    """Side-by-side panel of ``images`` scaled to ``height``, each with a caption bar.
+def labelled_panel(images: list[np.ndarray], labels: list[str], width: int | None = None) -> np.ndarray:
+    """Side-by-side panel of ``images``, each with a caption bar.
+
+    Each view keeps its own pixels (a retoucher judges pixels): the panel is as tall as
+    the tallest, shorter views padded with white. ``width``: scale the whole panel to that
+    many pixels across instead (a small panel for a page).
 
     Returns
     -------
-    (height + bar, W, 3) uint8 ndarray
+    (H, W, 3) uint8 ndarray
     """
     bar, gap = 28, 8
+    images = [as_bgr8(image) for image in images]
+    natural = sum(image.shape[1] for image in images)
+    scale = 1.0 if width is None else max(1, width - gap * (len(images) - 1)) / natural
+    height = max(max(1, round(image.shape[0] * scale)) for image in images)
+    edges = np.round(np.cumsum([0] + [image.shape[1] for image in images]) * scale).astype(int)
     tiles = []
-    for image, label in zip(images, labels):
-        image = as_bgr8(image)
-        width = max(1, round(image.shape[1] * height / image.shape[0]))
-        tile = cv2.resize(image, (width, height), interpolation=cv2.INTER_AREA)
-        caption = np.full((bar, width, 3), 255, np.uint8)
+    for image, label, across in zip(images, labels, np.maximum(np.diff(edges), 1)):
+        size = (int(across), max(1, round(image.shape[0] * scale)))
+        if scale != 1.0:
+            image = cv2.resize(image, size, interpolation=cv2.INTER_AREA if scale < 1 else cv2.INTER_CUBIC)
+        tile = np.full((height, size[0], 3), 255, np.uint8)
+        tile[:size[1]] = image
+        caption = np.full((bar, size[0], 3), 255, np.uint8)
         cv2.putText(caption, label, (6, bar - 9), cv2.FONT_HERSHEY_SIMPLEX, 0.55, (30, 30, 30), 1, cv2.LINE_AA)
         tiles.append(np.vstack([caption, tile]))
         tiles.append(np.full((height + bar, gap, 3), 255, np.uint8))

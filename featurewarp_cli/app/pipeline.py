@@ -447,11 +447,12 @@ def _report(input, out_path, image, result, warp, mesh, timings, t0) -> bytes:
 
 
 def compare_file(settings: Settings, input: str, output: str, mask: str | None = None,
-                 draw_grid: bool = False) -> dict:
+                 draw_grid: bool = False, panel_width: int | None = None) -> dict:
     """Write one labelled panel: input with the mask tinted | plain | rigid | similarity.
 
-    The three warps share one grid and one factorization. Other arguments as
-    for :func:`warp_file`; ``settings.mode`` is ignored.
+    The three warps share one grid and one factorization. Every view keeps the input's
+    resolution unless ``panel_width`` scales the panel to that many pixels across. Other
+    arguments as for :func:`warp_file`; ``settings.mode`` is ignored.
 
     Returns
     -------
@@ -479,5 +480,5 @@ def compare_file(settings: Settings, input: str, output: str, mask: str | None =
         result = warper.render(image, mesh, settings.interp, background, order="bgr")
         tiles.append(panel.draw_grid(result, mesh) if draw_grid else result)
         labels.append(f"{mode} {settings.preset}" if mode == "plain" else f"featurewarp {mode}")
-    write_image(out_path, fmt, panel.labelled_panel(tiles, labels), (255, 255, 255))
+    write_image(out_path, fmt, panel.labelled_panel(tiles, labels, panel_width), (255, 255, 255))
     return summary(settings.preset, "compare", input, out_path, (width, height), mesh, t0, warnings)

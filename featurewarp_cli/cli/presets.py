@@ -16,7 +16,7 @@ import sys
 import click
 
 from .. import plugins
-from .options import (FPS, FRAMES, JOBS, engine_options, input_output_mask, param_option, preset_options,
+from .options import (FPS, FRAMES, JOBS, PANEL_WIDTH, engine_options, input_output_mask, param_option, preset_options,
                       settings_from)
 from .progress import progress_line
 
@@ -155,16 +155,17 @@ def compare_command(preset) -> click.Command:
     """``featurewarp compare PRESET INPUT OUTPUT``: the labelled four-way panel."""
     params = input_output_mask("Feature mask (as for warp).") + [
         click.Option(["--grid", "draw_grid"], is_flag=True, help="Draw the deformed grid over the three results."),
+        param_option(PANEL_WIDTH),
     ] + [o for o in engine_options() if o.name != "mode"]
 
-    def callback(input, output, mask, draw_grid, **kwargs):
+    def callback(input, output, mask, draw_grid, panel_width, **kwargs):
         from ..app.pipeline import WarpError, compare_file
 
         kwargs["mode"] = "similarity"
         settings, quiet, verbose = settings_from(preset, kwargs)
         try:
             with progress_line(quiet):
-                summary = compare_file(settings, input, output, mask, draw_grid)
+                summary = compare_file(settings, input, output, mask, draw_grid, panel_width)
         except WarpError as err:
             raise click_error(err) from err
         report_warnings(summary, quiet, verbose)
