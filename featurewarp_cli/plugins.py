@@ -64,6 +64,8 @@ class Param:
         True when the bound itself is excluded.
     metavar : str
         Placeholder shown in help.
+    percent : bool
+        Also accept a percentage: ``150%`` is 1.5 (scale factors).
     """
 
     name: str
@@ -75,6 +77,7 @@ class Param:
     min_open: bool = False
     max_open: bool = False
     metavar: str = "F"
+    percent: bool = False
 
     def range_text(self) -> str:
         """Human-readable range, e.g. ``0 < F <= 360``."""
@@ -96,8 +99,9 @@ class Param:
             raise ValueError(f"--{self.cli_name} needs a value")
         if isinstance(value, bool):
             raise ValueError(f"--{self.cli_name}: {value!r} is not a number")
+        text = value.strip() if isinstance(value, str) else None
         try:
-            number = float(value)
+            number = float(text[:-1]) / 100.0 if self.percent and text and text.endswith("%") else float(value)
         except (TypeError, ValueError):
             raise ValueError(f"--{self.cli_name}: {value!r} is not a number") from None
         if not math.isfinite(number):

@@ -331,3 +331,11 @@ def test_presets_are_pure_and_vectorized(preset, rng):
     np.testing.assert_array_equal(pts, keep)
     np.testing.assert_allclose(np.concatenate([w(p[None]) for p in pts]), out, rtol=0, atol=1e-12)
     np.testing.assert_array_equal(w(pts), out)
+
+
+def test_stretch_factors_take_percentages():
+    """--sx 150% is 1.5; other parameters do not take percentages."""
+    w = load_warp("stretch")(W, H, sx="150%", sy=" 50% ")
+    assert (w.values["sx"], w.values["sy"]) == (1.5, 0.5)
+    with pytest.raises(ValueError, match="--angle"):
+        load_warp("swirl")(W, H, angle="50%")

@@ -19,8 +19,10 @@ class Stretch(Warp):
     summary = "Non-uniform scale to a new size or aspect ratio."
 
     params = (
-        Param("sx", float, 1.0, "Horizontal scale factor.", min=0, min_open=True, max=100),
-        Param("sy", float, 1.0, "Vertical scale factor.", min=0, min_open=True, max=100),
+        Param("sx", float, 1.0, "Horizontal scale factor, or a percentage (150%).", min=0, min_open=True, max=100,
+              percent=True),
+        Param("sy", float, 1.0, "Vertical scale factor, or a percentage (150%).", min=0, min_open=True, max=100,
+              percent=True),
         Param("width", int, None, "Target width in pixels (overrides --sx).", min=1, max=65535, metavar="PX"),
         Param("height", int, None, "Target height in pixels (overrides --sy).", min=1, max=65535, metavar="PX"),
     )
