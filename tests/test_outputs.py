@@ -251,3 +251,29 @@ def test_quality_sets_the_jpeg_tables_and_makes_webp_lossy(tmp_path):
     assert invoke("warp", "swirl", source, lossy, "--angle", "60", "--quality", "50").exit_code == 0
     assert lossy.stat().st_size < lossless.stat().st_size / 2
     assert invoke("warp", "swirl", source, lossy, "--quality", "101").exit_code == 2
+
+
+@pytest.mark.parametrize("text,expected", [
+    ("skyblue", (135, 206, 235)), ("#f80", (255, 136, 0)), ("#ff000080", (255, 0, 0, 128)),
+    ("rgba(255, 0, 0, 0.5)", (255, 0, 0, 128)), ("rgba(255,0,0,50%)", (255, 0, 0, 128)),
+    ("rgba(0, 0, 255, 1)", (0, 0, 255)), ("#00ff00ff", (0, 255, 0)), ("none", None)])
+def test_colour_forms(text, expected):
+    from featurewarp_cli.io.colours import parse_colour
+
+    assert parse_colour(text, alpha=True) == expected
+
+
+@pytest.mark.parametrize("text", ["rgb(300, 0, 0)", "rgba(1, 2, 3, 1.5)", "#12345", "blurple"])
+def test_bad_colours_are_refused(picture, text):
+    run = invoke("warp", "arc", picture, picture.with_name("o.png"), "--background", text)
+    assert run.exit_code == 2 and "--background" in run.output
+
+
+def test_a_translucent_background(picture, tmp_path):
+    """#ff000080: uncovered pixels of a PNG are red at alpha 128; a JPEG gets it over white."""
+    png, jpg = tmp_path / "o.png", tmp_path / "o.jpg"
+    assert invoke("warp", "arc", picture, png, "--angle", "150", "--background", "#ff000080").exit_code == 0
+    assert tuple(cv2.imread(str(png), cv2.IMREAD_UNCHANGED)[0, 0]) == (0, 0, 255, 128)
+    assert invoke("warp", "arc", picture, jpg, "--angle", "150", "--background", "rgba(255,0,0,0.5)").exit_code == 0
+    b, g, r = cv2.imread(str(jpg))[0, 0].astype(int)
+    assert r > 240 and abs(g - 128) < 6 and abs(b - 128) < 6

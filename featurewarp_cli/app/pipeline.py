@@ -102,14 +102,17 @@ class Settings:
 
 
 def background_colour(text: str | None, fmt: str):
-    """(r, g, b) fill for uncovered pixels, or None (transparent), for output format ``fmt``."""
+    """(r, g, b) fill for uncovered pixels, (r, g, b, a) for a translucent one, or None
+    (transparent), for output format ``fmt`` (without alpha: a translucent colour over white)."""
     has_alpha = formats.FORMATS[fmt].alpha
     if text is None:
         return None if has_alpha else (255, 255, 255)
     try:
-        rgb = colours.parse_colour(text)
+        rgb = colours.parse_colour(text, alpha=True)
     except ValueError as err:
         raise WarpError(str(err), "--background", usage=True) from None
+    if rgb is not None and len(rgb) == 4 and not has_alpha:
+        return tuple(round(c * rgb[3] / 255 + 255 * (1 - rgb[3] / 255)) for c in rgb[:3])
     if rgb is None and not has_alpha:
         raise WarpError(f"{fmt} has no alpha channel; use a colour or a png, webp or tiff output",
                         "--background", usage=True)
@@ -314,6 +317,16 @@ def make_warper(settings: Settings, width: int, height: int, feature_mask):
     return warp, warper
 
 
+def rendered(warper, image, mesh, interp: str, background):
+    """The BGR(A) image through ``mesh``; a translucent (r, g, b, a) background is laid under a
+    transparent render."""
+    if background is None or len(background) == 3:
+        return warper.render(image, mesh, interp, background, order="bgr")
+    from ..render.raster import under_colour
+
+    return under_colour(warper.render(image, mesh, interp, None, order="bgr"), background)
+
+
 def check_solution(settings: Settings, mesh) -> None:
     """WarpError when the solve left folded triangles (unless ``allow_folds``) or, under
     ``strict``, when it warned: nothing is written then."""
@@ -417,7 +430,7 @@ def warp_file(settings: Settings, input: str, output: str, mask: str | None = No
                         f"{width}x{height}")
     warnings.extend(mesh.record.warnings)
     check_solution(settings, mesh)
-    result = warper.render(image, mesh, settings.interp, background, order="bgr")
+    result = rendered(warper, image, mesh, settings.interp, background)
     if draw_grid:
         from .panel import draw_grid as overlay
 
@@ -477,7 +490,7 @@ def compare_file(settings: Settings, input: str, output: str, mask: str | None =
     for mode in ("plain", "rigid", "similarity"):
         mesh = warper.solve(warp, mode)
         check_solution(settings, mesh)
-        result = warper.render(image, mesh, settings.interp, background, order="bgr")
+        result = rendered(warper, image, mesh, settings.interp, background)
         tiles.append(panel.draw_grid(result, mesh) if draw_grid else result)
         labels.append(f"{mode} {settings.preset}" if mode == "plain" else f"featurewarp {mode}")
     write_image(out_path, fmt, panel.labelled_panel(tiles, labels, panel_width), (255, 255, 255))

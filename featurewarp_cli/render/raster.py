@@ -381,3 +381,17 @@ def add_alpha(image: np.ndarray) -> np.ndarray:
         image = cv2.cvtColor(image, cv2.COLOR_GRAY2BGR)
     alpha = np.full(image.shape[:2] + (1,), opaque, dtype=image.dtype)
     return np.concatenate([image, alpha], axis=2)
+
+
+def under_colour(image: np.ndarray, rgba) -> np.ndarray:
+    """A BGR(A) or grey image with a translucent (r, g, b, a) colour (0..255) laid under it
+    (Porter-Duff "over"): what was transparent becomes the colour, partly covered pixels
+    blend, opaque ones stay. Returns BGRA of the image's dtype."""
+    image = add_alpha(image)
+    top = float(np.iinfo(image.dtype).max)
+    alpha = image[..., 3:].astype(np.float64) / top
+    colour = np.array([rgba[2], rgba[1], rgba[0]], np.float64) * top / 255
+    under = rgba[3] / 255 * (1 - alpha)
+    out_alpha = alpha + under
+    rgb = (image[..., :3] * alpha + colour * under) / np.maximum(out_alpha, 1e-12)
+    return np.round(np.concatenate([rgb, out_alpha * top], axis=2)).astype(image.dtype)
