@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import importlib
 import math
+import re
 from dataclasses import dataclass
 from functools import lru_cache
 from typing import TYPE_CHECKING, ClassVar
@@ -40,7 +41,8 @@ from typing import TYPE_CHECKING, ClassVar
 if TYPE_CHECKING:                   # numpy is imported on first use: --help needs none of it
     import numpy as np
 
-__all__ = ["Param", "Warp", "load", "names", "known", "shadowing", "UnknownPreset", "GROUP", "BUILTIN"]
+__all__ = ["Param", "Warp", "load", "names", "known", "shadowing", "resolve_pair", "UnknownPreset", "GROUP",
+           "BUILTIN"]
 
 
 
@@ -53,7 +55,9 @@ class Param:
     name : str
         Python name; the option is ``--name`` (underscores become dashes).
     type : type
-        ``float`` or ``int``.
+        ``float`` or ``int``; or ``tuple`` for a pair such as a point ``X,Y`` or a size
+        ``WxH``, each part pixels or a percentage of the image's width and height
+        (:func:`resolve_pair` turns it into pixels).
     default : float or int or None
         Value when the option is not given. None means "not set".
     help : str
@@ -81,6 +85,8 @@ class Param:
 
     def range_text(self) -> str:
         """Human-readable range, e.g. ``0 < F <= 360``."""
+        if self.type is tuple:
+            return f"{self.metavar}: pixels or percentages"
         lo = "" if self.min is None else f"{self.min:g} {'<' if self.min_open else '<='} "
         hi = "" if self.max is None else f" {'<' if self.max_open else '<='} {self.max:g}"
         return f"{lo}{self.metavar}{hi}" if lo or hi else "any real number"
@@ -97,6 +103,8 @@ class Param:
             if self.default is None:
                 return None
             raise ValueError(f"--{self.cli_name} needs a value")
+        if self.type is tuple:
+            return self._check_pair(value)
         if isinstance(value, bool):
             raise ValueError(f"--{self.cli_name}: {value!r} is not a number")
         text = value.strip() if isinstance(value, str) else None
@@ -116,6 +124,25 @@ class Param:
             raise ValueError(f"--{self.cli_name}: {number:g} is out of range ({self.range_text()})")
         return number
 
+    def _check_pair(self, value) -> tuple[str, str]:
+        """Two parts, each a finite number of pixels or a percentage: ``'40%', '120'``."""
+        parts = re.split(r"\s*[,x\u00d7]\s*", value.strip()) if isinstance(value, str) else list(value)
+        try:
+            if len(parts) != 2:
+                raise ValueError
+            numbers = [float(str(part).strip().removesuffix("%")) for part in parts]
+        except (TypeError, ValueError):
+            raise ValueError(f"--{self.cli_name}: {value!r} is not {self.metavar} "
+                             f"(two numbers of pixels or percentages)") from None
+        if not all(math.isfinite(n) for n in numbers):
+            raise ValueError(f"--{self.cli_name}: {value!r} is not finite")
+        return tuple(str(part).strip() for part in parts)
+
+    @property
+    def type_name(self) -> str:
+        """``float``, ``int`` or ``pair``."""
+        return "pair" if self.type is tuple else self.type.__name__
+
     @property
     def cli_name(self) -> str:
         return self.name.replace("_", "-")
@@ -123,7 +150,7 @@ class Param:
     def as_dict(self) -> dict:
         """JSON-ready description (for ``featurewarp warps --json``)."""
         return {
-            "name": self.name, "type": self.type.__name__, "default": self.default,
+            "name": self.name, "type": self.type_name, "default": self.default,
             "min": self.min, "max": self.max, "min_open": self.min_open,
             "max_open": self.max_open, "help": self.help,
         }
@@ -193,6 +220,20 @@ class Warp:
     def __repr__(self) -> str:
         args = ", ".join(f"{k}={v!r}" for k, v in self.values.items())
         return f"{type(self).__name__}({self.width}, {self.height}, {args})"
+
+
+def resolve_pair(pair: tuple[str, str], width: int, height: int, position: bool = False) -> tuple[float, float]:
+    """A checked pair (:meth:`Param.check` of a ``tuple`` parameter) in pixels.
+
+    Percentages are of ``width`` and ``height`` (a size: ``150%``), or with ``position``
+    of the span between the first and last pixel centres, so that ``50%,50%`` is the
+    image's centre and ``0%,0%`` its top-left pixel."""
+    def one(part: str, extent: int) -> float:
+        if not part.endswith("%"):
+            return float(part)
+        return float(part[:-1]) / 100.0 * ((extent - 1) if position else extent)
+
+    return one(pair[0], width), one(pair[1], height)
 
 
 def centre(width: int, height: int) -> np.ndarray:

@@ -339,3 +339,20 @@ def test_stretch_factors_take_percentages():
     assert (w.values["sx"], w.values["sy"]) == (1.5, 0.5)
     with pytest.raises(ValueError, match="--angle"):
         load_warp("swirl")(W, H, angle="50%")
+
+
+def test_radial_presets_take_a_centre_and_stretch_a_size():
+    """--center X,Y (pixels or percentages; 50%,50% is the default centre) for swirl and bulge;
+    stretch --size WxH (pixels or percentages of the input)."""
+    for name, extra in (("swirl", {"angle": 90}), ("bulge", {"strength": 0.8})):
+        default = load_warp(name)(W, H, **extra)
+        middle = load_warp(name)(W, H, center="50%,50%", **extra)
+        corner = load_warp(name)(W, H, center="10,20", **extra)
+        np.testing.assert_allclose(middle.centre, default.centre)
+        np.testing.assert_allclose(corner(np.array([[10.0, 20.0]])), [[10.0, 20.0]])    # the centre stays
+        assert not np.allclose(corner(np.array([[30.0, 30.0]])), default(np.array([[30.0, 30.0]])))
+    assert load_warp("stretch")(W, H, size="300x100").canvas == (300, 100)
+    assert load_warp("stretch")(W, H, size="150%x50%").canvas == (round(1.5 * W), round(0.5 * H))
+    for bad in ("300", "ax3", "0x10"):
+        with pytest.raises(ValueError, match="--size"):
+            load_warp("stretch")(W, H, size=bad)

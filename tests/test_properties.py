@@ -36,7 +36,10 @@ fast = settings(deadline=None, max_examples=50, derandomize=True,
 
 def value_strategy(p):
     """Values of one declared parameter, inside its range (None too when that is its default)."""
-    if p.type is int:
+    if p.type is tuple:                  # a point inside the image, or a size of at least its own
+        part = st.integers(*((100, 300) if p.name == "size" else (0, 100))).map(lambda v: f"{v}%")
+        values = st.tuples(part, part).map(",".join)
+    elif p.type is int:
         lo = -INT_CAP if p.min is None else int(p.min) + int(p.min_open)
         hi = INT_CAP if p.max is None else min(int(p.max) - int(p.max_open), INT_CAP)
         values = st.integers(lo, max(lo, hi))

@@ -6,13 +6,14 @@ import math
 
 import numpy as np
 
-from featurewarp_cli.plugins import Param, Warp
+from featurewarp_cli.plugins import Param, Warp, resolve_pair
 
 
 class Stretch(Warp):
     """Scale x by sx and y by sy; the canvas is round(w*sx) x round(h*sy).
 
-    --width / --height name the target size in pixels instead of a factor.
+    --width / --height name the target size in pixels instead of a factor; --size WxH both
+    at once (pixels or percentages).
     """
 
     name = "stretch"
@@ -25,9 +26,17 @@ class Stretch(Warp):
               percent=True),
         Param("width", int, None, "Target width in pixels (overrides --sx).", min=1, max=65535, metavar="PX"),
         Param("height", int, None, "Target height in pixels (overrides --sy).", min=1, max=65535, metavar="PX"),
+        Param("size", tuple, None, "Target size WxH in pixels or percentages (800x600, 150%x100%); "
+              "overrides the others.", metavar="WxH"),
     )
 
-    def _setup(self, sx, sy, width, height):
+    def _setup(self, sx, sy, width, height, size):
+        if size is not None:
+            size_w, size_h = resolve_pair(size, self.width, self.height)
+            for value, name in ((size_w, "width"), (size_h, "height")):
+                if not 1 <= math.floor(value + 0.5) <= 65535:
+                    raise ValueError(f"--size: the {name} {value:g} is out of range (1 <= PX <= 65535)")
+            width, height = math.floor(size_w + 0.5), math.floor(size_h + 0.5)
         # Half-up rounding (Python's round() goes to even: 160.5 -> 160).
         out_w = width if width is not None else max(1, math.floor(self.width * sx + 0.5))
         out_h = height if height is not None else max(1, math.floor(self.height * sy + 0.5))

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from featurewarp_cli.plugins import Param, Warp, centre
+from featurewarp_cli.plugins import Param, Warp, centre, resolve_pair
 
 
 class Swirl(Warp):
@@ -27,10 +27,13 @@ class Swirl(Warp):
               min=-720, max=720, metavar="DEG"),
         Param("radius", float, 0.5, "Radius of the swirl as a fraction of min(width, height).",
               min=0.001, max=10),
+        Param("center", tuple, None, "Centre of the effect: X,Y in pixels (pixel centres at whole "
+              "numbers) or percentages (50%,50% is the image's centre, the default).", metavar="X,Y"),
     )
 
-    def _setup(self, angle, radius):
-        self.centre = centre(self.width, self.height)
+    def _setup(self, angle, radius, center):
+        self.centre = (centre(self.width, self.height) if center is None else
+                       np.array(resolve_pair(center, self.width, self.height, position=True)))
         self.r = radius * min(self.width, self.height)
         self.theta = np.deg2rad(angle)
 

@@ -130,7 +130,7 @@ def list_warps(as_json):
         click.echo(f"{entry['name']}  {entry['summary']}")
         preset = plugins.load(entry["name"])
         for p in preset.params:
-            click.echo(f"  --{p.cli_name:<10} {p.type.__name__:<6} default {p.default_text():<6} "
+            click.echo(f"  --{p.cli_name:<10} {p.type_name:<6} default {p.default_text():<6} "
                        f"{p.range_text():<18} {p.help}")
         click.echo()
 

@@ -60,7 +60,7 @@ class ParamValue(click.ParamType):
 
     def __init__(self, param: Param):
         self.param = param
-        self.name = param.type.__name__
+        self.name = param.type_name
 
     def convert(self, value, option, ctx):
         try:
