@@ -1,5 +1,6 @@
 """Which stage a run is in, for a progress line: the engine and the pipeline announce their
-stages here; a listener (the command line's progress line) hears them. Imports nothing."""
+stages here; a listener (the command line's progress line) hears them. Also the one switch
+for notices (``-q``). Imports nothing at module level."""
 
 from __future__ import annotations
 
@@ -21,3 +22,19 @@ def forget(listener) -> None:
     """Stop calling ``listener``."""
     if listener in _listeners:
         _listeners.remove(listener)
+
+
+#: Set by ``-q``: notices (one-time remarks such as a slower fallback) are not printed.
+quiet = False
+
+
+def notice(text: str) -> None:
+    """Print a one-line notice on stderr (``featurewarp: text``) unless ``-q`` was given."""
+    import sys
+
+    if quiet or sys.stderr is None:
+        return
+    try:
+        sys.stderr.write(f"featurewarp: {text}\n")
+    except (OSError, ValueError):
+        pass

@@ -264,3 +264,24 @@ def test_progress_line_names_the_stages_and_is_erased(monkeypatch):
     monkeypatch.setattr(sys.stderr, "isatty", lambda: False, raising=False)
     with progress.progress_line(quiet=False) as shown:
         assert shown is None
+
+
+def test_quiet_silences_notices(monkeypatch, tmp_path):
+    """-q: no warning, no notice (the SciPy fallback's one included)."""
+    from featurewarp_cli import stages
+
+    monkeypatch.setattr(stages, "quiet", False)
+    source = tmp_path / "in.png"
+    cv2.imwrite(str(source), picture(160, 120))
+    mask = tmp_path / "mask.png"
+    blobs = np.zeros((120, 160), np.uint8)
+    blobs[:, :150] = 255                       # most of the picture: warns, and factors a system
+    cv2.imwrite(str(mask), blobs)
+    code = ("import sys; sys.modules['sksparse'] = None\n"
+            "from featurewarp_cli.cli.main import main\n"
+            f"main(['warp', 'swirl', {str(source)!r}, {str(tmp_path / 'o.png')!r}, '-m', {str(mask)!r}, '-q'])\n")
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert run.returncode == 0 and run.stderr == "", run.stderr
+    loud = subprocess.run([sys.executable, "-c", code.replace(", '-q'", "")], capture_output=True, text=True,
+                          timeout=60)
+    assert "scikit-sparse" in loud.stderr and "warning" in loud.stderr

@@ -136,7 +136,11 @@ def list_warps(as_json):
 
 
 def one_line_warning(message, category, filename, lineno, file=None, line=None):
-    """Show a Python warning (e.g. numpy's overflow) as one line on stderr."""
+    """Show a Python warning (e.g. numpy's overflow) as one line on stderr (not with -q)."""
+    from .. import stages
+
+    if stages.quiet:
+        return
     click.echo(f"featurewarp: warning: {message} ({os.path.basename(filename)}:{lineno})", err=True)
 
 

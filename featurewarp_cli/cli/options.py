@@ -166,5 +166,8 @@ def settings_from(preset, kwargs: dict):
     quiet, verbose = kwargs.pop("quiet"), kwargs.pop("verbose")
     if quiet and verbose:
         raise click.UsageError("--quiet and --verbose exclude each other")
+    from .. import stages
+
+    stages.quiet = quiet
     params = {p.name: kwargs.pop(p.name) for p in preset.params}
     return Settings(preset.name, params, **{k: kwargs.pop(k) for k in SETTINGS}), quiet, verbose

@@ -38,12 +38,12 @@ scikit-sparse holds the GIL while CHOLMOD factors.
 from __future__ import annotations
 
 import hashlib
-import sys
 from collections import OrderedDict
 
 import numpy as np
 import scipy.sparse as sp
 
+from .. import stages
 from . import cholmod
 
 _fallback_noted = False
@@ -276,8 +276,7 @@ def _splu_solve(lower):
 
     global _fallback_noted
     if not _fallback_noted:
-        sys.stderr.write("featurewarp: scikit-sparse (CHOLMOD) cannot be imported; "
-                         "using SciPy's sparse LU, which is slower\n")
+        stages.notice("scikit-sparse (CHOLMOD) cannot be imported; using SciPy's sparse LU, which is slower")
         _fallback_noted = True
     try:
         return splu((lower + sp.tril(lower, -1).T).tocsc()).solve
