@@ -277,3 +277,24 @@ def test_a_translucent_background(picture, tmp_path):
     assert invoke("warp", "arc", picture, jpg, "--angle", "150", "--background", "rgba(255,0,0,0.5)").exit_code == 0
     b, g, r = cv2.imread(str(jpg))[0, 0].astype(int)
     assert r > 240 and abs(g - 128) < 6 and abs(b - 128) < 6
+
+
+def test_save_grid_as_obj_loads_in_trimesh(picture, tmp_path):
+    """--save-grid x.obj: a Wavefront OBJ with as many vertices and faces as the .npz holds,
+    texture coordinates in [0, 1] (issue 14)."""
+    import trimesh
+
+    obj, npz = tmp_path / "mesh.obj", tmp_path / "mesh.npz"
+    mask = tmp_path / "mask.png"
+    cv2.imwrite(str(mask), (np.indices((120, 160)).sum(0) % 40 < 8).astype(np.uint8) * 255)
+    for grid in (obj, npz):
+        run = invoke("warp", "arc", picture, tmp_path / f"{grid.stem}-{grid.suffix[1:]}.png", "-m", mask,
+                     "--angle", "120", "--save-grid", grid)
+        assert run.exit_code == 0, run.output
+    arrays = np.load(npz)
+    loaded = trimesh.load(obj, process=False, maintain_order=True)
+    assert len(loaded.vertices) == len(arrays["target"]) and len(loaded.faces) == len(arrays["triangles"])
+    np.testing.assert_allclose(loaded.vertices[:, :2], arrays["target"], atol=1e-5)
+    np.testing.assert_array_equal(loaded.faces, arrays["triangles"])
+    uv = loaded.visual.uv
+    assert uv.min() >= 0 and uv.max() <= 1

@@ -444,7 +444,7 @@ def warp_file(settings: Settings, input: str, output: str, mask: str | None = No
                                   getattr(kept, "icc", None), getattr(kept, "exif", None)))]
     timings["write"] = time.perf_counter() - t1
     if save_grid:
-        outputs.append((save_grid, mesh.to_npz()))
+        outputs.append((save_grid, mesh.to_obj() if save_grid.lower().endswith(".obj") else mesh.to_npz()))
     if report:
         outputs.append((report, _report(input, out_path, image, result, warp, mesh, timings, t0)))
     write_all(outputs)

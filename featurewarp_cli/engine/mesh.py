@@ -59,3 +59,22 @@ class Mesh:
         buffer = io.BytesIO()
         np.savez(buffer, source=self.source, target=self.target, triangles=self.triangles.astype(np.int32))
         return buffer.getvalue()
+
+    def to_obj(self) -> bytes:
+        """The mapping as a Wavefront OBJ (for ``--save-grid x.obj``), for 3D tools.
+
+        ``v x y 0``: the nodes on the output canvas, in pixels (y down, as in the image);
+        ``vt u v``: their source positions as texture coordinates, the source image's edges
+        at 0 and 1 (v up, as OBJ has it); ``f a/a b/b c/c``: the triangles, counter-clockwise
+        in source coordinates with y down.
+        """
+        lo, hi = self.source.min(axis=0), self.source.max(axis=0)
+        uv = (self.source - lo) / np.maximum(hi - lo, 1e-12)
+        uv[:, 1] = 1.0 - uv[:, 1]
+        faces = self.triangles.astype(np.int64) + 1
+        lines = ["# featurewarp mesh: v = canvas pixels (y down), vt = source in [0, 1]",
+                 f"# canvas {self.canvas[0]} x {self.canvas[1]}"]
+        lines += [f"v {x:.6f} {y:.6f} 0" for x, y in self.target]
+        lines += [f"vt {u:.8f} {v:.8f}" for u, v in uv]
+        lines += [f"f {a}/{a} {b}/{b} {c}/{c}" for a, b, c in faces]
+        return ("\n".join(lines) + "\n").encode()
