@@ -220,11 +220,6 @@ def write_atomic(path: str, data: bytes) -> None:
     write_outputs([(path, data)])
 
 
-def write_output(path: str, data: bytes) -> None:
-    """Write ``data`` to stdout for ``-``, else as :func:`write_atomic`."""
-    write_atomic(path, data)
-
-
 def remove_quietly(path: str) -> None:
     """Remove ``path`` if it is there."""
     try:
