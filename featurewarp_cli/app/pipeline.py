@@ -9,7 +9,6 @@ lookup and a process pool. Nothing here depends on click: errors are
 from __future__ import annotations
 
 import importlib
-import json
 import os
 import sys
 import threading
@@ -18,8 +17,9 @@ from dataclasses import dataclass, field
 
 from .. import plugins, stages
 from ..engine.defaults import DECAY, FEATURE_WEIGHT, FORMULATION, INTERPOLATION, MODE, SCALE_PRIOR
-from ..io import ImageError, colours, decode, encode, formats, limits, write
+from ..io import ImageError, colours, decode, formats, limits, write
 from .outputs import check_distinct, encoded, format_of, write_all, write_image
+from .report import report_bytes, summary
 
 #: What :func:`prefetch_engine` imports: the engine (grid, features, fold-over guard,
 #: renderer), then, for a warp that factors, the solver (scipy.sparse and scikit-sparse).
@@ -79,6 +79,9 @@ class Settings:
         JPEG and WebP quality 1..100 (WebP lossy when given).
     strip : bool
         Drop the input's ICC profile and EXIF instead of keeping them.
+    warp_factory : callable, optional
+        ``warp_factory(width, height)`` gives the warp instead of the preset (``deform``'s
+        handles); its ValueError is a usage error, its ``notes`` become warnings.
     """
 
     preset: str
@@ -99,6 +102,7 @@ class Settings:
     allow_folds: bool = False
     quality: int | None = None
     strip: bool = False
+    warp_factory: object = None
 
 
 def background_colour(text: str | None, fmt: str):
@@ -296,8 +300,10 @@ def make_warper(settings: Settings, width: int, height: int, feature_mask):
     from ..engine.warper import FeatureWarper
 
     try:
-        preset = plugins.load(settings.preset)
-        warp = preset(width, height, **settings.params)
+        if settings.warp_factory is not None:
+            warp = settings.warp_factory(width, height)
+        else:
+            warp = plugins.load(settings.preset)(width, height, **settings.params)
     except plugins.UnknownPreset as err:
         raise WarpError(str(err), usage=True) from None
     except ValueError as err:
@@ -358,20 +364,6 @@ def check_outputs(settings: Settings, output: str, *extra: tuple[str | None, str
     return out_path, fmt
 
 
-def summary(preset: str, mode: str, input: str, out_path: str, size, mesh, t0: float,
-            warnings: list) -> dict:
-    """The ``--verbose`` summary of one written image (a fold-over, if any, becomes a warning)."""
-    flips = mesh.info.get("flipped_triangles", 0)
-    if flips:
-        warnings.append(f"{flips} triangles of the mesh fold over; the output may show folds")
-    return {
-        "input": "stdin" if input == "-" else input, "output": "stdout" if out_path == "-" else out_path,
-        "preset": preset, "mode": mode, "size": tuple(size), "canvas": tuple(mesh.canvas),
-        "solver": mesh.info["solver"], "components": len(mesh.info["components"]),
-        "flipped_triangles": flips, "seconds": time.perf_counter() - t0, "warnings": warnings,
-    }
-
-
 def warp_file(settings: Settings, input: str, output: str, mask: str | None = None,
               report: str | None = None, save_grid: str | None = None, draw_grid: bool = False) -> dict:
     """Load, warp, render and write one image (the body of ``featurewarp warp PRESET``).
@@ -421,6 +413,7 @@ def warp_file(settings: Settings, input: str, output: str, mask: str | None = No
     try:
         warp, warper = make_warper(settings, width, height, feature_mask)
         mesh = warper.solve(warp, settings.mode)
+        mesh.record.warnings.extend(getattr(warp, "notes", ()))
     finally:
         t1 = time.perf_counter()
         image = pending.result()               # a decoding error outranks any from the solve
@@ -446,17 +439,9 @@ def warp_file(settings: Settings, input: str, output: str, mask: str | None = No
     if save_grid:
         outputs.append((save_grid, mesh.to_obj() if save_grid.lower().endswith(".obj") else mesh.to_npz()))
     if report:
-        outputs.append((report, _report(input, out_path, image, result, warp, mesh, timings, t0)))
+        outputs.append((report, report_bytes(input, out_path, image, result, warp, mesh, timings, t0)))
     write_all(outputs)
     return summary(settings.preset, settings.mode, input, out_path, (width, height), mesh, t0, warnings)
-
-
-def _report(input, out_path, image, result, warp, mesh, timings, t0) -> bytes:
-    """The JSON report's bytes (its ``seconds.total`` is the run so far)."""
-    from .report import build_report
-
-    timings["total"] = time.perf_counter() - t0
-    return (json.dumps(build_report(input, out_path, image, result, warp, mesh, timings), indent=2) + "\n").encode()
 
 
 def compare_file(settings: Settings, input: str, output: str, mask: str | None = None,

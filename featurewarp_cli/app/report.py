@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import json
 import os
+import time
 
 import numpy as np
 
@@ -73,3 +75,23 @@ def build_report(input_path, output_path, image, result, warp, mesh, timings) ->
         },
         "quality": info["quality"],
     }
+
+
+def summary(preset: str, mode: str, input: str, out_path: str, size, mesh, t0: float,
+            warnings: list) -> dict:
+    """The ``--verbose`` summary of one written image (a fold-over, if any, becomes a warning)."""
+    flips = mesh.info.get("flipped_triangles", 0)
+    if flips:
+        warnings.append(f"{flips} triangles of the mesh fold over; the output may show folds")
+    return {
+        "input": "stdin" if input == "-" else input, "output": "stdout" if out_path == "-" else out_path,
+        "preset": preset, "mode": mode, "size": tuple(size), "canvas": tuple(mesh.canvas),
+        "solver": mesh.info["solver"], "components": len(mesh.info["components"]),
+        "flipped_triangles": flips, "seconds": time.perf_counter() - t0, "warnings": warnings,
+    }
+
+
+def report_bytes(input, out_path, image, result, warp, mesh, timings, t0) -> bytes:
+    """The JSON report's bytes (its ``seconds.total`` is the run so far)."""
+    timings["total"] = time.perf_counter() - t0
+    return (json.dumps(build_report(input, out_path, image, result, warp, mesh, timings), indent=2) + "\n").encode()

@@ -41,6 +41,8 @@ import numpy as np
 PIN_TOLERANCE = 0.01
 #: Columns of Phi solved at once.
 _BATCH = 16
+#: The node responses to each eta (used by quick solves) are kept up to this many numbers per axis.
+_KEPT_RESPONSES = 2_500_000
 
 
 @dataclass
@@ -355,12 +357,16 @@ class ScaleSolver:
         self.d = [(lg[axis] - b[axis * n_nodes:(axis + 1) * n_nodes]).tocsc() for axis in range(2)]
         self.g, self.b = g, b
         hessian = np.zeros((n, n))
+        keep = n_nodes * n <= _KEPT_RESPONSES
+        self.responses = [np.empty((n_nodes, n)) for _ in range(2)] if keep else None
         for start in range(0, n, _BATCH):
             stop = min(n, start + _BATCH)
             for axis, system in enumerate((systems.x, systems.y)):
                 rows = slice(axis * n_nodes, (axis + 1) * n_nodes)
                 phi = system.solve(b[rows, start:stop].toarray(), g[rows, start:stop].toarray())
                 hessian[start:stop] += (self.d[axis].T @ phi).T
+                if keep:
+                    self.responses[axis][:, start:stop] = phi
         hessian -= (b.T @ g).toarray()
         moments = target_moments(ties, features, grid.spacing)
         directions = _directions(ties, self.comp, self.k)
@@ -416,4 +422,12 @@ class ScaleSolver:
         lhs[np.diag_indices_from(lhs)] += 1e-12 * max(1.0, float(np.abs(np.diag(lhs)).max()))
         eta = np.linalg.solve(lhs, -(gradient + pull))
         np.add.at(ab, self.comp, eta[:, None] * self.directions)
+        self.eta = eta
         return ab
+
+    def moved(self, x0: np.ndarray) -> np.ndarray | None:
+        """The nodes after the last :meth:`solve`'s step from the solution ``x0`` at eta = 0,
+        without a solve (x is affine in eta), or None when the responses were too many to keep."""
+        if self.responses is None or not self.n_columns:
+            return None
+        return x0 + np.stack([self.responses[axis] @ self.eta for axis in range(2)], axis=1)

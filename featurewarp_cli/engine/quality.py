@@ -169,7 +169,8 @@ def map_anisotropy(maps: np.ndarray) -> np.ndarray:
         return np.where(sv[:, 1] > 0, sv[:, 0] / np.maximum(sv[:, 1], 1e-300), np.inf)
 
 
-def component_figures(source, target, warped, triangles, tri_component, node_component, n_components) -> dict:
+def component_figures(source, target, warped, triangles, tri_component, node_component, n_components,
+                      plain: bool = True) -> dict:
     """Per component: how its triangles and its whole region came out, and under W.
 
     Parameters
@@ -182,6 +183,8 @@ def component_figures(source, target, warped, triangles, tri_component, node_com
     node_component : (N,) int ndarray
         Component of each node of a feature quad, -1 for the others.
     n_components : int
+    plain : bool
+        Also the figures under W (else the ``plain_`` ones are zeros).
 
     Returns
     -------
@@ -194,8 +197,8 @@ def component_figures(source, target, warped, triangles, tri_component, node_com
     on = tri_component >= 0
     tris, comp = triangles[on], tri_component[on]
     count = np.maximum(np.bincount(comp, minlength=n_components), 1)
-    out = {}
-    for name, points in (("", target), ("plain_", warped)):
+    out = {"plain_anisotropy_worst": np.zeros(n_components), "plain_distortion": np.zeros(n_components)}
+    for name, points in (("", target), ("plain_", warped))[:2 if plain else 1]:
         aniso = triangle_anisotropy(source, points, tris) - 1.0
         out[name + "anisotropy_worst"] = np.zeros(n_components)
         np.maximum.at(out[name + "anisotropy_worst"], comp, aniso)

@@ -42,19 +42,18 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .. import stages
-from . import arrays, components, fidelity, guard, quality, scale_search, system, targets
+from . import arrays, components, fidelity, guard, scale_search, system, targets
 from . import features as feat
 from .defaults import (BOUNDARIES, DECAY, DECAY_PARAM, FEATURE_WEIGHT, FEATURE_WEIGHT_PARAM, FORMULATION,
                        FORMULATIONS, INTERPOLATION, MODE, MODES, SCALE_PRIOR, SCALE_PRIOR_PARAM)
 from .grid import Grid, signed_areas
 from .mesh import Mesh
-from .record import KEPT, ComponentRecord, SolveRecord, warnings_for
+from .assess import assess
+from .record import SolveRecord
 
 
 #: Images thinner than this (px) are warped without features: one base cell cannot hold a shape.
 MIN_FEATURE_SIDE = 4
-#: Features (quads holding a mask pixel) covering more than this share of the grid get a warning.
-MASK_COVERAGE = 0.9
 
 
 def load_warp(name: str):
@@ -223,7 +222,7 @@ class FeatureWarper:
             offset[free, axis] = placed[free, axis]
         return offset
 
-    def solve(self, warp, mode: str = MODE) -> Mesh:
+    def solve(self, warp, mode: str = MODE, quick: bool = False) -> Mesh:
         """Feature-aware mesh for ``warp`` (a :class:`featurewarp_cli.plugins.Warp` instance).
 
         The least-squares solution is returned when it has no fold-over. When it
@@ -239,6 +238,12 @@ class FeatureWarper:
         mode : {'similarity', 'rigid', 'plain'}
             similarity: features rotate and scale uniformly; rigid: they keep
             their size; plain: the warp itself, mask ignored.
+        quick : bool
+            For interactive updates: the cell is not refined to follow the warp (the
+            given cell, or the base cell), the features take the least-squares
+            similarities without the scale search's safeguards, the guard runs only
+            when the result folds, and the per-component figures are computed but
+            not the other quality figures.
 
         Returns
         -------
@@ -252,7 +257,9 @@ class FeatureWarper:
         self.timings = {}
         stages.enter("grid")
         t0 = time.perf_counter()
-        if self.cell is None:
+        if quick:
+            cell, error = (self.cell or fidelity.auto_cell(self.width, self.height, None)[0]), float("nan")
+        elif self.cell is None:
             cell, error = fidelity.auto_cell(self.width, self.height, warp, self.max_nodes)
         else:
             cell = float(self.cell)
@@ -270,14 +277,15 @@ class FeatureWarper:
             target = warped
             record.guard.flipped_before = int(np.count_nonzero(signed_areas(target, state.triangles) <= 0))
         else:
-            target, tied, unpinned = self._feature_aware(state, warped, mode, record)
+            target, tied, unpinned = self._feature_aware(state, warped, mode, record, quick)
         t1 = time.perf_counter()
-        self._assess(state, target, warped, tied, unpinned, warp, record)
+        assess(state, target, warped, tied, unpinned, warp, record, self.notes, quick)
         self.timings["quality"] = time.perf_counter() - t1
         record.timings = dict(self.timings)
         return Mesh(state.nodes, target, state.triangles, tuple(warp.canvas), record, state.node_component)
 
-    def _feature_aware(self, state: _GridState, warped: np.ndarray, mode: str, record: SolveRecord):
+    def _feature_aware(self, state: _GridState, warped: np.ndarray, mode: str, record: SolveRecord,
+                       quick: bool = False):
         """Solve for the features' similarities and the nodes, then guard against folds.
 
         Returns the node positions, which components stayed tied, and which of those were
@@ -314,17 +322,11 @@ class FeatureWarper:
             self.timings["solve"] = self.timings.get("solve", 0.0) + time.perf_counter() - t0
             return x, edges, rhs, offset
 
-        x, edges, rhs, offset = solve(ab)
-        scale_solver = self._scale_solver(state, ties, systems)
-        if scale_solver is not None and scale_solver.n_columns:
-            gradient = scale_solver.gradient(x, rhs, edges, features, grid.spacing)
-            weights = components.prior_weights(features, grid.spacing, self.scale_prior)
-            optimum = np.where(ties.tied[:, None], scale_solver.solve(ties.base, gradient, prior, weights), prior)
-            start = np.where(ties.tied[:, None], ties.project(prior), prior)
-            ab, (x, edges, rhs, offset) = scale_search.fitting_scales(solve, start, optimum, state.triangles, warped)
-            ab, (x, edges, rhs, offset) = scale_search.spread_stretch(
-                solve, ab, (x, edges, rhs, offset), ties.tied, state.triangles, warped, state.tri_component < 0)
-        if not self.injective:
+        ab, (x, edges, rhs, offset), scale_solver = self._similarities(state, ties, systems, solve, ab, solve(ab),
+                                                                       prior, warped, quick)
+        if edges is None:                       # quick: moved without a solve, and no fold
+            return x, ties.tied, ties.unpinned & ties.tied
+        if not self.injective or (quick and np.all(signed_areas(x, state.triangles) > 0)):
             return x, ties.tied, ties.unpinned & ties.tied
 
         def rebuild(new_edges, released):
@@ -357,6 +359,32 @@ class FeatureWarper:
         released = np.isin(np.arange(ties.tied.size), record.guard.released_components)
         return x, ties.tied & ~released, ties.unpinned & ties.tied & ~released
 
+    def _similarities(self, state: _GridState, ties, systems, solve, ab, solved, prior, warped, quick):
+        """The features' scales and rotations where they are unknowns (similarity mode): the
+        least-squares optimum under the prior, kept within what the scale search allows (not
+        when ``quick``: then the optimum, reached without a solve when that does not fold).
+
+        Returns (ab, (x, edges, rhs, offset), scale_solver); edges is None when the nodes were
+        moved without a solve."""
+        scale_solver = self._scale_solver(state, ties, systems)
+        if scale_solver is None or not scale_solver.n_columns:
+            return ab, solved, scale_solver
+        x, edges, rhs, _ = solved
+        features = state.features
+        gradient = scale_solver.gradient(x, rhs, edges, features, state.grid.spacing)
+        weights = components.prior_weights(features, state.grid.spacing, self.scale_prior)
+        optimum = np.where(ties.tied[:, None], scale_solver.solve(ties.base, gradient, prior, weights), prior)
+        if quick:
+            moved = scale_solver.moved(x)
+            if moved is not None and np.all(signed_areas(moved, state.triangles) > 0):
+                return optimum, (moved, None, None, None), scale_solver
+            return optimum, solve(optimum), scale_solver
+        start = np.where(ties.tied[:, None], ties.project(prior), prior)
+        ab, solved = scale_search.fitting_scales(solve, start, optimum, state.triangles, warped)
+        ab, solved = scale_search.spread_stretch(solve, ab, solved, ties.tied, state.triangles, warped,
+                                                 state.tri_component < 0)
+        return ab, solved, scale_solver
+
     def _scale_solver(self, state: _GridState, ties: components.Ties, systems):
         """The cached :class:`components.ScaleSolver` for these ties (None without free scales)."""
         if not ties.columns()[0].size:
@@ -368,33 +396,6 @@ class FeatureWarper:
                                                               systems)
             self.timings["scale_setup"] = time.perf_counter() - t0
         return state.scale_solvers[key]
-
-    def _assess(self, state: _GridState, target, warped, tied, unpinned, warp, record: SolveRecord) -> None:
-        """Quality figures, per-component records and warnings."""
-        features = state.features
-        transition = np.tile(features.is_constrained & ~features.is_feature, 2)
-        record.quality = quality.mesh_quality(
-            state.nodes, target, warped, state.triangles, state.grid.quads(), state.node_component,
-            features.n_components, ~features.is_constrained, transition)
-        figures = quality.component_figures(state.nodes, target, warped, state.triangles, state.tri_component,
-                                            state.node_component, features.n_components)
-        counts = np.bincount(features.component[features.is_feature], minlength=features.n_components)
-        record.components = [
-            ComponentRecord(int(counts[c]), bool(tied[c]), bool(unpinned[c]), *(float(figures[k][c]) for k in (
-                "scale", "rotation_deg", "distortion", "anisotropy_worst", "anisotropy_mean",
-                "plain_distortion", "plain_anisotropy_worst", "area_ratio")),
-                kept=bool(figures["anisotropy_worst"][c] <= KEPT))
-            for c in range(features.n_components)]
-        record.background_stretch = quality.background_stretch(target, warped, state.triangles,
-                                                               state.tri_component < 0)
-        if record.mode != "plain":
-            record.warnings.extend(warnings_for(record, state.nodes, target, warped, warp))
-            coverage = float(np.mean(features.is_feature))
-            if coverage > MASK_COVERAGE:
-                record.warnings.append(f"the mask's features cover {100 * coverage:.0f} % of the grid: little background "
-                                       f"is left to take the warp (is the mask inverted, or a JPEG whose "
-                                       f"noise crosses the threshold?)")
-        record.warnings.extend(self.notes)
 
     def render(self, image: np.ndarray, mesh: Mesh, interp: str = INTERPOLATION, background=None,
                antialias: bool = True, order: str = "rgb") -> np.ndarray:

@@ -1,0 +1,44 @@
+"""Quality figures, per-component records and warnings of a solved mesh."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import quality
+from .record import KEPT, ComponentRecord, SolveRecord, warnings_for
+
+#: Features (quads holding a mask pixel) covering more than this share of the grid get a warning.
+MASK_COVERAGE = 0.9
+
+
+def assess(state, target, warped, tied, unpinned, warp, record: SolveRecord, notes: list,
+           quick: bool = False) -> None:
+    """Fill ``record`` with the quality figures, per-component records and warnings of the mesh
+    ``target`` (``state``: the warper's grid state; ``notes``: the warper's own warnings;
+    ``quick``: the per-component records and the warnings only)."""
+    features = state.features
+    if not quick:
+        transition = np.tile(features.is_constrained & ~features.is_feature, 2)
+        record.quality = quality.mesh_quality(
+            state.nodes, target, warped, state.triangles, state.grid.quads(), state.node_component,
+            features.n_components, ~features.is_constrained, transition)
+    figures = quality.component_figures(state.nodes, target, warped, state.triangles, state.tri_component,
+                                        state.node_component, features.n_components, plain=not quick)
+    counts = np.bincount(features.component[features.is_feature], minlength=features.n_components)
+    record.components = [
+        ComponentRecord(int(counts[c]), bool(tied[c]), bool(unpinned[c]), *(float(figures[k][c]) for k in (
+            "scale", "rotation_deg", "distortion", "anisotropy_worst", "anisotropy_mean",
+            "plain_distortion", "plain_anisotropy_worst", "area_ratio")),
+            kept=bool(figures["anisotropy_worst"][c] <= KEPT))
+        for c in range(features.n_components)]
+    if not quick:
+        record.background_stretch = quality.background_stretch(target, warped, state.triangles,
+                                                               state.tri_component < 0)
+    if record.mode != "plain" and not quick:
+        record.warnings.extend(warnings_for(record, state.nodes, target, warped, warp))
+        coverage = float(np.mean(features.is_feature))
+        if coverage > MASK_COVERAGE:
+            record.warnings.append(f"the mask's features cover {100 * coverage:.0f} % of the grid: little background "
+                                   f"is left to take the warp (is the mask inverted, or a JPEG whose "
+                                   f"noise crosses the threshold?)")
+    record.warnings.extend(notes)
