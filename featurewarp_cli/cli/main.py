@@ -19,6 +19,7 @@ import warnings
 import click
 
 from .. import __version__, plugins
+from .deform import deform_command
 from .diff import diff_command
 from .measure import measure_command
 from .presets import AnimateGroup, BatchGroup, CompareGroup, PresetGroup
@@ -53,6 +54,7 @@ def cli(debug):
       featurewarp batch swirl photos/*.jpg --out-dir out --jobs 8 --angle 90
       featurewarp compare arc photo.jpg panel.png -m mask.png --angle 120 --grid
       featurewarp animate swirl photo.jpg swirl.gif -m mask.png --vary angle=0:360 --frames 36
+      featurewarp deform photo.jpg out.jpg -m mask.png --handles h.json
       featurewarp diff out.png golden.png --max-rmse 0.5
       featurewarp warps            # presets, their options, defaults and ranges
     """
@@ -100,6 +102,7 @@ def animate():
     """
 
 
+cli.add_command(deform_command())
 cli.add_command(diff_command)
 cli.add_command(measure_command)
 

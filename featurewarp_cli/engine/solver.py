@@ -433,3 +433,16 @@ class AxisSystems:
             return self.x.solve(rhs, offset)
         return np.concatenate([self.x.solve(rhs[:, :1], offset[:, :1]),
                                self.y.solve(rhs[:, 1:], offset[:, 1:])], axis=1)
+
+
+def spd_solver(matrix):
+    """``solve(b)`` for a symmetric positive definite sparse ``matrix``, factored once
+    (CHOLMOD with its default ordering, or SciPy's sparse LU without scikit-sparse).
+
+    ``b``: (n,) or (n, k) ndarray. Raises :class:`cholmod.NotPositiveDefinite`."""
+    lower = sp.tril(matrix, format="csc")
+    lower.sort_indices()
+    if not cholmod.AVAILABLE:
+        return _splu_solve(lower)
+    factor = _cholmod_factor(lower, natural=False)
+    return lambda b: cholmod.solve(factor, np.asfortranarray(b, dtype=np.float64))

@@ -1,0 +1,138 @@
+"""``featurewarp deform``: the interactive mode from the shell (handles file, --move, --pin)."""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+from dataclasses import replace
+
+import click
+
+from .options import engine_options, input_output_mask
+from .presets import MASK_HELP, click_error, report_warnings
+from .progress import progress_line
+
+
+class Deform:
+    """What :func:`settings_from` needs of a preset: a name and no parameters of its own."""
+
+    name = "deform"
+    params = ()
+
+
+class PointPair(click.ParamType):
+    """``X,Y`` (a pin) or, with ``move``, ``X,Y:X2,Y2`` (a handle dragged from X,Y to X2,Y2)."""
+
+    def __init__(self, move: bool):
+        self.move = move
+        self.name = "move" if move else "point"
+
+    def convert(self, value, option, ctx):
+        if not isinstance(value, str):
+            return value
+        parts = value.split(":")
+        try:
+            if len(parts) != (2 if self.move else 1):
+                raise ValueError
+            points = [tuple(float(n) for n in re.split(r"\s*,\s*", p.strip())) for p in parts]
+            if any(len(p) != 2 or not all(math.isfinite(n) for n in p) for p in points):
+                raise ValueError
+        except ValueError:
+            form = "X,Y:X2,Y2 (from and to, in pixels)" if self.move else "X,Y (pixels)"
+            self.fail(f"{value!r} is not {form}", option, ctx)
+        return tuple(points) if self.move else points[0]
+
+
+def load_handles(path: str | None) -> dict | None:
+    """The parsed handles file (a usage error naming the file when it cannot be read or parsed)."""
+    if path is None:
+        return None
+    try:
+        with open(path, "rb") as file:
+            text = file.read(16 * 2**20 + 1)
+    except OSError as err:
+        raise click.BadParameter(f"cannot read {path}: {err.strerror or err}", param_hint="'--handles'") from None
+    if len(text) > 16 * 2**20:
+        raise click.BadParameter(f"{path} is larger than 16 MiB; not a handles file", param_hint="'--handles'")
+    try:
+        return json.loads(text)
+    except (ValueError, UnicodeDecodeError) as err:
+        raise click.BadParameter(f"{path} is not valid JSON ({err})", param_hint="'--handles'") from None
+
+
+def handles_factory(data: dict | None, moves, pins, canvas: str | None):
+    """``make(width, height)``: the handles' warp W for an image of that size (ValueError when
+    the handles do not fit it)."""
+    def make(width: int, height: int):
+        from ..engine.deform import RigidMap
+        from ..engine.handles import VERSION, Handles
+
+        merged = dict(data) if isinstance(data, dict) else ({"version": VERSION} if data is None else data)
+        if isinstance(merged, dict):
+            points = merged.get("points", [])
+            if not isinstance(points, list):
+                raise ValueError("'points' must be a list")
+            merged["points"] = points + [{"from": list(a), "to": list(b)} for a, b in moves] + [
+                {"from": list(p), "to": list(p)} for p in pins]
+            if canvas:
+                merged["canvas"] = canvas
+        return RigidMap(width, height).deformation(Handles.from_dict(merged, width, height))
+
+    return make
+
+
+def deform_command() -> click.Command:
+    """``featurewarp deform INPUT OUTPUT --handles H.json``."""
+    params = input_output_mask(MASK_HELP) + [
+        click.Option(["--handles"], type=click.Path(dir_okay=False), metavar="H.json",
+                     help="Handles file (JSON; see README, 'The handles file'): points dragged "
+                          "from -> to, pins, curves, the border, the canvas."),
+        click.Option(["--move"], type=PointPair(move=True), multiple=True, metavar="X,Y:X2,Y2",
+                     help="A handle dragged from X,Y to X2,Y2 (repeatable; added to --handles)."),
+        click.Option(["--pin"], type=PointPair(move=False), multiple=True, metavar="X,Y",
+                     help="A point that stays where it is (repeatable)."),
+        click.Option(["--canvas"], type=click.Choice(["fit", "input"]),
+                     help="fit: the deformed image's bounding box (default); input: the input's "
+                          "size and coordinates. Overrides the file's."),
+        click.Option(["--report"], type=click.Path(dir_okay=False), metavar="PATH",
+                     help="Write a JSON report (as for warp)."),
+        click.Option(["--save-grid"], type=click.Path(dir_okay=False), metavar="PATH.npz|PATH.obj",
+                     help="Save the solved mesh (as for warp)."),
+        click.Option(["--grid", "draw_grid"], is_flag=True, help="Draw the deformed grid over the result."),
+    ] + [o for o in engine_options() if o.name != "boundary"]
+
+    def callback(input, output, mask, handles, move, pin, canvas, report, save_grid, draw_grid, **kwargs):
+        from ..app.pipeline import WarpError, warp_file
+        from .options import settings_from
+
+        if handles is None and not move and not pin:
+            raise click.UsageError("give the handles: --handles H.json, or --move X,Y:X2,Y2 with --pin X,Y")
+        data = load_handles(handles)
+        kwargs["boundary"] = None
+        settings, quiet, verbose = settings_from(Deform, kwargs)
+        settings = replace(settings, warp_factory=handles_factory(data, move, pin, canvas))
+        try:
+            with progress_line(quiet):
+                summary = warp_file(settings, input, output, mask, report, save_grid, draw_grid)
+        except WarpError as err:
+            raise click_error(err) from err
+        report_warnings(summary, quiet, verbose)
+
+    doc = """Deform INPUT by handles into OUTPUT, keeping masked features in shape.
+
+    The handles (points dragged from one place to another, pins, curves, the
+    border's outline) define an as-rigid-as-possible map of the image
+    (Igarashi et al. 2005); the features marked in the mask then keep their
+    shape under it, as with warp. Handles that describe one similarity give
+    exactly that similarity. Coordinates are pixels, pixel centres at whole
+    numbers. Design a handles file live with 'featurewarp edit'.
+
+    \b
+    Examples:
+      featurewarp deform in.jpg out.jpg -m mask.png --handles h.json
+      featurewarp deform in.jpg out.jpg -m mask.png --pin 20,20 --pin 620,20 \\
+          --move 320,400:360,460 --canvas input
+    """
+    return click.Command("deform", params=params, callback=callback, help=doc, no_args_is_help=True,
+                         short_help="Deform by handles (points, curves, border), features kept.")

@@ -1,0 +1,258 @@
+"""Handles: the positional constraints of the interactive mode, and their JSON format.
+
+A handles file (version 1) is a JSON object::
+
+    {"version": 1,
+     "points": [{"from": [x, y], "to": [x, y]}, ...],       # from == to: a pin
+     "curves": [{"from": [[x, y], ...], "to": [[x, y], ...]}, ...],
+     "border": "free" | "pinned" | {"top": SIDE, "right": SIDE, "bottom": SIDE, "left": SIDE},
+     "canvas": "fit" | "input",
+     "radius": R}
+
+Coordinates are pixels with pixel centres at whole numbers (the image spans -0.5 to
+width - 0.5). A point handle holds a disc of radius R pixels (default: see
+:func:`default_radius`). A curve's two polylines may have different numbers of points:
+both are resampled by arc length. A border SIDE is a polyline ``[[x, y], ...]`` or a cubic
+Bezier ``{"bezier": [p0, p1, p2, p3]}``, running left to right (top, bottom) or top to bottom
+(left, right), giving where that edge of the image goes; sides not given are free.
+``canvas``: ``fit`` (default) is the bounding box of the deformed image, ``input`` keeps
+the input's size and coordinates. Keys this version does not know are ignored, with a note.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .grid import Grid
+
+VERSION = 1
+SIDES = ("top", "right", "bottom", "left")
+KEYS = ("version", "points", "curves", "border", "canvas", "radius")
+#: Points a Bezier side is flattened to before it is resampled by arc length.
+BEZIER_POINTS = 256
+
+
+@dataclass
+class Handles:
+    """Validated handles (see the module docstring for the format).
+
+    Attributes
+    ----------
+    points_from, points_to : (K, 2) ndarray
+    curves : list of ((n, 2) ndarray, (m, 2) ndarray)
+    border : 'free', 'pinned' or dict side -> (n, 2) ndarray
+    canvas : 'fit' or 'input'
+    radius : float or None
+        Disc radius of the point handles; None: :func:`default_radius`.
+    notes : list of str
+        What was ignored (unknown keys).
+    """
+
+    points_from: np.ndarray
+    points_to: np.ndarray
+    curves: list = field(default_factory=list)
+    border: object = "free"
+    canvas: str = "fit"
+    radius: float | None = None
+    notes: list = field(default_factory=list)
+
+    @classmethod
+    def from_dict(cls, data, width: int, height: int) -> "Handles":
+        """Check ``data`` (a parsed handles file) against a ``width`` x ``height`` image.
+
+        Raises
+        ------
+        ValueError
+            One line naming the first problem (its key and index).
+        """
+        if not isinstance(data, dict):
+            raise ValueError("the handles file must hold a JSON object ({\"version\": 1, \"points\": [...]})")
+        if data.get("version") != VERSION:
+            raise ValueError(f"'version': {data.get('version')!r}; this featurewarp reads version {VERSION}")
+        notes = [f"handles: ignoring the key {key!r} (unknown to version {VERSION})" for key in data if key not in KEYS]
+        points = _list(data.get("points", []), "points")
+        pairs = [(_point(_entry(p, "points", i), "from", f"points[{i}].from"),
+                  _point(_entry(p, "points", i), "to", f"points[{i}].to")) for i, p in enumerate(points)]
+        sources = np.array([a for a, _ in pairs], float).reshape(-1, 2)
+        for i, source in enumerate(sources):
+            _inside(source, width, height, f"points[{i}].from")
+        _no_duplicates(sources)
+        curves = []
+        for i, curve in enumerate(_list(data.get("curves", []), "curves")):
+            curve = _entry(curve, "curves", i)
+            start, end = (_polyline(curve.get(key), f"curves[{i}].{key}") for key in ("from", "to"))
+            for k, source in enumerate(start):
+                _inside(source, width, height, f"curves[{i}].from[{k}]")
+            curves.append((start, end))
+        canvas = data.get("canvas", "fit")
+        if canvas not in ("fit", "input"):
+            raise ValueError(f"'canvas': {canvas!r}; use \"fit\" or \"input\"")
+        radius = data.get("radius")
+        if radius is not None and not (_number(radius) and 0 <= radius <= max(width, height)):
+            raise ValueError(f"'radius': {radius!r}; use a number of pixels from 0 to {max(width, height)}")
+        handles = cls(sources, np.array([b for _, b in pairs], float).reshape(-1, 2), curves,
+                      _border(data.get("border", "free"), width, height), canvas,
+                      None if radius is None else float(radius), notes)
+        handles.check_enough()
+        return handles
+
+    @classmethod
+    def from_moves(cls, moves, pins, width: int, height: int, canvas: str = "fit") -> "Handles":
+        """Handles from ``--move X,Y:X2,Y2`` and ``--pin X,Y`` pairs (already parsed to numbers)."""
+        points = [{"from": list(a), "to": list(b)} for a, b in moves] + [{"from": list(p), "to": list(p)} for p in pins]
+        return cls.from_dict({"version": VERSION, "points": points, "canvas": canvas}, width, height)
+
+    def check_enough(self) -> None:
+        """ValueError unless at least two distinct places are held (a rotation and a scale)."""
+        held = len(np.unique(np.round(self.points_from, 6), axis=0)) + 2 * len(self.curves)
+        held += 4 if self.border == "pinned" else 2 * len(self.border) if isinstance(self.border, dict) else 0
+        if held < 2:
+            raise ValueError("at least two handles are needed (a pin counts, or a curve, or the border): "
+                             "one handle alone leaves the rotation and scale free")
+
+    def as_dict(self) -> dict:
+        """The JSON-ready handles file."""
+        data = {"version": VERSION,
+                "points": [{"from": _plain(a), "to": _plain(b)} for a, b in zip(self.points_from, self.points_to)],
+                "curves": [{"from": [_plain(p) for p in a], "to": [_plain(p) for p in b]} for a, b in self.curves],
+                "border": self.border if isinstance(self.border, str) else
+                {side: [_plain(p) for p in line] for side, line in self.border.items()},
+                "canvas": self.canvas}
+        if self.radius is not None:
+            data["radius"] = self.radius
+        return data
+
+    def constraints(self, grid: Grid, radius: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Source points, their targets and their disc radii: point handles (radius
+        ``radius``), curves resampled every half cell, and the border's nodes."""
+        step = 0.5 * min(grid.spacing)
+        sources, targets, radii = [self.points_from], [self.points_to], [np.full(len(self.points_from), radius)]
+        for start, end in self.curves:
+            count = max(2, math.ceil(_length(start) / step) + 1)
+            sources.append(resample(start, count))
+            targets.append(resample(end, count))
+            radii.append(np.zeros(count))
+        if self.border != "free":
+            for side, nodes, fraction in _border_nodes(grid):
+                if self.border == "pinned" or side in self.border:
+                    sources.append(nodes)
+                    targets.append(nodes if self.border == "pinned" else along(self.border[side], fraction))
+                    radii.append(np.zeros(len(nodes)))
+        return np.concatenate(sources), np.concatenate(targets), np.concatenate(radii)
+
+
+def default_radius(width: int, height: int, cell: float) -> float:
+    """Disc radius of a point handle: 1.5 % of the image's diagonal, at least one grid cell."""
+    return max(float(cell), 0.015 * math.hypot(width, height))
+
+
+def resample(line: np.ndarray, count: int) -> np.ndarray:
+    """``count`` points evenly spaced by arc length along the polyline ``line`` (n, 2)."""
+    return along(line, np.linspace(0.0, 1.0, count))
+
+
+def along(line: np.ndarray, fraction: np.ndarray) -> np.ndarray:
+    """Points at arc-length ``fraction`` (0..1) of the polyline ``line``."""
+    steps = np.hypot(*np.diff(line, axis=0).T)
+    walked = np.concatenate([[0.0], np.cumsum(steps)])
+    if walked[-1] == 0.0:
+        return np.repeat(line[:1], len(fraction), axis=0)
+    at = np.asarray(fraction) * walked[-1]
+    return np.stack([np.interp(at, walked, line[:, axis]) for axis in range(2)], axis=1)
+
+
+def _border_nodes(grid: Grid):
+    """(side, its nodes' source positions, their fraction along the side) for the four sides."""
+    nodes = grid.nodes().reshape(grid.ny, grid.nx, 2)
+    across, down = np.linspace(0, 1, grid.nx), np.linspace(0, 1, grid.ny)
+    return [("top", nodes[0], across), ("bottom", nodes[-1], across),
+            ("left", nodes[:, 0], down), ("right", nodes[:, -1], down)]
+
+
+def _length(line: np.ndarray) -> float:
+    return float(np.sum(np.hypot(*np.diff(line, axis=0).T)))
+
+
+def _number(value) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def _plain(point) -> list:
+    return [float(point[0]), float(point[1])]
+
+
+def _list(value, name: str) -> list:
+    if not isinstance(value, list):
+        raise ValueError(f"'{name}' must be a list")
+    return value
+
+
+def _entry(value, name: str, index: int) -> dict:
+    if not isinstance(value, dict):
+        raise ValueError(f"{name}[{index}] must be an object with \"from\" and \"to\"")
+    return value
+
+
+def _point(entry: dict, key: str, where: str) -> tuple[float, float]:
+    value = entry.get(key)
+    if not (isinstance(value, list) and len(value) == 2 and all(_number(v) for v in value)):
+        raise ValueError(f"{where}: {value!r} is not a point [x, y] of two finite numbers")
+    return float(value[0]), float(value[1])
+
+
+def _polyline(value, where: str) -> np.ndarray:
+    if not (isinstance(value, list) and len(value) >= 2):
+        raise ValueError(f"{where}: a polyline needs a list of at least two points [x, y]")
+    return np.array([_point({"p": p}, "p", f"{where}[{k}]") for k, p in enumerate(value)], float)
+
+
+def _inside(point: np.ndarray, width: int, height: int, where: str) -> None:
+    x, y = point
+    if not (-0.5 <= x <= width - 0.5 and -0.5 <= y <= height - 0.5):
+        raise ValueError(f"{where} ({x:g}, {y:g}) lies outside the {width}x{height} image "
+                         f"(pixel centres 0..{width - 1}, 0..{height - 1})")
+
+
+def _no_duplicates(sources: np.ndarray) -> None:
+    key = np.round(sources, 6)
+    _, first, counts = np.unique(key, axis=0, return_index=True, return_counts=True)
+    if np.any(counts > 1):
+        point = key[first[np.argmax(counts > 1)]]
+        same = np.flatnonzero(np.all(key == point, axis=1))
+        raise ValueError(f"points[{same[0]}] and points[{same[1]}] both start at ({point[0]:g}, {point[1]:g}); "
+                         f"one place can have one handle")
+
+
+def _border(value, width: int, height: int):
+    """'free', 'pinned' or {side: (n, 2) polyline} with matching corners."""
+    if value in ("free", "pinned"):
+        return value
+    if not isinstance(value, dict) or not value or set(value) - set(SIDES):
+        raise ValueError(f"'border': use \"free\", \"pinned\" or an object with some of {', '.join(SIDES)}")
+    sides = {}
+    for side, line in value.items():
+        if isinstance(line, dict):
+            control = _polyline(line.get("bezier"), f"border.{side}.bezier")
+            if len(control) != 4:
+                raise ValueError(f"border.{side}.bezier: a cubic Bezier has four points, not {len(control)}")
+            line = _bezier(control)
+        else:
+            line = _polyline(line, f"border.{side}")
+        sides[side] = line
+    corners = {("top", 0): "left", ("top", -1): "right", ("bottom", 0): "left", ("bottom", -1): "right"}
+    for (row, end), column in corners.items():
+        if row in sides and column in sides:
+            a, b = sides[row][end], sides[column][0 if row == "top" else -1]
+            if np.hypot(*(a - b)) > 1.0:
+                raise ValueError(f"border: {row} and {column} disagree on their shared corner "
+                                 f"({a[0]:g}, {a[1]:g}) vs ({b[0]:g}, {b[1]:g})")
+    return sides
+
+
+def _bezier(control: np.ndarray) -> np.ndarray:
+    t = np.linspace(0.0, 1.0, BEZIER_POINTS)[:, None]
+    weights = [(1 - t) ** 3, 3 * t * (1 - t) ** 2, 3 * t * t * (1 - t), t ** 3]
+    return sum(w * p for w, p in zip(weights, control))
