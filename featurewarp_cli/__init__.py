@@ -15,11 +15,12 @@ importable from here; importing this package is cheap (the numeric modules
 load on first use):
 
 >>> from featurewarp_cli import warp, FeatureWarper, Mesh
+>>> from featurewarp_cli import Deformer, Handles       # the interactive mode (handles)
 """
 
 __version__ = "0.1.0"
 
-__all__ = ["warp", "FeatureWarper", "Mesh", "load_warp", "__version__"]
+__all__ = ["warp", "FeatureWarper", "Mesh", "load_warp", "Deformer", "Handles", "__version__"]
 
 
 def __getattr__(name):
@@ -27,4 +28,8 @@ def __getattr__(name):
         from .engine import warper
 
         return getattr(warper, name)
+    if name in {"Deformer", "Handles"}:
+        from .engine import deform
+
+        return getattr(deform, name)
     raise AttributeError(f"module 'featurewarp_cli' has no attribute {name!r}")

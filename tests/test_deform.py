@@ -1,0 +1,252 @@
+"""The interactive mode from the shell and the API: handles -> rigid map -> feature-aware (issue 11)."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import cv2
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+
+from featurewarp_cli import Deformer, Handles
+from featurewarp_cli.engine.arap import RigidDeformer, embed
+from featurewarp_cli.engine.deform import RigidMap
+from featurewarp_cli.engine.grid import Grid, signed_areas
+from samples.scenes import SHAPES, scene
+from shapes import distortions
+
+W, H = 500, 360
+
+
+def similarity(angle_deg, scale, shift, centre=(W / 2, H / 2)):
+    """2x3 matrix of a rotation and scale about ``centre`` followed by ``shift``."""
+    matrix = cv2.getRotationMatrix2D(centre, -angle_deg, scale)      # OpenCV: positive is counter-clockwise
+    matrix[:, 2] += shift
+    return matrix
+
+
+def apply(matrix, points):
+    points = np.asarray(points, float)
+    return points @ matrix[:, :2].T + matrix[:, 2]
+
+
+def handles_for(sources, targets, **extra):
+    data = {"version": 1, "points": [{"from": list(map(float, a)), "to": list(map(float, b))}
+                                     for a, b in zip(sources, targets)], **extra}
+    return Handles.from_dict(data, W, H)
+
+
+def render(mask, handles, mode="similarity"):
+    image, _ = scene()
+    deformer = Deformer(W, H, mask)
+    mesh = deformer.solve(handles, mode)
+    return deformer.warper.render(image, mesh, order="bgr", background=(0, 0, 0)), mesh
+
+
+@pytest.mark.parametrize("with_mask", [False, True])
+@pytest.mark.parametrize("angle, scale, shift", [(20, 0.8, (10, -5)), (-35, 1.1, (-20, 15)), (0, 1.0, (30, 12))])
+def test_similarity_handles_reproduce_the_similarity(with_mask, angle, scale, shift):
+    """Handles that describe one similarity give it: RMSE <= 2 against cv2.warpAffine where both cover."""
+    image, mask = scene()
+    matrix = similarity(angle, scale, shift)
+    sources = [(60, 50), (440, 60), (250, 300), (100, 320)]
+    out, mesh = render(mask if with_mask else None, handles_for(sources, apply(matrix, sources), canvas="input"))
+    expected = cv2.warpAffine(image, matrix, (W, H), flags=cv2.INTER_LINEAR, borderValue=(0, 0, 0))
+    covered = cv2.warpAffine(np.full((H, W), 255, np.uint8), matrix, (W, H), flags=cv2.INTER_NEAREST)
+    inner = cv2.erode(covered, np.ones((5, 5), np.uint8)) > 0
+    rmse = math.sqrt(float(np.mean((out[inner].astype(float) - expected[inner]) ** 2)))
+    assert rmse <= 2.0
+    assert mesh.flips() == 0
+
+
+def test_rigid_map_of_a_similarity_is_exact():
+    grid = Grid.for_image(W, H, 12)
+    matrix = similarity(33, 1.4, (5, 7))
+    sources = np.array([[10.0, 20.0], [400.0, 300.0], [200, 40]])
+    nodes = RigidDeformer(grid, sources, radius=15).deform(apply(matrix, sources))
+    assert np.abs(nodes - apply(matrix, grid.nodes())).max() < 1e-6
+
+
+def squash_handles():
+    """Corners and side midpoints moved so that the image is squashed to half its width."""
+    xs, ys = (-0.5, W / 2 - 0.5, W - 0.5), (-0.5, H / 2 - 0.5, H - 0.5)
+    sources = [(x, y) for x in xs for y in ys if (x, y) != (xs[1], ys[1])]
+    targets = [(W / 4 + (x + 0.5) / 2 - 0.5, y) for x, y in sources]
+    return handles_for(sources, targets, canvas="input")
+
+
+def test_squash_keeps_every_shape_with_the_mask_and_not_without():
+    """Acceptance: similarity mode keeps every disc and square <= 0.02; plain ARAP visibly distorts them."""
+    _, mask = scene()
+    handles = squash_handles()
+    kept, mesh = render(mask, handles)
+    plain, _ = render(mask, handles, mode="plain")
+    assert max(distortions(kept)) <= 0.02
+    assert max(distortions(plain)) > 0.3
+    assert mesh.flips() == 0
+    assert all(c.kept for c in mesh.record.components)
+
+
+def test_handles_are_reached():
+    sources = [(50, 50), (450, 50), (250, 200)]
+    targets = [(50, 50), (450, 50), (280, 240)]
+    rigid = RigidMap(W, H)
+    warp = rigid.deformation(handles_for(sources, targets, canvas="input"))
+    assert np.abs(warp(np.array(sources, float)) - targets).max() < 0.5
+
+
+def test_curves_and_border_outline():
+    """A curve handle and a Bezier border side are followed."""
+    data = {"version": 1, "canvas": "input",
+            "curves": [{"from": [[100, 300], [400, 300]], "to": [[100, 320], [250, 340], [400, 320]]}],
+            "border": {"top": {"bezier": [[-0.5, 30], [160, -10], [340, -10], [W - 0.5, 30]]}}}
+    handles = Handles.from_dict(data, W, H)
+    warp = RigidMap(W, H).deformation(handles)
+    assert abs(warp(np.array([[-0.5, -0.5]]))[0, 1] - 30) < 1.0
+    assert abs(warp(np.array([[250, 300]]))[0, 1] - 340) < 2.0
+    pinned = RigidMap(W, H).deformation(Handles.from_dict(
+        {"version": 1, "border": "pinned", "points": [{"from": [250, 180], "to": [270, 190]}]}, W, H))
+    corner = np.array([[-0.5, -0.5], [W - 0.5, H - 0.5]])
+    assert np.abs(pinned(corner) + np.array(pinned.offset) - corner).max() < 0.1
+
+
+def test_fit_canvas_holds_the_deformed_image():
+    handles = handles_for([(0, 0), (W - 1, H - 1)], [(0, 0), (W - 1 + 100, H - 1 + 50)])
+    warp = RigidMap(W, H).deformation(handles)
+    corners = warp(np.array([[-0.5, -0.5], [W - 0.5, H - 0.5]]))
+    assert corners.min() >= -0.5 - 1e-6
+    assert np.all(corners.max(axis=0) <= np.array(warp.canvas) - 0.5 + 1e-6)
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.lists(st.tuples(st.floats(0, 119), st.floats(0, 89), st.floats(-150, 150), st.floats(-150, 150)),
+                min_size=1, max_size=6))
+def test_random_handles_never_fold_and_never_crash(points):
+    """Property: any handle set gives a fold-free mesh or a ValueError naming the problem."""
+    mask = np.zeros((90, 120), bool)
+    mask[30:60, 40:80] = True
+    data = {"version": 1, "canvas": "input",
+            "points": [{"from": [x, y], "to": [x + dx, y + dy]} for x, y, dx, dy in points]}
+    try:
+        handles = Handles.from_dict(data, 120, 90)
+    except ValueError as err:
+        assert "handle" in str(err) or "points" in str(err)
+        return
+    mesh = Deformer(120, 90, mask).solve(handles)
+    assert mesh.flips() == 0
+    assert np.all(np.isfinite(mesh.target))
+
+
+def test_api_update_reuses_both_factorizations():
+    _, mask = scene()
+    sources = [(60, 50), (440, 60), (250, 300), (100, 320), (250, 180)]
+    deformer = Deformer(W, H, mask, quick=True)
+    deformer.solve(handles_for(sources, sources))
+    factored = deformer.warper.factorizations
+    rigid = deformer.rigid.rigid
+    targets = np.array(sources, float)
+    for step in range(3):
+        targets[4] += (4, 3)
+        mesh = deformer.move(targets)
+        assert mesh.flips() == 0
+    assert deformer.warper.factorizations == factored and deformer.rigid.rigid is rigid
+
+
+def test_embedding_reproduces_points():
+    grid = Grid.for_image(W, H, 10)
+    points = np.random.default_rng(0).uniform([-0.5, -0.5], [W - 0.5, H - 0.5], (200, 2))
+    assert np.abs(embed(grid, points) @ grid.nodes() - points).max() < 1e-9
+
+
+@pytest.mark.parametrize("data, message", [
+    ({"version": 1, "points": [{"from": [10, 10], "to": [20, 20]}]}, "at least two handles"),
+    ({"version": 1, "points": [{"from": [600, 10], "to": [20, 20]}, {"from": [5, 5], "to": [5, 5]}]}, "outside"),
+    ({"version": 1, "points": [{"from": [10, 10], "to": [20, 20]}, {"from": [10, 10], "to": [5, 5]}]},
+     "both start at"),
+    ({"version": 1, "points": [{"from": [float("nan"), 10], "to": [20, 20]}]}, "finite"),
+    ({"version": 2, "points": []}, "version"),
+    ({"version": 1, "points": "all"}, "list"),
+    ({"version": 1, "canvas": "huge", "border": "pinned"}, "canvas"),
+    ({"version": 1, "border": {"top": [[0, 0], [10, 0]], "left": [[5, 5], [0, 100]]}}, "corner"),
+    ({"version": 1, "border": {"top": {"bezier": [[0, 0], [1, 1]]}}}, "four points"),
+    ([1, 2], "JSON object"),
+])
+def test_bad_handles_name_the_problem(data, message):
+    with pytest.raises(ValueError, match=message):
+        Handles.from_dict(data, W, H)
+
+
+def test_handles_round_trip():
+    data = {"version": 1, "canvas": "input", "radius": 12.0,
+            "points": [{"from": [10.0, 10.0], "to": [20.0, 25.0]}, {"from": [400.0, 300.0], "to": [400.0, 300.0]}],
+            "curves": [{"from": [[1.0, 2.0], [30.0, 40.0]], "to": [[3.0, 2.0], [33.0, 44.0]]}],
+            "border": "pinned"}
+    assert Handles.from_dict(data, W, H).as_dict() == data
+    assert json.loads(json.dumps(data)) == data
+
+
+# --- the command line ---------------------------------------------------------------------
+
+from test_cli import SIZE, runner, scene as files  # noqa: E402,F401  (the runner fixture)
+
+
+def handles_file(tmp_path, data, name="h.json"):
+    path = tmp_path / name
+    path.write_text(json.dumps(data))
+    return str(path)
+
+
+def test_deform_command_writes_and_reruns_byte_identically(runner, tmp_path):
+    image, mask = files(tmp_path)
+    w, h = SIZE
+    data = {"version": 1, "points": [{"from": [2, 2], "to": [2, 2]}, {"from": [w - 3, 2], "to": [w - 3, 2]},
+                                     {"from": [w / 2, h - 3], "to": [w / 2 + 6, h + 4]}]}
+    hfile = handles_file(tmp_path, data)
+    outs = []
+    for k in range(2):
+        out = tmp_path / f"out{k}.png"
+        run = runner("deform", image, out, "-m", mask, "--handles", hfile, "--report", tmp_path / "r.json")
+        assert run.code == 0, run.stderr
+        outs.append(out.read_bytes())
+    assert outs[0] == outs[1]
+    report = json.loads((tmp_path / "r.json").read_text())
+    assert report["preset"] == "deform" and report["params"]["points"] == 3
+    again = runner("deform", image, tmp_path / "m.png", "-m", mask, "--pin", "2,2", "--pin", f"{w - 3},2",
+                   "--move", f"{w / 2},{h - 3}:{w / 2 + 6},{h + 4}")
+    assert again.code == 0 and (tmp_path / "m.png").read_bytes() == outs[0]
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--move", "1,2"], "is not X,Y:X2,Y2"),
+    (["--pin", "a,b"], "is not X,Y"),
+    (["--move", "5,5:9,9"], "at least two handles"),
+    (["--pin", "5,5", "--move", "9999,5:3,3"], "outside"),
+    (["--pin", "5,5", "--pin", "5,5"], "both start at"),
+    ([], "give the handles"),
+])
+def test_deform_usage_errors_exit_2_and_write_nothing(runner, tmp_path, args, message):
+    image, mask = files(tmp_path)
+    out = tmp_path / "out.png"
+    run = runner("deform", image, out, "-m", mask, *args)
+    assert run.code == 2 and message in run.stderr
+    assert len(run.lines) == 1 and "Traceback" not in run.stderr
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("content, message", [
+    ("{not json", "not valid JSON"), ('{"version": 1, "points": [{"from": [NaN, 1], "to": [2, 2]}]}', "finite"),
+    ('{"points": []}', "version"),
+])
+def test_deform_bad_handles_file(runner, tmp_path, content, message):
+    image, mask = files(tmp_path)
+    hfile = tmp_path / "h.json"
+    hfile.write_text(content)
+    out = tmp_path / "out.png"
+    out.write_bytes(b"keep me")
+    run = runner("deform", image, out, "-m", mask, "--handles", hfile)
+    assert run.code == 2 and message in run.stderr and len(run.lines) == 1
+    assert out.read_bytes() == b"keep me"
+    missing = runner("deform", image, out, "-m", mask, "--handles", tmp_path / "none.json")
+    assert missing.code == 2 and "cannot read" in missing.stderr
