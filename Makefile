@@ -8,7 +8,7 @@ PYTHON ?= python3
 VENV   ?= .venv
 BIN    := $(VENV)/bin
 SUDO   := $(shell [ "$$(id -u)" -eq 0 ] || echo sudo)
-APT_PACKAGES := python3-venv python3-dev build-essential libsuitesparse-dev libopenblas0-pthread libopenblas-dev
+APT_PACKAGES := python3-venv python3-dev build-essential libsuitesparse-dev libopenblas0-pthread libopenblas-dev chromium chromium-driver
 
 SAMPLES := astronaut coins shapes
 PRESETS := stretch arc swirl bulge

@@ -61,25 +61,18 @@ def load_handles(path: str | None) -> dict | None:
         raise click.BadParameter(f"{path} is not valid JSON ({err})", param_hint="'--handles'") from None
 
 
-def handles_factory(data: dict | None, moves, pins, canvas: str | None):
-    """``make(width, height)``: the handles' warp W for an image of that size (ValueError when
-    the handles do not fit it)."""
-    def make(width: int, height: int):
-        from ..engine.deform import RigidMap
-        from ..engine.handles import VERSION, Handles
-
-        merged = dict(data) if isinstance(data, dict) else ({"version": VERSION} if data is None else data)
-        if isinstance(merged, dict):
-            points = merged.get("points", [])
-            if not isinstance(points, list):
-                raise ValueError("'points' must be a list")
-            merged["points"] = points + [{"from": list(a), "to": list(b)} for a, b in moves] + [
-                {"from": list(p), "to": list(p)} for p in pins]
-            if canvas:
-                merged["canvas"] = canvas
-        return RigidMap(width, height).deformation(Handles.from_dict(merged, width, height))
-
-    return make
+def merged_handles(data, moves, pins, canvas: str | None):
+    """The handles file's content with ``--move`` and ``--pin`` added and ``--canvas`` applied."""
+    merged = dict(data) if isinstance(data, dict) else ({"version": 1} if data is None else data)
+    if isinstance(merged, dict) and (moves or pins or canvas):
+        points = merged.get("points", [])
+        if not isinstance(points, list):
+            raise click.BadParameter("'points' must be a list", param_hint="'--handles'")
+        merged["points"] = points + [{"from": list(a), "to": list(b)} for a, b in moves] + [
+            {"from": list(p), "to": list(p)} for p in pins]
+        if canvas:
+            merged["canvas"] = canvas
+    return merged
 
 
 def deform_command() -> click.Command:
@@ -111,7 +104,9 @@ def deform_command() -> click.Command:
         data = load_handles(handles)
         kwargs["boundary"] = None
         settings, quiet, verbose = settings_from(Deform, kwargs)
-        settings = replace(settings, warp_factory=handles_factory(data, move, pin, canvas))
+        from ..engine.deform import handles_factory
+
+        settings = replace(settings, warp_factory=handles_factory(merged_handles(data, move, pin, canvas)))
         try:
             with progress_line(quiet):
                 summary = warp_file(settings, input, output, mask, report, save_grid, draw_grid)

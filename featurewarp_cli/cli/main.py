@@ -21,6 +21,7 @@ import click
 from .. import __version__, plugins
 from .deform import deform_command
 from .diff import diff_command
+from .edit import edit_command
 from .measure import measure_command
 from .presets import AnimateGroup, BatchGroup, CompareGroup, PresetGroup
 
@@ -103,6 +104,7 @@ def animate():
 
 
 cli.add_command(deform_command())
+cli.add_command(edit_command())
 cli.add_command(diff_command)
 cli.add_command(measure_command)
 

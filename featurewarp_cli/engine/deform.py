@@ -164,7 +164,7 @@ class Deformer:
                  quick: bool = False, **options):
         self.mode = mode
         self.quick = quick
-        self.warper = FeatureWarper(width, height, mask, boundary="fixed", **options)
+        self.warper = FeatureWarper(width, height, mask, **options)         # the border: HandleWarp.boundary
         self.rigid = RigidMap(width, height)
         self.handles = None
         self.warp = None
@@ -183,3 +183,12 @@ class Deformer:
         nothing is factored again."""
         targets = np.asarray(targets, dtype=np.float64).reshape(self.handles.points_from.shape)
         return self.solve(replace(self.handles, points_to=targets), mode)
+
+
+def handles_factory(data):
+    """``make(width, height)``: the map W of the handles file ``data`` (parsed JSON) for an image
+    of that size (ValueError when the handles do not fit it)."""
+    def make(width: int, height: int) -> HandleWarp:
+        return RigidMap(width, height).deformation(Handles.from_dict(data, width, height))
+
+    return make

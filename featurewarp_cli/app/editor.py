@@ -1,0 +1,259 @@
+"""The live editor's server: the browser draws, this process solves (``featurewarp edit``).
+
+The standard library's :mod:`http.server` (a ``ThreadingHTTPServer``) serves one page, its
+image, its mask, the grid, and four JSON calls: ``state``, ``solve``, ``save`` and
+``export``. No framework: the editor is one local user's page, a dozen routes and no
+templates, and the standard library keeps ``make install`` and the attack surface small.
+
+Safety: the server listens on 127.0.0.1 only, on a free port unless one is given; every
+request must carry the random token of the URL it prints (compared in constant time) and a
+Host header naming 127.0.0.1 or localhost on its port (DNS rebinding), and POSTs must be
+JSON. It serves its own page and the one image; it writes only the handles file and the
+output the user named on the command line, atomically, through the ``deform`` pipeline.
+"""
+
+from __future__ import annotations
+
+import hmac
+import json
+import math
+import secrets
+import struct
+import threading
+import time
+from dataclasses import replace
+from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from importlib import resources
+from urllib.parse import parse_qs, urlsplit
+
+import numpy as np
+
+from ..io import write
+from .pipeline import Settings, WarpError, load_image_and_mask, warp_file
+
+#: The live preview keeps its grid at about this many nodes at most (Export uses the full
+#: pipeline, whose grid follows the warp).
+PREVIEW_NODES = 65_000
+#: Longest side of the image the browser gets as its texture.
+TEXTURE_SIDE = 4096
+#: Largest request body accepted (bytes).
+MAX_BODY = 8 * 2**20
+
+
+class EditorSession:
+    """What the editor works on: the image, its mask, the deformer and the files it may write.
+
+    Parameters
+    ----------
+    settings : Settings
+        The ``deform`` options (mode, cell, weights, output format and quality).
+    input, mask : str
+        The image and its feature mask (mask may be None).
+    handles_path, output_path : str or None
+        Where Save and Export write (None: the browser downloads instead).
+    handles : dict or None
+        The handles to start from (a parsed handles file; ValueError when they do not fit).
+    """
+
+    def __init__(self, settings: Settings, input: str, mask: str | None, handles_path: str | None,
+                 output_path: str | None, handles: dict | None = None):
+        from ..engine.deform import Deformer
+        from ..engine.fidelity import base_cell
+
+        self.settings, self.input, self.mask = settings, input, mask
+        self.handles_path, self.output_path = handles_path, output_path
+        image, feature_mask, self.warnings = load_image_and_mask(replace(settings, mode="similarity"), input, mask)
+        self.height, self.width = image.shape[:2]
+        self.cell = settings.cell or max(base_cell(self.width, self.height),
+                                         math.sqrt(self.width * self.height / PREVIEW_NODES))
+        self.deformer = Deformer(self.width, self.height, feature_mask, quick=True, cell=self.cell,
+                                 feature_weight=settings.feature_weight, decay=settings.decay,
+                                 scale_prior=settings.scale_prior)
+        self.image_png = _png(_texture(image))
+        self.mask_png = _png(_texture((feature_mask if feature_mask is not None else
+                                       np.zeros((self.height, self.width), bool)).astype(np.uint8) * 255))
+        self.initial = ({"version": 1, "points": [], "curves": [], "border": "free", "canvas": "fit"}
+                        if handles is None else self._checked({"handles": handles}))
+        self.lock = threading.Lock()
+
+    def state(self) -> dict:
+        """What the page needs to start."""
+        return {"width": self.width, "height": self.height, "handles": self.initial, "mode": self.settings.mode,
+                "cell": self.cell, "save_to": self.handles_path, "export_to": self.output_path,
+                "has_mask": self.mask is not None, "warnings": self.warnings}
+
+    def grid(self) -> bytes:
+        """The preview grid: node count, triangle count, nodes per row and per column (uint32),
+        texture coordinates (float32, 0..1) and triangles (uint32), little-endian."""
+        from ..engine.grid import Grid
+
+        grid = Grid.for_image(self.width, self.height, self.cell)
+        nodes = grid.nodes()
+        uv = np.stack([(nodes[:, 0] + 0.5) / self.width, (nodes[:, 1] + 0.5) / self.height], axis=1)
+        triangles = grid.triangles()
+        return (struct.pack("<IIII", len(nodes), len(triangles), grid.nx, grid.ny) + uv.astype("<f4").tobytes()
+                + triangles.astype("<u4").tobytes())
+
+    def solve(self, body: dict) -> tuple[dict, bytes]:
+        """Solve the handles of ``body``: (status, node positions in input pixels as float32)."""
+        from ..engine.handles import Handles
+
+        mode = body.get("mode", self.settings.mode)
+        if mode not in ("similarity", "rigid", "plain"):
+            raise ValueError(f"mode {mode!r}")
+        handles = Handles.from_dict(body.get("handles"), self.width, self.height)
+        with self.lock:
+            t0 = time.perf_counter()
+            mesh = self.deformer.solve(handles, mode)
+            seconds = time.perf_counter() - t0
+            offset = np.asarray(self.deformer.warp.offset)
+        components = mesh.record.components
+        status = {"ms": round(1000 * seconds, 1), "folds": mesh.flips(), "components": len(components),
+                  "kept": sum(c.kept for c in components) if mode != "plain" else 0,
+                  "canvas": list(mesh.canvas), "warnings": mesh.record.warnings[:3]}
+        return status, (mesh.target + offset).astype("<f4").tobytes()
+
+    def save(self, body: dict) -> dict:
+        """Write the handles to ``handles_path`` (checked first); return the file's content."""
+        data = self._checked(body)
+        if self.handles_path:
+            write.write_atomic(self.handles_path, (json.dumps(data, indent=2) + "\n").encode())
+        return {"saved": self.handles_path, "handles": data}
+
+    def export(self, body: dict) -> dict:
+        """Render the full-resolution result through exactly the ``deform`` pipeline."""
+        from ..engine.deform import handles_factory
+
+        data = self._checked(body)
+        if not self.output_path:
+            raise ValueError("start the editor with --output OUT to export")
+        mode = body.get("mode", self.settings.mode)
+        settings = replace(self.settings, mode=mode, warp_factory=handles_factory(data))
+        summary = warp_file(settings, self.input, self.output_path, self.mask)
+        return {"exported": self.output_path, "seconds": round(summary["seconds"], 2),
+                "warnings": summary["warnings"][:3]}
+
+    def _checked(self, body: dict) -> dict:
+        from ..engine.handles import Handles
+
+        return Handles.from_dict(body.get("handles"), self.width, self.height).as_dict()
+
+
+def _texture(image: np.ndarray) -> np.ndarray:
+    """``image`` scaled down to :data:`TEXTURE_SIDE` at most (8 bits)."""
+    import cv2
+
+    if image.dtype != np.uint8:
+        image = (image / (257.0 if image.dtype == np.uint16 else 1.0 / 255.0)).clip(0, 255).astype(np.uint8)
+    side = max(image.shape[:2])
+    if side > TEXTURE_SIDE:
+        scale = TEXTURE_SIDE / side
+        image = cv2.resize(image, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
+    return image
+
+
+def _png(image: np.ndarray) -> bytes:
+    import cv2
+
+    ok, data = cv2.imencode(".png", image, [cv2.IMWRITE_PNG_COMPRESSION, 1])
+    if not ok:
+        raise WarpError("cannot encode the editor's texture")
+    return data.tobytes()
+
+
+def page() -> bytes:
+    """The editor's page (HTML with its script and style inline)."""
+    folder = resources.files("featurewarp_cli.app") / "static"
+    html = (folder / "editor.html").read_text(encoding="utf-8")
+    return (html.replace("/*EDITOR_CSS*/", (folder / "editor.css").read_text(encoding="utf-8"))
+                .replace("/*EDITOR_JS*/", (folder / "editor.js").read_text(encoding="utf-8"))).encode()
+
+
+class EditorServer(ThreadingHTTPServer):
+    """The HTTP server of one :class:`EditorSession` on 127.0.0.1."""
+
+    daemon_threads = True
+
+    def __init__(self, session: EditorSession, port: int = 0, token: str | None = None):
+        self.session = session
+        self.token = token or secrets.token_urlsafe(24)
+        self.page = page()
+        super().__init__(("127.0.0.1", port), EditorHandler)
+        self.hosts = {f"127.0.0.1:{self.server_port}", f"localhost:{self.server_port}"}
+
+    @property
+    def url(self) -> str:
+        return f"http://127.0.0.1:{self.server_port}/?token={self.token}"
+
+
+class EditorHandler(BaseHTTPRequestHandler):
+    """Routes of the editor; every one checks the Host header and the token first."""
+
+    server_version = "featurewarp-edit"
+    protocol_version = "HTTP/1.1"
+
+    def log_message(self, format, *args):       # quiet: the terminal belongs to the user
+        pass
+
+    def _allowed(self) -> bool:
+        query = parse_qs(urlsplit(self.path).query)
+        token = (query.get("token") or [""])[0]
+        return (self.headers.get("Host", "") in self.server.hosts
+                and hmac.compare_digest(token.encode(), self.server.token.encode()))
+
+    def _send(self, code: int, body: bytes, kind: str = "application/json", extra: dict | None = None):
+        self.send_response(code)
+        self.send_header("Content-Type", kind)
+        self.send_header("Content-Length", str(len(body)))
+        self.send_header("Cache-Control", "no-store")
+        self.send_header("X-Content-Type-Options", "nosniff")
+        self.send_header("Referrer-Policy", "no-referrer")
+        self.send_header("Content-Security-Policy", "default-src 'self'; script-src 'unsafe-inline'; "
+                         "style-src 'unsafe-inline'; img-src 'self' blob: data:; connect-src 'self'")
+        for key, value in (extra or {}).items():
+            self.send_header(key, value)
+        self.end_headers()
+        self.wfile.write(body)
+
+    def _json(self, code: int, data: dict):
+        self._send(code, json.dumps(data).encode())
+
+    def do_GET(self):
+        if not self._allowed():
+            return self._send(403, b"forbidden: open the URL that featurewarp edit printed", "text/plain")
+        session, route = self.server.session, urlsplit(self.path).path
+        routes = {"/": (lambda: self.server.page, "text/html; charset=utf-8"),
+                  "/image": (lambda: session.image_png, "image/png"),
+                  "/mask": (lambda: session.mask_png, "image/png"),
+                  "/grid": (session.grid, "application/octet-stream"),
+                  "/state": (lambda: json.dumps(session.state()).encode(), "application/json")}
+        if route not in routes:
+            return self._send(404, b"not found", "text/plain")
+        make, kind = routes[route]
+        self._send(200, make(), kind)
+
+    def do_POST(self):
+        if not self._allowed():
+            return self._send(403, b"forbidden", "text/plain")
+        route = urlsplit(self.path).path
+        calls = {"/solve": self._solve, "/save": self.server.session.save, "/export": self.server.session.export}
+        if route not in calls:
+            return self._send(404, b"not found", "text/plain")
+        length = int(self.headers.get("Content-Length") or 0)
+        if not self.headers.get("Content-Type", "").startswith("application/json") or not 0 < length <= MAX_BODY:
+            return self._json(400, {"error": "a JSON body is expected"})
+        try:
+            body = json.loads(self.rfile.read(length))
+            if not isinstance(body, dict):
+                raise ValueError("a JSON object is expected")
+            result = calls[route](body)
+        except (ValueError, WarpError) as err:
+            return self._json(400, {"error": str(err)})
+        if route == "/solve":
+            return self._send(200, result, "application/octet-stream")
+        self._json(200, result)
+
+    def _solve(self, body: dict) -> bytes:
+        status, positions = self.server.session.solve(body)
+        header = json.dumps(status).encode()
+        return struct.pack("<I", len(header)) + header + b" " * (-(4 + len(header)) % 4) + positions

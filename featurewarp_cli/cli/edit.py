@@ -1,0 +1,87 @@
+"""``featurewarp edit``: the live editor in the browser (a local server that solves)."""
+
+from __future__ import annotations
+
+import os
+import signal
+import sys
+
+import click
+
+from .deform import Deform, load_handles
+from .options import engine_options
+from .presets import MASK_HELP, click_error
+
+KEEP = {"mode", "cell", "feature_weight", "decay", "scale_prior", "background", "interp", "fmt", "max_pixels",
+        "max_memory", "allow_folds", "quality", "strip", "quiet", "verbose"}
+
+
+def edit_command() -> click.Command:
+    """``featurewarp edit INPUT -m MASK [--handles H.json] [--output OUT] [--port N] [--no-browser]``."""
+    params = [
+        click.Argument(["input"], type=click.Path(dir_okay=False)),
+        click.Option(["-m", "--mask"], type=click.Path(dir_okay=False), metavar="PATH", help=MASK_HELP),
+        click.Option(["--handles"], type=click.Path(dir_okay=False), metavar="H.json",
+                     help="Handles file: loaded at start if it exists; Save writes it."),
+        click.Option(["-o", "--output"], type=click.Path(dir_okay=False), metavar="OUT",
+                     help="Where Export writes the full-resolution image (exactly what "
+                          "'featurewarp deform INPUT OUT --handles H.json' writes)."),
+        click.Option(["--port"], type=click.IntRange(0, 65535), default=0, show_default=True,
+                     help="Port on 127.0.0.1 (0: a free one)."),
+        click.Option(["--no-browser"], is_flag=True, help="Print the URL only; do not open a browser."),
+    ] + [o for o in engine_options() if o.name in KEEP]
+
+    def callback(input, mask, handles, output, port, no_browser, **kwargs):
+        from ..app.editor import EditorServer, EditorSession
+        from ..app.pipeline import WarpError
+        from .options import settings_from
+
+        data = load_handles(handles) if handles and os.path.exists(handles) else None
+        kwargs.update(formulation="exact", boundary=None, strict=False)
+        settings, quiet, _ = settings_from(Deform, kwargs)
+        try:
+            session = EditorSession(settings, input, mask, handles, output, data)
+        except WarpError as err:
+            raise click_error(err) from err
+        except ValueError as err:
+            raise click.BadParameter(str(err), param_hint="'--handles'") from None
+        try:
+            server = EditorServer(session, port)
+        except OSError as err:
+            raise click.ClickException(f"cannot listen on 127.0.0.1:{port}: {err.strerror or err}") from None
+        signal.signal(signal.SIGINT, signal.default_int_handler)     # Ctrl-C stops it cleanly, exit 0
+        signal.signal(signal.SIGTERM, signal.default_int_handler)
+        try:
+            click.echo(server.url)
+            sys.stdout.flush()
+            if not quiet:
+                click.echo("featurewarp: editor running; Ctrl-C stops it", err=True)
+            if not no_browser:
+                import webbrowser
+
+                webbrowser.open(server.url)
+            server.serve_forever(poll_interval=0.2)
+        except KeyboardInterrupt:
+            pass
+        finally:
+            server.server_close()
+        if not quiet:
+            click.echo("featurewarp: editor stopped", err=True)
+
+    doc = """Edit handles live in the browser: the result follows the pointer.
+
+    Opens INPUT with its mask tinted. Click to add a handle, drag to move it,
+    shift-drag to draw a curve handle, Alt-click or Delete to remove one, drag
+    the square markers to reshape the border; toggles for plain vs
+    feature-aware, rigid vs similarity, the grid and the mask; Ctrl+Z undoes.
+    Save writes --handles; Export writes --output through exactly the deform
+    pipeline. The server listens on 127.0.0.1 only and requires the token in
+    the URL it prints. Ctrl-C stops it.
+
+    \b
+    Example:
+      featurewarp edit photo.jpg -m mask.png --handles h.json -o out.jpg
+      featurewarp deform photo.jpg out.jpg -m mask.png --handles h.json   # the same bytes
+    """
+    return click.Command("edit", params=params, callback=callback, help=doc, no_args_is_help=True,
+                         short_help="Live editor in the browser for deform's handles.")

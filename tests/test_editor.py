@@ -1,0 +1,197 @@
+"""The live editor (``featurewarp edit``) in a real browser: Debian's headless Chromium driven by
+Selenium (issue 11). ``make install`` installs chromium, chromium-driver and selenium.
+
+Set FEATUREWARP_SCREENSHOT=path to keep a screenshot of the editor (``make gallery`` does,
+for the README).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+import urllib.error
+import urllib.request
+
+import pytest
+
+pytestmark = pytest.mark.slow
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+IMAGE = os.path.join(ROOT, "samples", "astronaut.png")
+MASK = os.path.join(ROOT, "samples", "astronaut_mask.png")
+CHROMIUM_FLAGS = ["--headless=new", "--no-sandbox", "--disable-gpu", "--use-angle=swiftshader",
+                  "--enable-unsafe-swiftshader", "--disable-dev-shm-usage", "--no-first-run",
+                  "--disable-background-networking", "--disable-component-update", "--disable-sync",
+                  "--window-size=1280,900"]
+
+
+def start_editor(tmp_path, *extra):
+    """``featurewarp edit`` in a subprocess; returns (process, url)."""
+    process = subprocess.Popen(
+        [sys.executable, "-m", "featurewarp_cli", "edit", IMAGE, "-m", MASK, "--no-browser", "--port", "0",
+         "--handles", str(tmp_path / "h.json"), "-o", str(tmp_path / "exported.png"), *extra],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    url = process.stdout.readline().strip()
+    assert url.startswith("http://127.0.0.1:") and "token=" in url, process.stderr.read()
+    return process, url
+
+
+@pytest.fixture
+def editor(tmp_path):
+    process, url = start_editor(tmp_path)
+    yield process, url
+    if process.poll() is None:
+        process.send_signal(signal.SIGINT)
+        process.wait(timeout=10)
+
+
+@pytest.fixture(scope="module")
+def browser():
+    from selenium import webdriver
+    from selenium.webdriver.chrome.service import Service
+
+    options = webdriver.ChromeOptions()
+    options.binary_location = "/usr/bin/chromium"
+    for flag in CHROMIUM_FLAGS:
+        options.add_argument(flag)
+    driver = webdriver.Chrome(service=Service("/usr/bin/chromedriver"), options=options)
+    yield driver
+    driver.quit()
+
+
+def wait_for(driver, script, timeout=30.0):
+    """Poll ``script`` (JavaScript returning a value) until it is truthy."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        value = driver.execute_script(script)
+        if value:
+            return value
+        time.sleep(0.05)
+    raise AssertionError(f"timed out waiting for: {script}")
+
+
+def settled(driver):
+    """Wait until no solve is running or pending; return how many have finished."""
+    wait_for(driver, "return document.body.dataset.ready === '1' && !featurewarp.busy && !featurewarp.pending")
+    return driver.execute_script("return featurewarp.solves")
+
+
+def screen(driver, point):
+    """Offset from the overlay's centre (what ActionChains takes) of an input pixel position."""
+    return driver.execute_script(
+        "const v = featurewarp.view, o = document.getElementById('overlay');"
+        "return [arguments[0] * v.scale + v.ox - o.clientWidth / 2, arguments[1] * v.scale + v.oy - o.clientHeight / 2];",
+        *point)
+
+
+def test_editor_add_drag_save_export(editor, browser, tmp_path):
+    from selenium.webdriver.common.action_chains import ActionChains
+    from selenium.webdriver.common.by import By
+
+    _, url = editor
+    browser.get(url)
+    settled(browser)
+    overlay = browser.find_element(By.ID, "overlay")
+    before = browser.execute_script("return document.getElementById('gl').toDataURL()")
+    actions = ActionChains(browser)
+    for pin in ((30, 30), (480, 30), (30, 480)):
+        x, y = screen(browser, pin)
+        actions.move_to_element_with_offset(overlay, round(x), round(y)).click().perform()
+        settled(browser)
+    x, y = screen(browser, (470, 470))
+    x2, y2 = screen(browser, (505, 500))
+    chain = ActionChains(browser).move_to_element_with_offset(overlay, round(x), round(y)).click_and_hold()
+    for k in range(1, 6):
+        chain.move_to_element_with_offset(overlay, round(x + (x2 - x) * k / 5), round(y + (y2 - y) * k / 5))
+    chain.release().perform()
+    settled(browser)
+    status = browser.find_element(By.ID, "status").text
+    assert "folds 0" in status and "features kept" in status, status
+    after = browser.execute_script("return document.getElementById('gl').toDataURL()")
+    assert after != before                      # the preview follows the handles
+
+    if os.environ.get("FEATUREWARP_SCREENSHOT"):
+        browser.save_screenshot(os.environ["FEATUREWARP_SCREENSHOT"])
+
+    browser.find_element(By.ID, "save").click()
+    wait_for(browser, "return featurewarp.saved")
+    saved = json.loads((tmp_path / "h.json").read_text())
+    points = saved["points"]
+    assert len(points) == 4
+    dragged = [p for p in points if p["from"] != p["to"]]
+    assert len(dragged) == 1
+    scale = browser.execute_script("return featurewarp.view.scale")
+    assert abs(dragged[0]["from"][0] - 470) <= 1.5 / scale + 0.5 and abs(dragged[0]["from"][1] - 470) <= 1.5 / scale + 0.5
+    assert abs(dragged[0]["to"][0] - 505) <= 1.5 / scale + 0.5 and abs(dragged[0]["to"][1] - 500) <= 1.5 / scale + 0.5
+
+    browser.find_element(By.ID, "export").click()
+    wait_for(browser, "return featurewarp.exported", timeout=120)
+    again = tmp_path / "deform.png"
+    run = subprocess.run([sys.executable, "-m", "featurewarp_cli", "deform", IMAGE, str(again), "-m", MASK,
+                          "--handles", str(tmp_path / "h.json")], capture_output=True, timeout=120)
+    assert run.returncode == 0, run.stderr
+    assert (tmp_path / "exported.png").read_bytes() == again.read_bytes()
+
+
+def test_editor_undo_delete_and_toggles(editor, browser):
+    from selenium.webdriver.common.action_chains import ActionChains
+    from selenium.webdriver.common.by import By
+
+    _, url = editor
+    browser.get(url)
+    settled(browser)
+    overlay = browser.find_element(By.ID, "overlay")
+    for pin in ((100, 100), (400, 100)):
+        x, y = screen(browser, pin)
+        ActionChains(browser).move_to_element_with_offset(overlay, round(x), round(y)).click().perform()
+        settled(browser)
+    assert browser.execute_script("return featurewarp.handles.points.length") == 2
+    browser.find_element(By.ID, "delete").click()          # the last added is selected
+    settled(browser)
+    assert browser.execute_script("return featurewarp.handles.points.length") == 1
+    browser.find_element(By.ID, "undo").click()
+    settled(browser)
+    assert browser.execute_script("return featurewarp.handles.points.length") == 2
+    browser.find_element(By.ID, "aware").click()            # plain map
+    settled(browser)
+    assert "plain map" in browser.find_element(By.ID, "status").text
+
+
+def test_requests_need_the_token_and_the_host(editor):
+    _, url = editor
+    base = url.split("?")[0]
+    with urllib.request.urlopen(url) as response:
+        assert response.status == 200 and b"featurewarp edit" in response.read()
+    for bad in (base, base + "?token=wrong", base + "state?token=x"):
+        with pytest.raises(urllib.error.HTTPError) as err:
+            urllib.request.urlopen(bad)
+        assert err.value.code == 403
+    rebound = urllib.request.Request(url, headers={"Host": "attacker.example:80"})
+    with pytest.raises(urllib.error.HTTPError) as err:
+        urllib.request.urlopen(rebound)
+    assert err.value.code == 403
+    with pytest.raises(urllib.error.HTTPError) as err:
+        urllib.request.urlopen(url.replace("/?", "/../etc/passwd?"))
+    assert err.value.code == 404
+
+
+def test_editor_binds_loopback_only_and_stops_on_ctrl_c(tmp_path):
+    from featurewarp_cli.app.editor import EditorServer
+
+    class Nothing:
+        pass
+
+    server = EditorServer.__new__(EditorServer)
+    EditorServer.__init__(server, Nothing(), 0)
+    try:
+        assert server.server_address[0] == "127.0.0.1"
+    finally:
+        server.server_close()
+    process, _ = start_editor(tmp_path)
+    process.send_signal(signal.SIGINT)
+    assert process.wait(timeout=10) == 0
+    assert "editor stopped" in process.stderr.read()
