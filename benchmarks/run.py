@@ -22,6 +22,8 @@ commands  Whole ``featurewarp warp`` commands (subprocess wall time, peak RSS of
 magick    ImageMagick's plain equivalents on the same files, each run right after
           ours (part of ``commands``), when ``convert`` is installed, and the
           ratios ours / ImageMagick.
+deform    Issue 11's interactive case (benchmarks/deform_case.py): one of 10 handles moving
+          on the 1 MP photo through the API's quick Deformer, median of 10 updates.
 hard      Issue 10's hard cases (benchmarks/hard_cases.py): the 12 MP photo with a
           head + helmet mask that makes the fold guard work, swirl 180, arc 300 and
           bulge 2.95, each beside ImageMagick's -swirl / -distort Arc / -implode.
@@ -62,7 +64,7 @@ from benchmarks.hard_cases import bench_hard  # noqa: E402
 from benchmarks.inputs import make_photos  # noqa: E402
 from samples.scenes import disc_mask  # noqa: E402
 
-SECTIONS = ("table1", "render", "rewarp", "commands", "magick", "hard")
+SECTIONS = ("table1", "render", "rewarp", "deform", "commands", "magick", "hard")
 
 #: The paper's Table 1 (Pentium 4, 3.2 GHz): setup, factor, rhs setup, solve in seconds.
 PAPER_TABLE1 = {
@@ -395,7 +397,7 @@ def main(argv=None) -> int:
     with tempfile.TemporaryDirectory(prefix="featurewarp-bench-") as tmpdir:
         tmp = Path(tmpdir)
         photos = None
-        if {"render", "rewarp", "commands", "hard"} & set(sections):
+        if {"render", "rewarp", "deform", "commands", "hard"} & set(sections):
             photos = make_photos(ROOT / "samples", tmp)
         if "table1" in sections:
             report["table1"] = bench_table1(runs, QUICK_GRIDS if args.quick else GRIDS)
@@ -403,6 +405,10 @@ def main(argv=None) -> int:
             report["render"] = bench_render(runs, *photos["12MP"])
         if "rewarp" in sections:
             report["rewarp"] = bench_rewarp(runs, *photos["1MP"])
+        if "deform" in sections:
+            from benchmarks.deform_case import bench_deform
+
+            report["deform"] = bench_deform(runs, *photos["1MP"], median)
         if "commands" in sections:
             commands, magick = bench_commands(runs, exe, photos, tmp, args.quick, "magick" in sections)
             report["commands"], report["magick"] = commands, magick

@@ -13,6 +13,7 @@ STRETCH_1MP_RATIO = 0.1          # whole command / ImageMagick -liquid-rescale 2
 STRETCH_1MP_FLOOR_RATIO = 1.5    # whole command / its floor (imports, decode, encode; issue 12)
 STARTUP_S = 0.25                 # featurewarp --help, featurewarp warps
 REWARP_1MP_S = 0.15              # API: re-solve + re-render 1 MP with new parameters, factorization reused
+DEFORM_1MP_S = 0.05              # API: one of 10 handles moved on 1 MP (quick Deformer), both factorizations reused
 
 
 def _row(name, value, limit, unit="s"):
@@ -35,6 +36,9 @@ def evaluate(report: dict) -> list[dict]:
     rewarp = report.get("rewarp")
     if rewarp:
         rows.append(_row("1 MP re-warp (API: re-solve + re-render)", rewarp["median_s"], REWARP_1MP_S))
+    deform = report.get("deform")
+    if deform:
+        rows.append(_row("1 MP deform update, 10 handles (API)", deform["median_s"], DEFORM_1MP_S))
     commands = report.get("commands", {})
     for name, r in commands.get("startup", {}).items():
         rows.append(_row(f"featurewarp {name} start-up", r["median_s"], STARTUP_S))
