@@ -47,9 +47,11 @@ out/%.png: | out
 bench:
 	$(BIN)/python benchmarks/run.py
 
-# The README's pictures: plain vs featurewarp panels on the astronaut sample.
+# The README's pictures: plain vs featurewarp panels on the astronaut sample, and the editor
+# (a screenshot taken by its browser test).
 gallery:
 	mkdir -p docs/gallery
+	FEATUREWARP_SCREENSHOT=$(CURDIR)/docs/editor.png $(BIN)/python -m pytest -q -p no:cacheprovider tests/test_editor.py -k save
 	$(BIN)/featurewarp compare swirl samples/astronaut.png docs/gallery/swirl.jpg -m samples/astronaut_mask.png --angle 120 --panel-width 1464
 	$(BIN)/featurewarp compare arc samples/astronaut.png docs/gallery/arc.jpg -m samples/astronaut_mask.png --angle 120 --background "#f0f0f0" --panel-width 1464
 	$(BIN)/featurewarp compare bulge samples/astronaut.png docs/gallery/bulge.jpg -m samples/astronaut_mask.png --strength 0.8 --panel-width 1464
