@@ -195,3 +195,34 @@ def test_editor_binds_loopback_only_and_stops_on_ctrl_c(tmp_path):
     process.send_signal(signal.SIGINT)
     assert process.wait(timeout=10) == 0
     assert "editor stopped" in process.stderr.read()
+
+
+def test_editor_curve_and_border_outline(editor, browser):
+    """Shift-drag draws a curve handle; dragging a border marker turns the border into an outline."""
+    from selenium.webdriver.common.action_chains import ActionChains
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.common.keys import Keys
+
+    _, url = editor
+    browser.get(url)
+    settled(browser)
+    overlay = browser.find_element(By.ID, "overlay")
+    points = [screen(browser, (100 + 60 * k, 300 + 5 * k)) for k in range(6)]
+    chain = ActionChains(browser).key_down(Keys.SHIFT).move_to_element_with_offset(overlay, *map(round, points[0]))
+    chain.click_and_hold()
+    for x, y in points[1:]:
+        chain.move_to_element_with_offset(overlay, round(x), round(y))
+    chain.release().key_up(Keys.SHIFT).perform()
+    settled(browser)
+    curves = browser.execute_script("return featurewarp.handles.curves")
+    assert len(curves) == 1 and len(curves[0]["from"]) >= 3
+    x, y = screen(browser, (511.5, 511.5))                             # the bottom-right marker
+    x2, y2 = screen(browser, (560, 540))
+    ActionChains(browser).move_to_element_with_offset(overlay, round(x), round(y)).click_and_hold() \
+        .move_to_element_with_offset(overlay, round(x2), round(y2)).release().perform()
+    settled(browser)
+    border = browser.execute_script("return featurewarp.handles.border")
+    assert isinstance(border, dict) and set(border) == {"top", "right", "bottom", "left"}, border
+    assert abs(border["right"][2][0] - 560) < 3 and abs(border["right"][2][1] - 540) < 3
+    status = browser.find_element(By.ID, "status").text
+    assert "folds 0" in status, status
