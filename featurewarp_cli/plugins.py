@@ -275,6 +275,9 @@ BUILTIN = {
     "inflate": "featurewarp_warps.inflate:Inflate",
     "squeeze": "featurewarp_warps.squeeze:Squeeze",
     "shell": "featurewarp_warps.shell:Shell",
+    "perspective": "featurewarp_warps.perspective:Perspective",
+    "cylinder": "featurewarp_warps.cylinder:Cylinder",
+    "sphere": "featurewarp_warps.sphere:Sphere",
 }
 
 
