@@ -91,7 +91,7 @@ class Cylinder(Warp):
         self.turn = axis == "horizontal"
         self.distance = distance
         self.c = centre(self.width, self.height)
-        self.theta = math.radians(angle)
+        self.theta = max(math.radians(angle), 1e-9)          # a finite radius
         self.r = (self.height if self.turn else self.width) / self.theta
         check_view(self, lambda a: np.cos(a / 2.0), angle, distance, 160.0)
         self._shift = 0.0

@@ -42,7 +42,7 @@ class Sphere(Warp):
         self.distance = distance
         self.c = centre(self.width, self.height)
         longer = max(self.width, self.height)
-        self.r = longer / math.radians(angle)
+        self.r = longer / max(math.radians(angle), 1e-9)     # a finite radius
         fractions = np.array([self.width, self.height]) / longer
 
         def corner_cos(theta):
