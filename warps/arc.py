@@ -9,7 +9,7 @@ import numpy as np
 
 from featurewarp_cli.plugins import Param, Warp
 
-from .common import border, fit_canvas
+from .common import fit_canvas
 
 #: Largest angle of --where lower or upper: at 180 degrees the bowed edge turns vertical.
 EDGE_MAX = 170.0
@@ -72,7 +72,7 @@ class Arc(Warp):
         self.radius = self.width / (2.0 * math.sin(half))      # the circle through the edge's ends
         self.chord_depth = self.radius * math.cos(half)         # from its centre to the chord
         self._shift = 0.0
-        self._shift = fit_canvas(self, self._bow(border(self.width, self.height)))
+        self._shift = fit_canvas(self, self._bow)
 
     def _bow(self, points):
         """Arc Lower / Upper: each column sags by its share of the bowed edge's sag."""

@@ -8,7 +8,7 @@ import numpy as np
 
 from featurewarp_cli.plugins import Param, Warp, centre
 
-from .common import border, fit_canvas
+from .common import fit_canvas
 
 #: The least foreshortening allowed at the image's edge, relative to its middle: cos 80
 #: degrees (a side wrapped to 80 degrees from the viewer, seen from afar, is 5.8 x thinner).
@@ -95,7 +95,7 @@ class Cylinder(Warp):
         self.r = (self.height if self.turn else self.width) / self.theta
         check_view(self, lambda a: np.cos(a / 2.0), angle, distance, 160.0)
         self._shift = 0.0
-        self._shift = fit_canvas(self, self.forward(border(self.width, self.height)))
+        self._shift = fit_canvas(self, self.forward)
 
     def forward(self, points):
         d = points - self.c

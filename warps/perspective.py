@@ -12,8 +12,8 @@ from .common import fit_canvas
 
 CORNERS = ("tl", "tr", "br", "bl")
 WORDS = {"tl": "top-left", "tr": "top-right", "br": "bottom-right", "bl": "bottom-left"}
-#: Smallest interior angle of the quadrilateral, in degrees: flatter corners squeeze a
-#: side into a sliver that no grid follows.
+#: Smallest interior angle of the quadrilateral, and smallest turn (180 less the largest), in
+#: degrees: sharper or flatter corners squeeze part of the image into a sliver no grid follows.
 MIN_ANGLE = 5.0
 
 
@@ -34,7 +34,8 @@ def homography(source: np.ndarray, target: np.ndarray) -> np.ndarray:
 
 
 def check_quadrilateral(quad: np.ndarray) -> None:
-    """Raise ValueError unless ``quad`` (tl, tr, br, bl) is convex, in the image's order, not too flat.
+    """Raise ValueError unless ``quad`` (tl, tr, br, bl) is convex, in the image's order, its
+    angles within :data:`MIN_ANGLE` of 0 and 180 degrees.
 
     The turn at each corner is the cross product of the edges in and out; on screen (y down)
     the image's own corners turn positively. Two negative turns make a self-crossing
@@ -58,10 +59,10 @@ def check_quadrilateral(quad: np.ndarray) -> None:
         raise ValueError(f"{options}: the quadrilateral is concave at --{CORNERS[odd]}")
     cosines = -(incoming * edges).sum(1) / (lengths * np.roll(lengths, 1))
     angles = np.degrees(np.arccos(np.clip(cosines, -1.0, 1.0)))
-    if angles.min() < MIN_ANGLE:
-        flat = int(np.argmin(angles))
-        raise ValueError(f"{options}: the angle at --{CORNERS[flat]} is {angles[flat]:.3g} degrees "
-                         f"(at least {MIN_ANGLE:g})")
+    worst = int(np.argmax(np.abs(angles - 90.0)))
+    if abs(angles[worst] - 90.0) > 90.0 - MIN_ANGLE:
+        raise ValueError(f"{options}: the angle at --{CORNERS[worst]} is {angles[worst]:.3g} degrees "
+                         f"({MIN_ANGLE:g} to {180 - MIN_ANGLE:g})")
 
 
 class Perspective(Warp):
@@ -96,7 +97,8 @@ class Perspective(Warp):
         denominators = np.c_[source, np.ones(4)] @ self.matrix[2]
         if not (np.all(denominators > 0) or np.all(denominators < 0)) or not math.isfinite(self.matrix.sum()):
             raise ValueError("--tl/--tr/--br/--bl: no perspective maps the image onto these corners")
-        self._shift = fit_canvas(self, target)
+        self._shift = 0.0
+        self._shift = fit_canvas(self, self.forward)
 
     def forward(self, points):
         mapped = np.c_[points, np.ones(len(points))] @ self.matrix.T

@@ -6,7 +6,7 @@ import numpy as np
 
 from featurewarp_cli.plugins import Param
 
-from .common import Style, border
+from .common import Style, bounds
 
 
 class Shell(Style):
@@ -35,8 +35,8 @@ class Shell(Style):
     def _shape_setup(self, side):
         self.flip = 1.0 if side == "lower" else -1.0
         self.bow = self.b * min(self.width / 4.0, 0.9 * self.height)
-        bowed = self._bow((border(self.width, self.height) - self.c) * [1.0, self.flip])
-        self.top, self.depth = float(bowed[:, 1].min()), float(np.ptp(bowed[:, 1])) or 1.0
+        lo, hi = bounds(self.width, self.height, lambda p: self._bow((p - self.c) * [1.0, self.flip]))
+        self.top, self.depth = float(lo[1]), float(hi[1] - lo[1]) or 1.0
 
     def _bow(self, d):
         u = d[:, 0] / self.half[0]

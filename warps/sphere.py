@@ -8,7 +8,7 @@ import numpy as np
 
 from featurewarp_cli.plugins import Param, Warp, centre
 
-from .common import border, fit_canvas
+from .common import fit_canvas
 from .cylinder import DISTANCE, check_view, scale
 
 
@@ -50,7 +50,7 @@ class Sphere(Warp):
 
         check_view(self, corner_cos, angle, distance, 120.0)
         self._shift = 0.0
-        self._shift = fit_canvas(self, self.forward(border(self.width, self.height)))
+        self._shift = fit_canvas(self, self.forward)
 
     def forward(self, points):
         lon, lat = ((points - self.c) / self.r).T
