@@ -216,3 +216,73 @@ def test_a_refused_view_is_a_usage_error_on_the_command_line(tmp_path):
     assert run.exit_code == 2 and "--angle" in run.output and "(at most" in run.output
     ok = CliRunner().invoke(cli, ["warp", "shell", str(source), str(tmp_path / "o.png"), "--side", "Upper"])
     assert ok.exit_code == 0, ok.output
+
+
+def test_arc_lower_and_upper_bow_one_edge_into_a_circular_arc():
+    """Arc Lower: the top edge stays, columns stay vertical, the bottom edge is an arc of --angle
+    degrees through its ends; Arc Upper is the same upside down."""
+    xs = np.linspace(-0.5, W - 0.5, 401)
+    for where, straight, bowed in (("lower", -0.5, H - 0.5), ("upper", H - 0.5, -0.5)):
+        w = make("arc", {"where": where, "angle": 120})
+        top = w(np.stack([xs, np.full_like(xs, straight)], 1))
+        assert np.ptp(top[:, 1]) < 1e-9 and np.allclose(np.diff(top[:, 0]), xs[1] - xs[0])
+        column = w(np.stack([np.full(9, 30.0), np.linspace(-0.5, H - 0.5, 9)], 1))
+        assert np.ptp(column[:, 0]) < 1e-9
+        edge = w(np.stack([xs, np.full_like(xs, bowed)], 1))
+        (a, b), c = edge[0], edge[-1]
+        chord_mid = (edge[0] + edge[-1]) / 2
+        sag = np.abs(edge[200, 1] - chord_mid[1])
+        radius = W / (2 * np.sin(np.radians(60)))
+        assert a == pytest.approx(-0.5) and c[0] == pytest.approx(W - 0.5) and b == pytest.approx(c[1])
+        assert sag == pytest.approx(radius * (1 - np.cos(np.radians(60))), rel=1e-9)
+        centre = np.array([chord_mid[0], chord_mid[1] + (sag - radius) * (1 if where == "lower" else -1)])
+        np.testing.assert_allclose(np.hypot(*(edge - centre).T), radius, rtol=1e-9)
+
+
+def test_shell_upper_is_shell_lower_upside_down():
+    w_low, w_up = make("shell", {"side": "lower"}), make("shell", {"side": "upper"})
+    p = np.random.default_rng(1).uniform([-0.5, -0.5], [W - 0.5, H - 0.5], (200, 2))
+    low = w_low(p)
+    up = w_up(np.stack([p[:, 0], H - 1 - p[:, 1]], 1))
+    np.testing.assert_allclose(low[:, 0], up[:, 0], atol=1e-9)
+    np.testing.assert_allclose(low[:, 1], w_up.canvas[1] - 1 - up[:, 1], atol=1e-6)
+    assert w_low.canvas == w_up.canvas
+
+
+@pytest.mark.parametrize("hdistort", [-60, 60])
+def test_horizontal_distortion_is_a_linear_keystone(hdistort):
+    """With no bend, --hdistort H makes the right side (1 + H) / (1 - H) times the left side's height."""
+    w = make("arch", {"bend": 0, "hdistort": hdistort})
+    left, right = w(np.array([[-0.5, -0.5], [-0.5, H - 0.5]])), w(np.array([[W - 0.5, -0.5], [W - 0.5, H - 0.5]]))
+    h = hdistort / 100
+    assert (right[1, 1] - right[0, 1]) / (left[1, 1] - left[0, 1]) == pytest.approx((1 + h) / (1 - h))
+
+
+@pytest.mark.parametrize("name,params", [(n, {}) for n in NEW] + [("squeeze", {"bend": 100}),
+                                                                   ("sphere", {"angle": 120})])
+def test_the_saved_grid_has_no_fold(tmp_path, name, params):
+    """Through the command line with a mask: the --save-grid npz's triangles all keep a positive area."""
+    import cv2
+
+    image, mask = scene(((("disc", 30, 30, 12, (0, 0, 255)), ("square", 70, 45, 10, (0, 255, 0)))), (W, H))
+    cv2.imwrite(str(tmp_path / "in.png"), image)
+    cv2.imwrite(str(tmp_path / "mask.png"), mask.astype(np.uint8) * 255)
+    options = [x for k, v in params.items() for x in (f"--{k}", str(v))]
+    run = CliRunner().invoke(cli, ["warp", name, str(tmp_path / "in.png"), str(tmp_path / "out.png"), "-m",
+                                   str(tmp_path / "mask.png"), "--save-grid", str(tmp_path / "g.npz"), *options])
+    assert run.exit_code == 0, run.output
+    saved = np.load(tmp_path / "g.npz")
+    assert (signed_areas(saved["target"], saved["triangles"]) > 0).all()
+
+
+def test_word_parameters():
+    """A choice takes its words in any case; featurewarp warps --json lists them; a pair default prints as X,Y."""
+    shell = load_warp("shell")
+    assert shell(W, H, side=" UPPER ").values["side"] == "upper"
+    side = next(p for p in shell.params if p.name == "side")
+    assert (side.type_name, side.range_text(), side.default_text()) == ("choice", "lower|upper", "lower")
+    listed = {e["name"]: e for e in json.loads(CliRunner().invoke(cli, ["warps", "--json"]).output)}
+    assert {"name": "side", "choices": ["lower", "upper"]}.items() <= next(
+        p for p in listed["shell"]["params"] if p["name"] == "side").items()
+    tl = next(p for p in load_warp("perspective").params if p.name == "tl")
+    assert tl.default_text() == "10%,0%"

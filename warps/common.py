@@ -94,9 +94,11 @@ class Style(Warp):
         self._shape_setup(**extra)
         self.h, self.v = hdistort / 100.0, vdistort / 100.0
         size = (self.width, self.height)
-        self.extent_x = max(np.abs(bounds(*size, lambda p: self._shape(p - self.c))).max(axis=0)[0], 1e-300)
-        self.extent_y = max(np.abs(bounds(*size, lambda p: self._keystone_h(self._shape(p - self.c)))).max(axis=0)[1],
-                            1e-300)
+        self.extent_x = self.extent_y = 1.0
+        shaped = bounds(*size, lambda p: self._shape(p - self.c))
+        self.extent_x = max(float(np.abs(shaped).max(axis=0)[0]), 1e-300)
+        keystoned = bounds(*size, lambda p: self._keystone_h(self._shape(p - self.c)))
+        self.extent_y = max(float(np.abs(keystoned).max(axis=0)[1]), 1e-300)
         self._shift = 0.0
         self._shift = fit_canvas(self, self.forward)
 
@@ -104,12 +106,26 @@ class Style(Warp):
         """Constants of the shape from the style's own parameters (none by default)."""
 
     def _shape(self, d: np.ndarray) -> np.ndarray:
+        """The style's own map.
+
+        Parameters
+        ----------
+        d : (N, 2) ndarray
+            Offsets of source points from the image's centre, in pixels.
+
+        Returns
+        -------
+        (N, 2) ndarray
+            Their offsets in the shaped image (any origin: the canvas is fitted afterwards).
+        """
         raise NotImplementedError
 
-    def _keystone_h(self, d):
+    def _keystone_h(self, d: np.ndarray) -> np.ndarray:
+        """Horizontal distortion: each column's y scaled by ``1 + H x / X`` (>= 0.1)."""
         return np.stack([d[:, 0], d[:, 1] * (1.0 + self.h * d[:, 0] / self.extent_x)], axis=1)
 
-    def _keystone_v(self, d):
+    def _keystone_v(self, d: np.ndarray) -> np.ndarray:
+        """Vertical distortion: each row's x scaled by ``1 + V y / Y`` (>= 0.1)."""
         return np.stack([d[:, 0] * (1.0 + self.v * d[:, 1] / self.extent_y), d[:, 1]], axis=1)
 
     def forward(self, points):
