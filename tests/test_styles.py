@@ -286,3 +286,12 @@ def test_word_parameters():
         p for p in listed["shell"]["params"] if p["name"] == "side").items()
     tl = next(p for p in load_warp("perspective").params if p.name == "tl")
     assert tl.default_text() == "10%,0%"
+
+
+def test_animate_refuses_to_vary_a_word(tmp_path):
+    import cv2
+
+    cv2.imwrite(str(tmp_path / "in.png"), np.full((30, 40, 3), 128, np.uint8))
+    run = CliRunner().invoke(cli, ["animate", "shell", str(tmp_path / "in.png"), str(tmp_path / "o.gif"),
+                                   "--vary", "side=lower:upper", "--frames", "2"])
+    assert run.exit_code == 2 and "side is not a number" in run.output
