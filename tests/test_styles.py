@@ -295,3 +295,17 @@ def test_animate_refuses_to_vary_a_word(tmp_path):
     run = CliRunner().invoke(cli, ["animate", "shell", str(tmp_path / "in.png"), str(tmp_path / "o.gif"),
                                    "--vary", "side=lower:upper", "--frames", "2"])
     assert run.exit_code == 2 and "side is not a number" in run.output
+
+
+STRIP_CASES = [(n, {"bend": b, "hdistort": d, "vdistort": -d}) for n in STYLES for b, d in ((100, 90), (-100, -90))]
+
+
+@pytest.mark.parametrize("size", [(900, 2), (2, 900)])
+@pytest.mark.parametrize("name,params", STRIP_CASES + [("perspective", {}), ("cylinder", {"angle": 160}),
+                                                       ("sphere", {"angle": 120})])
+def test_long_thin_strips_do_not_fold(size, name, params):
+    """A strip two pixels thin at the ends of the ranges: the automatic grid follows W without a
+    fold (no term of the maps grows with the aspect ratio), and the defaults accept any size."""
+    w = make(name, params, size)
+    mesh = FeatureWarper(*size, None).solve(w, "plain")
+    assert mesh.flips() == 0 and mesh.info["grid"]["pl_error_px"] <= 0.5

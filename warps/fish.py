@@ -10,12 +10,14 @@ from .common import Style
 
 
 class Fish(Style):
-    """Scale each column's height about the middle row by ``1 - (b/2) sin(pi u)``, u = x / (w/2).
+    """Scale each column's height about the middle row by ``1 - g sin(pi u)``, u = x / (w/2).
 
-    The left half (u < 0) swells into the body, the right half narrows into the tail, the
-    ends and the middle keep their height. Columns stay vertical and each is scaled by a
-    factor of at least ``1 - |b|/2 >= 0.5``: one-to-one, with Jacobian determinant equal to
-    that factor.
+    ``g = (b/2) min(1, w / h)``. The left half (u < 0) swells into the body, the right half
+    narrows into the tail, the ends and the middle keep their height. Columns stay
+    vertical and each is scaled by a factor of at least ``1 - |b|/2 >= 0.5``: one-to-one,
+    with Jacobian determinant equal to that factor. The shear ``y g pi cos(pi u) / (w/2)``
+    stays under ``pi |b| / 2`` however tall and narrow the image: a portrait image swells
+    less than a landscape one.
     """
 
     name = "fish"
@@ -24,4 +26,5 @@ class Fish(Style):
 
     def _shape(self, d):
         u = d[:, 0] / self.half[0]
-        return np.stack([d[:, 0], d[:, 1] * (1.0 - 0.5 * self.b * np.sin(math.pi * u))], axis=1)
+        gain = 0.5 * self.b * min(1.0, self.width / self.height)
+        return np.stack([d[:, 0], d[:, 1] * (1.0 - gain * np.sin(math.pi * u))], axis=1)

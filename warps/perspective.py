@@ -37,6 +37,9 @@ def check_quadrilateral(quad: np.ndarray) -> None:
     """Raise ValueError unless ``quad`` (tl, tr, br, bl) is convex, in the image's order, its
     angles within :data:`MIN_ANGLE` of 0 and 180 degrees.
 
+    ``quad`` is in units of the image's width and height (its own corners at 0 and 1), so
+    that a long strip's quadrilateral is judged as a square's.
+
     The turn at each corner is the cross product of the edges in and out; on screen (y down)
     the image's own corners turn positively. Two negative turns make a self-crossing
     quadrilateral, one or three a concave one, four a mirror image.
@@ -92,7 +95,7 @@ class Perspective(Warp):
         w, h = self.width, self.height
         source = np.array([[-0.5, -0.5], [w - 0.5, -0.5], [w - 0.5, h - 0.5], [-0.5, h - 0.5]])
         target = np.array([resolve_pair(p, w, h) for p in (tl, tr, br, bl)]) - 0.5
-        check_quadrilateral(target)
+        check_quadrilateral((target + 0.5) / [w, h])     # in the image's frame: any size alike
         self.matrix = homography(source, target)
         denominators = np.c_[source, np.ones(4)] @ self.matrix[2]
         if not (np.all(denominators > 0) or np.all(denominators < 0)) or not math.isfinite(self.matrix.sum()):

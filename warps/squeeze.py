@@ -6,12 +6,13 @@ from .inflate import Inflate
 
 
 class Squeeze(Inflate):
-    """Inflate's map with ``s = 0.75 b``, ``t = -0.75 b``: the middle column loses height,
-    the middle row gains width (negative bend: the middle bulges up and down and narrows,
-    like Photoshop's Bulge style).
+    """Inflate's map with ``s = 0.75 b m / w``, ``t = -0.75 b m / h`` (m = min(w, h)): the
+    middle column loses height, the middle row gains width (negative bend: the middle
+    bulges up and down and narrows, like Photoshop's Bulge style).
 
-    The corner values of Inflate's bilinear determinant become ``1 - s^2``, ``1 + s``,
-    ``1 - s`` and ``1 + 4 s^2``: positive exactly when ``|s| < 1``; ``|0.75 b| <= 0.75``.
+    s and t have opposite signs, so the corner values of Inflate's bilinear determinant,
+    ``(1 + s)(1 + t)``, ``1 + s``, ``1 + t`` and ``1 - 4 s t >= 1``, are positive when
+    ``|s|, |t| < 1``; here ``|s|, |t| <= 0.75``.
     """
 
     name = "squeeze"
