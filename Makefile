@@ -11,7 +11,7 @@ SUDO   := $(shell [ "$$(id -u)" -eq 0 ] || echo sudo)
 APT_PACKAGES := python3-venv python3-dev build-essential libsuitesparse-dev libopenblas0-pthread libopenblas-dev chromium chromium-driver
 
 SAMPLES := astronaut coins shapes
-PRESETS := stretch arc swirl bulge
+PRESETS := stretch arc swirl bulge arch flag fish rise inflate squeeze shell perspective cylinder sphere
 stretch_ARGS := --sx 1.6
 arc_ARGS     := --angle 120
 swirl_ARGS   := --angle 120
@@ -61,6 +61,17 @@ gallery:
 	$(BIN)/featurewarp compare stretch samples/astronaut.png docs/gallery/portrait-wide.jpg -m samples/astronaut_body_mask.png --sx 2 --panel-width 1464
 	$(BIN)/featurewarp compare stretch samples/astronaut.png docs/gallery/portrait-narrow.jpg -m samples/astronaut_body_mask.png --sx 0.6 --panel-width 1464
 	$(BIN)/featurewarp compare arc samples/astronaut.png docs/gallery/helmet-arc.jpg -m samples/astronaut_helmet_mask.png --angle 120 --background "#f0f0f0" --panel-width 1464
+	$(BIN)/featurewarp compare arch samples/astronaut.png docs/gallery/arch.jpg -m samples/astronaut_mask.png --background "#f0f0f0" --panel-width 1464
+	$(BIN)/featurewarp compare flag samples/astronaut.png docs/gallery/flag.jpg -m samples/astronaut_mask.png --waves 2 --background "#f0f0f0" --panel-width 1464
+	$(BIN)/featurewarp compare fish samples/astronaut.png docs/gallery/fish.jpg -m samples/astronaut_mask.png --background "#f0f0f0" --panel-width 1464
+	$(BIN)/featurewarp compare rise samples/astronaut.png docs/gallery/rise.jpg -m samples/astronaut_mask.png --background "#f0f0f0" --panel-width 1464
+	$(BIN)/featurewarp compare inflate samples/astronaut.png docs/gallery/inflate.jpg -m samples/astronaut_mask.png --background "#f0f0f0" --panel-width 1464
+	$(BIN)/featurewarp compare squeeze samples/astronaut.png docs/gallery/squeeze.jpg -m samples/astronaut_mask.png --background "#f0f0f0" --panel-width 1464
+	$(BIN)/featurewarp compare shell samples/astronaut.png docs/gallery/shell.jpg -m samples/astronaut_mask.png --side upper --background "#f0f0f0" --panel-width 1464
+	$(BIN)/featurewarp compare arc samples/astronaut.png docs/gallery/arc-lower.jpg -m samples/astronaut_mask.png --where lower --angle 120 --background "#f0f0f0" --panel-width 1464
+	$(BIN)/featurewarp compare perspective samples/astronaut.png docs/gallery/perspective.jpg -m samples/astronaut_mask.png --tl 20%,5% --tr 85%,0% --br 100%,100% --bl 0%,90% --background "#f0f0f0" --panel-width 1464
+	$(BIN)/featurewarp compare cylinder samples/astronaut.png docs/gallery/cylinder.jpg -m samples/astronaut_mask.png --angle 150 --background "#f0f0f0" --panel-width 1464
+	$(BIN)/featurewarp compare sphere samples/astronaut.png docs/gallery/sphere.jpg -m samples/astronaut_mask.png --angle 110 --background "#f0f0f0" --panel-width 1464
 
 clean:
 	rm -rf out .pytest_cache

@@ -24,6 +24,13 @@ CASES = ["stretch --sx 100", "stretch --sy 100", "stretch --sx 100 --sy 100", "s
          "bulge --strength 2.95", "bulge --strength -0.95", "bulge --strength 2.95 --radius 10",
          "bulge --strength 2.95 --radius 0.001", "swirl --angle 720", "swirl --angle -720",
          "swirl --angle 720 --radius 10", "swirl --angle 720 --radius 0.001"]
+# The design tools' styles and the wraps (issue 14): each range's ends, combined.
+CASES += [f"{style} --bend {b} --hdistort {d} --vdistort {d}" for style in
+          ("arch", "flag", "fish", "rise", "inflate", "squeeze", "shell") for b, d in ((100, 90), (-100, -90))]
+CASES += ["flag --waves 12 --bend 100", "shell --side upper --bend 100", "arc --where lower --angle 170",
+          "arc --where upper --angle 170", "perspective --tl 45%,45%", "cylinder --angle 160",
+          "cylinder --angle 160 --axis horizontal", "cylinder --angle 1 --distance 1.001", "sphere --angle 120",
+          "sphere --angle 1 --distance 1.001"]
 MEASURE = ("import resource, subprocess, sys; r = subprocess.run(sys.argv[1:]); "
            "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss, file=sys.stderr); sys.exit(r.returncode)")
 
@@ -67,7 +74,7 @@ def main() -> int:
                 refused = run.returncode in (1, 2) and len(lines) == 1
                 ok = seconds < 60 and int(peak) < 2 * 2**20 and (flips == 0 or (flips is None and refused))
                 failures += not ok
-                print(f"{image.stem:>9} {case:<36} {seconds:6.2f} s {int(peak) / 1024:7.0f} MB "
+                print(f"{image.stem:>9} {case:<48} {seconds:6.2f} s {int(peak) / 1024:7.0f} MB "
                       f"{'folds ' + str(flips) if flips is not None else 'refused: ' + (lines[0] if lines else '?')}"
                       f"{'' if ok else '   <-- FAILS'}")
     print(f"{failures} failing rows")

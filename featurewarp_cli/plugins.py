@@ -57,8 +57,8 @@ class Param:
     type : type
         ``float`` or ``int``; or ``tuple`` for a pair such as a point ``X,Y`` or a size
         ``WxH``, each part pixels or a percentage of the image's width and height
-        (:func:`resolve_pair` turns it into pixels).
-    default : float or int or None
+        (:func:`resolve_pair` turns it into pixels); or ``str`` for one word of ``choices``.
+    default : float or int or str or tuple of str or None
         Value when the option is not given. None means "not set".
     help : str
         One line for ``--help``.
@@ -70,6 +70,8 @@ class Param:
         Placeholder shown in help.
     percent : bool
         Also accept a percentage: ``150%`` is 1.5 (scale factors).
+    choices : tuple of str
+        The words a ``str`` parameter takes (``lower``, ``upper``), matched without regard to case.
     """
 
     name: str
@@ -82,11 +84,14 @@ class Param:
     max_open: bool = False
     metavar: str = "F"
     percent: bool = False
+    choices: tuple[str, ...] = ()
 
     def range_text(self) -> str:
         """Human-readable range, e.g. ``0 < F <= 360``."""
         if self.type is tuple:
             return f"{self.metavar}: pixels or percentages"
+        if self.type is str:
+            return "|".join(self.choices)
         lo = "" if self.min is None else f"{self.min:g} {'<' if self.min_open else '<='} "
         hi = "" if self.max is None else f" {'<' if self.max_open else '<='} {self.max:g}"
         return f"{lo}{self.metavar}{hi}" if lo or hi else "any real number"
@@ -95,7 +100,9 @@ class Param:
         """The default as help shows it: ``unset``, ``24`` or ``0.5``."""
         if self.default is None:
             return "unset"
-        return str(self.default) if self.type is int else f"{self.default:g}"
+        if self.type is tuple:
+            return ",".join(self.default)
+        return str(self.default) if self.type in (int, str) else f"{self.default:g}"
 
     def check(self, value):
         """Convert and validate ``value``; raise ValueError naming the problem."""
@@ -105,6 +112,8 @@ class Param:
             raise ValueError(f"--{self.cli_name} needs a value")
         if self.type is tuple:
             return self._check_pair(value)
+        if self.type is str:
+            return self._check_choice(value)
         if isinstance(value, bool):
             raise ValueError(f"--{self.cli_name}: {value!r} is not a number")
         text = value.strip() if isinstance(value, str) else None
@@ -138,10 +147,17 @@ class Param:
             raise ValueError(f"--{self.cli_name}: {value!r} is not finite")
         return tuple(str(part).strip() for part in parts)
 
+    def _check_choice(self, value) -> str:
+        """One of ``choices``, whatever its case: ``'Lower'`` -> ``'lower'``."""
+        word = value.strip().lower() if isinstance(value, str) else None
+        if word not in self.choices:
+            raise ValueError(f"--{self.cli_name}: {value!r} is not one of {', '.join(self.choices)}")
+        return word
+
     @property
     def type_name(self) -> str:
-        """``float``, ``int`` or ``pair``."""
-        return "pair" if self.type is tuple else self.type.__name__
+        """``float``, ``int``, ``pair`` or ``choice``."""
+        return {tuple: "pair", str: "choice"}.get(self.type, self.type.__name__)
 
     @property
     def cli_name(self) -> str:
@@ -153,7 +169,7 @@ class Param:
             "name": self.name, "type": self.type_name, "default": self.default,
             "min": self.min, "max": self.max, "min_open": self.min_open,
             "max_open": self.max_open, "help": self.help,
-        }
+        } | ({"choices": list(self.choices)} if self.type is str else {})
 
 
 class Warp:
@@ -252,6 +268,16 @@ BUILTIN = {
     "arc": "featurewarp_warps.arc:Arc",
     "swirl": "featurewarp_warps.swirl:Swirl",
     "bulge": "featurewarp_warps.bulge:Bulge",
+    "arch": "featurewarp_warps.arch:Arch",
+    "flag": "featurewarp_warps.flag:Flag",
+    "fish": "featurewarp_warps.fish:Fish",
+    "rise": "featurewarp_warps.rise:Rise",
+    "inflate": "featurewarp_warps.inflate:Inflate",
+    "squeeze": "featurewarp_warps.squeeze:Squeeze",
+    "shell": "featurewarp_warps.shell:Shell",
+    "perspective": "featurewarp_warps.perspective:Perspective",
+    "cylinder": "featurewarp_warps.cylinder:Cylinder",
+    "sphere": "featurewarp_warps.sphere:Sphere",
 }
 
 

@@ -108,7 +108,7 @@ def test_preset_parameter_fuzz(name):
     mask[10:20, 12:26] = True
     for _ in range(6):
         values = {p.name: _random_value(p, rng) for p in preset.params
-                  if p.name not in ("width", "height") and p.type is not tuple}
+                  if p.name not in ("width", "height") and p.type not in (tuple, str)}
         warp = preset(48, 36, **values)
         t0 = time.perf_counter()
         mesh = FeatureWarper(48, 36, mask).solve(warp)
@@ -160,7 +160,7 @@ def test_every_builtin_preset_declares_bounded_ranges():
     """Every float parameter of the built-in presets has both bounds (a promise needs them)."""
     for name in ("stretch", "arc", "swirl", "bulge"):
         for param in plugins.load(name).params:
-            if param.type is not tuple:                     # a point or a size is checked in _setup
+            if param.type not in (tuple, str):              # a point, a size or a word is checked in _setup
                 assert param.min is not None and param.max is not None, (name, param.name)
 
 

@@ -1,4 +1,5 @@
-"""Arc: bend the image into a ring sector, as ImageMagick's ``-distort Arc``."""
+"""Arc: bend the image into a ring sector, as ImageMagick's ``-distort Arc`` (the design tools'
+Arc), or bow only its bottom or top edge (their Arc Lower and Arc Upper)."""
 
 from __future__ import annotations
 
@@ -7,6 +8,11 @@ import math
 import numpy as np
 
 from featurewarp_cli.plugins import Param, Warp
+
+from .common import fit_canvas
+
+#: Largest angle of --where lower or upper: at 180 degrees the bowed edge turns vertical.
+EDGE_MAX = 170.0
 
 
 class Arc(Warp):
@@ -18,16 +24,31 @@ class Arc(Warp):
     h / 10; beyond that the inner radius stays h / 10. Rows keep their spacing,
     so the ring is h thick. The map is injective for every angle in range; the
     canvas is the sector's bounding box.
+
+    ``--where lower`` (``upper``) keeps the columns vertical and the top (bottom) edge
+    straight and bows the other edge into a circular arc of --angle degrees through its
+    ends, sagging ``S(x)`` at column x; each row in between follows a share of that
+    sag in proportion to its distance from the straight edge. Each column is then scaled
+    by ``1 + S(x) / h >= 1``: one-to-one, Jacobian determinant ``1 + S(x) / h``. The arc
+    is the graph of a function of x up to 180 degrees; --angle is refused beyond
+    :data:`EDGE_MAX` there.
     """
 
     name = "arc"
-    summary = "Bend into a ring sector spanning an angle (top edge outside)."
+    summary = ("Arc (ImageMagick, Photoshop): a ring sector; --where lower or upper: Arc Lower, "
+               "Arc Upper (one edge bows).")
     params = (
-        Param("angle", float, 90.0, "Angle the sector spans, in degrees.",
-              min=0, min_open=True, max=360, metavar="DEG"),
+        Param("angle", float, 90.0, "Angle the sector spans, in degrees (--where lower or upper: the "
+              f"bowed edge's arc, at most {EDGE_MAX:g}).", min=0, min_open=True, max=360, metavar="DEG"),
+        Param("where", str, "both", "both: the whole image bends into a ring sector; lower (Arc Lower) or "
+              "upper (Arc Upper): only that edge bows out.", metavar="WHERE", choices=("both", "lower", "upper")),
     )
 
-    def _setup(self, angle):
+    def _setup(self, angle, where):
+        self.where = where
+        if where != "both":
+            self._setup_edge(angle)
+            return
         w, h = self.width, self.height
         # Below 1e-9 rad the sector is a straight image to within 1e-6 px; the floor
         # keeps the radius finite.
@@ -44,6 +65,24 @@ class Arc(Warp):
         self.offset = (float(lo[0]), float(lo[1]))
         self._shift = lo + 0.5
 
+    def _setup_edge(self, angle):
+        if angle > EDGE_MAX:
+            raise ValueError(f"--angle: {angle:g} is out of range with --where {self.where} (at most {EDGE_MAX:g})")
+        half = max(math.radians(angle), 1e-9) / 2.0
+        self.radius = self.width / (2.0 * math.sin(half))      # the circle through the edge's ends
+        self.chord_depth = self.radius * math.cos(half)         # from its centre to the chord
+        self._shift = 0.0
+        self._shift = fit_canvas(self, self._bow)
+
+    def _bow(self, points):
+        """Arc Lower / Upper: each column sags by its share of the bowed edge's sag."""
+        x = points[:, 0] - (self.width - 1) / 2.0
+        sag = np.sqrt(np.maximum(self.radius ** 2 - x * x, 0.0)) - self.chord_depth
+        share = (points[:, 1] + 0.5) / self.height
+        if self.where == "lower":
+            return np.stack([points[:, 0], points[:, 1] + share * sag], axis=1) - self._shift
+        return np.stack([points[:, 0], points[:, 1] - (1.0 - share) * sag], axis=1) - self._shift
+
     def _place(self, phi, r):
         """Position of polar (phi, r) relative to the top of the outer arc (y down).
 
@@ -53,6 +92,8 @@ class Arc(Warp):
         return np.stack([r * np.sin(phi), (self.r_outer - r) + 2.0 * r * np.sin(phi / 2.0) ** 2], axis=1)
 
     def forward(self, points):
+        if self.where != "both":
+            return self._bow(points)
         phi = ((points[:, 0] + 0.5) / self.width - 0.5) * self.theta
         r = self.r_outer - (points[:, 1] + 0.5)
         return self._place(phi, r) - self._shift

@@ -16,7 +16,8 @@ class Bulge(Warp):
     """
 
     name = "bulge"
-    summary = "Magnify (S > 0) or pinch (S < 0) the centre, smooth at the radius."
+    summary = ("Fisheye, Bulge, Pinch (Photoshop's Fisheye style and Pinch filter): magnify (S > 0) or "
+               "pinch (S < 0) the centre, smooth at the radius.")
     params = (
         Param("strength", float, 0.5,
               "Centre magnification minus 1 (0.5: 1.5x). Injective only for -1 < S < 3, hence the range.",

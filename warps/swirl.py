@@ -19,7 +19,8 @@ class Swirl(Warp):
     """
 
     name = "swirl"
-    summary = "Twist the centre by an angle, fading smoothly to zero at a radius."
+    summary = ("Swirl, Twist (Photoshop's Twist style and Twirl filter, ImageMagick -swirl): turn the "
+               "centre by an angle, fading smoothly to zero at a radius.")
     params = (
         Param("angle", float, 90.0, "Rotation at the centre in degrees (positive: clockwise on "
               "screen), at most two turns either way: beyond, the grid that follows the swirl "

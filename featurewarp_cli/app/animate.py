@@ -40,6 +40,8 @@ def parse_vary(texts, preset) -> dict[str, tuple[float, float]]:
             raise WarpError(f"{preset.name} has no parameter {name!r} (it has: {', '.join(names)})",
                             "--vary", usage=True)
         param = names[name]
+        if param.type not in (int, float):
+            raise WarpError(f"{name} is not a number and cannot vary", "--vary", usage=True)
         try:
             ranges[param.name] = (param.check(start), param.check(end))
         except ValueError as err:
