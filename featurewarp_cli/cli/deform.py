@@ -10,8 +10,7 @@ from dataclasses import replace
 import click
 
 from .options import engine_options, input_output_mask
-from .presets import MASK_HELP, click_error, report_warnings
-from .progress import progress_line
+from .presets import MASK_HELP, warp_one
 
 
 class Deform:
@@ -96,7 +95,6 @@ def deform_command() -> click.Command:
     ] + [o for o in engine_options() if o.name != "boundary"]
 
     def callback(input, output, mask, handles, move, pin, canvas, report, save_grid, draw_grid, **kwargs):
-        from ..app.pipeline import WarpError, warp_file
         from .options import settings_from
 
         if handles is None and not move and not pin:
@@ -107,12 +105,7 @@ def deform_command() -> click.Command:
         from ..engine.deform import handles_factory
 
         settings = replace(settings, warp_factory=handles_factory(merged_handles(data, move, pin, canvas)))
-        try:
-            with progress_line(quiet):
-                summary = warp_file(settings, input, output, mask, report, save_grid, draw_grid)
-        except WarpError as err:
-            raise click_error(err) from err
-        report_warnings(summary, quiet, verbose)
+        warp_one(settings, quiet, verbose, input, output, mask, report, save_grid, draw_grid)
 
     doc = """Deform INPUT by handles into OUTPUT, keeping masked features in shape.
 

@@ -95,17 +95,23 @@ def warp_command(preset) -> click.Command:
     ] + engine_options()
 
     def callback(input, output, mask, report, save_grid, draw_grid, **kwargs):
-        from ..app.pipeline import WarpError, warp_file
-
         settings, quiet, verbose = settings_from(preset, kwargs)
-        try:
-            with progress_line(quiet):
-                summary = warp_file(settings, input, output, mask, report, save_grid, draw_grid)
-        except WarpError as err:
-            raise click_error(err) from err
-        report_warnings(summary, quiet, verbose)
+        warp_one(settings, quiet, verbose, input, output, mask, report, save_grid, draw_grid)
 
     return preset_command(preset, params, callback, preset_doc(preset))
+
+
+def warp_one(settings, quiet: bool, verbose: bool, *files) -> None:
+    """Run :func:`featurewarp_cli.app.pipeline.warp_file` on ``files`` (input, output, mask,
+    report, save_grid, draw_grid) with the progress line, then print its warnings."""
+    from ..app.pipeline import WarpError, warp_file
+
+    try:
+        with progress_line(quiet):
+            summary = warp_file(settings, *files)
+    except WarpError as err:
+        raise click_error(err) from err
+    report_warnings(summary, quiet, verbose)
 
 
 def batch_command(preset) -> click.Command:
