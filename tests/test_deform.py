@@ -164,7 +164,7 @@ def test_embedding_reproduces_points():
     ({"version": 1, "points": [{"from": [10, 10], "to": [20, 20]}]}, "at least two handles"),
     ({"version": 1, "points": [{"from": [600, 10], "to": [20, 20]}, {"from": [5, 5], "to": [5, 5]}]}, "outside"),
     ({"version": 1, "points": [{"from": [10, 10], "to": [20, 20]}, {"from": [10, 10], "to": [5, 5]}]},
-     "both start at"),
+     "apart"),
     ({"version": 1, "points": [{"from": [float("nan"), 10], "to": [20, 20]}]}, "finite"),
     ({"version": 2, "points": []}, "version"),
     ({"version": 1, "points": "all"}, "list"),
@@ -223,7 +223,7 @@ def test_deform_command_writes_and_reruns_byte_identically(runner, tmp_path):
     (["--pin", "a,b"], "is not X,Y"),
     (["--move", "5,5:9,9"], "at least two handles"),
     (["--pin", "5,5", "--move", "9999,5:3,3"], "outside"),
-    (["--pin", "5,5", "--pin", "5,5"], "both start at"),
+    (["--pin", "5,5", "--pin", "5,5"], "apart"),
     ([], "give the handles"),
 ])
 def test_deform_usage_errors_exit_2_and_write_nothing(runner, tmp_path, args, message):
@@ -250,3 +250,66 @@ def test_deform_bad_handles_file(runner, tmp_path, content, message):
     assert out.read_bytes() == b"keep me"
     missing = runner("deform", image, out, "-m", mask, "--handles", tmp_path / "none.json")
     assert missing.code == 2 and "cannot read" in missing.stderr
+
+
+def test_an_image_laid_over_itself_is_refused(runner, tmp_path):
+    """A handle dragged far through the image: no triangle folds, but the border crosses itself."""
+    image, mask = files(tmp_path)
+    w, h = SIZE
+    out = tmp_path / "out.png"
+    run = runner("deform", image, out, "-m", mask, "--pin", f"2,{h - 3}", "--pin", f"{w - 3},{h - 3}",
+                 "--move", f"{w / 2},5:{w / 2},{-6 * h}", "--canvas", "input")
+    assert run.code == 1 and "lays the image over itself" in run.stderr and not out.exists()
+
+
+def test_a_handle_on_a_feature_carries_the_feature():
+    """Dragging a point of a disc moves the disc with it: the handle ends where it was dragged."""
+    _, mask = scene()
+    sources = [(60, 50), (440, 60), (440, 320), (60, 320), (110, 110)]     # the last on the red disc
+    targets = [*sources[:4], (150, 85)]
+    deformer = Deformer(W, H, mask)
+    mesh = deformer.solve(handles_for(sources, targets, border="pinned", canvas="input"))
+    error = np.hypot(*(deformer.warp.ends(mesh) - np.array(targets)).T)
+    assert error.max() < 6.0 and deformer.warp.values["handle_error_px"]["max"] == pytest.approx(error.max(), abs=1e-3)
+    assert not any("ends" in w for w in mesh.record.warnings)
+    assert mesh.record.components[0].kept
+
+
+def test_a_handle_the_border_holds_is_reported():
+    """A handle dragged out through a pinned border cannot follow: the report and a warning say so."""
+    sources, targets = [(15, 180), (250, 180)], [(-40, 180), (250, 180)]
+    deformer = Deformer(W, H)
+    mesh = deformer.solve(handles_for(sources, targets, border="pinned", canvas="input"))
+    assert deformer.warp.values["handle_error_px"]["max"] > 20
+    assert any("handle 0" in w and "ends" in w for w in mesh.record.warnings)
+
+
+def test_deformer_api_checks_its_input():
+    deformer = Deformer(W, H)
+    with pytest.raises(ValueError, match="solve"):
+        deformer.move([[1, 2]])
+    with pytest.raises(TypeError):
+        deformer.solve(42)
+    mesh = deformer.solve({"version": 1, "points": [{"from": [10, 10], "to": [10, 10]},
+                                                    {"from": [400, 300], "to": [410, 300]}]})
+    assert mesh.flips() == 0
+    with pytest.raises(ValueError, match="finite"):
+        deformer.move([[10, 10], [float("nan"), 3]])
+
+
+@pytest.mark.parametrize("data, message", [
+    ({"version": 1, "points": [{"from": [5, 5], "to": [5, 5]}, {"from": [9, 9], "to": [1e308, 3]}]}, "image sizes"),
+    ({"version": 1, "points": [{"from": [5, 5], "to": [5, 5]}, {"from": [9, 10 ** 400], "to": [1, 3]}]}, "finite"),
+    ({"version": True, "points": []}, "version"),
+    ({"version": 1.0, "points": []}, "version"),
+    ({"version": 1, "points": [{"from": [5, 5], "to": [5, 5]}, {"from": [5.2, 5], "to": [9, 9]}]}, "apart"),
+])
+def test_hostile_handles(data, message):
+    with pytest.raises(ValueError, match=message):
+        Handles.from_dict(data, W, H)
+
+
+def test_bezier_border_survives_a_save():
+    data = {"version": 1, "border": {"top": {"bezier": [[-0.5, 10], [100, -20], [300, -20], [W - 0.5, 10]]}},
+            "points": [{"from": [250, 200], "to": [250, 210]}], "curves": [], "canvas": "fit"}
+    assert Handles.from_dict(data, W, H).as_dict()["border"] == data["border"]

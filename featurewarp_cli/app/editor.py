@@ -18,6 +18,7 @@ import hmac
 import json
 import math
 import secrets
+import shlex
 import struct
 import threading
 import time
@@ -36,6 +37,8 @@ from .pipeline import Settings, WarpError, load_image_and_mask, warp_file
 PREVIEW_NODES = 65_000
 #: Longest side of the image the browser gets as its texture.
 TEXTURE_SIDE = 4096
+#: The injective fallback's steps per update at most (a drag stays live; Export runs it fully).
+EDITOR_INJECTIVE_STEPS = 8
 #: Largest request body accepted (bytes).
 MAX_BODY = 8 * 2**20
 
@@ -67,20 +70,22 @@ class EditorSession:
         self.cell = settings.cell or max(base_cell(self.width, self.height),
                                          math.sqrt(self.width * self.height / PREVIEW_NODES))
         self.deformer = Deformer(self.width, self.height, feature_mask, quick=True, cell=self.cell,
+                                 injective_steps=EDITOR_INJECTIVE_STEPS,
                                  feature_weight=settings.feature_weight, decay=settings.decay,
                                  scale_prior=settings.scale_prior)
         self.image_png = _png(_texture(image))
         self.mask_png = _png(_texture((feature_mask if feature_mask is not None else
                                        np.zeros((self.height, self.width), bool)).astype(np.uint8) * 255))
+        self.notes = []
         self.initial = ({"version": 1, "points": [], "curves": [], "border": "free", "canvas": "fit"}
-                        if handles is None else self._checked({"handles": handles}))
+                        if handles is None else self._checked({"handles": handles}, self.notes))
         self.lock = threading.Lock()
 
     def state(self) -> dict:
         """What the page needs to start."""
         return {"width": self.width, "height": self.height, "handles": self.initial, "mode": self.settings.mode,
                 "cell": self.cell, "save_to": self.handles_path, "export_to": self.output_path,
-                "has_mask": self.mask is not None, "warnings": self.warnings}
+                "has_mask": self.mask is not None, "warnings": self.warnings + self.notes}
 
     def grid(self) -> bytes:
         """The preview grid: node count, triangle count, nodes per row and per column (uint32),
@@ -107,10 +112,12 @@ class EditorSession:
             mesh = self.deformer.solve(handles, mode)
             seconds = time.perf_counter() - t0
             offset = np.asarray(self.deformer.warp.offset)
+            ends = self.deformer.warp.ends(mesh)
         components = mesh.record.components
-        status = {"ms": round(1000 * seconds, 1), "folds": mesh.flips(), "components": len(components),
-                  "kept": sum(c.kept for c in components) if mode != "plain" else 0,
-                  "canvas": list(mesh.canvas), "warnings": mesh.record.warnings[:3]}
+        status = {"ms": round(1000 * seconds, 1), "folds": mesh.flips() + mesh.crossings,
+                  "components": len(components), "kept": sum(c.kept for c in components) if mode != "plain" else 0,
+                  "canvas": list(mesh.canvas), "warnings": mesh.record.warnings[:3],
+                  "ends": [] if ends is None else np.round(ends, 2).tolist()}
         return status, (mesh.target + offset).astype("<f4").tobytes()
 
     def save(self, body: dict) -> dict:
@@ -129,14 +136,20 @@ class EditorSession:
             raise ValueError("start the editor with --output OUT to export")
         mode = body.get("mode", self.settings.mode)
         settings = replace(self.settings, mode=mode, warp_factory=handles_factory(data))
-        summary = warp_file(settings, self.input, self.output_path, self.mask)
+        summary = warp_file(settings, self.input, self.output_path, self.mask,
+                            also_read=((self.handles_path, "--handles"),) if self.handles_path else ())
+        command = ["featurewarp", "deform", self.input, self.output_path] + (["-m", self.mask] if self.mask else [])
+        command += ["--handles", self.handles_path or "H.json"] + (["--mode", mode] if mode != "similarity" else [])
         return {"exported": self.output_path, "seconds": round(summary["seconds"], 2),
-                "warnings": summary["warnings"][:3]}
+                "warnings": summary["warnings"][:3], "command": " ".join(shlex.quote(c) for c in command)}
 
-    def _checked(self, body: dict) -> dict:
+    def _checked(self, body: dict, notes: list | None = None) -> dict:
         from ..engine.handles import Handles
 
-        return Handles.from_dict(body.get("handles"), self.width, self.height).as_dict()
+        handles = Handles.from_dict(body.get("handles"), self.width, self.height)
+        if notes is not None:
+            notes.extend(handles.notes)
+        return handles.as_dict()
 
 
 def _texture(image: np.ndarray) -> np.ndarray:
@@ -239,16 +252,24 @@ class EditorHandler(BaseHTTPRequestHandler):
         calls = {"/solve": self._solve, "/save": self.server.session.save, "/export": self.server.session.export}
         if route not in calls:
             return self._send(404, b"not found", "text/plain")
-        length = int(self.headers.get("Content-Length") or 0)
-        if not self.headers.get("Content-Type", "").startswith("application/json") or not 0 < length <= MAX_BODY:
-            return self._json(400, {"error": "a JSON body is expected"})
+        length = self.headers.get("Content-Length", "")
+        if (not self.headers.get("Content-Type", "").startswith("application/json") or not length.isdigit()
+                or not 0 < int(length) <= MAX_BODY):
+            self.close_connection = True
+            return self._json(400, {"error": f"a JSON body of at most {MAX_BODY} bytes is expected"})
         try:
-            body = json.loads(self.rfile.read(length))
+            body = json.loads(self.rfile.read(int(length)))
             if not isinstance(body, dict):
                 raise ValueError("a JSON object is expected")
             result = calls[route](body)
-        except (ValueError, WarpError) as err:
+        except RecursionError:
+            return self._json(400, {"error": "the JSON body is nested too deeply"})
+        except (ValueError, TypeError, OverflowError, WarpError) as err:
             return self._json(400, {"error": str(err)})
+        except OSError as err:
+            return self._json(500, {"error": f"{err.strerror or err}: {err.filename or ''}"})
+        except Exception as err:  # the server keeps serving; the page shows the one line
+            return self._json(500, {"error": f"{type(err).__name__}: {err}"})
         if route == "/solve":
             return self._send(200, result, "application/octet-stream")
         self._json(200, result)

@@ -80,8 +80,9 @@ class Settings:
     strip : bool
         Drop the input's ICC profile and EXIF instead of keeping them.
     warp_factory : callable, optional
-        ``warp_factory(width, height)`` gives the warp instead of the preset (``deform``'s
-        handles); its ValueError is a usage error, its ``notes`` become warnings.
+        ``warp_factory(width, height, feature_mask)`` gives the warp instead of the preset
+        (``deform``'s handles); its ValueError is a usage error; its ``review(mesh)`` gives
+        warnings.
     """
 
     preset: str
@@ -301,7 +302,7 @@ def make_warper(settings: Settings, width: int, height: int, feature_mask):
 
     try:
         if settings.warp_factory is not None:
-            warp = settings.warp_factory(width, height)
+            warp = settings.warp_factory(width, height, feature_mask)
         else:
             warp = plugins.load(settings.preset)(width, height, **settings.params)
     except plugins.UnknownPreset as err:
@@ -323,6 +324,17 @@ def make_warper(settings: Settings, width: int, height: int, feature_mask):
     return warp, warper
 
 
+def solved(settings: Settings, width: int, height: int, feature_mask):
+    """(warp, warper, mesh) for an image of this size and mask; the warp's own ``review`` of the
+    mesh (deform's: handles reached, an image laid over itself) joins its warnings."""
+    warp, warper = make_warper(settings, width, height, feature_mask)
+    mesh = warper.solve(warp, settings.mode)
+    review = getattr(warp, "review", None)
+    if review is not None:
+        mesh.record.warnings.extend(review(mesh))
+    return warp, warper, mesh
+
+
 def rendered(warper, image, mesh, interp: str, background):
     """The BGR(A) image through ``mesh``; a translucent (r, g, b, a) background is laid under a
     transparent render."""
@@ -336,10 +348,13 @@ def rendered(warper, image, mesh, interp: str, background):
 def check_solution(settings: Settings, mesh) -> None:
     """WarpError when the solve left folded triangles (unless ``allow_folds``) or, under
     ``strict``, when it warned: nothing is written then."""
-    folded = mesh.flips()
+    folded, crossings = mesh.flips(), getattr(mesh, "crossings", 0)
     if folded and not settings.allow_folds:
         raise WarpError(f"the result has {folded} folded triangles (the warp turns the image over itself "
                         f"there); nothing written (--allow-folds writes it anyway)")
+    if crossings and not settings.allow_folds:
+        raise WarpError(f"the result lays the image over itself (its border crosses itself {crossings} times); "
+                        f"nothing written (--allow-folds writes it anyway)")
     if settings.strict and mesh.record.warnings:
         raise WarpError(f"--strict: {mesh.record.warnings[0]}; nothing written")
 
@@ -365,7 +380,8 @@ def check_outputs(settings: Settings, output: str, *extra: tuple[str | None, str
 
 
 def warp_file(settings: Settings, input: str, output: str, mask: str | None = None,
-              report: str | None = None, save_grid: str | None = None, draw_grid: bool = False) -> dict:
+              report: str | None = None, save_grid: str | None = None, draw_grid: bool = False,
+              also_read: tuple = ()) -> dict:
     """Load, warp, render and write one image (the body of ``featurewarp warp PRESET``).
 
     Every check that needs no pixels runs before anything is decoded, and the
@@ -387,6 +403,8 @@ def warp_file(settings: Settings, input: str, output: str, mask: str | None = No
         Where to write the mesh as ``.npz`` (``source``, ``target``, ``triangles``).
     draw_grid : bool
         Draw the deformed grid over the result.
+    also_read : tuple of (path, option)
+        Other files the run reads (deform's ``--handles``): no output may name them.
 
     Returns
     -------
@@ -405,15 +423,13 @@ def warp_file(settings: Settings, input: str, output: str, mask: str | None = No
     out_path, fmt = check_outputs(settings, output, (report, "--report"), (save_grid, "--save-grid"),
                                   like=input)
     check_distinct([(out_path, "OUTPUT"), (report, "--report"), (save_grid, "--save-grid")],
-                   [(input, "INPUT"), (mask, "--mask")])
+                   [(input, "INPUT"), (mask, "--mask"), *also_read])
     background = background_colour(settings.background, fmt)
     prefetch_engine(solver=mask is not None and settings.mode != "plain")
     pending, feature_mask, warnings, (width, height) = start_loading(settings, input, mask)
     timings = {"load": time.perf_counter() - t0}
     try:
-        warp, warper = make_warper(settings, width, height, feature_mask)
-        mesh = warper.solve(warp, settings.mode)
-        mesh.record.warnings.extend(getattr(warp, "notes", ()))
+        warp, warper, mesh = solved(settings, width, height, feature_mask)
     finally:
         t1 = time.perf_counter()
         image = pending.result()               # a decoding error outranks any from the solve

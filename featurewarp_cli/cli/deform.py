@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import math
 import re
+import sys
 from dataclasses import replace
 
 import click
@@ -44,20 +45,30 @@ class PointPair(click.ParamType):
 
 
 def load_handles(path: str | None) -> dict | None:
-    """The parsed handles file (a usage error naming the file when it cannot be read or parsed)."""
+    """The parsed handles file, ``-`` for stdin (a usage error naming the file when it cannot be
+    read or parsed, or holds no JSON object)."""
     if path is None:
         return None
+    name = "stdin" if path == "-" else path
     try:
-        with open(path, "rb") as file:
-            text = file.read(16 * 2**20 + 1)
+        if path == "-":
+            text = sys.stdin.buffer.read(16 * 2**20 + 1)
+        else:
+            with open(path, "rb") as file:
+                text = file.read(16 * 2**20 + 1)
     except OSError as err:
-        raise click.BadParameter(f"cannot read {path}: {err.strerror or err}", param_hint="'--handles'") from None
+        raise click.BadParameter(f"cannot read {name}: {err.strerror or err}", param_hint="'--handles'") from None
     if len(text) > 16 * 2**20:
-        raise click.BadParameter(f"{path} is larger than 16 MiB; not a handles file", param_hint="'--handles'")
+        raise click.BadParameter(f"{name} is larger than 16 MiB; not a handles file", param_hint="'--handles'")
     try:
-        return json.loads(text)
-    except (ValueError, UnicodeDecodeError) as err:
-        raise click.BadParameter(f"{path} is not valid JSON ({err})", param_hint="'--handles'") from None
+        data = json.loads(text)
+    except (ValueError, UnicodeDecodeError, RecursionError) as err:
+        reason = "nested too deeply" if isinstance(err, RecursionError) else str(err)
+        raise click.BadParameter(f"{name} is not valid JSON ({reason})", param_hint="'--handles'") from None
+    if not isinstance(data, dict):
+        raise click.BadParameter(f"{name} must hold a JSON object ({{\"version\": 1, \"points\": [...]}})",
+                                 param_hint="'--handles'")
+    return data
 
 
 def merged_handles(data, moves, pins, canvas: str | None):
@@ -72,6 +83,24 @@ def merged_handles(data, moves, pins, canvas: str | None):
         if canvas:
             merged["canvas"] = canvas
     return merged
+
+
+def named_flags(make, merged: dict, moves, pins):
+    """``make`` whose errors about the points that --move and --pin added name those flags."""
+    first = len(merged.get("points", [])) - len(moves) - len(pins)
+    flags = [f"--move {a[0]:g},{a[1]:g}:{b[0]:g},{b[1]:g}" for a, b in moves] + [f"--pin {p[0]:g},{p[1]:g}" for p in pins]
+
+    def name(match):
+        k = int(match.group(1))
+        return match.group(0) if k < first else f"{flags[k - first]} ({match.group(2) or 'its point'})"
+
+    def named(width: int, height: int, mask=None):
+        try:
+            return make(width, height, mask)
+        except ValueError as err:
+            raise ValueError(re.sub(r"points\[(\d+)\](?:\.(from|to))?", name, str(err))) from None
+
+    return named
 
 
 def deform_command() -> click.Command:
@@ -104,8 +133,13 @@ def deform_command() -> click.Command:
         settings, quiet, verbose = settings_from(Deform, kwargs)
         from ..engine.deform import handles_factory
 
-        settings = replace(settings, warp_factory=handles_factory(merged_handles(data, move, pin, canvas)))
-        warp_one(settings, quiet, verbose, input, output, mask, report, save_grid, draw_grid)
+        if handles == "-" and input == "-":
+            raise click.BadParameter("cannot be '-' when INPUT is '-' (stdin holds the image)",
+                                     param_hint="'--handles'")
+        merged = merged_handles(data, move, pin, canvas)
+        settings = replace(settings, warp_factory=named_flags(handles_factory(merged), merged, move, pin))
+        warp_one(settings, quiet, verbose, input, output, mask, report, save_grid, draw_grid,
+                 also_read=((handles, "--handles"),) if handles else ())
 
     doc = """Deform INPUT by handles into OUTPUT, keeping masked features in shape.
 

@@ -16,6 +16,25 @@ KEEP = {"mode", "cell", "feature_weight", "decay", "scale_prior", "background", 
         "max_memory", "allow_folds", "quality", "strip", "quiet", "verbose"}
 
 
+def check_files(settings, input: str, mask: str | None, handles: str | None, output: str | None) -> None:
+    """Before the editor starts: Save's and Export's files can be written, and neither names
+    INPUT, the mask or the other (WarpError otherwise)."""
+    from ..app.outputs import check_distinct
+    from ..app.pipeline import WarpError, check_outputs
+
+    named = {"-o": output, "--handles": handles, "INPUT": input, "--mask": mask}
+    pairs = (("-o", "--handles"), ("-o", "INPUT"), ("-o", "--mask"), ("--handles", "INPUT"), ("--handles", "--mask"))
+    same = [(a, b) for a, b in pairs if named[a] and named[b] and os.path.realpath(named[a]) == os.path.realpath(named[b])]
+    if same:
+        a, b = same[0]
+        raise WarpError(f"{a} {named[a]} is also {b}: the editor would overwrite it", usage=True)
+    if output:
+        check_outputs(settings, output, (handles, "--handles"))
+        check_distinct([(output, "--output"), (handles, "--handles")], [(input, "INPUT"), (mask, "--mask")])
+    elif handles:
+        check_outputs(settings, "unused.png", (handles, "--handles"))
+
+
 def edit_command() -> click.Command:
     """``featurewarp edit INPUT -m MASK [--handles H.json] [--output OUT] [--port N] [--no-browser]``."""
     params = [
@@ -36,10 +55,14 @@ def edit_command() -> click.Command:
         from ..app.pipeline import WarpError
         from .options import settings_from
 
+        if input == "-" or handles == "-":
+            raise click.UsageError("the editor reads INPUT again on Export and writes --handles on Save: "
+                                   "give files, not '-'")
         data = load_handles(handles) if handles and os.path.exists(handles) else None
         kwargs.update(formulation="exact", boundary=None, strict=False)
         settings, quiet, _ = settings_from(Deform, kwargs)
         try:
+            check_files(settings, input, mask, handles, output)
             session = EditorSession(settings, input, mask, handles, output, data)
         except WarpError as err:
             raise click_error(err) from err
@@ -50,7 +73,6 @@ def edit_command() -> click.Command:
         except OSError as err:
             raise click.ClickException(f"cannot listen on 127.0.0.1:{port}: {err.strerror or err}") from None
         signal.signal(signal.SIGINT, signal.default_int_handler)     # Ctrl-C stops it cleanly, exit 0
-        signal.signal(signal.SIGTERM, signal.default_int_handler)
         try:
             click.echo(server.url)
             sys.stdout.flush()

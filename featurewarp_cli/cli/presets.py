@@ -101,14 +101,15 @@ def warp_command(preset) -> click.Command:
     return preset_command(preset, params, callback, preset_doc(preset))
 
 
-def warp_one(settings, quiet: bool, verbose: bool, *files) -> None:
+def warp_one(settings, quiet: bool, verbose: bool, *files, **options) -> None:
     """Run :func:`featurewarp_cli.app.pipeline.warp_file` on ``files`` (input, output, mask,
-    report, save_grid, draw_grid) with the progress line, then print its warnings."""
+    report, save_grid, draw_grid; ``options``: its others) with the progress line, then print
+    its warnings."""
     from ..app.pipeline import WarpError, warp_file
 
     try:
         with progress_line(quiet):
-            summary = warp_file(settings, *files)
+            summary = warp_file(settings, *files, **options)
     except WarpError as err:
         raise click_error(err) from err
     report_warnings(summary, quiet, verbose)

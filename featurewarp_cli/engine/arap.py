@@ -32,10 +32,12 @@ and folds them at drags of a few cells; a disc spreads it. The disc moves as the
 turned and scaled by the handles' overall similarity, so a similarity stays exact.
 
 When the two-step result still folds (handles dragged across each other, or far towards a
-pin), the map is found again by local/global iterations of the same step 2 started from an
-injective map (the handles' best similarity, or the caller's last result), each step cut
-short before the first triangle would flip (:func:`injectivity.max_step`): the result never
-folds; the handles are then held only as far as the image can follow.
+pin), the map is found again by scalable locally injective mapping (SLIM, Rabinovich et al.
+2017) started from an injective map (the handles' best similarity, or the caller's last
+result): the symmetric Dirichlet energy, infinite at a flip, lowered by reweighted least
+squares with a line search cut short before the first flip (:func:`injectivity.max_step`).
+No triangle of the result folds; the handles are then held only as far as the image can
+follow.
 """
 
 from __future__ import annotations
@@ -186,15 +188,18 @@ class RigidDeformer:
         self._edges = _edge_rows(self.triangles, grid.n_nodes)
         self._step2 = spd_solver((self._edges.T @ self._edges + penalty).tocsc())
         self._source_edges = np.asarray(self._edges @ self.nodes).reshape(-1, 3, 2)
+        corners = self.nodes[self.triangles]
+        self._centred_source = corners - corners.mean(axis=1, keepdims=True)
         #: Local/global steps the last :meth:`deform` took to stay injective (0: none needed).
         self.injective_steps = 0
 
-    def deform(self, targets: np.ndarray, start: np.ndarray | None = None) -> np.ndarray:
+    def deform(self, targets: np.ndarray, start: np.ndarray | None = None, steps: int | None = None) -> np.ndarray:
         """Node positions (N, 2) that carry the handles to ``targets`` (K, 2) as rigidly as
         possible, without a fold.
 
         ``start``: an injective map (N, 2) close to the answer (the last one, while a handle
-        is dragged) for the injective fallback; default: the handles' best similarity."""
+        is dragged) for the injective fallback; default: the handles' best similarity.
+        ``steps``: the fallback's iterations at most (default :data:`INJECTIVE_STEPS`)."""
         targets = np.asarray(targets, dtype=np.float64).reshape(self.sources.shape)
         a, b = similarity_fit(self.sources, targets)
         turn = np.array([[a, -b], [b, a]])
@@ -211,7 +216,7 @@ class RigidDeformer:
             start = (self.nodes - centre_s) @ turn.T + centre_t
             if not (a * a + b * b > 0):
                 start = self.nodes + (centre_t - centre_s)
-        return self._injective(start, np.hypot(a, b) or 1.0, samples)
+        return self._injective(start, np.hypot(a, b) or 1.0, samples, steps or INJECTIVE_STEPS)
 
     def _rigid_step(self, positions: np.ndarray, scale: float, pulled: np.ndarray) -> np.ndarray:
         """Step 2: the triangles rotated as in ``positions``, scaled by ``scale``, joined."""
@@ -221,7 +226,7 @@ class RigidDeformer:
         wanted = scale * np.stack([c * src[..., 0] - s * src[..., 1], s * src[..., 0] + c * src[..., 1]], axis=-1)
         return np.asarray(self._step2(self._edges.T @ wanted.reshape(-1, 2) + pulled))
 
-    def _injective(self, x: np.ndarray, scale: float, samples: np.ndarray) -> np.ndarray:
+    def _injective(self, x: np.ndarray, scale: float, samples: np.ndarray, steps: int) -> np.ndarray:
         """Scalable locally injective mapping (Rabinovich et al. 2017) from the injective ``x``:
         the symmetric Dirichlet energy of each triangle against its source scaled by ``scale``
         (infinite at a flip) plus the handles' penalty, lowered by reweighted least squares
@@ -231,7 +236,7 @@ class RigidDeformer:
         root = np.sqrt(self.weight / self.offsets.shape[1])
         penalty_rows, targets = (self.embedding * root).tocsr(), samples * root
         energy = _slim_energy(x, self.triangles, grads, areas, penalty_rows, targets)
-        for step in range(1, INJECTIVE_STEPS + 1):
+        for step in range(1, steps + 1):
             proposal = _slim_step(x, self.triangles, grads, areas, penalty_rows, targets)
             t = min(1.0, 0.9 * max_step(x, proposal, self.triangles))
             while t > 1e-6:
@@ -250,9 +255,8 @@ class RigidDeformer:
 
     def _rotations(self, positions: np.ndarray) -> np.ndarray:
         """Angle of each triangle's closest similarity from the source to ``positions``."""
-        p = self.nodes[self.triangles]
+        p = self._centred_source
         q = positions[self.triangles]
-        p = p - p.mean(axis=1, keepdims=True)
         q = q - q.mean(axis=1, keepdims=True)
         dot = np.sum(p * q, axis=(1, 2))
         cross = np.sum(p[..., 0] * q[..., 1] - p[..., 1] * q[..., 0], axis=1)

@@ -119,6 +119,23 @@ class Ties:
         comp, k = np.nonzero(np.arange(2)[None, :] < np.where(self.tied, self.free, 0)[:, None])
         return comp, k
 
+    def border_fixed(self, fixed_x: np.ndarray, fixed_y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The border conditions in force: the grid's (``fixed_x``, ``fixed_y``), less those of
+        unpinned components' nodes."""
+        let_go = self.let_go()
+        return fixed_x & ~let_go, fixed_y & ~let_go
+
+    def window_ties(self) -> np.ndarray:
+        """Component whose shared translation a node takes in both axes, or -1 (for window passes)."""
+        x, y = self.unknown_ties(0), self.unknown_ties(1)
+        return np.where(x == y, x, -1)
+
+    def window_fixed(self, fixed_x: np.ndarray, fixed_y: np.ndarray) -> np.ndarray:
+        """Nodes a window pass may not move: held in either axis, or tied in one axis only."""
+        x, y = self.unknown_ties(0), self.unknown_ties(1)
+        held_x, held_y = self.border_fixed(fixed_x, fixed_y)
+        return held_x | held_y | self.held(0) | self.held(1) | (x != y)
+
     def key(self) -> bytes:
         """What the Hessian of eta depends on besides the grid and weights."""
         return b"".join(np.ascontiguousarray(a).tobytes() for a in (self.tied, self.pin, self.basis, self.unpinned))

@@ -26,17 +26,23 @@ from __future__ import annotations
 
 import hashlib
 import math
-from dataclasses import replace
 
 import numpy as np
 
-from .arap import RigidDeformer, embed
+from .arap import RigidDeformer, embed, similarity_fit
 from .defaults import MODE
-from .grid import Grid
+from .grid import Grid, signed_areas
+from .injectivity import border_crossings
 from .handles import Handles, default_radius
 from .mesh import Mesh
 from .warper import FeatureWarper
 
+#: A point handle may end this far from its target (px, or this share of the image's diagonal
+#: if larger) before a warning says so.
+HANDLE_SLACK_PX = 3.0
+HANDLE_SLACK = 0.02
+#: Deformed images smaller than this share of the input's area get a warning.
+SHRUNK = 0.01
 #: Nodes of the grid the rigid map is solved on (about; it is coarser than the feature grid:
 #: the map is smooth away from the handles, and its solves must take milliseconds).
 RIGID_NODES = 4096
@@ -84,6 +90,45 @@ class HandleWarp:
         self.nodes = nodes - np.asarray(self.offset)
         self._embeddings = {} if embeddings is None else embeddings
         self.notes = []
+        self.handles = None
+
+    def review(self, mesh: Mesh, quick: bool = False) -> list[str]:
+        """Warnings on the solved ``mesh`` of these handles (also kept in ``values`` for the
+        report): how far each point handle ended from its target, a border that crosses
+        itself (``mesh.crossings``; ``quick``: W's border, on the coarse grid), an image shrunk
+        away or moved off the canvas."""
+        warnings = list(self.notes)
+        mesh.crossings = (border_crossings(self.grid.nodes(), self.nodes) if quick else
+                          border_crossings(mesh.source, mesh.target))
+        if mesh.crossings:
+            warnings.append(f"the handles lay the image over itself (its border crosses itself "
+                            f"{mesh.crossings} times)")
+        ends = self.ends(mesh)
+        if ends is not None:
+            error = np.hypot(*(ends - self.handles.points_to).T)
+            self.values["handle_error_px"] = {"max": round(float(error.max()), 3),
+                                              "mean": round(float(error.mean()), 3)}
+            limit = max(HANDLE_SLACK_PX, HANDLE_SLACK * math.hypot(self.width, self.height))
+            for k in np.flatnonzero(error > limit)[:3]:
+                (x, y), (tx, ty) = self.handles.points_from[k], self.handles.points_to[k]
+                warnings.append(f"handle {k} ({x:g},{y:g} -> {tx:g},{ty:g}) ends {error[k]:.0f} px from its "
+                                f"target: a feature that keeps its shape, or the border, holds it")
+        area = float(np.sum(signed_areas(mesh.target, mesh.triangles)))
+        if area < SHRUNK * self.width * self.height:
+            warnings.append(f"the handles shrink the image to {100 * area / (self.width * self.height):.1f} % "
+                            f"of its area")
+        lo, hi = mesh.target.min(axis=0), mesh.target.max(axis=0)
+        if np.any(hi < -0.5) or np.any(lo > np.array(mesh.canvas) - 0.5):
+            warnings.append("the deformed image lies outside the canvas: the output is empty")
+        return warnings
+
+    def ends(self, mesh: Mesh) -> np.ndarray | None:
+        """Where the point handles ended in ``mesh``, in input pixel coordinates (None: no handles)."""
+        if self.handles is None or not len(self.handles.points_from):
+            return None
+        nx = int(np.count_nonzero(mesh.source[:, 1] == mesh.source[0, 1]))
+        grid = Grid(self.width, self.height, 0, nx, len(mesh.source) // nx)
+        return embed(grid, self.handles.points_from) @ mesh.target + np.asarray(self.offset)
 
     def __call__(self, points) -> np.ndarray:
         points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
@@ -104,11 +149,22 @@ class RigidMap:
     ----------
     width, height : int
         Source image size.
+    injective_steps : int, optional
+        Cap on the injective fallback's iterations (default :data:`arap.INJECTIVE_STEPS`).
+    mask : (height, width) bool ndarray, optional
+        The feature mask: a point handle on a feature carries the whole feature (see
+        :func:`carried_features`).
     """
 
-    def __init__(self, width: int, height: int):
+    def __init__(self, width: int, height: int, injective_steps: int | None = None, mask=None):
         self.width, self.height = int(width), int(height)
+        self.injective_steps = injective_steps
         self.grid = rigid_grid(width, height)
+        self.labels = None
+        if mask is not None and np.any(mask):
+            import cv2
+
+            self.labels = cv2.connectedComponents(np.asarray(mask, np.uint8), connectivity=8)[1]
         self.rigid = None
         self._key = None
         self._last = None
@@ -120,21 +176,60 @@ class RigidMap:
         radius = handles.radius if handles.radius is not None else default_radius(
             self.width, self.height, max(self.grid.spacing))
         sources, targets, radii = handles.constraints(self.grid, radius)
+        if self.labels is not None and len(handles.points_from):
+            sources, targets, radii = carried_features(self.labels, self.grid.nodes(), handles, sources, targets,
+                                                       radii)
         key = (sources.tobytes(), radii.tobytes())
         if key != self._key:
             self.rigid = RigidDeformer(self.grid, sources, radii)
             self._key, self._last = key, None
-        nodes = self.rigid.deform(targets, start=self._last)
+        nodes = self.rigid.deform(targets, start=self._last, steps=self.injective_steps)
         self._last = nodes
         values = {"points": len(handles.points_from), "curves": len(handles.curves),
                   "border": handles.border if isinstance(handles.border, str) else sorted(handles.border),
                   "canvas": handles.canvas, "radius": radius}
         warp = HandleWarp(self.width, self.height, self.grid, nodes, handles.canvas, values, self._embeddings)
-        warp.notes = list(handles.notes)
+        warp.notes, warp.handles = list(handles.notes), handles
         if self.rigid.injective_steps:
             warp.notes.append(f"the handles ask for a fold; they are held as far as the image can follow "
                               f"without one ({self.rigid.injective_steps} injective steps)")
         return warp
+
+
+def carried_features(labels, nodes, handles: Handles, sources, targets, radii):
+    """The constraints with every point handle that sits on a feature replaced by that feature.
+
+    Dragging a point of a face moves the face: the nodes of the rigid grid inside the
+    feature's connected component are held to one similarity, the best fit of the handles on
+    it (with one handle: the handles' overall rotation and scale, and that handle's
+    translation), so the feature-aware solve, which keeps features as similarities of W,
+    keeps the handle where it was dragged. Point handles come first in ``sources`` (as
+    :meth:`Handles.constraints` orders them).
+    """
+    h, w = labels.shape
+    at = np.clip(np.rint(handles.points_from).astype(int), 0, [w - 1, h - 1])
+    on = labels[at[:, 1], at[:, 0]]
+    node_at = np.clip(np.rint(nodes).astype(int), 0, [w - 1, h - 1])
+    node_label = labels[node_at[:, 1], node_at[:, 0]]
+    overall = similarity_fit(sources, targets)
+    keep = np.ones(len(sources), bool)
+    extra_sources, extra_targets = [], []
+    for label in np.unique(on[on > 0]):
+        inside = nodes[node_label == label]
+        held = np.flatnonzero(on == label)
+        if len(inside) < 3:
+            continue
+        a, b = similarity_fit(handles.points_from[held], handles.points_to[held]) if len(held) > 1 else overall
+        turn = np.array([[a, -b], [b, a]])
+        shift = np.mean(handles.points_to[held] - handles.points_from[held] @ turn.T, axis=0)
+        keep[held] = False
+        extra_sources.append(inside)
+        extra_targets.append(inside @ turn.T + shift)
+    if not extra_sources:
+        return sources, targets, radii
+    extra = np.concatenate(extra_sources)
+    return (np.concatenate([sources[keep], extra]), np.concatenate([targets[keep], *extra_targets]),
+            np.concatenate([radii[keep], np.zeros(len(extra))]))
 
 
 class Deformer:
@@ -149,6 +244,8 @@ class Deformer:
     mode : {'similarity', 'rigid', 'plain'}
     quick : bool
         Skip what an interactive update can do without (see :meth:`FeatureWarper.solve`).
+    injective_steps : int, optional
+        Cap on the rigid map's injective fallback per update (see :class:`RigidMap`).
     **options
         :class:`FeatureWarper` options (cell, feature_weight, decay, scale_prior, max_nodes, ...).
 
@@ -161,34 +258,43 @@ class Deformer:
     """
 
     def __init__(self, width: int, height: int, mask: np.ndarray | None = None, *, mode: str = MODE,
-                 quick: bool = False, **options):
+                 quick: bool = False, injective_steps: int | None = None, **options):
         self.mode = mode
         self.quick = quick
         self.warper = FeatureWarper(width, height, mask, **options)         # the border: HandleWarp.boundary
-        self.rigid = RigidMap(width, height)
+        self.rigid = RigidMap(width, height, injective_steps, self.warper.mask)
         self.handles = None
         self.warp = None
 
     def solve(self, handles: Handles, mode: str | None = None) -> Mesh:
         """The feature-aware mesh for ``handles`` (whose sources may differ from the last call's:
         the rigid map is then factored anew)."""
+        if isinstance(handles, dict):
+            handles = Handles.from_dict(handles, self.warper.width, self.warper.height)
+        if not isinstance(handles, Handles):
+            raise TypeError(f"handles must be Handles or a handles dict, not {type(handles).__name__}")
         self.handles = handles
         self.warp = self.rigid.deformation(handles)
         mesh = self.warper.solve(self.warp, mode or self.mode, quick=self.quick)
-        mesh.record.warnings.extend(self.warp.notes)
+        mesh.record.warnings.extend(self.warp.review(mesh, self.quick))
         return mesh
 
     def move(self, targets: np.ndarray, mode: str | None = None) -> Mesh:
         """The mesh with the last handles' points moved to ``targets`` ((K, 2), in their order);
         nothing is factored again."""
+        if self.handles is None:
+            raise ValueError("move() moves the handles of the last solve(): call solve() first")
         targets = np.asarray(targets, dtype=np.float64).reshape(self.handles.points_from.shape)
-        return self.solve(replace(self.handles, points_to=targets), mode)
+        data = self.handles.as_dict()
+        data["points"] = [{"from": a, "to": [float(x), float(y)]} for a, (x, y) in
+                          zip([p["from"] for p in data["points"]], targets)]
+        return self.solve(Handles.from_dict(data, self.warper.width, self.warper.height), mode)
 
 
 def handles_factory(data):
-    """``make(width, height)``: the map W of the handles file ``data`` (parsed JSON) for an image
-    of that size (ValueError when the handles do not fit it)."""
-    def make(width: int, height: int) -> HandleWarp:
-        return RigidMap(width, height).deformation(Handles.from_dict(data, width, height))
+    """``make(width, height, mask)``: the map W of the handles file ``data`` (parsed JSON) for an
+    image of that size and feature mask (ValueError when the handles do not fit it)."""
+    def make(width: int, height: int, mask=None) -> HandleWarp:
+        return RigidMap(width, height, mask=mask).deformation(Handles.from_dict(data, width, height))
 
     return make

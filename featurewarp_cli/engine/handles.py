@@ -21,6 +21,7 @@ the input's size and coordinates. Keys this version does not know are ignored, w
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass, field
 
@@ -33,6 +34,10 @@ SIDES = ("top", "right", "bottom", "left")
 KEYS = ("version", "points", "curves", "border", "canvas", "radius")
 #: Points a Bezier side is flattened to before it is resampled by arc length.
 BEZIER_POINTS = 256
+#: Targets may lie at most this many image sizes beyond the image.
+REACH = 10
+#: Point handles must start at least this far apart (px).
+MIN_SPACING = 0.5
 
 
 @dataclass
@@ -49,6 +54,8 @@ class Handles:
         Disc radius of the point handles; None: :func:`default_radius`.
     notes : list of str
         What was ignored (unknown keys).
+    border_spec : str or dict
+        The border as the file gave it (Bezier sides stay Bezier when saved again).
     """
 
     points_from: np.ndarray
@@ -58,6 +65,7 @@ class Handles:
     canvas: str = "fit"
     radius: float | None = None
     notes: list = field(default_factory=list)
+    border_spec: object = "free"
 
     @classmethod
     def from_dict(cls, data, width: int, height: int) -> "Handles":
@@ -70,15 +78,17 @@ class Handles:
         """
         if not isinstance(data, dict):
             raise ValueError("the handles file must hold a JSON object ({\"version\": 1, \"points\": [...]})")
-        if data.get("version") != VERSION:
-            raise ValueError(f"'version': {data.get('version')!r}; this featurewarp reads version {VERSION}")
+        version = data.get("version")
+        if not (type(version) is int and version == VERSION):
+            raise ValueError(f"'version': {version!r}; this featurewarp reads version {VERSION}")
         notes = [f"handles: ignoring the key {key!r} (unknown to version {VERSION})" for key in data if key not in KEYS]
         points = _list(data.get("points", []), "points")
         pairs = [(_point(_entry(p, "points", i), "from", f"points[{i}].from"),
                   _point(_entry(p, "points", i), "to", f"points[{i}].to")) for i, p in enumerate(points)]
         sources = np.array([a for a, _ in pairs], float).reshape(-1, 2)
-        for i, source in enumerate(sources):
+        for i, (source, target) in enumerate(pairs):
             _inside(source, width, height, f"points[{i}].from")
+            _near(target, width, height, f"points[{i}].to")
         _no_duplicates(sources)
         curves = []
         for i, curve in enumerate(_list(data.get("curves", []), "curves")):
@@ -86,6 +96,8 @@ class Handles:
             start, end = (_polyline(curve.get(key), f"curves[{i}].{key}") for key in ("from", "to"))
             for k, source in enumerate(start):
                 _inside(source, width, height, f"curves[{i}].from[{k}]")
+            for k, target in enumerate(end):
+                _near(target, width, height, f"curves[{i}].to[{k}]")
             curves.append((start, end))
         canvas = data.get("canvas", "fit")
         if canvas not in ("fit", "input"):
@@ -93,9 +105,10 @@ class Handles:
         radius = data.get("radius")
         if radius is not None and not (_number(radius) and 0 <= radius <= max(width, height)):
             raise ValueError(f"'radius': {radius!r}; use a number of pixels from 0 to {max(width, height)}")
+        border = data.get("border", "free")
         handles = cls(sources, np.array([b for _, b in pairs], float).reshape(-1, 2), curves,
-                      _border(data.get("border", "free"), width, height), canvas,
-                      None if radius is None else float(radius), notes)
+                      _border(border, width, height), canvas, None if radius is None else float(radius), notes,
+                      border if isinstance(border, str) else json.loads(json.dumps(border)))
         handles.check_enough()
         return handles
 
@@ -118,8 +131,7 @@ class Handles:
         data = {"version": VERSION,
                 "points": [{"from": _plain(a), "to": _plain(b)} for a, b in zip(self.points_from, self.points_to)],
                 "curves": [{"from": [_plain(p) for p in a], "to": [_plain(p) for p in b]} for a, b in self.curves],
-                "border": self.border if isinstance(self.border, str) else
-                {side: [_plain(p) for p in line] for side, line in self.border.items()},
+                "border": self.border_spec,
                 "canvas": self.canvas}
         if self.radius is not None:
             data["radius"] = self.radius
@@ -177,7 +189,10 @@ def _length(line: np.ndarray) -> float:
 
 
 def _number(value) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+    try:
+        return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+    except OverflowError:                      # an integer of hundreds of digits
+        return False
 
 
 def _plain(point) -> list:
@@ -216,14 +231,33 @@ def _inside(point: np.ndarray, width: int, height: int, where: str) -> None:
                          f"(pixel centres 0..{width - 1}, 0..{height - 1})")
 
 
+def _near(point, width: int, height: int, where: str) -> None:
+    """ValueError when a target lies more than :data:`REACH` image sizes from the image."""
+    x, y = point
+    reach = REACH * max(width, height)
+    if not (-reach <= x <= width + reach and -reach <= y <= height + reach):
+        raise ValueError(f"{where} ({x:g}, {y:g}) lies more than {REACH} image sizes away from the image")
+
+
 def _no_duplicates(sources: np.ndarray) -> None:
-    key = np.round(sources, 6)
-    _, first, counts = np.unique(key, axis=0, return_index=True, return_counts=True)
-    if np.any(counts > 1):
-        point = key[first[np.argmax(counts > 1)]]
-        same = np.flatnonzero(np.all(key == point, axis=1))
-        raise ValueError(f"points[{same[0]}] and points[{same[1]}] both start at ({point[0]:g}, {point[1]:g}); "
-                         f"one place can have one handle")
+    """ValueError when two point handles start closer than :data:`MIN_SPACING` pixels."""
+    if len(sources) < 2:
+        return
+    gap = np.hypot(*(sources[:, None, :] - sources[None, :, :]).transpose(2, 0, 1)) if len(sources) <= 2000 else None
+    if gap is None:                            # many handles: exact duplicates only
+        key = np.round(sources, 6)
+        _, index, counts = np.unique(key, axis=0, return_index=True, return_counts=True)
+        if not np.any(counts > 1):
+            return
+        point = key[index[np.argmax(counts > 1)]]
+        a, b = np.flatnonzero(np.all(key == point, axis=1))[:2]
+    else:
+        np.fill_diagonal(gap, np.inf)
+        if gap.min() >= MIN_SPACING:
+            return
+        a, b = sorted(np.unravel_index(np.argmin(gap), gap.shape))
+    raise ValueError(f"points[{a}] and points[{b}] start {np.hypot(*(sources[a] - sources[b])):.3g} px apart "
+                     f"(at least {MIN_SPACING:g} px between handles); one place can have one handle")
 
 
 def _border(value, width: int, height: int):
@@ -241,6 +275,8 @@ def _border(value, width: int, height: int):
             line = _bezier(control)
         else:
             line = _polyline(line, f"border.{side}")
+        for k, point in enumerate(line[:: max(1, len(line) // 64)]):
+            _near(point, width, height, f"border.{side}[{k}]")
         sides[side] = line
     corners = {("top", 0): "left", ("top", -1): "right", ("bottom", 0): "left", ("bottom", -1): "right"}
     for (row, end), column in corners.items():

@@ -265,3 +265,41 @@ def untangle(solve, hessian, x: np.ndarray, triangles: np.ndarray, floor: np.nda
             kappa *= 4.0
             stalled, boosts, reference = 0, boosts + 1, active.size
     return x, max_iterations
+
+
+def border_crossings(source: np.ndarray, target: np.ndarray) -> int:
+    """How many pairs of the grid's border edges cross on the canvas.
+
+    A map that folds no triangle can still lay the image over itself when its border
+    winds across itself (a handle dragged far through the image); it is one-to-one exactly
+    when no triangle folds and this is 0.
+
+    Parameters
+    ----------
+    source, target : (N, 2) ndarray
+        Node positions of a row-major grid (as :meth:`Grid.nodes`) in the source and on the canvas.
+    """
+    nx = int(np.count_nonzero(source[:, 1] == source[0, 1]))
+    ny = len(source) // nx
+    if nx < 2 or ny < 2:
+        return 0
+    index = np.arange(nx * ny).reshape(ny, nx)
+    loop = np.concatenate([index[0, :-1], index[:-1, -1], index[-1, :0:-1], index[:0:-1, 0]])
+    start, end = target[loop], np.roll(target[loop], -1, axis=0)
+    edges, count = len(loop), 0
+
+    def cross(u, v):
+        return u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
+
+    low, high = np.minimum(start, end), np.maximum(start, end)
+    for first in range(0, edges, 64):            # runs of 64 edges against the edges near them
+        last = min(edges, first + 64)
+        box_low, box_high = low[first:last].min(axis=0), high[first:last].max(axis=0)
+        near = np.flatnonzero(np.all((high >= box_low) & (low <= box_high), axis=1))
+        a, b = start[first:last, None], end[first:last, None]
+        c, d = start[near][None], end[near][None]
+        hit = (cross(b - a, c - a) * cross(b - a, d - a) < 0) & (cross(d - c, a - c) * cross(d - c, b - c) < 0)
+        i = np.arange(first, last)[:, None]
+        j = near[None]
+        count += int(np.count_nonzero(hit & (j > i + 1) & ~((i == 0) & (j == edges - 1))))
+    return count

@@ -27,6 +27,9 @@ class Mesh:
     node_component : (N,) int ndarray or None
         Feature component of each node of a feature quad (as in ``record.components``), -1
         for the others.
+    crossings : int
+        Pairs of border edges that cross on the canvas, where counted (the deform
+        command's handles can lay the image over itself without folding a triangle).
     """
 
     source: np.ndarray
@@ -35,6 +38,7 @@ class Mesh:
     canvas: tuple[int, int]
     record: SolveRecord | None = None
     node_component: np.ndarray | None = None
+    crossings: int = 0
 
     @property
     def info(self) -> dict:

@@ -87,9 +87,11 @@ def edge_vectors(grid: Grid, quad_maps: np.ndarray) -> np.ndarray:
 
 
 def warp_edge_vectors(grid: Grid, warped: np.ndarray) -> np.ndarray:
-    """Edge vectors of each quad under the warp itself (Eq. 4): (K, 4, 2)."""
-    corners = warped[grid.quads()]
-    return np.roll(corners, -1, axis=1) - corners
+    """Edge vectors of each quad under the warp itself (Eq. 4): (K, 4, 2), top, right, bottom, left
+    (from corner k to corner k + 1 of tl, tr, br, bl)."""
+    nodes = warped.reshape(grid.ny, grid.nx, 2)
+    tl, tr, br, bl = nodes[:-1, :-1], nodes[:-1, 1:], nodes[1:, 1:], nodes[1:, :-1]
+    return np.stack([tr - tl, br - tr, bl - br, tl - bl], axis=2).reshape(-1, 4, 2)
 
 
 def right_hand_side(grid: Grid, weights: np.ndarray, edges: np.ndarray) -> np.ndarray:

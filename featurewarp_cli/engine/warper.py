@@ -78,6 +78,7 @@ class _GridState:
     stiffness: np.ndarray
     normal: object = None                 # scipy.sparse normal matrix, built when first factored
     systems: dict = field(default_factory=dict)         # factored systems by unknown numbering
+    systems_by_ties: dict = field(default_factory=dict) # the same, by Ties.key() (skips the numbering)
     scale_solvers: dict = field(default_factory=dict)   # components.ScaleSolver by ties
 
 
@@ -198,8 +199,11 @@ class FeatureWarper:
 
         if state.normal is None:
             state.normal = system.normal_matrix(state.grid, state.features.weight)
+        memo = ties.key()
+        if memo in state.systems_by_ties:
+            return state.systems_by_ties[memo]
         unknowns = [system.number_unknowns(fixed | ties.held(axis), ties.unknown_ties(axis))
-                    for axis, fixed in enumerate(_fixed(state, ties))]
+                    for axis, fixed in enumerate(ties.border_fixed(state.fixed_x, state.fixed_y))]
         key = b"".join(u.astype(np.int32).tobytes() for u in unknowns)
         if key not in state.systems:
             stages.enter("factor")
@@ -207,12 +211,13 @@ class FeatureWarper:
             state.systems[key] = AxisSystems(state.normal, *unknowns)
             self.factorizations += state.systems[key].factorizations
             self.timings["factor"] = self.timings.get("factor", 0.0) + time.perf_counter() - t0
+        state.systems_by_ties[memo] = state.systems[key]
         return state.systems[key]
 
     def _offsets(self, state: _GridState, ties: components.Ties, ab: np.ndarray, warped: np.ndarray):
         """q: fixed coordinates at W, tied nodes at their component's similarity."""
         offset = np.zeros_like(warped)
-        fixed_x, fixed_y = _fixed(state, ties)
+        fixed_x, fixed_y = ties.border_fixed(state.fixed_x, state.fixed_y)
         offset[fixed_x, 0] = warped[fixed_x, 0]
         offset[fixed_y, 1] = warped[fixed_y, 1]
         placed = components.placement(ties, state.nodes, warped, ab)
@@ -333,11 +338,11 @@ class FeatureWarper:
             loose = components.Ties(**{**ties.__dict__, "tied": ties.tied & ~np.isin(np.arange(ties.tied.size),
                                                                                       released)})
             _, new_rhs, new_offset = constants(ab, loose, new_edges)
-            return self._systems(state, loose), new_rhs, new_offset, _window_ties(loose)
+            return self._systems(state, loose), new_rhs, new_offset, loose.window_ties()
 
         problem = guard.Problem(grid, features, state.triangles, warped, state.normal, state.stiffness,
-                                _window_fixed(state, ties), _window_ties(ties), systems, rhs, offset, edges,
-                                warp_edges, rebuild, self.timings)
+                                ties.window_fixed(state.fixed_x, state.fixed_y), ties.window_ties(), systems,
+                                rhs, offset, edges, warp_edges, rebuild, self.timings)
         counted = sum(self.timings.get(k, 0.0) for k in ("solve", "factor", "rhs"))
         stages.enter("guard")
         t0 = time.perf_counter()
@@ -440,25 +445,6 @@ def _smallest_scale(jac: np.ndarray, features, prior: np.ndarray) -> np.ndarray:
     scale over it (the paper's lambda), at which a feature fits wherever W fits it: (C, 1)."""
     size = np.maximum(np.hypot(prior[:, 0], prior[:, 1]), 1e-12)
     return (np.minimum(targets.paper_scales(jac, features), size) / size)[:, None]
-
-
-def _window_ties(ties: components.Ties) -> np.ndarray:
-    """Component whose shared translation a node takes in both axes, or -1 (for window passes)."""
-    x, y = ties.unknown_ties(0), ties.unknown_ties(1)
-    return np.where(x == y, x, -1)
-
-
-def _fixed(state: _GridState, ties: components.Ties) -> tuple[np.ndarray, np.ndarray]:
-    """The border conditions in force: the grid's, less those of unpinned components' nodes."""
-    let_go = ties.let_go()
-    return state.fixed_x & ~let_go, state.fixed_y & ~let_go
-
-
-def _window_fixed(state: _GridState, ties: components.Ties) -> np.ndarray:
-    """Nodes a window pass may not move: held in either axis, or tied in one axis only."""
-    x, y = ties.unknown_ties(0), ties.unknown_ties(1)
-    fixed_x, fixed_y = _fixed(state, ties)
-    return fixed_x | fixed_y | ties.held(0) | ties.held(1) | (x != y)
 
 
 def warp(image: np.ndarray, mask: np.ndarray | None, preset: str, *, mode: str = MODE,

@@ -50,8 +50,6 @@ function setupGL() {
   gl.bindBuffer(gl.ARRAY_BUFFER, buffers.uv); gl.bufferData(gl.ARRAY_BUFFER, app.uv, gl.STATIC_DRAW);
   gl.bindBuffer(gl.ELEMENT_ARRAY_BUFFER, buffers.tris);
   gl.bufferData(gl.ELEMENT_ARRAY_BUFFER, app.tris, gl.STATIC_DRAW);
-  gl.bindBuffer(gl.ELEMENT_ARRAY_BUFFER, buffers.edges);
-  gl.bufferData(gl.ELEMENT_ARRAY_BUFFER, app.edges, gl.STATIC_DRAW);
 }
 
 function texture(unit, img) {
@@ -116,11 +114,24 @@ function draw() {
   gl.bindBuffer(gl.ELEMENT_ARRAY_BUFFER, buffers.tris);
   gl.drawElements(gl.TRIANGLES, app.tris.length, gl.UNSIGNED_INT, 0);
   if ($("grid").checked) {
+    const edges = gridLines();
     gl.uniform4f(line, 0.1, 0.9, 1.0, 0.6);
     gl.bindBuffer(gl.ELEMENT_ARRAY_BUFFER, buffers.edges);
-    gl.drawElements(gl.LINES, app.edges.length, gl.UNSIGNED_INT, 0);
+    gl.bufferData(gl.ELEMENT_ARRAY_BUFFER, edges, gl.DYNAMIC_DRAW);
+    gl.drawElements(gl.LINES, edges.length, gl.UNSIGNED_INT, 0);
   }
   drawOverlay(dpr);
+}
+
+function gridLines() {      // rows and columns of the grid, every k-th so lines stay >= 8 px apart on screen
+  const cell = app.info.width / (app.nx - 1) * app.view.scale, k = Math.max(1, Math.ceil(8 / cell));
+  if (app.edges && app.edges.step === k) return app.edges;
+  const every = (n) => { const at = []; for (let i = 0; i < n; i += k) at.push(i); if (at[at.length - 1] !== n - 1) at.push(n - 1); return at; };
+  const lines = [];
+  for (const j of every(app.ny)) for (let i = 0; i + 1 < app.nx; i++) lines.push(nodeAt(i, j), nodeAt(i + 1, j));
+  for (const i of every(app.nx)) for (let j = 0; j + 1 < app.ny; j++) lines.push(nodeAt(i, j), nodeAt(i, j + 1));
+  app.edges = new Uint32Array(lines); app.edges.step = k;
+  return app.edges;
 }
 
 function bindAttribute(name, buffer) {
@@ -144,6 +155,13 @@ function drawOverlay(dpr) {
     ctx.strokeStyle = sel && sel.kind === "curve" && sel.index === i ? "#ffd54f" : "#4fc3f7"; ctx.lineWidth = 3;
     ctx.beginPath(); c.to.forEach((p, k) => { const [x, y] = toScreen(p); k ? ctx.lineTo(x, y) : ctx.moveTo(x, y); });
     ctx.stroke();
+  });
+  const ends = (app.status && app.status.ends) || [];
+  app.handles.points.forEach((p, i) => {       // where a handle ended, if a feature or the border held it
+    if (!ends[i] || Math.hypot(ends[i][0] - p.to[0], ends[i][1] - p.to[1]) < 2) return;
+    const [x, y] = toScreen(p.to), [ex, ey] = toScreen(ends[i]);
+    ctx.strokeStyle = "#ff5252"; ctx.lineWidth = 2; ctx.setLineDash([4, 3]);
+    ctx.beginPath(); ctx.moveTo(ex, ey); ctx.lineTo(x, y); ctx.stroke(); ctx.setLineDash([]);
   });
   app.handles.points.forEach((p, i) => {
     const [x, y] = toScreen(p.to), pin = p.from[0] === p.to[0] && p.from[1] === p.to[1];
@@ -304,7 +322,7 @@ function requestSolve() {
 
 async function solveOnce() {
   if (held() < 2) {
-    app.positions = identity();
+    app.positions = identity(); app.status = null;
     setStatus(app.handles.points.length ? "add a second handle (a pin counts) to deform" : "click to add a handle");
     app.solves++; return draw();
   }
@@ -361,7 +379,8 @@ $("export").addEventListener("click", async () => {
   try {
     const data = await post("/export");
     app.exported = data;
-    setStatus(`exported ${data.exported} in ${data.seconds} s` + (data.warnings.length ? " · " + data.warnings[0] : ""));
+    setStatus(`exported ${data.exported} in ${data.seconds} s (the same bytes as: ${data.command})` +
+              (data.warnings.length ? " · " + data.warnings[0] : ""));
   } catch (err) { setStatus(err.message, true); }
 });
 
@@ -393,16 +412,15 @@ async function start() {
   app.nx = head[2]; app.ny = head[3];
   app.uv = new Float32Array(grid, 16, 2 * nodes);
   app.tris = new Uint32Array(grid, 16 + 8 * nodes, 3 * triangles);
-  app.edges = new Uint32Array(6 * triangles);
-  for (let t = 0; t < triangles; t++) {
-    const a = app.tris[3 * t], b = app.tris[3 * t + 1], c = app.tris[3 * t + 2];
-    app.edges.set([a, b, b, c, c, a], 6 * t);
-  }
   app.handles = Object.assign({ version: 1, points: [], curves: [], border: "free", canvas: "fit" }, info.handles);
   if (typeof app.handles.border === "object") {
     const b = app.handles.border;
     if (b.top && b.right && b.bottom && b.left && [b.top, b.right, b.bottom, b.left].every((s) => s.length === 3))
       app.markers = [b.top[0], b.top[1], b.top[2], b.right[1], b.right[2], b.bottom[1], b.bottom[0], b.left[1]];
+  }
+  if (!info.export_to) {
+    $("export").disabled = true;
+    $("export").title = "start the editor with -o OUT to export";
   }
   $("mode").value = info.mode === "rigid" ? "rigid" : "similarity";
   $("aware").checked = info.mode !== "plain";
