@@ -313,3 +313,16 @@ def test_bezier_border_survives_a_save():
     data = {"version": 1, "border": {"top": {"bezier": [[-0.5, 10], [100, -20], [300, -20], [W - 0.5, 10]]}},
             "points": [{"from": [250, 200], "to": [250, 210]}], "curves": [], "canvas": "fit"}
     assert Handles.from_dict(data, W, H).as_dict()["border"] == data["border"]
+
+
+def test_handles_from_stdin(tmp_path):
+    from test_cli import command
+
+    image, mask = files(tmp_path)
+    w, h = SIZE
+    data = json.dumps({"version": 1, "points": [{"from": [2, 2], "to": [2, 2]}, {"from": [w - 3, h - 3],
+                                                                                  "to": [w - 1, h]}]}).encode()
+    run = command("deform", image, tmp_path / "o.png", "-m", mask, "--handles", "-", input=data)
+    assert run.returncode == 0, run.stderr
+    both = command("deform", "-", tmp_path / "p.png", "--handles", "-", input=data)
+    assert both.returncode == 2 and b"stdin" in both.stderr

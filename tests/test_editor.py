@@ -226,3 +226,47 @@ def test_editor_curve_and_border_outline(editor, browser):
     assert abs(border["right"][2][0] - 560) < 3 and abs(border["right"][2][1] - 540) < 3
     status = browser.find_element(By.ID, "status").text
     assert "folds 0" in status, status
+
+
+def post(url, route, body: bytes, headers=None):
+    """POST ``body`` to ``route`` of the editor at ``url``; (status, parsed JSON or None)."""
+    base, query = url.split("?")
+    request = urllib.request.Request(base.rstrip("/") + route + "?" + query, data=body, method="POST",
+                                     headers={"Content-Type": "application/json", **(headers or {})})
+    try:
+        with urllib.request.urlopen(request) as response:
+            return response.status, response.read()
+    except urllib.error.HTTPError as err:
+        return err.code, json.loads(err.read() or b"null")
+
+
+@pytest.mark.parametrize("route, body, message", [
+    ("/solve", b"[" * 100000 + b"]" * 100000, "nested too deeply"),
+    ("/solve", b'{"handles": {"version": 1, "points": [{"from": [1, 2], "to": [1' + b"0" * 400 + b', 1]}]}}', "finite"),
+    ("/solve", b'{"handles": {"version": 1, "points": []}}', "at least two handles"),
+    ("/solve", b'{"handles": 5}', "JSON object"),
+    ("/save", b'{"handles": {"version": 2}}', "version"),
+    ("/solve", b"not json", "Expecting value"),
+])
+def test_bad_requests_get_a_json_error(editor, route, body, message):
+    process, url = editor
+    code, answer = post(url, route, body)
+    assert code == 400 and message in answer["error"]
+    assert process.poll() is None                      # still serving
+
+
+def test_bad_request_headers(editor):
+    _, url = editor
+    code, answer = post(url, "/solve", b"{}", {"Content-Type": "text/plain"})
+    assert code == 400
+    code, answer = post(url, "/solve", b"{}", {"Content-Length": "abc"})
+    assert code == 400
+
+
+def test_edit_refuses_to_overwrite_its_inputs(tmp_path):
+    from test_cli import command
+
+    for args in (["-o", IMAGE], ["-o", str(tmp_path / "x.png"), "--handles", str(tmp_path / "x.png")],
+                 ["--handles", MASK], ["--handles", str(tmp_path / "missing" / "h.json")]):
+        run = command("edit", IMAGE, "-m", MASK, "--no-browser", *args)
+        assert run.returncode == 2 and len(run.stderr.splitlines()) == 1, run.stderr
