@@ -291,18 +291,32 @@ def _slim_energy(x, triangles, grads, areas, penalty_rows, targets) -> float:
     return float(np.sum(areas * (frob + frob / (det * det))) + np.sum(residual * residual))
 
 
+def _slim_weights(jac: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """SLIM's per-triangle weight W = U diag(w(sigma)) U^T and target W R for Jacobians ``jac``
+    (M, 2, 2) with a positive determinant, from the closed-form 2x2 SVD J = U(phi) S U(theta)
+    (the closest rotation R is the rotation by phi + theta)."""
+    e = (jac[:, 0, 0] + jac[:, 1, 1]) / 2
+    f = (jac[:, 0, 0] - jac[:, 1, 1]) / 2
+    g = (jac[:, 1, 0] + jac[:, 0, 1]) / 2
+    h = (jac[:, 1, 0] - jac[:, 0, 1]) / 2
+    q, r = np.hypot(e, h), np.hypot(f, g)
+    sigma = np.maximum(np.stack([q + r, q - r], axis=1), 1e-8)
+    turn, spread = np.arctan2(h, e), np.arctan2(g, f)
+    phi = (turn + spread) / 2
+    w = np.sqrt((sigma + 1) * (sigma * sigma + 1) / sigma ** 3)        # symmetric Dirichlet's reweighting
+    c, s = np.cos(phi), np.sin(phi)
+    weight = np.empty_like(jac)
+    weight[:, 0, 0] = w[:, 0] * c * c + w[:, 1] * s * s
+    weight[:, 1, 1] = w[:, 0] * s * s + w[:, 1] * c * c
+    weight[:, 0, 1] = weight[:, 1, 0] = (w[:, 0] - w[:, 1]) * c * s
+    rc, rs = np.cos(turn), np.sin(turn)
+    rotation = np.stack([np.stack([rc, -rs], -1), np.stack([rs, rc], -1)], -2)
+    return weight, weight @ rotation
+
+
 def _slim_step(x, triangles, grads, areas, penalty_rows, targets) -> np.ndarray:
     """The reweighted least-squares proposal of one SLIM iteration."""
-    jac = _jacobians(x, triangles, grads)
-    u, sigma, vt = np.linalg.svd(jac)
-    sigma = np.maximum(sigma, 1e-8)
-    rotation = u @ vt
-    flip = np.linalg.det(rotation) < 0
-    u[flip, :, 1] *= -1
-    rotation = u @ vt
-    w = np.sqrt((sigma + 1) * (sigma * sigma + 1) / sigma ** 3)        # symmetric Dirichlet's reweighting
-    weight = np.einsum("mik,mk,mjk->mij", u, w, u)
-    target = weight @ rotation
+    weight, target = _slim_weights(_jacobians(x, triangles, grads))
     m, n = len(triangles), len(x)
     # rows (triangle, column c, output i): sum_k g_k[c] (W[i,0] x_k + W[i,1] y_k) = (W R)[i, c]
     root = np.sqrt(areas)
