@@ -270,3 +270,26 @@ def test_edit_refuses_to_overwrite_its_inputs(tmp_path):
                  ["--handles", MASK], ["--handles", str(tmp_path / "missing" / "h.json")]):
         run = command("edit", IMAGE, "-m", MASK, "--no-browser", *args)
         assert run.returncode == 2 and len(run.stderr.splitlines()) == 1, run.stderr
+
+
+def test_export_saves_the_handles_and_prints_the_command_that_reproduces_it(tmp_path):
+    import shlex
+
+    process, url = start_editor(tmp_path, "--cell", "8", "--background", "black")
+    try:
+        handles = {"version": 1, "points": [{"from": [30, 30], "to": [30, 30]}, {"from": [480, 480], "to": [500, 490]}]}
+        code, answer = post(url, "/export", json.dumps({"handles": handles, "mode": "rigid"}).encode())
+        assert code == 200, answer
+        answer = json.loads(answer)
+        assert json.loads((tmp_path / "h.json").read_text())["points"][1]["to"] == [500.0, 490.0]
+        command = shlex.split(answer["command"])
+        assert command[:2] == ["featurewarp", "deform"] and "--cell" in command and "--background" in command
+        assert "--mode" in command and "rigid" in command
+        again = tmp_path / "again.png"
+        command[3] = str(again)
+        run = subprocess.run([sys.executable, "-m", "featurewarp_cli", *command[1:]], capture_output=True, timeout=120)
+        assert run.returncode == 0, run.stderr
+        assert again.read_bytes() == (tmp_path / "exported.png").read_bytes()
+    finally:
+        process.send_signal(signal.SIGINT)
+        process.wait(timeout=10)

@@ -105,7 +105,7 @@ class EditorSession:
 
         mode = body.get("mode", self.settings.mode)
         if mode not in ("similarity", "rigid", "plain"):
-            raise ValueError(f"mode {mode!r}")
+            raise ValueError(f"mode {mode!r}: use similarity, rigid or plain")
         handles = Handles.from_dict(body.get("handles"), self.width, self.height)
         with self.lock:
             t0 = time.perf_counter()
@@ -134,12 +134,15 @@ class EditorSession:
         data = self._checked(body)
         if not self.output_path:
             raise ValueError("start the editor with --output OUT to export")
+        if self.handles_path:                   # the printed command must find these very handles
+            self.save(body)
         mode = body.get("mode", self.settings.mode)
         settings = replace(self.settings, mode=mode, warp_factory=handles_factory(data))
         summary = warp_file(settings, self.input, self.output_path, self.mask,
                             also_read=((self.handles_path, "--handles"),) if self.handles_path else ())
         command = ["featurewarp", "deform", self.input, self.output_path] + (["-m", self.mask] if self.mask else [])
         command += ["--handles", self.handles_path or "H.json"] + (["--mode", mode] if mode != "similarity" else [])
+        command += options_given(self.settings)
         return {"exported": self.output_path, "seconds": round(summary["seconds"], 2),
                 "warnings": summary["warnings"][:3], "command": " ".join(shlex.quote(c) for c in command)}
 
@@ -150,6 +153,21 @@ class EditorSession:
         if notes is not None:
             notes.extend(handles.notes)
         return handles.as_dict()
+
+
+def options_given(settings: Settings) -> list[str]:
+    """The command-line options of ``settings`` that differ from deform's defaults (for the
+    command Export prints)."""
+    default = Settings(settings.preset)
+    flags = {"cell": "--cell", "feature_weight": "--feature-weight", "decay": "--decay",
+             "scale_prior": "--scale-prior", "background": "--background", "interp": "--interp",
+             "fmt": "--format", "quality": "--quality", "max_pixels": "--max-pixels"}
+    given = []
+    for name, flag in flags.items():
+        value = getattr(settings, name)
+        if value != getattr(default, name):
+            given += [flag, f"{value:g}" if isinstance(value, float) else str(value)]
+    return given + (["--strip"] if settings.strip else []) + (["--allow-folds"] if settings.allow_folds else [])
 
 
 def _texture(image: np.ndarray) -> np.ndarray:
@@ -193,6 +211,9 @@ class EditorServer(ThreadingHTTPServer):
         self.page = page()
         super().__init__(("127.0.0.1", port), EditorHandler)
         self.hosts = {f"127.0.0.1:{self.server_port}", f"localhost:{self.server_port}"}
+
+    def handle_error(self, request, client_address):
+        """A client that hangs up (a reload, a closed tab) is not news: no traceback on stderr."""
 
     @property
     def url(self) -> str:
@@ -256,7 +277,8 @@ class EditorHandler(BaseHTTPRequestHandler):
         if (not self.headers.get("Content-Type", "").startswith("application/json") or not length.isdigit()
                 or not 0 < int(length) <= MAX_BODY):
             self.close_connection = True
-            return self._json(400, {"error": f"a JSON body of at most {MAX_BODY} bytes is expected"})
+            return self._json(400, {"error": "expected a JSON body (Content-Type: application/json, "
+                                             f"Content-Length 1 to {MAX_BODY})"})
         try:
             body = json.loads(self.rfile.read(int(length)))
             if not isinstance(body, dict):
@@ -264,6 +286,8 @@ class EditorHandler(BaseHTTPRequestHandler):
             result = calls[route](body)
         except RecursionError:
             return self._json(400, {"error": "the JSON body is nested too deeply"})
+        except json.JSONDecodeError as err:
+            return self._json(400, {"error": f"the body is not valid JSON ({err})"})
         except (ValueError, TypeError, OverflowError, WarpError) as err:
             return self._json(400, {"error": str(err)})
         except OSError as err:

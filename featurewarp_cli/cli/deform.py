@@ -88,11 +88,12 @@ def merged_handles(data, moves, pins, canvas: str | None):
 def named_flags(make, merged: dict, moves, pins):
     """``make`` whose errors about the points that --move and --pin added name those flags."""
     first = len(merged.get("points", [])) - len(moves) - len(pins)
-    flags = [f"--move {a[0]:g},{a[1]:g}:{b[0]:g},{b[1]:g}" for a, b in moves] + [f"--pin {p[0]:g},{p[1]:g}" for p in pins]
+    flags = [f"--move {a[0]:g},{a[1]:g}:{b[0]:g},{b[1]:g} ({{}})" for a, b in moves] + [
+        f"--pin {p[0]:g},{p[1]:g}" for p in pins]
 
     def name(match):
         k = int(match.group(1))
-        return match.group(0) if k < first else f"{flags[k - first]} ({match.group(2) or 'its point'})"
+        return match.group(0) if k < first else flags[k - first].format(match.group(2) or "from")
 
     def named(width: int, height: int, mask=None):
         try:
@@ -106,13 +107,15 @@ def named_flags(make, merged: dict, moves, pins):
 def deform_command() -> click.Command:
     """``featurewarp deform INPUT OUTPUT --handles H.json``."""
     params = input_output_mask(MASK_HELP) + [
-        click.Option(["--handles"], type=click.Path(dir_okay=False), metavar="H.json",
+        click.Option(["--handles"], type=click.Path(dir_okay=False, allow_dash=True), metavar="H.json",
                      help="Handles file (JSON; see README, 'The handles file'): points dragged "
-                          "from -> to, pins, curves, the border, the canvas."),
+                          "from -> to, pins, curves, the border, the canvas. '-' reads stdin."),
         click.Option(["--move"], type=PointPair(move=True), multiple=True, metavar="X,Y:X2,Y2",
-                     help="A handle dragged from X,Y to X2,Y2 (repeatable; added to --handles)."),
+                     help="A handle dragged from X,Y to X2,Y2, in pixels (repeatable; added to "
+                          "--handles)."),
         click.Option(["--pin"], type=PointPair(move=False), multiple=True, metavar="X,Y",
-                     help="A point that stays where it is (repeatable)."),
+                     help="A point that stays where it is, in pixels (repeatable). At least two "
+                          "places must be held in all: a pin counts."),
         click.Option(["--canvas"], type=click.Choice(["fit", "input"]),
                      help="fit: the deformed image's bounding box (default); input: the input's "
                           "size and coordinates. Overrides the file's."),

@@ -28,11 +28,16 @@ def check_files(settings, input: str, mask: str | None, handles: str | None, out
     if same:
         a, b = same[0]
         raise WarpError(f"{a} {named[a]} is also {b}: the editor would overwrite it", usage=True)
-    if output:
-        check_outputs(settings, output, (handles, "--handles"))
-        check_distinct([(output, "--output"), (handles, "--handles")], [(input, "INPUT"), (mask, "--mask")])
-    elif handles:
-        check_outputs(settings, "unused.png", (handles, "--handles"))
+    try:
+        if output:
+            check_outputs(settings, output, (handles, "--handles"))
+            check_distinct([(output, "-o"), (handles, "--handles")], [(input, "INPUT"), (mask, "--mask")])
+        elif handles:
+            check_outputs(settings, "unused.png", (handles, "--handles"))
+    except WarpError as err:
+        if err.param == "OUTPUT":
+            err.param = "-o"
+        raise
 
 
 def edit_command() -> click.Command:
@@ -58,11 +63,11 @@ def edit_command() -> click.Command:
         if input == "-" or handles == "-":
             raise click.UsageError("the editor reads INPUT again on Export and writes --handles on Save: "
                                    "give files, not '-'")
-        data = load_handles(handles) if handles and os.path.exists(handles) else None
         kwargs.update(formulation="exact", boundary=None, strict=False)
         settings, quiet, _ = settings_from(Deform, kwargs)
         try:
             check_files(settings, input, mask, handles, output)
+            data = load_handles(handles) if handles and os.path.exists(handles) else None
             session = EditorSession(settings, input, mask, handles, output, data)
         except WarpError as err:
             raise click_error(err) from err
@@ -71,7 +76,8 @@ def edit_command() -> click.Command:
         try:
             server = EditorServer(session, port)
         except OSError as err:
-            raise click.ClickException(f"cannot listen on 127.0.0.1:{port}: {err.strerror or err}") from None
+            raise click.BadParameter(f"cannot listen on 127.0.0.1:{port}: {err.strerror or err} "
+                                     f"(--port 0 takes a free one)", param_hint="'--port'") from None
         signal.signal(signal.SIGINT, signal.default_int_handler)     # Ctrl-C stops it cleanly, exit 0
         try:
             click.echo(server.url)

@@ -115,9 +115,10 @@ def engine_options() -> list[click.Option]:
                           "curves and oblique rays)."),
         param_option(defaults.SCALE_PRIOR_PARAM),
         click.Option(["--strict"], is_flag=True,
-                     help="Exit 1 and write nothing when a feature could not be kept, features "
-                          "were relaxed to avoid fold-overs, or the output would equal the input "
-                          "(each is otherwise a warning)."),
+                     help="Exit 1 and write nothing when the run warns: a feature could not be "
+                          "kept, features were relaxed to avoid fold-overs, the mask keeps the "
+                          "output from following a warp that moves pixels, a handle could not "
+                          "follow (deform) (each is otherwise a warning)."),
         click.Option(["--background"], metavar="COLOR",
                      help="Fill where no source pixel lands: #rrggbb, a colour name, or transparent. "
                           "Default: transparent for PNG, WebP and TIFF output, white otherwise "

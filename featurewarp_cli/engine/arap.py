@@ -218,6 +218,11 @@ class RigidDeformer:
                 start = self.nodes + (centre_t - centre_s)
         return self._injective(start, np.hypot(a, b) or 1.0, samples, steps or INJECTIVE_STEPS)
 
+    def centres(self, nodes: np.ndarray) -> np.ndarray:
+        """Where the handles' centres are under the node positions ``nodes``: (K, 2)."""
+        centre = self.embedding[:: self.offsets.shape[1]]
+        return np.asarray(centre @ nodes)
+
     def _rigid_step(self, positions: np.ndarray, scale: float, pulled: np.ndarray) -> np.ndarray:
         """Step 2: the triangles rotated as in ``positions``, scaled by ``scale``, joined."""
         angle = self._rotations(positions)

@@ -55,7 +55,7 @@ MIN_CELL = 1.0
 CELL_PARAM = Param(
     "cell", float, None,
     "Grid cell size in pixels. Default: automatic: 4 px, or sqrt(w*h/250000) on big images; "
-    "then divided by sqrt(2) until the grid is within 0.5 px of the analytic warp and the warp "
+    "then divided by sqrt(2) until the grid is within 0.5 px of the warp and the warp "
     "folds none of its triangles (sub-pixel allowed, at most 4 million nodes).",
     min=MIN_CELL, metavar="PX")
 FEATURE_WEIGHT_PARAM = Param(

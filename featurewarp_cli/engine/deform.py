@@ -95,11 +95,13 @@ class HandleWarp:
     def review(self, mesh: Mesh, quick: bool = False) -> list[str]:
         """Warnings on the solved ``mesh`` of these handles (also kept in ``values`` for the
         report): how far each point handle ended from its target, a border that crosses
-        itself (``mesh.crossings``; ``quick``: W's border, on the coarse grid), an image shrunk
-        away or moved off the canvas."""
+        itself (``mesh.crossings``), an image shrunk away or moved off the canvas; ``quick``
+        (the editor's live updates) notes a fold fallback cut short."""
         warnings = list(self.notes)
-        mesh.crossings = (border_crossings(self.grid.nodes(), self.nodes) if quick else
-                          border_crossings(mesh.source, mesh.target))
+        if quick and self.values.get("fallback_capped"):
+            warnings.append("preview: the unfolding was cut short to stay live; Export finishes it "
+                            "(and may differ)")
+        mesh.crossings = border_crossings(mesh.source, mesh.target)
         if mesh.crossings:
             warnings.append(f"the handles lay the image over itself (its border crosses itself "
                             f"{mesh.crossings} times)")
@@ -190,9 +192,13 @@ class RigidMap:
                   "canvas": handles.canvas, "radius": radius}
         warp = HandleWarp(self.width, self.height, self.grid, nodes, handles.canvas, values, self._embeddings)
         warp.notes, warp.handles = list(handles.notes), handles
-        if self.rigid.injective_steps:
-            warp.notes.append(f"the handles ask for a fold; they are held as far as the image can follow "
-                              f"without one ({self.rigid.injective_steps} injective steps)")
+        steps = self.rigid.injective_steps
+        if steps:
+            held = np.hypot(*(self.rigid.centres(nodes) - targets).T).max()
+            warp.values["fallback_capped"] = bool(self.injective_steps and steps >= self.injective_steps)
+            if held > max(HANDLE_SLACK_PX, HANDLE_SLACK * math.hypot(self.width, self.height)):
+                warp.notes.append(f"the handles ask for a fold; they are held as far as the image can follow "
+                                  f"without one (up to {held:.0f} px from their targets)")
         return warp
 
 
