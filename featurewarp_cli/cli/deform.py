@@ -73,8 +73,8 @@ def load_handles(path: str | None) -> dict | None:
 
 def merged_handles(data, moves, pins, canvas: str | None):
     """The handles file's content with ``--move`` and ``--pin`` added and ``--canvas`` applied."""
-    merged = dict(data) if isinstance(data, dict) else ({"version": 1} if data is None else data)
-    if isinstance(merged, dict) and (moves or pins or canvas):
+    merged = {"version": 1} if data is None else dict(data)      # load_handles gives a dict or None
+    if moves or pins or canvas:
         points = merged.get("points", [])
         if not isinstance(points, list):
             raise click.BadParameter("'points' must be a list", param_hint="'--handles'")

@@ -31,7 +31,7 @@ import numpy as np
 
 from .arap import RigidDeformer, embed, similarity_fit
 from .defaults import MODE
-from .grid import Grid, signed_areas
+from .grid import Grid, grid_shape, signed_areas
 from .injectivity import border_crossings
 from .handles import Handles, default_radius
 from .mesh import Mesh
@@ -46,6 +46,11 @@ SHRUNK = 0.01
 #: Nodes of the grid the rigid map is solved on (about; it is coarser than the feature grid:
 #: the map is smooth away from the handles, and its solves must take milliseconds).
 RIGID_NODES = 4096
+
+
+def handle_slack(width: int, height: int) -> float:
+    """How far (px) a handle may end from its target before a warning says so."""
+    return max(HANDLE_SLACK_PX, HANDLE_SLACK * math.hypot(width, height))
 
 
 def rigid_grid(width: int, height: int) -> Grid:
@@ -91,6 +96,7 @@ class HandleWarp:
         self._embeddings = {} if embeddings is None else embeddings
         self.notes = []
         self.handles = None
+        self.capped = False                 # the injective fallback stopped at its cap
 
     def review(self, mesh: Mesh, quick: bool = False) -> list[str]:
         """Warnings on the solved ``mesh`` of these handles (also kept in ``values`` for the
@@ -98,7 +104,7 @@ class HandleWarp:
         itself (``mesh.crossings``), an image shrunk away or moved off the canvas; ``quick``
         (the editor's live updates) notes a fold fallback cut short."""
         warnings = list(self.notes)
-        if quick and self.values.get("fallback_capped"):
+        if quick and self.capped:
             warnings.append("preview: the unfolding was cut short to stay live; Export finishes it "
                             "(and may differ)")
         mesh.crossings = border_crossings(mesh.source, mesh.target)
@@ -110,8 +116,7 @@ class HandleWarp:
             error = np.hypot(*(ends - self.handles.points_to).T)
             self.values["handle_error_px"] = {"max": round(float(error.max()), 3),
                                               "mean": round(float(error.mean()), 3)}
-            limit = max(HANDLE_SLACK_PX, HANDLE_SLACK * math.hypot(self.width, self.height))
-            for k in np.flatnonzero(error > limit)[:3]:
+            for k in np.flatnonzero(error > handle_slack(self.width, self.height))[:3]:
                 (x, y), (tx, ty) = self.handles.points_from[k], self.handles.points_to[k]
                 warnings.append(f"handle {k} ({x:g},{y:g} -> {tx:g},{ty:g}) ends {error[k]:.0f} px from its "
                                 f"target: a feature that keeps its shape, or the border, holds it")
@@ -128,8 +133,8 @@ class HandleWarp:
         """Where the point handles ended in ``mesh``, in input pixel coordinates (None: no handles)."""
         if self.handles is None or not len(self.handles.points_from):
             return None
-        nx = int(np.count_nonzero(mesh.source[:, 1] == mesh.source[0, 1]))
-        grid = Grid(self.width, self.height, 0, nx, len(mesh.source) // nx)
+        nx, ny = grid_shape(mesh.source)
+        grid = Grid(self.width, self.height, 0, nx, ny)
         return embed(grid, self.handles.points_from) @ mesh.target + np.asarray(self.offset)
 
     def __call__(self, points) -> np.ndarray:
@@ -195,8 +200,8 @@ class RigidMap:
         steps = self.rigid.injective_steps
         if steps:
             held = np.hypot(*(self.rigid.centres(nodes) - targets).T).max()
-            warp.values["fallback_capped"] = bool(self.injective_steps and steps >= self.injective_steps)
-            if held > max(HANDLE_SLACK_PX, HANDLE_SLACK * math.hypot(self.width, self.height)):
+            warp.capped = bool(self.injective_steps and steps >= self.injective_steps)
+            if held > handle_slack(self.width, self.height):
                 warp.notes.append(f"the handles ask for a fold; they are held as far as the image can follow "
                                   f"without one (up to {held:.0f} px from their targets)")
         return warp

@@ -84,6 +84,12 @@ class Grid:
         return rows, cols
 
 
+def grid_shape(nodes: np.ndarray) -> tuple[int, int]:
+    """(nx, ny) of a grid from its nodes' source positions, row by row as :meth:`Grid.nodes`."""
+    nx = int(np.count_nonzero(nodes[:, 1] == nodes[0, 1]))
+    return nx, len(nodes) // nx
+
+
 def signed_areas(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     """Signed area of each triangle (positive: same orientation as the source grid).
 

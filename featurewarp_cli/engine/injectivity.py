@@ -11,7 +11,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from .grid import Grid, signed_areas
+from .grid import Grid, grid_shape, signed_areas
 
 
 def max_step(start: np.ndarray, end: np.ndarray, triangles: np.ndarray) -> float:
@@ -279,8 +279,7 @@ def border_crossings(source: np.ndarray, target: np.ndarray) -> int:
     source, target : (N, 2) ndarray
         Node positions of a row-major grid (as :meth:`Grid.nodes`) in the source and on the canvas.
     """
-    nx = int(np.count_nonzero(source[:, 1] == source[0, 1]))
-    ny = len(source) // nx
+    nx, ny = grid_shape(source)
     if nx < 2 or ny < 2:
         return 0
     index = np.arange(nx * ny).reshape(ny, nx)
