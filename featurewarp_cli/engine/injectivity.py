@@ -136,12 +136,6 @@ PROGRESS_RATIO = 0.9
 #: triangles has not fallen below this fraction of what it was.
 STALL_STEPS = 3
 STALL_RATIO = 0.8
-#: kappa grows at most this many times; once it has, untangle gives up when the fold count
-#: has not fallen below PROGRESS_RATIO of what it was STIFF_STEPS steps before (12 MP swirl
-#: 180, head + helmet mask: a window too small to open its folds stopped at step 60, 2 175
-#: folds left, after 35 steps at the stiffest kappa that opened 7 %; now at step 35).
-MAX_BOOSTS = 8
-STIFF_STEPS = 10
 
 
 def area_gradients(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
@@ -185,6 +179,15 @@ def penalty_stiffness(x: np.ndarray, triangles: np.ndarray, stiffness: np.ndarra
     return stiffness[triangles].mean(axis=1) / np.maximum(2.0 * (grads * grads).sum(axis=(1, 2)), 1e-12)
 
 
+def area_penalty(current: np.ndarray, floor: np.ndarray, kappa: np.ndarray, injective: bool):
+    """(sum_t kappa_t max(0, floor_t - area_t)^2, the deficits) for the areas ``current``;
+    the sum is infinite where a triangle folds and ``injective`` is asked for."""
+    deficit = np.maximum(0.0, floor - current)
+    if injective and current.min() <= 0:
+        return np.inf, deficit
+    return float((kappa * deficit * deficit).sum()), deficit
+
+
 def line_search(phi, below: float, alpha: float) -> float:
     """Halve ``alpha`` until ``phi(alpha) < below``; a result <= 1e-6 means no step was found."""
     while alpha > 1e-6 and not phi(alpha) < below:
@@ -192,33 +195,9 @@ def line_search(phi, below: float, alpha: float) -> float:
     return alpha
 
 
-class _Progress:
-    """Whether :func:`untangle` is stuck: every PROGRESS_EVERY steps the fold count must fall
-    below PROGRESS_RATIO of what it was, and unless ``patient``, so every STIFF_STEPS steps
-    once kappa is at its stiffest."""
-
-    def __init__(self, patient: bool):
-        self.patient = patient
-        self.checkpoint = None
-        self.stiff = None                   # (iteration, folds) since kappa peaked
-
-    def stuck(self, iteration: int, folds: int, boosts: int) -> bool:
-        if iteration % PROGRESS_EVERY == 0:
-            if self.checkpoint is not None and folds > PROGRESS_RATIO * self.checkpoint:
-                return True
-            self.checkpoint = folds
-        if boosts == MAX_BOOSTS and not self.patient:
-            self.stiff = self.stiff or (iteration, folds)
-            if iteration - self.stiff[0] >= STIFF_STEPS:
-                if folds > PROGRESS_RATIO * self.stiff[1]:
-                    return True
-                self.stiff = (iteration, folds)
-        return False
-
-
 def untangle(solve, hessian, x: np.ndarray, triangles: np.ndarray, floor: np.ndarray,
              stiffness: np.ndarray, max_iterations: int = 80, areas=None,
-             settle: bool = True, patient: bool = True) -> tuple[np.ndarray, int]:
+             settle: bool = True) -> tuple[np.ndarray, int]:
     """Open folded or crushed triangles while staying near the least-squares optimum.
 
     Minimises phi(x) = E(x) + sum_t kappa_t max(0, floor_t - area_t(x))^2, where
@@ -228,9 +207,11 @@ def untangle(solve, hessian, x: np.ndarray, triangles: np.ndarray, floor: np.nda
     backtracking line search on phi (starting from twice the last accepted
     step; E along the line is the exact quadratic ``a g.d + a^2/2 d.Hd``), so phi never
     increases. kappa starts as stiff as the quadratic energy at each triangle and grows
-    4-fold (at most MAX_BOOSTS times) when the crushed set stops shrinking. Tied features
-    stay exact. Stops when no triangle is folded and none is below half its floor (without
-    ``settle``: none folded), and gives up when the folds stop falling (:class:`_Progress`).
+    4-fold (at most 8 times) when the crushed set stops shrinking. Tied features stay
+    exact. From a start with no fold, no step may fold a triangle (phi is infinite there,
+    so the line search stops short of the first fold). Stops when no triangle is folded
+    and none is below half its floor (without ``settle``: none folded), and gives up
+    early when the number of folds stops falling.
 
     Parameters
     ----------
@@ -249,11 +230,9 @@ def untangle(solve, hessian, x: np.ndarray, triangles: np.ndarray, floor: np.nda
         Diagonal of the quadratic energy's Hessian per node.
     max_iterations : int
     areas : callable, optional
-        ``areas(x)`` -> signed area per triangle (default: :func:`grid.signed_areas`).
+        ``areas(x)`` -> signed area per triangle (default :func:`grid.signed_areas`).
     settle : bool
         Also lift the triangles crushed below half their floor once none is folded.
-    patient : bool
-        Go on at the stiffest kappa while the folds fall at all (the last resort's way).
 
     Returns
     -------
@@ -264,20 +243,20 @@ def untangle(solve, hessian, x: np.ndarray, triangles: np.ndarray, floor: np.nda
     areas = areas or (lambda points: signed_areas(points, triangles))
     kappa = penalty_stiffness(x, triangles, stiffness)
 
-    def penalty(points):
-        deficit = np.maximum(0.0, floor - areas(points))
-        return float((kappa * deficit * deficit).sum()), deficit
-
-    stalled, boosts, alpha, reference = 0, 0, 0.5, None
+    injective = bool(areas(x).min() > 0)
+    penalty = lambda points: area_penalty(areas(points), floor, kappa, injective)  # noqa: E731
+    stalled, boosts, alpha, checkpoint, reference = 0, 0, 0.5, None, None
     optimum = solve(np.zeros_like(x))
     gradient = hessian(x - optimum)                 # grad E(x) along admissible directions
-    progress = _Progress(patient)
     for iteration in range(max_iterations):
         current = areas(x)
         if current.min() > 0 and (not settle or np.all(current >= 0.5 * floor)):
             return x, iteration
-        if progress.stuck(iteration, int(np.count_nonzero(current <= 0)), boosts):
-            return x, iteration              # not converging: let the caller relax the features
+        if iteration % PROGRESS_EVERY == 0:
+            folds = int(np.count_nonzero(current <= 0))
+            if checkpoint is not None and folds > PROGRESS_RATIO * checkpoint:
+                return x, iteration          # not converging: let the caller relax the features
+            checkpoint = folds
         pen, deficit = penalty(x)
         active = np.flatnonzero(deficit > 0)
         if reference is None or active.size < STALL_RATIO * reference:
@@ -291,7 +270,7 @@ def untangle(solve, hessian, x: np.ndarray, triangles: np.ndarray, floor: np.nda
             x = x + alpha * direction
             gradient += alpha * curvature
         stalled += 1
-        if (stalled >= STALL_STEPS or alpha <= 1e-6) and boosts < MAX_BOOSTS:
+        if (stalled >= STALL_STEPS or alpha <= 1e-6) and boosts < 8:
             kappa *= 4.0
             stalled, boosts, reference = 0, boosts + 1, active.size
     return x, max_iterations
