@@ -110,39 +110,6 @@ def test_subject_that_fills_the_height_grows_instead_of_streaking_the_sky(portra
     assert spread.info["background_stretch"] < piled.info["background_stretch"]
 
 
-def test_subject_grows_past_the_corner_folds_the_guard_opens(portrait, monkeypatch):
-    """20 rows over the head and room at the side, stretch --sy 2: least squares folds a few
-    triangles at the subject's corners long before the room beside it runs out; the spread
-    leaves those to the guard and grows the subject further than a spread that crushes
-    nothing, which is what the warper falls back to when the guard must relax features."""
-    from featurewarp_cli.engine import guard, scale_search
-
-    image, mask = portrait
-    image = cv2.copyMakeBorder(image, 12, 0, 0, 250, cv2.BORDER_REFLECT)
-    mask = np.pad(mask, ((12, 0), (0, 250)))
-    out, bold = warped(image, mask, "stretch", sy=2)
-    monkeypatch.setattr(scale_search, "SPREAD_CRUSHED", 0)
-    _, safe = warped(image, mask, "stretch", sy=2)
-    grown, kept_clear = bold.info["components"][0], safe.info["components"][0]
-    assert grown["kept"] and bold.flips() == 0 and bold.record.guard.flipped_before > 0
-    assert grown["scale"] >= kept_clear["scale"] + 0.2
-    assert bold.info["background_stretch"] < 0.8 * safe.info["background_stretch"]
-    fit = measure(image, out, mask)[0]
-    assert fit.distortion <= 0.03 and abs(fit.scale - grown["scale"]) <= 0.03
-
-    real_guard = guard.guard
-
-    def relaxing_guard(problem, x, record):            # as if the corners could not be opened
-        x = real_guard(problem, x, record)
-        record.release_rounds = record.release_rounds or (1 if record.flipped_before else 0)
-        return x
-
-    monkeypatch.setattr(scale_search, "SPREAD_CRUSHED", 100)
-    monkeypatch.setattr(guard, "guard", relaxing_guard)
-    _, fallen_back = warped(image, mask, "stretch", sy=2)
-    assert abs(fallen_back.info["components"][0]["scale"] - kept_clear["scale"]) <= 1e-6
-
-
 def test_frame_filling_closeup_swirl_warns_that_the_output_is_the_input(closeup):
     """A swirl whose disc the mask fills (its rim pinned) leaves the picture as it was: said so."""
     image, mask = closeup

@@ -179,11 +179,11 @@ def penalty_stiffness(x: np.ndarray, triangles: np.ndarray, stiffness: np.ndarra
     return stiffness[triangles].mean(axis=1) / np.maximum(2.0 * (grads * grads).sum(axis=(1, 2)), 1e-12)
 
 
-def area_penalty(current: np.ndarray, floor: np.ndarray, kappa: np.ndarray, injective: bool):
+def area_penalty(current: np.ndarray, floor: np.ndarray, kappa: np.ndarray, wall):
     """(sum_t kappa_t max(0, floor_t - area_t)^2, the deficits) for the areas ``current``;
-    the sum is infinite where a triangle folds and ``injective`` is asked for."""
+    the sum is infinite where a triangle is below its ``wall`` (an (M,) array, or None)."""
     deficit = np.maximum(0.0, floor - current)
-    if injective and current.min() <= 0:
+    if wall is not None and np.any(current < wall):
         return np.inf, deficit
     return float((kappa * deficit * deficit).sum()), deficit
 
@@ -197,21 +197,18 @@ def line_search(phi, below: float, alpha: float) -> float:
 
 def untangle(solve, hessian, x: np.ndarray, triangles: np.ndarray, floor: np.ndarray,
              stiffness: np.ndarray, max_iterations: int = 80, areas=None,
-             settle: bool = True) -> tuple[np.ndarray, int]:
+             settle: bool = True, keep_thinnest: bool = False) -> tuple[np.ndarray, int]:
     """Open folded or crushed triangles while staying near the least-squares optimum.
 
-    Minimises phi(x) = E(x) + sum_t kappa_t max(0, floor_t - area_t(x))^2, where
-    E(x) = 1/2 x.Hx - b.x is the least-squares energy, by gradient descent
-    preconditioned with the factored quadratic energy: the direction is
-    ``solve(force) - x`` with ``force = -grad(penalty)``, followed by a
-    backtracking line search on phi (starting from twice the last accepted
-    step; E along the line is the exact quadratic ``a g.d + a^2/2 d.Hd``), so phi never
-    increases. kappa starts as stiff as the quadratic energy at each triangle and grows
-    4-fold (at most 8 times) when the crushed set stops shrinking. Tied features stay
-    exact. From a start with no fold, no step may fold a triangle (phi is infinite there,
-    so the line search stops short of the first fold). Stops when no triangle is folded
-    and none is below half its floor (without ``settle``: none folded), and gives up
-    early when the number of folds stops falling.
+    Minimises phi(x) = E(x) + sum_t kappa_t max(0, floor_t - area_t(x))^2, where E(x) =
+    1/2 x.Hx - b.x is the least-squares energy, by gradient descent preconditioned with the
+    factored quadratic energy: the direction is ``solve(force) - x`` with ``force =
+    -grad(penalty)``, then a backtracking line search on phi (from twice the last step; E
+    along the line is the exact quadratic ``a g.d + a^2/2 d.Hd``). kappa starts as stiff as
+    the quadratic energy at each triangle and grows 4-fold (at most 8 times) when the
+    crushed set stops shrinking. Tied features stay exact. Stops when none is folded and
+    none is below half its floor (without ``settle``: none folded); gives up when the folds
+    stop falling.
 
     Parameters
     ----------
@@ -233,18 +230,21 @@ def untangle(solve, hessian, x: np.ndarray, triangles: np.ndarray, floor: np.nda
         ``areas(x)`` -> signed area per triangle (default :func:`grid.signed_areas`).
     settle : bool
         Also lift the triangles crushed below half their floor once none is folded.
+    keep_thinnest : bool
+        From a start with no fold, phi is infinite where a triangle is thinner, relative to
+        its floor, than the thinnest one at the start: nothing folds, no sliver worsens.
 
     Returns
     -------
-    x : (N, 2) ndarray
-        The last iterate (check it for folds).
-    iterations : int
+    x, iterations : (N, 2) ndarray and int
+        The last iterate (check it for folds) and the steps taken.
     """
     areas = areas or (lambda points: signed_areas(points, triangles))
     kappa = penalty_stiffness(x, triangles, stiffness)
 
-    injective = bool(areas(x).min() > 0)
-    penalty = lambda points: area_penalty(areas(points), floor, kappa, injective)  # noqa: E731
+    thinnest = float((areas(x) / floor).min())
+    wall = min(thinnest, 0.5) * floor if keep_thinnest and thinnest > 0 else None
+    penalty = lambda points: area_penalty(areas(points), floor, kappa, wall)  # noqa: E731
     stalled, boosts, alpha, checkpoint, reference = 0, 0, 0.5, None, None
     optimum = solve(np.zeros_like(x))
     gradient = hessian(x - optimum)                 # grad E(x) along admissible directions

@@ -99,14 +99,6 @@ SPREAD_RANGE = 2.0
 SPREAD_BISECTIONS = 8
 #: Fraction of background triangles at each end that the spread's balance leaves out.
 SPREAD_OUTLIERS = 0.002
-#: Triangles the spread may crush for the fold-over guard to open (the warper falls back
-#: to a spread that crushes none when the guard then relaxes features). A portrait cut by
-#: the frame, 20 rows over the head, 49 % of the width, stretch --sy 2: the subject grew
-#: 1.21x crushing none, 1.58x crushing up to 100 (the sky's largest stretch 20.7 -> 15.1;
-#: the guard opened 79 folds in 194 steps); the same at 10.8 MP 1.00x -> 1.38x (17.3 ->
-#: 15.3). Letting 0.2 % of the triangles be crushed there (533) left folds the guard could
-#: open only by relaxing the subject, and the fallback cost 2.5 s.
-SPREAD_CRUSHED = 100
 
 
 def _log_extremes(target: np.ndarray, reference: np.ndarray, triangles: np.ndarray) -> tuple[float, float]:
@@ -119,20 +111,15 @@ def _log_extremes(target: np.ndarray, reference: np.ndarray, triangles: np.ndarr
 
 
 def spread_stretch(solve, ab: np.ndarray, result, scalable: np.ndarray, triangles: np.ndarray,
-                   warped: np.ndarray, background: np.ndarray, crushed_allowed: int = 0):
+                   warped: np.ndarray, background: np.ndarray):
     """Grow the features uniformly so the background's stretch is spread.
 
     When the largest background area ratio against W exceeds :data:`SPREAD_ABOVE` and
     outweighs the largest compression, the ``scalable`` components' (a, b) are multiplied
     by one factor m, searched by bisection on [1, SPREAD_RANGE] for the point where the
     largest stretch equals the largest compression (log max + log min changes sign).
-    Shrinking is not searched here: squeezed features are :func:`shrink_to_fit`'s. A step
-    may crush at most ``crushed_allowed`` triangles below half of :data:`SCALE_FLOOR` of
-    their area under W (or below half their area in ``result`` where that is smaller
-    already); the compression is measured over the others. Crushed ones are the fold-over
-    guard's to open: least squares folds a few triangles
-    at the corners of a feature that grows into the background beside it long before that
-    background runs out of room.
+    Shrinking is not searched here: squeezed features are :func:`shrink_to_fit`'s. No step may crush a triangle below half of :data:`SCALE_FLOOR` of its
+    area under W, or below half its area in ``result`` where that is smaller already.
 
     Growing a feature stretches the strip over it sideways too, so the area ratio there
     falls more slowly than the strip's height: a subject that fills the height and most of
@@ -151,8 +138,6 @@ def spread_stretch(solve, ab: np.ndarray, result, scalable: np.ndarray, triangle
         The nodes under W.
     background : (M,) bool ndarray
         Background triangles.
-    crushed_allowed : int
-        See above.
 
     Returns
     -------
@@ -174,28 +159,9 @@ def spread_stretch(solve, ab: np.ndarray, result, scalable: np.ndarray, triangle
         mid = 0.5 * (lo + hi)
         factor = SPREAD_RANGE ** mid
         outcome = _between(result, grown, (factor - 1.0) / (SPREAD_RANGE - 1.0))
-        crushed = signed_areas(outcome[0], triangles) < floor
-        spared = ~crushed[background][keep]
-        high, low = _log_extremes(outcome[0], reference[spared], tris[spared])
-        if np.count_nonzero(crushed) <= crushed_allowed and high + low > 0:
+        high, low = _log_extremes(outcome[0], reference, tris)
+        if np.all(signed_areas(outcome[0], triangles) >= floor) and high + low > 0:
             lo, best, best_ab = mid, outcome, np.where(scalable[:, None], ab * factor, ab)
         else:
             hi = mid
     return best_ab, best
-
-
-def spread_boldly(solve, ab: np.ndarray, result, scalable: np.ndarray, triangles: np.ndarray,
-                  warped: np.ndarray, background: np.ndarray):
-    """:func:`spread_stretch` crushing up to :data:`SPREAD_CRUSHED` triangles, and
-    the way back to one that crushes none.
-
-    Returns
-    -------
-    (ab, solve(ab), safe)
-        ``safe()`` gives the spread that crushes no triangle (for when the fold-over guard
-        cannot open the crushed ones without relaxing features); None when this one crushes none.
-    """
-    args = (scalable, triangles, warped, background)
-    grown, grown_result = spread_stretch(solve, ab, result, *args, SPREAD_CRUSHED)
-    crushed = signed_areas(grown_result[0], triangles) < SCALE_FLOOR * signed_areas(warped, triangles)
-    return grown, grown_result, (lambda: spread_stretch(solve, ab, result, *args)) if crushed.any() else None

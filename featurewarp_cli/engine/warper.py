@@ -327,8 +327,8 @@ class FeatureWarper:
             self.timings["solve"] = self.timings.get("solve", 0.0) + time.perf_counter() - t0
             return x, edges, rhs, offset
 
-        ab, (x, edges, rhs, offset), safe_spread, scale_solver = self._similarities(
-            state, ties, systems, solve, ab, solve(ab), prior, warped, quick)
+        ab, (x, edges, rhs, offset), scale_solver = self._similarities(state, ties, systems, solve, ab, solve(ab),
+                                                                       prior, warped, quick)
         if edges is None:                       # quick: moved without a solve, and no fold
             return x, ties.tied, ties.unpinned & ties.tied
         if not self.injective or (quick and np.all(signed_areas(x, state.triangles) > 0)):
@@ -348,15 +348,15 @@ class FeatureWarper:
         t0 = time.perf_counter()
         solved = (x, edges, rhs, offset)
         x = guard.guard(problem, x, record.guard)
-        if record.guard.release_rounds and safe_spread is not None:
-            # Grown into the room beside them, the features had to be relaxed: grow less.
-            ab, solved, x = _guard_again(problem, record, safe_spread())
         if record.guard.release_rounds and scale_solver is not None and scale_solver.n_columns:
             # The features could not keep their shape at this scale: smaller, do they?
             low = np.where(ties.tied[:, None], ties.project(prior * _smallest_scale(jac, features, prior)), prior)
             shrunk = scale_search.shrink_to_fit(solve, low, ab, solved, state.triangles, warped)
             if shrunk is not None:
-                ab, solved, x = _guard_again(problem, record, shrunk)
+                ab, (x, edges, rhs, offset) = shrunk
+                record.guard = guard.GuardRecord()
+                problem.rhs, problem.offset, problem.edges = rhs, offset, edges
+                x = guard.guard(problem, x, record.guard)
         if self.formulation == "exact":            # the paper's soft targets are kept as published
             x = guard.no_worse_than_plain(state, x, warped, record.guard, problem)
         inner = sum(self.timings.get(k, 0.0) for k in ("solve", "factor", "rhs")) - counted
@@ -369,11 +369,11 @@ class FeatureWarper:
         least-squares optimum under the prior, kept within what the scale search allows (not
         when ``quick``: then the optimum, reached without a solve when that does not fold).
 
-        Returns (ab, (x, edges, rhs, offset), safe, scale_solver): edges is None when the nodes
-        were moved without a solve; ``safe()`` is a spread that crushes nothing (None: this one)."""
+        Returns (ab, (x, edges, rhs, offset), scale_solver); edges is None when the nodes were
+        moved without a solve."""
         scale_solver = self._scale_solver(state, ties, systems)
         if scale_solver is None or not scale_solver.n_columns:
-            return ab, solved, None, scale_solver
+            return ab, solved, scale_solver
         x, edges, rhs, _ = solved
         features = state.features
         gradient = scale_solver.gradient(x, rhs, edges, features, state.grid.spacing)
@@ -382,12 +382,13 @@ class FeatureWarper:
         if quick:
             moved = scale_solver.moved(x)
             if moved is not None and np.all(signed_areas(moved, state.triangles) > 0):
-                return optimum, (moved, None, None, None), None, scale_solver
-            return optimum, solve(optimum), None, scale_solver
+                return optimum, (moved, None, None, None), scale_solver
+            return optimum, solve(optimum), scale_solver
         start = np.where(ties.tied[:, None], ties.project(prior), prior)
         ab, solved = scale_search.fitting_scales(solve, start, optimum, state.triangles, warped)
-        return (*scale_search.spread_boldly(solve, ab, solved, ties.tied, state.triangles, warped,
-                                            state.tri_component < 0), scale_solver)
+        ab, solved = scale_search.spread_stretch(solve, ab, solved, ties.tied, state.triangles, warped,
+                                                 state.tri_component < 0)
+        return ab, solved, scale_solver
 
     def _scale_solver(self, state: _GridState, ties: components.Ties, systems):
         """The cached :class:`components.ScaleSolver` for these ties (None without free scales)."""
@@ -437,16 +438,6 @@ class FeatureWarper:
         if mesh.record is not None:
             mesh.record.timings["render"] = time.perf_counter() - t0
         return arrays.finish(out, channels, dtype) if order == "rgb" else out
-
-
-def _guard_again(problem, record: SolveRecord, found):
-    """(ab, solved, guarded positions) for another ``found`` = (ab, (x, edges, rhs, offset)):
-    the guard's record starts afresh."""
-    ab, solved = found
-    x, edges, rhs, offset = solved
-    record.guard = guard.GuardRecord()
-    problem.rhs, problem.offset, problem.edges = rhs, offset, edges
-    return ab, solved, guard.guard(problem, x, record.guard)
 
 
 def _smallest_scale(jac: np.ndarray, features, prior: np.ndarray) -> np.ndarray:
