@@ -257,7 +257,7 @@ def untangle(solve, hessian, x: np.ndarray, triangles: np.ndarray, floor: np.nda
             if checkpoint is not None and folds > PROGRESS_RATIO * checkpoint:
                 return x, iteration          # not converging: let the caller relax the features
             checkpoint = folds
-        pen, deficit = penalty(x)
+        pen, deficit = area_penalty(current, floor, kappa, wall)
         active = np.flatnonzero(deficit > 0)
         if reference is None or active.size < STALL_RATIO * reference:
             reference, stalled = active.size, 0
