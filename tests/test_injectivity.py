@@ -1,5 +1,7 @@
 """No fold-overs: the final grid has no triangle of non-positive area anywhere in the presets' ranges."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -184,3 +186,40 @@ def test_untangle_that_keeps_the_thinnest_never_folds_or_thins_a_sliver(seed):
     assert results[True] >= thinnest - 1e-12 and results[True] > 0
     if seed == 0:
         assert results[False] < thinnest            # the case is one where the wall matters
+
+
+def test_slivers_left_by_an_unfolding_window_are_lifted(monkeypatch):
+    """A window stops once nothing is folded; the slivers it leaves are lifted, in a small
+    window (swirl 180) or, where that falls short, by the wide window run again as it used to
+    (squeeze --bend 100): every settled result keeps each triangle at SETTLED of its floor."""
+    import cv2
+
+    from featurewarp_cli.engine import guard
+
+    settled, small, reruns = [], [], []
+    real_settled, real_window = guard._settled, guard._untangle_window
+
+    def window(*args, **kwargs):
+        if kwargs.get("keep_thinnest"):
+            small.append(1)
+        elif kwargs.get("settle", True):              # unfolding passes stop at no fold
+            reruns.append(1)
+        return real_window(*args, **kwargs)
+
+    def spy(*args):
+        out = real_settled(*args)
+        problem, floor = args[0], args[6]
+        settled.append(float((injectivity.grid_areas(problem.grid, out) / floor).min()))
+        return out
+
+    monkeypatch.setattr(guard, "_untangle_window", window)
+    monkeypatch.setattr(guard, "_settled", spy)
+    samples = Path(__file__).resolve().parent.parent / "samples"
+    mask = cv2.imread(str(samples / "astronaut_mask.png"), cv2.IMREAD_GRAYSCALE) >= 128
+    h, w = mask.shape
+    for preset, params in (("swirl", {"angle": 180}), ("squeeze", {"bend": 100})):
+        small.clear(), reruns.clear()
+        mesh = FeatureWarper(w, h, mask).solve(load_warp(preset)(w, h, **params), "similarity")
+        assert mesh.flips() == 0 and small, preset
+        assert bool(reruns) == (preset == "squeeze"), (preset, reruns)
+    assert settled and min(settled) >= guard.SETTLED

@@ -38,6 +38,10 @@ WINDOW_ITERATIONS = 150
 #: bisection steps of that move (:func:`no_worse_than_plain`).
 TAPER_CELLS = 3
 PLAIN_BISECTIONS = 6
+#: Slivers the small settling window leaves at or above this fraction of their floor are
+#: kept (it lifts them to half; a few stall just short of it, as 2 of 1 500 triangles on the
+#: 12 MP hard swirl at 0.496); thinner ones send the wide window back to lift them as before.
+SETTLED = 0.45
 #: Windows larger than this fraction of the grid are left to the global pass.
 WINDOW_MAX_FRACTION = 0.5
 
@@ -174,9 +178,9 @@ def _settled(problem, rhs, offset, tied, start, x, floor, margin, record):
     there took as many steps as opening thousands of folds (12 MP swirl 180, head + helmet
     mask: 20 of 50 steps on 86 000 nodes). So first a small window around them, features
     held, by steps that never make the thinnest triangle thinner (150 cheap steps on 1 500
-    nodes there). Where slivers below a quarter of their floor are left (wedged against a
-    feature), the wide window runs again from ``start`` until they are lifted too, as it
-    did before (a fresh pass from ``x`` either folds again or stalls)."""
+    nodes there). Where slivers below :data:`SETTLED` of their floor are left (wedged
+    against a feature), the wide window runs again from ``start`` until they are lifted too,
+    as it did before (a fresh pass from ``x`` either folds again or stalls)."""
     thinnest = lambda points: float((injectivity.grid_areas(problem.grid, points) / floor).min())  # noqa: E731
     if thinnest(x) >= 0.5:
         return x
@@ -185,7 +189,7 @@ def _settled(problem, rhs, offset, tied, start, x, floor, margin, record):
     record.untangle_iterations += iterations
     if settled is not None and not injectivity.flipped(settled, problem.triangles).any():
         x = settled
-    if thinnest(x) >= 0.25:
+    if thinnest(x) >= SETTLED:
         return x
     again, iterations, _ = _untangle_window(problem, rhs, offset, tied, start, floor, margin)
     record.untangle_iterations += iterations

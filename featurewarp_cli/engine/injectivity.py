@@ -252,8 +252,8 @@ def untangle(solve, hessian, x: np.ndarray, triangles: np.ndarray, floor: np.nda
         current = areas(x)
         if current.min() > 0 and (not settle or np.all(current >= 0.5 * floor)):
             return x, iteration
-        if iteration % PROGRESS_EVERY == 0:
-            folds = int(np.count_nonzero(current <= 0))
+        if iteration % PROGRESS_EVERY == 0:       # with keep_thinnest nothing folds: count slivers
+            folds = int(np.count_nonzero(current <= (0.5 * floor if wall is not None else 0)))
             if checkpoint is not None and folds > PROGRESS_RATIO * checkpoint:
                 return x, iteration          # not converging: let the caller relax the features
             checkpoint = folds
