@@ -189,11 +189,12 @@ def _settled(problem, rhs, offset, tied, start, x, floor, margin, record):
     record.untangle_iterations += iterations
     if settled is not None and not injectivity.flipped(settled, problem.triangles).any():
         x = settled
-    if thinnest(x) >= SETTLED:
+    worst = thinnest(x)
+    if worst >= SETTLED:
         return x
     again, iterations, _ = _untangle_window(problem, rhs, offset, tied, start, floor, margin)
     record.untangle_iterations += iterations
-    if again is not None and not injectivity.flipped(again, problem.triangles).any() and thinnest(again) > thinnest(x):
+    if again is not None and not injectivity.flipped(again, problem.triangles).any() and thinnest(again) > worst:
         return again
     return x
 

@@ -242,8 +242,8 @@ def untangle(solve, hessian, x: np.ndarray, triangles: np.ndarray, floor: np.nda
     areas = areas or (lambda points: signed_areas(points, triangles))
     kappa = penalty_stiffness(x, triangles, stiffness)
 
-    thinnest = float((areas(x) / floor).min())
-    wall = min(thinnest, 0.5) * floor if keep_thinnest and thinnest > 0 else None
+    thinnest = float((areas(x) / floor).min()) if keep_thinnest else 0.0
+    wall = min(thinnest, 0.5) * floor if thinnest > 0 else None
     penalty = lambda points: area_penalty(areas(points), floor, kappa, wall)  # noqa: E731
     stalled, boosts, alpha, checkpoint, reference = 0, 0, 0.5, None, None
     optimum = solve(np.zeros_like(x))
