@@ -89,11 +89,28 @@ def test_node_budget_counts_the_images():
         FeatureWarper(4000, 3000, cell=1, max_nodes=100_000)
 
 
-def test_automatic_grid_stays_within_a_small_budget():
-    """A tight budget coarsens the automatic grid instead of failing."""
+def test_a_budget_refuses_the_automatic_grid_but_never_coarsens_it():
+    """The memory budget only refuses: within it the grid (and so every pixel) is the same as
+    without one; above it the solve is refused, not done on a coarser grid (issue 21: a
+    result must not depend on the machine's memory)."""
+    from featurewarp_cli.engine.warper import GridBudgetError
+
     warp = load_warp("swirl")(320, 240, angle=720)
-    mesh = FeatureWarper(320, 240, max_nodes=20_000).solve(warp, "plain")
-    assert mesh.record.grid["nodes"] <= 20_000
+    free = FeatureWarper(320, 240).solve(warp, "plain")
+    needed = free.record.grid["nodes"]
+    assert needed > 20_000
+    within = FeatureWarper(320, 240, max_nodes=needed).solve(warp, "plain")
+    np.testing.assert_array_equal(within.target, free.target)
+    with pytest.raises(GridBudgetError, match="memory limit"):
+        FeatureWarper(320, 240, max_nodes=20_000).solve(warp, "plain")
+
+
+def test_a_grid_above_the_budget_is_a_one_line_error(tmp_path):
+    image = tmp_path / "in.png"
+    cv2.imwrite(str(image), np.zeros((240, 320, 3), np.uint8))
+    one_line_error(run("warp", "swirl", image, tmp_path / "o.png", "--angle", "720", "--max-memory", "12M"),
+                   1, "memory limit", "--max-memory")
+    assert list(tmp_path.iterdir()) == [image]
 
 
 def test_a_folded_result_is_an_error_unless_allowed(tmp_path):

@@ -21,7 +21,7 @@ from ..io.colours import parse_colour
 from ..io.depth import to_eight_bit
 from ..io.encode import encode_image
 from .pipeline import (Settings, WarpError, background_colour, check_solution, load_image_and_mask, make_warper,
-                       prefetch_engine)
+                       prefetch_engine, solve_within_budget)
 
 ANIMATED = {".gif", ".webp", ".png", ".apng"}
 VIDEO = {".mp4": "mp4v", ".avi": "MJPG"}
@@ -144,7 +144,7 @@ def animate_file(settings: Settings, input: str, output: str, mask: str | None, 
     fill = (0, 0, 0, 0) if alpha else tuple(background[::-1]) + (255,)
     rendered, flips = [], 0
     for warp in warps:
-        mesh = warper.solve(warp, settings.mode)
+        mesh = solve_within_budget(warper, warp, settings.mode)
         flips += mesh.info["flipped_triangles"]
         check_solution(replace(settings, strict=False), mesh)
         frame = to_bgr(warper.render(image, mesh, settings.interp, background, order="bgr"), alpha)

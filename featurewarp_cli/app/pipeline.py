@@ -324,11 +324,21 @@ def make_warper(settings: Settings, width: int, height: int, feature_mask):
     return warp, warper
 
 
+def solve_within_budget(warper, warp, mode: str):
+    """``warper.solve(warp, mode)``; a grid above the memory budget is a WarpError (exit 1)."""
+    from ..engine.warper import GridBudgetError
+
+    try:
+        return warper.solve(warp, mode)
+    except GridBudgetError as err:
+        raise WarpError(str(err)) from None
+
+
 def solved(settings: Settings, width: int, height: int, feature_mask):
     """(warp, warper, mesh) for an image of this size and mask; the warp's own ``review`` of the
     mesh (deform's: handles reached, an image laid over itself) joins its warnings."""
     warp, warper = make_warper(settings, width, height, feature_mask)
-    mesh = warper.solve(warp, settings.mode)
+    mesh = solve_within_budget(warper, warp, settings.mode)
     review = getattr(warp, "review", None)
     if review is not None:
         mesh.record.warnings.extend(review(mesh))
@@ -489,7 +499,7 @@ def compare_file(settings: Settings, input: str, output: str, mask: str | None =
     warp, warper = make_warper(settings, width, height, feature_mask)
     tiles, labels = [panel.tint(image, feature_mask)], ["input + mask"]
     for mode in ("plain", "rigid", "similarity"):
-        mesh = warper.solve(warp, mode)
+        mesh = solve_within_budget(warper, warp, mode)
         check_solution(settings, mesh)
         result = rendered(warper, image, mesh, settings.interp, background)
         tiles.append(panel.draw_grid(result, mesh) if draw_grid else result)

@@ -111,24 +111,24 @@ def follows(grid: Grid, warp) -> tuple[bool, float]:
     return bool(smallest_area(warped) > 0), error
 
 
-def auto_cell(width: int, height: int, warp=None, max_nodes: int | None = None) -> tuple[float, float]:
+def auto_cell(width: int, height: int, warp=None) -> tuple[float, float]:
     """Automatic cell size: the base cell, made finer until the grid follows ``warp``.
 
     Rule: start from :func:`base_cell` (4 px, or larger so the grid keeps about
     160 000 nodes); while the piecewise-linear grid strays more than 0.5 px from
     the warp, or folds a triangle the warp itself does not fold, divide the
     cell by sqrt(2) (sub-pixel cells included), down to the size at which the grid
-    would pass ``max_nodes`` (default and at most :data:`MAX_NODES`).
-    The sizes are a fixed ladder, so warps that need the same fineness share one
-    grid (and one factorization).
+    would pass :data:`MAX_NODES`. The sizes are a fixed ladder, so warps that need the
+    same fineness share one grid (and one factorization). The cell is a function of the
+    image size and the warp alone: never of the machine (its memory, cores or timing), so
+    the same command gives the same grid everywhere; a memory budget refuses a grid it
+    cannot hold (:class:`featurewarp_cli.engine.warper.FeatureWarper`), it never coarsens it.
 
     Parameters
     ----------
     width, height : int
     warp : callable, optional
         Without it, the base cell is returned.
-    max_nodes : int, optional
-        A smaller node budget than :data:`MAX_NODES` (the memory limit's).
 
     Returns
     -------
@@ -139,8 +139,7 @@ def auto_cell(width: int, height: int, warp=None, max_nodes: int | None = None) 
     cell = base_cell(width, height)
     if warp is None:
         return cell, float("nan")
-    nodes = MAX_NODES if max_nodes is None else min(MAX_NODES, max_nodes)
-    smallest = min(_cell_for_nodes(width, height, nodes), cell)
+    smallest = min(_cell_for_nodes(width, height, MAX_NODES), cell)
     ok, error = follows(Grid.for_image(width, height, cell), warp)
     while not ok and cell / math.sqrt(2.0) >= smallest:
         # The error scales with the cell's square: skip rungs that cannot suffice.

@@ -56,6 +56,10 @@ from .record import SolveRecord
 MIN_FEATURE_SIDE = 4
 
 
+class GridBudgetError(ValueError):
+    """The grid a warp needs is larger than the memory budget allows."""
+
+
 def load_warp(name: str):
     """The preset class registered under ``name`` in the ``featurewarp.warps`` group."""
     from ..plugins import load
@@ -121,8 +125,10 @@ class FeatureWarper:
         spare the background; large values fix them at lambda R.
     max_nodes : int, optional
         Largest grid allowed (a memory budget; see :func:`featurewarp_cli.io.limits.node_budget`).
-        The automatic cell stays within it; an explicit ``cell`` beyond it is a ValueError.
-        Default: :data:`fidelity.MAX_NODES` for the automatic cell, no limit for an explicit one.
+        It only refuses: an explicit ``cell`` beyond it is a ValueError here, an automatic
+        grid beyond it a :class:`GridBudgetError` from :meth:`solve`. It never changes the
+        grid, so a result does not depend on the machine's memory. Default: no limit (the
+        automatic cell stops at :data:`fidelity.MAX_NODES`).
 
     Attributes
     ----------
@@ -174,6 +180,15 @@ class FeatureWarper:
         self.factorizations = 0
         self.timings: dict[str, float] = {}
         self._states: dict[tuple, _GridState] = {}
+
+    def _check_budget(self, cell: float) -> None:
+        """Refuse an automatic grid above ``max_nodes`` (the budget never coarsens it)."""
+        nodes = Grid.for_image(self.width, self.height, cell).n_nodes
+        if self.max_nodes is not None and nodes > self.max_nodes:
+            raise GridBudgetError(
+                f"this warp needs a grid of {nodes} nodes (cell {cell:.3g} px) to follow it within "
+                f"{fidelity.MAX_PL_ERROR} px, above the {self.max_nodes} that the memory limit allows "
+                f"(a larger --max-memory, or a gentler warp)")
 
     def _state(self, grid: Grid, warped: np.ndarray, boundary: str) -> _GridState:
         """Features and border conditions on ``grid`` (built once per grid and border);
@@ -265,7 +280,8 @@ class FeatureWarper:
         if quick:
             cell, error = (self.cell or fidelity.auto_cell(self.width, self.height, None)[0]), float("nan")
         elif self.cell is None:
-            cell, error = fidelity.auto_cell(self.width, self.height, warp, self.max_nodes)
+            cell, error = fidelity.auto_cell(self.width, self.height, warp)
+            self._check_budget(cell)
         else:
             cell = float(self.cell)
             error = fidelity.pl_error(Grid.for_image(self.width, self.height, cell), warp)
