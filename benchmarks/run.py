@@ -24,6 +24,9 @@ magick    ImageMagick's plain equivalents on the same files, each run right afte
           ratios ours / ImageMagick.
 deform    Issue 11's interactive case (benchmarks/deform_case.py): one of 10 handles moving
           on the 1 MP photo through the API's quick Deformer, median of 10 updates.
+stability Issue 21's one-ulp harness (benchmarks/stability.py): twelve hard cases on the
+          512 px astronaut, W's output nudged by one ulp in two patterns; the largest node
+          move and image RMSE against the un-nudged run (targets 0.01 px, RMSE 0.5).
 hard      Issue 10's hard cases (benchmarks/hard_cases.py): the 12 MP photo with a
           head + helmet mask that makes the fold guard work, swirl 180, arc 300 and
           bulge 2.95, each beside ImageMagick's -swirl / -distort Arc / -implode.
@@ -64,7 +67,7 @@ from benchmarks.hard_cases import bench_hard  # noqa: E402
 from benchmarks.inputs import make_photos  # noqa: E402
 from samples.scenes import disc_mask  # noqa: E402
 
-SECTIONS = ("table1", "render", "rewarp", "deform", "commands", "magick", "hard")
+SECTIONS = ("table1", "render", "rewarp", "deform", "commands", "magick", "hard", "stability")
 
 #: The paper's Table 1 (Pentium 4, 3.2 GHz): setup, factor, rhs setup, solve in seconds.
 PAPER_TABLE1 = {
@@ -416,6 +419,10 @@ def main(argv=None) -> int:
         if "hard" in sections:
             report["hard"] = bench_hard(runs, exe, photos["12MP"][0], ROOT / "samples", tmp,
                                         "magick" in sections, repeat, show)
+        if "stability" in sections:
+            from benchmarks.stability import bench_stability
+
+            report["stability"] = bench_stability(512)
     report["targets"] = tgt.evaluate(report)
     report["machine"]["loadavg_end"] = os.getloadavg()
     report["seconds"] = time.perf_counter() - started

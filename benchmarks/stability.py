@@ -1,0 +1,124 @@
+"""``make bench`` section ``stability`` (issue 21, item 3): does a one-ulp change of W move pixels?
+
+Another CPU, libm or BLAS kernel changes the last bit of a preset's output. A solver whose
+result is the converged minimum of one energy moves by rounding only; one that takes
+discrete decisions (fold counts, first fold-free iterate, bisections) can turn that bit
+into pixels. For each hard case the preset's output at the grid nodes is nudged by one ulp
+in two patterns (every coordinate up; up and down alternating by node), everything else
+unchanged, and the mesh and the rendered image are compared with the un-nudged ones.
+
+Target (issue 21): every mesh within 0.01 px, every image within RMSE 0.5 grey levels.
+
+Usage::
+
+    .venv/bin/python benchmarks/stability.py [--size 256]
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+from featurewarp_cli import FeatureWarper, load_warp  # noqa: E402
+
+#: (preset, parameters, mode, mask): strong swirls and arcs in both modes, cylinder,
+#: perspective, frame-cut masks.
+CASES = [
+    ("swirl", {"angle": 180}, "rigid", "astronaut_mask.png"),
+    ("swirl", {"angle": 180}, "similarity", "astronaut_mask.png"),
+    ("swirl", {"angle": 300}, "similarity", "astronaut_helmet_mask.png"),
+    ("arc", {"angle": 300}, "similarity", "astronaut_helmet_mask.png"),
+    ("arc", {"angle": 300}, "rigid", "astronaut_mask.png"),
+    ("cylinder", {"angle": 150}, "similarity", "astronaut_mask.png"),
+    ("perspective", {"tl": "20%,5%", "tr": "85%,0%", "br": "100%,100%", "bl": "0%,90%"}, "rigid",
+     "astronaut_mask.png"),
+    ("fish", {}, "similarity", "astronaut_mask.png"),
+    ("stretch", {"sy": 2}, "similarity", "astronaut_body_mask.png"),
+    ("stretch", {"sx": 0.6}, "rigid", "astronaut_body_mask.png"),
+    ("inflate", {}, "similarity", "astronaut_body_mask.png"),
+    ("bulge", {"strength": 2.5}, "similarity", "astronaut_helmet_mask.png"),
+]
+PATTERNS = ("up", "alternate")
+MESH_TARGET_PX = 0.01
+IMAGE_TARGET_RMSE = 0.5
+
+
+class Nudged:
+    """A preset whose output is moved by one ulp (``pattern``), its attributes unchanged."""
+
+    def __init__(self, warp, pattern: str):
+        self._warp, self._pattern = warp, pattern
+
+    def __getattr__(self, name):
+        return getattr(self._warp, name)
+
+    def __call__(self, points):
+        out = np.asarray(self._warp(points), dtype=np.float64)
+        if self._pattern == "up":
+            return np.nextafter(out, np.inf)
+        sign = np.where(np.arange(out.shape[0]) % 2 == 0, np.inf, -np.inf)[:, None]
+        return np.nextafter(out, sign)
+
+
+def measure_case(image, mask, preset, params, mode):
+    """(worst node move px, worst image RMSE, flips) over the nudge patterns."""
+    h, w = mask.shape
+    warp = load_warp(preset)(w, h, **params)
+
+    def solve(wrapped):
+        warper = FeatureWarper(w, h, mask)
+        mesh = warper.solve(wrapped, mode)
+        return mesh, warper.render(image, mesh, background=(255, 255, 255))
+
+    base_mesh, base_image = solve(warp)
+    moves, errors = [], []
+    for pattern in PATTERNS:
+        mesh, out = solve(Nudged(warp, pattern))
+        if mesh.target.shape != base_mesh.target.shape or out.shape != base_image.shape:
+            moves.append(float("inf"))
+            errors.append(float("inf"))
+            continue
+        moves.append(float(np.abs(mesh.target - base_mesh.target).max()))
+        errors.append(float(np.sqrt(np.mean((out.astype(np.float64) - base_image) ** 2))))
+    return max(moves), max(errors), base_mesh.flips()
+
+
+def bench_stability(size: int = 256) -> list[dict]:
+    """Run every case on the astronaut sample scaled to ``size`` px; print and return the rows."""
+    samples = ROOT / "samples"
+    image = cv2.cvtColor(cv2.imread(str(samples / "astronaut.png")), cv2.COLOR_BGR2RGB)
+    image = cv2.resize(image, (size, size), interpolation=cv2.INTER_AREA)
+    rows = []
+    print(f"\nStability: one-ulp nudges of W ({', '.join(PATTERNS)}), astronaut at {size}x{size}; "
+          f"targets: mesh <= {MESH_TARGET_PX} px, image RMSE <= {IMAGE_TARGET_RMSE}")
+    print(f"{'case':58s} {'node move px':>13s} {'RMSE':>8s}  ok")
+    for preset, params, mode, mask_name in CASES:
+        mask = cv2.imread(str(samples / mask_name), cv2.IMREAD_GRAYSCALE)
+        mask = cv2.resize(mask, (size, size), interpolation=cv2.INTER_NEAREST) >= 128
+        move, rmse, flips = measure_case(image, mask, preset, params, mode)
+        ok = move <= MESH_TARGET_PX and rmse <= IMAGE_TARGET_RMSE
+        name = f"{preset} {params} {mode} ({mask_name.split('.')[0]})"
+        print(f"{name[:58]:58s} {move:13.4g} {rmse:8.3f}  {'yes' if ok else 'NO'}")
+        rows.append({"preset": preset, "params": params, "mode": mode, "mask": mask_name, "node_move_px": move,
+                     "rmse": rmse, "flips": flips, "ok": bool(ok)})
+    print(f"{sum(r['ok'] for r in rows)} of {len(rows)} cases within the targets")
+    return rows
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--size", type=int, default=256)
+    args = parser.parse_args(argv)
+    bench_stability(args.size)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
