@@ -27,6 +27,9 @@ deform    Issue 11's interactive case (benchmarks/deform_case.py): one of 10 han
 stability Issue 21's one-ulp harness (benchmarks/stability.py): twelve hard cases on the
           512 px astronaut, W's output nudged by one ulp in two patterns; the largest node
           move and image RMSE against the un-nudged run (targets 0.01 px, RMSE 0.5).
+cluster   Issue 25 (benchmarks/cluster.py): 200 images of 1 MP on 2 local Dask workers
+          (batch --scheduler local:2) against batch -j 2 and make -j 2, interleaved;
+          the Dask batch's overhead over the fastest (target 15 %).
 hard      Issue 10's hard cases (benchmarks/hard_cases.py): the 12 MP photo with a
           head + helmet mask that makes the fold guard work, swirl 180, arc 300 and
           bulge 2.95, each beside ImageMagick's -swirl / -distort Arc / -implode.
@@ -67,7 +70,7 @@ from benchmarks.hard_cases import bench_hard  # noqa: E402
 from benchmarks.inputs import make_photos  # noqa: E402
 from samples.scenes import disc_mask  # noqa: E402
 
-SECTIONS = ("table1", "render", "rewarp", "deform", "commands", "magick", "hard", "stability")
+SECTIONS = ("table1", "render", "rewarp", "deform", "commands", "magick", "hard", "stability", "cluster")
 
 #: The paper's Table 1 (Pentium 4, 3.2 GHz): setup, factor, rhs setup, solve in seconds.
 PAPER_TABLE1 = {
@@ -423,6 +426,10 @@ def main(argv=None) -> int:
             from benchmarks.stability import bench_stability
 
             report["stability"] = bench_stability(512)
+        if "cluster" in sections:
+            from benchmarks.cluster import bench_cluster
+
+            report["cluster"] = bench_cluster(200, min(runs, 3))
     report["targets"] = tgt.evaluate(report)
     report["machine"]["loadavg_end"] = os.getloadavg()
     report["seconds"] = time.perf_counter() - started

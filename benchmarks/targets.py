@@ -13,6 +13,7 @@ STRETCH_1MP_RATIO = 0.1          # whole command / ImageMagick -liquid-rescale 2
 STRETCH_1MP_FLOOR_RATIO = 1.5    # whole command / its floor (imports, decode, encode; issue 12)
 STARTUP_S = 0.25                 # featurewarp --help, featurewarp warps
 REWARP_1MP_S = 0.15              # API: re-solve + re-render 1 MP with new parameters, factorization reused
+CLUSTER_OVERHEAD = 0.15         # issue 25: 2 local Dask workers against the fastest of batch -j 2 / make -j 2
 STABLE_NODE_PX = 0.01           # issue 21: largest node move under a one-ulp nudge of W
 DEFORM_1MP_S = 0.05              # API: one of 10 handles moved on 1 MP (quick Deformer), both factorizations reused
 
@@ -62,6 +63,9 @@ def evaluate(report: dict) -> list[dict]:
     for r in hard.get("ratios", []):
         if r["preset"] == "swirl":
             rows.append(_row("12 MP portrait (hard mask) swirl 180 / magick", r["ratio"], SWIRL_12MP_RATIO, "x"))
+    cluster = report.get("cluster")
+    if cluster:
+        rows.append(_row("200 x 1 MP on 2 Dask workers: overhead", cluster["dask_overhead"], CLUSTER_OVERHEAD, "x"))
     stability = report.get("stability", [])
     if stability:
         worst = max(r["node_move_px"] for r in stability)

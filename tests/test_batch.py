@@ -83,13 +83,14 @@ def test_plain_mode_needs_no_masks(runner, tmp_path):
 
 
 @pytest.mark.parametrize("args, words", [
-    (["--out-dir", "{tmp}/nowhere"], ["--out-dir", "does not exist"]),
+    (["--out-dir", "{tmp}/a-file/out"], ["--out-dir", "cannot create"]),
     (["--out-dir", "{tmp}/out", "--mask-pattern", "{nope}.png"], ["--mask-pattern", "nope"]),
     (["--out-dir", "{tmp}/out", "--jobs", "0"], ["--jobs", "out of range (1 <= N)"]),
     (["--out-dir", "{tmp}/out", "--angle", "inf"], ["--angle", "finite"]),
     (["--out-dir", "{tmp}/out", "--background", "transparent", "--format", "bmp"], []),
-], ids=["missing out-dir", "bad pattern", "no jobs", "inf angle", "transparent bmp"])
+], ids=["out-dir under a file", "bad pattern", "no jobs", "inf angle", "transparent bmp"])
 def test_usage_errors(runner, photos, tmp_path, args, words):
+    (tmp_path / "a-file").write_text("")
     run = runner("batch", "swirl", photos / "a.png", *[a.replace("{tmp}", str(tmp_path)) for a in args])
     if not words:                              # a per-file problem: every file fails, exit 1
         assert run.code == 1 and "no alpha" in run.stderr
@@ -150,3 +151,8 @@ def test_run_job_never_raises(tmp_path):
     job = batch.Job(str(tmp_path / "missing.png"), str(tmp_path / "o.png"), None)
     error, summary = batch.run_job(batch.Settings("swirl"), job)
     assert "does not exist" in error and summary is None
+
+
+def test_a_missing_out_dir_is_created(runner, photos, tmp_path):
+    run = runner("batch", "swirl", photos / "a.png", "-o", tmp_path / "new" / "deeper", "--mode", "plain")
+    assert run.code == 0 and names(tmp_path / "new" / "deeper") == ["a.png"]

@@ -3,7 +3,8 @@
 The shell blocks run with bash (``set -e``), the Makefile block with make, the Python
 block with this interpreter, each in a fresh folder that holds ``samples/`` (a link to the
 repository's) and with this environment's ``featurewarp`` first on PATH. The Setup blocks
-(``make install``, ``make test``, ``make demo``) are what CI itself runs, so they are left out.
+(``make install``, ``make test``, ``make demo``) are what CI itself runs, so they are left out,
+and so are ``bash`` blocks: they need what a test cannot have (a Slurm or Kubernetes cluster).
 """
 
 from __future__ import annotations

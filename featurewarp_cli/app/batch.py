@@ -1,15 +1,17 @@
 """``featurewarp batch``: many files, each with its own mask, optionally in parallel processes.
 
 Every file goes through :func:`featurewarp_cli.app.pipeline.warp_file`; a batch only adds
-output naming, mask lookup and a process pool.
+output naming, mask lookup, ``--resume``, a JSON-lines summary, and a process pool or a
+Dask cluster (:mod:`featurewarp_cli.app.cluster`).
 """
 
 from __future__ import annotations
 
 import os
+import time
 from dataclasses import dataclass
 
-from .pipeline import Settings, WarpError, _writable, warp_file
+from .pipeline import Settings, WarpError, _writable, file_problem, warp_file
 
 
 @dataclass(frozen=True)
@@ -30,6 +32,7 @@ def plan(inputs, out_dir: str, suffix: str = "", fmt: str | None = None,
     inputs : sequence of str
     out_dir : str
         Outputs are ``out_dir/{stem}{suffix}.{ext}``; ext is ``fmt`` or the input's extension.
+        Created (with its parents) when missing.
     suffix : str
     fmt : str, optional
         Output format name.
@@ -40,7 +43,7 @@ def plan(inputs, out_dir: str, suffix: str = "", fmt: str | None = None,
     Raises
     ------
     WarpError
-        An output folder that is missing or not writable, a pattern that does not
+        An output folder that cannot be created or written, a pattern that does not
         format, or two inputs that would write the same output.
     """
     def mask_of(path):
@@ -54,6 +57,10 @@ def plan(inputs, out_dir: str, suffix: str = "", fmt: str | None = None,
                             "--mask-pattern", usage=True) from None
         return os.path.join(os.path.dirname(path), name)
 
+    try:
+        os.makedirs(out_dir, exist_ok=True)
+    except OSError as err:
+        raise WarpError(f"cannot create {out_dir} ({err.strerror or err})", "--out-dir", usage=True) from None
     _writable(os.path.join(out_dir, "probe"), "--out-dir")
     masks = {os.path.realpath(mask_of(p)) for p in inputs} if mask_pattern else set()
     jobs, seen = [], {}
@@ -103,6 +110,8 @@ def _worker_setup() -> None:
 
 def run_job(settings: Settings, job: Job) -> tuple[str | None, dict | None]:
     """Run one batch job; returns (error message or None, summary or None). Never raises."""
+    if not os.path.isfile(job.input):                # named as the input, before its output or mask
+        return f"{job.input} {file_problem(job.input)}", None
     try:
         return None, warp_file(settings, job.input, job.output, job.mask)
     except WarpError as err:
@@ -111,21 +120,59 @@ def run_job(settings: Settings, job: Job) -> tuple[str | None, dict | None]:
         return f"{type(err).__name__}: {err}", None
 
 
-def run_batch(settings: Settings, jobs: list[Job], workers: int = 1):
-    """Run ``jobs``, yielding (job, error, summary) in the order of ``jobs``.
+def timed_job(settings: Settings, job: Job) -> tuple[str | None, dict | None, float]:
+    """:func:`run_job` and its seconds: (error, summary, seconds). Never raises."""
+    t0 = time.perf_counter()
+    error, summary = run_job(settings, job)
+    return error, summary, time.perf_counter() - t0
 
-    With ``workers`` > 1 the jobs run in that many fresh processes (spawned,
-    not forked, so that no thread pool of a parent library is inherited). The
-    outputs are byte-identical to a serial run.
+
+def up_to_date(job: Job) -> bool:
+    """The job's output exists and is at least as new as its input and mask (``--resume``)."""
+    try:
+        written = os.stat(job.output).st_mtime_ns
+        return all(os.stat(path).st_mtime_ns <= written for path in (job.input, job.mask) if path)
+    except OSError:
+        return False
+
+
+def run_jobs(settings: Settings, jobs: list[Job], workers: int = 1, scheduler: str | None = None):
+    """Run ``jobs``, yielding (index, job, error, summary, seconds).
+
+    Locally (``scheduler`` None) the jobs run in order, in ``workers`` fresh processes when
+    above 1 (spawned, not forked, so that no thread pool of a parent library is
+    inherited); on a Dask cluster (:mod:`featurewarp_cli.app.cluster`) they are yielded as
+    they finish. The outputs are byte-identical either way.
     """
+    if scheduler is not None:
+        from .cluster import run_on_cluster
+
+        yield from run_on_cluster(settings, jobs, scheduler)
+        return
     workers = max(1, min(workers, len(jobs)))
     if workers == 1:
-        for job in jobs:
-            yield (job, *run_job(settings, job))
+        for i, job in enumerate(jobs):
+            yield (i, job, *timed_job(settings, job))
         return
     from concurrent.futures import ProcessPoolExecutor
     from multiprocessing import get_context
 
     with ProcessPoolExecutor(workers, mp_context=get_context("spawn"), initializer=_worker_setup) as pool:
-        yield from ((job, *outcome) for job, outcome in
-                    zip(jobs, pool.map(run_job, [settings] * len(jobs), jobs)))
+        outcomes = pool.map(timed_job, [settings] * len(jobs), jobs)
+        yield from ((i, job, *outcome) for i, (job, outcome) in enumerate(zip(jobs, outcomes)))
+
+
+def run_batch(settings: Settings, jobs: list[Job], workers: int = 1):
+    """Run ``jobs`` locally, yielding (job, error, summary) in the order of ``jobs``
+    (see :func:`run_jobs`)."""
+    for _, job, error, summary, _ in run_jobs(settings, jobs, workers):
+        yield job, error, summary
+
+
+def summary_record(index: int, job: Job, status: str, seconds: float = 0.0, summary: dict | None = None,
+                   error: str | None = None) -> dict:
+    """One line of the JSON-lines summary (``--summary``): the job, its status ('ok', 'failed'
+    or 'skipped'), seconds, warnings and error."""
+    return {"job": index, "input": job.input, "mask": job.mask, "output": job.output, "status": status,
+            "seconds": round(seconds, 4), "warnings": list(summary["warnings"]) if summary else [],
+            "error": error}

@@ -115,12 +115,53 @@ def warp_one(settings, quiet: bool, verbose: bool, *files, **options) -> None:
     report_warnings(summary, quiet, verbose)
 
 
+def run_planned(settings, todo, jobs: int, scheduler, summary_path, resume: bool, quiet: bool,
+                verbose: bool) -> int:
+    """Run a batch's jobs (locally or on Dask), print errors and warnings, write the JSON-lines
+    summary; returns how many failed."""
+    import json
+
+    from ..app.batch import run_jobs, summary_record, up_to_date
+
+    skipped = {i for i, job in enumerate(todo) if resume and up_to_date(job)}
+    numbers = [i for i in range(len(todo)) if i not in skipped]
+    remaining = [todo[i] for i in numbers]
+    sink = None
+    if summary_path:
+        try:
+            sink = click.open_file(summary_path, "w", lazy=False)
+        except OSError as err:
+            raise click.UsageError(f"--summary: cannot write {summary_path} ({err.strerror})") from None
+    failed = 0
+    try:
+        def record(line):
+            if sink is not None:
+                sink.write(json.dumps(line) + "\n")
+                sink.flush()
+
+        for i in sorted(skipped):
+            record(summary_record(i, todo[i], "skipped"))
+        with progress_bar(len(remaining), "warping", quiet) as bar:
+            for k, job, error, summary, seconds in run_jobs(settings, remaining, jobs, scheduler):
+                bar.update(1)
+                if error:
+                    failed += 1
+                    click.echo(f"featurewarp: error: {job.input}: {error}", err=True)
+                else:
+                    report_warnings(summary, quiet, verbose)
+                record(summary_record(numbers[k], job, "failed" if error else "ok", seconds, summary, error))
+    finally:
+        if sink is not None and summary_path != "-":
+            sink.close()
+    return failed
+
+
 def batch_command(preset) -> click.Command:
     """``featurewarp batch PRESET INPUT... --out-dir DIR``."""
     params = [click.Argument(["inputs"], nargs=-1, required=True, metavar="INPUT...",
-                             type=click.Path(dir_okay=False)),
+                             type=click.Path()),           # a folder among them fails that file only
               click.Option(["-o", "--out-dir"], required=True, metavar="DIR",
-                           type=click.Path(file_okay=False), help="Folder for the outputs (must exist)."),
+                           type=click.Path(file_okay=False), help="Folder for the outputs (created, with its parents, if missing)."),
               click.Option(["--mask-pattern"], default="{stem}_mask.png", show_default=True,
                            metavar="PATTERN",
                            help="Mask file of each input; {stem} is the input's name without "
@@ -129,28 +170,34 @@ def batch_command(preset) -> click.Command:
                                 "input's mask are skipped, so 'photos/*.png' works."),
               click.Option(["--suffix"], default="", metavar="S",
                            help="Appended to each output's stem: DIR/{stem}S.{ext}."),
-              param_option(JOBS, "-j", "--jobs")] + engine_options()
+              param_option(JOBS, "-j", "--jobs"),
+              click.Option(["--scheduler"], metavar="ADDRESS",
+                           help="Run the jobs on a Dask cluster instead of --jobs local processes: a "
+                                "scheduler address (tcp://host:8786), a scheduler file (.json, as "
+                                "'dask scheduler --scheduler-file' writes it), or local:N for a local "
+                                "cluster of N workers. Paths must be ones every worker sees. Needs "
+                                "pip install 'featurewarp[dask]'."),
+              click.Option(["--summary"], metavar="FILE", type=click.Path(dir_okay=False, allow_dash=True),
+                           help="Write one JSON line per file (job, input, mask, output, status: ok, "
+                                "failed or skipped, seconds, warnings, error) as each finishes; '-' "
+                                "for stdout."),
+              click.Option(["--resume"], is_flag=True,
+                           help="Skip files whose output exists and is newer than their input and mask.")
+              ] + engine_options()
 
-    def callback(inputs, out_dir, mask_pattern, suffix, jobs, **kwargs):
-        from ..app.batch import plan, run_batch
+    def callback(inputs, out_dir, mask_pattern, suffix, jobs, scheduler, summary, resume, **kwargs):
+        from ..app.batch import plan
         from ..app.pipeline import WarpError
-        from ..io.formats import format_name
 
         settings, quiet, verbose = settings_from(preset, kwargs)
         try:
+            from ..io.formats import format_name
+
             fmt = format_name(settings.fmt) if settings.fmt else None
             todo = plan(inputs, out_dir, suffix, fmt, None if settings.mode == "plain" else mask_pattern)
+            failed = run_planned(settings, todo, jobs, scheduler, summary, resume, quiet, verbose)
         except WarpError as err:
             raise click_error(err) from err
-        failed = 0
-        with progress_bar(len(todo), "warping", quiet) as bar:
-            for job, error, summary in run_batch(settings, todo, jobs):
-                bar.update(1)
-                if error:
-                    failed += 1
-                    click.echo(f"featurewarp: error: {job.input}: {error}", err=True)
-                else:
-                    report_warnings(summary, quiet, verbose)
         if failed:
             raise click.ClickException(f"{failed} of {len(todo)} files failed")
 
@@ -166,7 +213,8 @@ def compare_command(preset) -> click.Command:
     ] + [o for o in engine_options() if o.name != "mode"]
 
     def callback(input, output, mask, draw_grid, panel_width, **kwargs):
-        from ..app.pipeline import WarpError, compare_file
+        from ..app.panel import compare_file
+        from ..app.pipeline import WarpError
 
         kwargs["mode"] = "similarity"
         settings, quiet, verbose = settings_from(preset, kwargs)
@@ -247,8 +295,12 @@ class PresetGroup(click.Group):
             return super().resolve_command(ctx, args)
         except click.UsageError:
             if args and args[0] not in plugins.names():
+                import difflib
+
+                close = difflib.get_close_matches(args[0], plugins.names(), n=1)
+                hint = f"did you mean {close[0]!r}? " if close else ""
                 raise click.UsageError(
-                    f"unknown preset {args[0]!r}; available: {', '.join(plugins.names())} "
+                    f"unknown preset {args[0]!r}; {hint}available: {', '.join(plugins.names())} "
                     "(see 'featurewarp warps')", ctx) from None
             raise
 
