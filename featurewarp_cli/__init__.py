@@ -20,7 +20,12 @@ load on first use):
 
 __version__ = "0.1.0"
 
-__all__ = ["warp", "FeatureWarper", "Mesh", "load_warp", "Deformer", "Handles", "__version__"]
+__all__ = ["warp", "FeatureWarper", "Mesh", "load_warp", "Deformer", "Handles", "FeatureWarpWarning", "__version__"]
+
+
+class FeatureWarpWarning(UserWarning):
+    """What :func:`warp` could not do (a feature not kept, an output equal to its input), one
+    warning per line of the solve's record."""
 
 
 def __getattr__(name):

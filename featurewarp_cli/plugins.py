@@ -92,8 +92,9 @@ class Param:
             return f"{self.metavar}: pixels or percentages"
         if self.type is str:
             return "|".join(self.choices)
-        lo = "" if self.min is None else f"{self.min:g} {'<' if self.min_open else '<='} "
-        hi = "" if self.max is None else f" {'<' if self.max_open else '<='} {self.max:g}"
+        show = (lambda n: str(int(n))) if self.type is int else (lambda n: f"{n:g}")
+        lo = "" if self.min is None else f"{show(self.min)} {'<' if self.min_open else '<='} "
+        hi = "" if self.max is None else f" {'<' if self.max_open else '<='} {show(self.max)}"
         return f"{lo}{self.metavar}{hi}" if lo or hi else "any real number"
 
     def default_text(self) -> str:
@@ -130,7 +131,8 @@ class Param:
         too_low = self.min is not None and (number < self.min or (self.min_open and number == self.min))
         too_high = self.max is not None and (number > self.max or (self.max_open and number == self.max))
         if too_low or too_high:
-            raise ValueError(f"--{self.cli_name}: {number:g} is out of range ({self.range_text()})")
+            shown = str(value).strip() if self.type is int else f"{number:g}"
+            raise ValueError(f"--{self.cli_name}: {shown} is out of range ({self.range_text()})")
         return number
 
     def _check_pair(self, value) -> tuple[str, str]:
@@ -145,6 +147,11 @@ class Param:
                              f"(two numbers of pixels or percentages)") from None
         if not all(math.isfinite(n) for n in numbers):
             raise ValueError(f"--{self.cli_name}: {value!r} is not finite")
+        for part, number in zip(parts, numbers):
+            limit = PAIR_PERCENT_LIMIT if str(part).strip().endswith("%") else PAIR_PIXEL_LIMIT
+            if abs(number) > limit:
+                raise ValueError(f"--{self.cli_name}: {value!r} is out of range (each part within "
+                                 f"+-{PAIR_PIXEL_LIMIT:g} px or +-{PAIR_PERCENT_LIMIT:g} %)")
         return tuple(str(part).strip() for part in parts)
 
     def _check_choice(self, value) -> str:
@@ -238,6 +245,12 @@ class Warp:
         return f"{type(self).__name__}({self.width}, {self.height}, {args})"
 
 
+#: A point or size parameter's parts: pixels and percentages within these (beyond, a warp's
+#: arithmetic overflows or its grid cannot follow it: ``--center 1e308,1e308``).
+PAIR_PIXEL_LIMIT = 1e5
+PAIR_PERCENT_LIMIT = 1e3
+
+
 def resolve_pair(pair: tuple[str, str], width: int, height: int, position: bool = False) -> tuple[float, float]:
     """A checked pair (:meth:`Param.check` of a ``tuple`` parameter) in pixels.
 
@@ -320,7 +333,11 @@ def load(name: str):
     """
     matches = [] if name in BUILTIN else [ep for ep in entry_points() if ep.name == name]
     if name not in BUILTIN and not matches:
-        raise UnknownPreset(f"unknown preset {name!r}; available: {', '.join(names()) or 'none'}")
+        import difflib
+
+        close = difflib.get_close_matches(name, names(), n=1)
+        hint = f"did you mean {close[0]!r}? " if close else ""
+        raise UnknownPreset(f"unknown preset {name!r}; {hint}available: {', '.join(names()) or 'none'}")
     try:
         if matches:
             return matches[0].load()

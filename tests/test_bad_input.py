@@ -102,7 +102,7 @@ CASES = [
     ("cell too small", "swirl {ok.png} {out} --cell 0.5", 2, ["--cell", "out of range (1 <= PX)"]),
     ("not a number", "swirl {ok.png} {out} --angle ninety", 2, ["--angle", "not a number"]),
     ("not a whole number", "stretch {ok.png} {out} --width 10.5", 2, ["--width", "whole number"]),
-    ("max pixels zero", "swirl {ok.png} {out} --max-pixels 0", 2, ["--max-pixels", "out of range (1 <= N)"]),
+    ("max pixels zero", "swirl {ok.png} {out} --max-pixels 0", 2, ["--max-pixels", "out of range (1 <= N <= 1099511627776)"]),
     ("output folder missing", "swirl {ok.png} {dir}/nowhere/o.png", 2, ["nowhere", "does not exist"]),
     ("output is a folder", "swirl {ok.png} {dir}", 2, ["is a directory"]),
     ("unknown extension", "swirl {ok.png} {dir}/out/o.xyz", 2, ["OUTPUT", "unknown output format", ".xyz"]),

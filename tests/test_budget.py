@@ -93,7 +93,7 @@ def test_a_budget_refuses_the_automatic_grid_but_never_coarsens_it():
     """The memory budget only refuses: within it the grid (and so every pixel) is the same as
     without one; above it the solve is refused, not done on a coarser grid (issue 21: a
     result must not depend on the machine's memory)."""
-    from featurewarp_cli.engine.warper import GridBudgetError
+    from featurewarp_cli.engine.fidelity import GridBudgetError
 
     warp = load_warp("swirl")(320, 240, angle=720)
     free = FeatureWarper(320, 240).solve(warp, "plain")

@@ -103,7 +103,7 @@ def test_input_is_read_once(tmp_path, monkeypatch):
     INPUT's bytes once."""
     reads = []
     real = decode.read_bytes
-    monkeypatch.setattr(decode, "read_bytes", lambda path: reads.append(path) or real(path))
+    monkeypatch.setattr(decode, "read_bytes", lambda path, *limit: reads.append(path) or real(path, *limit))
     settings = pipeline.Settings(preset="swirl", params={"angle": 90.0})
     mask = tmp_path / "m.png"
     mask.write_bytes(encode.encode_image(square_mask(), "png"))

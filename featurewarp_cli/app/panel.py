@@ -1,4 +1,5 @@
-"""Pictures that explain a warp: the deformed grid drawn over a result, and labelled panels."""
+"""Pictures that explain a warp: the deformed grid drawn over a result, labelled panels, and
+the ``compare`` command's four-way panel (:func:`compare_file`)."""
 
 from __future__ import annotations
 
@@ -98,3 +99,47 @@ def labelled_panel(images: list[np.ndarray], labels: list[str], width: int | Non
         tiles.append(np.vstack([caption, tile]))
         tiles.append(np.full((height + bar, gap, 3), 255, np.uint8))
     return np.hstack(tiles[:-1])
+
+
+def compare_file(settings, input: str, output: str, mask: str | None = None,
+                 with_grid: bool = False, panel_width: int | None = None) -> dict:
+    """Write one labelled panel: input with the mask tinted | plain | rigid | similarity.
+
+    The three warps share one grid and one factorization. Every view keeps the input's
+    resolution unless ``panel_width`` scales the panel to that many pixels across; ``with_grid``
+    draws the deformed grid over the three results. Other
+    arguments as for :func:`featurewarp_cli.app.pipeline.warp_file`; ``settings.mode`` is ignored.
+
+    Returns
+    -------
+    dict
+        :func:`featurewarp_cli.app.report.summary` of the similarity result.
+    """
+    import time
+    from dataclasses import replace
+
+    from ..io import formats
+    from .outputs import check_distinct, write_image
+    from .pipeline import (background_colour, check_outputs, check_solution, load_image_and_mask, make_warper,
+                           prefetch_engine, rendered, solve_within_budget)
+    from .report import summary
+
+    t0 = time.perf_counter()
+    input = formats.split_prefix(input)[1]
+    out_path, fmt = check_outputs(settings, output, like=input)
+    check_distinct([(out_path, "OUTPUT")], [(input, "INPUT"), (mask, "--mask")])
+    background = background_colour(settings.background, fmt)
+    settings = replace(settings, mode="similarity")
+    prefetch_engine()
+    image, feature_mask, warnings = load_image_and_mask(settings, input, mask)
+    height, width = image.shape[:2]
+    warp, warper = make_warper(settings, width, height, feature_mask)
+    tiles, labels = [tint(image, feature_mask)], ["input + mask"]
+    for mode in ("plain", "rigid", "similarity"):
+        mesh = solve_within_budget(warper, warp, mode)
+        check_solution(settings, mesh)
+        result = rendered(warper, image, mesh, settings.interp, background)
+        tiles.append(draw_grid(result, mesh) if with_grid else result)
+        labels.append(f"{mode} {settings.preset}" if mode == "plain" else f"featurewarp {mode}")
+    write_image(out_path, fmt, labelled_panel(tiles, labels, panel_width), (255, 255, 255))
+    return summary(settings.preset, "compare", input, out_path, (width, height), mesh, t0, warnings)

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 from .. import plugins, stages
 from ..engine.defaults import DECAY, FEATURE_WEIGHT, FORMULATION, INTERPOLATION, MODE, SCALE_PRIOR
 from ..io import ImageError, colours, decode, formats, limits, write
-from .outputs import check_distinct, encoded, format_of, write_all, write_image
+from .outputs import check_distinct, encoded, format_of, write_all
 from .report import report_bytes, summary
 
 #: What :func:`prefetch_engine` imports: the engine (grid, features, fold-over guard,
@@ -131,16 +131,26 @@ def _writable(path: str, param: str) -> None:
         raise WarpError(str(err), param, usage=True) from None
 
 
-def read_input(path: str, param: str, max_pixels: int | None, data: bytes | None = None):
+def file_problem(path: str) -> str:
+    """Why ``path`` cannot be read as an image file: 'does not exist', 'is a folder', or 'is a
+    device, pipe or socket, not a regular file' (use '-' to read a stream from stdin)."""
+    if not os.path.exists(path):
+        return "does not exist"
+    if os.path.isdir(path):
+        return "is a folder, not a file"
+    return "is a device, pipe or socket, not a regular file (use '-' to read a stream from stdin)"
+
+
+def read_input(path: str, param: str, max_pixels: int | None, data: bytes | None = None,
+               max_bytes: int | None = None):
     """Decode an image argument (``-``: stdin; ``data``: its bytes if already read); a missing file
     is a usage error, a bad one a processing error (:class:`WarpError`); ``param`` names it."""
     if path != "-" and not os.path.isfile(path):
-        problem = "does not exist" if not os.path.exists(path) else "is not a file"
-        raise WarpError(f"{path} {problem}", param, usage=True)
+        raise WarpError(f"{path} {file_problem(path)}", param, usage=True)
     try:
         if data is not None:
             return decode.decode_image(data, path, max_pixels)
-        return decode.read_image(path, max_pixels)
+        return decode.read_image(path, max_pixels, max_bytes)
     except ImageError as err:
         raise WarpError(str(err), None if param == "INPUT" else param) from err
 
@@ -178,9 +188,11 @@ def load_image_and_mask(settings: Settings, input: str, mask: str | None, data: 
     warnings : list of str
     """
     use_mask = mask is not None and settings.mode != "plain"
+    if input != "-" and not os.path.isfile(input):              # INPUT first: a missing input is
+        raise WarpError(f"{input} {file_problem(input)}", "INPUT", usage=True)   # not its mask's fault
     if use_mask and mask != "-" and not os.path.isfile(mask):
-        raise WarpError(f"{mask} does not exist", "--mask", usage=True)
-    image = read_input(input, "INPUT", settings.max_pixels, data)
+        raise WarpError(f"{mask} {file_problem(mask)}", "--mask", usage=True)
+    image = read_input(input, "INPUT", settings.max_pixels, data, settings.max_memory)
     height, width = image.shape[:2]
     feature_mask, warnings = _load_mask(settings, mask, (width, height)) if use_mask else (None, [])
     return image, feature_mask, warnings
@@ -210,7 +222,8 @@ def _load_mask(settings: Settings, mask: str, size: tuple[int, int]):
     width, height = size
     if mask != "-" and os.path.isfile(mask):
         check_file_size(mask, "--mask", settings.max_memory, settings.max_pixels)
-    feature_mask = decode.mask_from_image(read_input(mask, "--mask", settings.max_pixels))
+    feature_mask = decode.mask_from_image(read_input(mask, "--mask", settings.max_pixels,
+                                                     max_bytes=settings.max_memory))
     if feature_mask.shape != (height, width):
         raise WarpError(f"mask is {feature_mask.shape[1]}x{feature_mask.shape[0]} but the "
                         f"image is {width}x{height}", "--mask", usage=True)
@@ -261,8 +274,10 @@ def start_loading(settings: Settings, input: str, mask: str | None):
         (width, height) of INPUT.
     """
     use_mask = mask is not None and settings.mode != "plain"
+    if input != "-" and not os.path.isfile(input):              # INPUT first: a missing input is
+        raise WarpError(f"{input} {file_problem(input)}", "INPUT", usage=True)   # not its mask's fault
     if use_mask and mask != "-" and not os.path.isfile(mask):
-        raise WarpError(f"{mask} does not exist", "--mask", usage=True)
+        raise WarpError(f"{mask} {file_problem(mask)}", "--mask", usage=True)
     data = header = None
     if input != "-" and os.path.isfile(input):
         check_file_size(input, "INPUT", settings.max_memory, settings.max_pixels)
@@ -326,7 +341,7 @@ def make_warper(settings: Settings, width: int, height: int, feature_mask):
 
 def solve_within_budget(warper, warp, mode: str):
     """``warper.solve(warp, mode)``; a grid above the memory budget is a WarpError (exit 1)."""
-    from ..engine.warper import GridBudgetError
+    from ..engine.fidelity import GridBudgetError
 
     try:
         return warper.solve(warp, mode)
@@ -468,41 +483,3 @@ def warp_file(settings: Settings, input: str, output: str, mask: str | None = No
         outputs.append((report, report_bytes(input, out_path, image, result, warp, mesh, timings, t0)))
     write_all(outputs)
     return summary(settings.preset, settings.mode, input, out_path, (width, height), mesh, t0, warnings)
-
-
-def compare_file(settings: Settings, input: str, output: str, mask: str | None = None,
-                 draw_grid: bool = False, panel_width: int | None = None) -> dict:
-    """Write one labelled panel: input with the mask tinted | plain | rigid | similarity.
-
-    The three warps share one grid and one factorization. Every view keeps the input's
-    resolution unless ``panel_width`` scales the panel to that many pixels across. Other
-    arguments as for :func:`warp_file`; ``settings.mode`` is ignored.
-
-    Returns
-    -------
-    dict
-        :func:`summary` of the similarity result.
-    """
-    from dataclasses import replace
-
-    from . import panel
-
-    t0 = time.perf_counter()
-    input = formats.split_prefix(input)[1]
-    out_path, fmt = check_outputs(settings, output, like=input)
-    check_distinct([(out_path, "OUTPUT")], [(input, "INPUT"), (mask, "--mask")])
-    background = background_colour(settings.background, fmt)
-    settings = replace(settings, mode="similarity")
-    prefetch_engine()
-    image, feature_mask, warnings = load_image_and_mask(settings, input, mask)
-    height, width = image.shape[:2]
-    warp, warper = make_warper(settings, width, height, feature_mask)
-    tiles, labels = [panel.tint(image, feature_mask)], ["input + mask"]
-    for mode in ("plain", "rigid", "similarity"):
-        mesh = solve_within_budget(warper, warp, mode)
-        check_solution(settings, mesh)
-        result = rendered(warper, image, mesh, settings.interp, background)
-        tiles.append(panel.draw_grid(result, mesh) if draw_grid else result)
-        labels.append(f"{mode} {settings.preset}" if mode == "plain" else f"featurewarp {mode}")
-    write_image(out_path, fmt, panel.labelled_panel(tiles, labels, panel_width), (255, 255, 255))
-    return summary(settings.preset, "compare", input, out_path, (width, height), mesh, t0, warnings)

@@ -29,6 +29,7 @@ def diff_command(a, b, max_rmse, min_psnr, max_pixels_off, tolerance, diff_image
     counts differ. Without --max-rmse, --min-psnr or --max-pixels-off the images
     must match within --tolerance everywhere. One of A and B may be '-' (stdin).
     """
+    quiet = quiet or bool(click.get_current_context().meta.get("featurewarp.quiet"))
     from ..app import diff
     from ..app.pipeline import WarpError
     from ..io import ImageError, encode, formats, write

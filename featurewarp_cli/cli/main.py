@@ -40,7 +40,10 @@ Shell completion (bash; use zsh_source or fish_source for zsh or fish):
              epilog=EPILOG)
 @click.version_option(__version__, "-V", "--version", prog_name="featurewarp")
 @click.option("--debug", is_flag=True, help="Show a traceback with processing errors.")
-def cli(debug):
+@click.option("-q", "--quiet", is_flag=True, help="Print nothing but errors (as each command's -q).")
+@click.option("-v", "--verbose", is_flag=True, help="A summary line per image (as each command's -v).")
+@click.pass_context
+def cli(ctx, debug, quiet, verbose):
     """Warp images while the features marked in a mask keep their shape.
 
     Features (faces, people, logos, products) only rotate and scale uniformly;
@@ -59,6 +62,7 @@ def cli(debug):
       featurewarp diff out.png golden.png --max-rmse 0.5
       featurewarp warps            # presets, their options, defaults and ranges
     """
+    ctx.meta["featurewarp.quiet"], ctx.meta["featurewarp.verbose"] = quiet, verbose
 
 
 @cli.group(cls=PresetGroup, context_settings={"help_option_names": ["-h", "--help"]},

@@ -23,7 +23,7 @@ SETTINGS = ("mode", "cell", "feature_weight", "decay", "formulation", "boundary"
 
 MAX_PIXELS_PARAM = Param("max_pixels", int, limits.MAX_PIXELS,
                          "Refuse inputs with more than N pixels (checked in the file header, before decoding).",
-                         min=1, metavar="N")
+                         min=1, max=limits.MAX_PIXELS_LIMIT, metavar="N")
 QUALITY = Param("quality", int, None, "JPEG and WebP quality (WebP becomes lossy when it is given; "
                 "default: JPEG 95, WebP lossless); other formats ignore it.", min=1, max=100, metavar="N")
 PANEL_WIDTH = Param("panel_width", int, None, "Scale the panel to this many pixels across (default: every "
@@ -164,7 +164,9 @@ def settings_from(preset, kwargs: dict):
     """Split a preset command's keyword arguments into Settings, quiet and verbose."""
     from ..app.pipeline import Settings
 
-    quiet, verbose = kwargs.pop("quiet"), kwargs.pop("verbose")
+    meta = click.get_current_context().meta          # -q / -v given before the command
+    quiet = kwargs.pop("quiet") or bool(meta.get("featurewarp.quiet"))
+    verbose = kwargs.pop("verbose") or bool(meta.get("featurewarp.verbose"))
     if quiet and verbose:
         raise click.UsageError("--quiet and --verbose exclude each other")
     from .. import stages

@@ -81,8 +81,10 @@ def finish(out: np.ndarray, channels: int, dtype: np.dtype) -> np.ndarray:
 
 
 def mask_array(mask, shape: tuple[int, int]) -> np.ndarray | None:
-    """The mask rule of the API and the command line: bool as is; integers at or above 128/255 of
-    their type's maximum (128 for uint8, 32896 for uint16); floats at or above 0.5."""
+    """The mask rule of the API and the command line: bool as is; integers whose largest value is
+    1 (a 0/1 mask, as ``cv2.threshold(..., 1, ...)`` gives) mark their 1s, other integers mark
+    values at or above 128/255 of their type's maximum (128 for uint8, 32896 for uint16); floats
+    mark values at or above 0.5."""
     if mask is None:
         return None
     mask = np.asarray(mask)
@@ -92,6 +94,8 @@ def mask_array(mask, shape: tuple[int, int]) -> np.ndarray | None:
     if mask.dtype == bool:
         return mask
     if np.issubdtype(mask.dtype, np.integer):
+        if mask.size and mask.max() == 1 and mask.min() >= 0:
+            return mask == 1
         return mask >= 128 * int(np.iinfo(mask.dtype).max) / 255        # as the command line: 128, 32896
     if np.issubdtype(mask.dtype, np.floating):
         return mask >= 0.5

@@ -74,5 +74,6 @@ SCALE_PRIOR_PARAM = Param(
     "Similarity mode: how firmly each feature's scale and rotation are pulled towards the warp's "
     "own (its best-fit rotation and the scale the mode picks). 1 holds them as firmly as the "
     "feature's own shape equations; smaller values let features that fill a row or column grow "
-    "or shrink uniformly so the background is not streaked; 0 leaves them free.",
-    min=0.0, metavar="P")
+    "or shrink uniformly so the background is not streaked; 0 leaves them free. At most 10 000 "
+    "(beyond, its square outweighs the shape equations by more than double precision keeps apart).",
+    min=0.0, max=1e4, metavar="P")

@@ -147,3 +147,22 @@ def auto_cell(width: int, height: int, warp=None) -> tuple[float, float]:
         cell = max(cell / math.sqrt(2.0) ** rungs, smallest)
         ok, error = follows(Grid.for_image(width, height, cell), warp)
     return cell, error
+
+
+class GridBudgetError(ValueError):
+    """The grid a warp needs is larger than the memory budget allows."""
+
+
+def check_budget(width: int, height: int, cell: float, max_nodes: int | None) -> None:
+    """Refuse an automatic grid above ``max_nodes`` (the budget never coarsens it).
+
+    Raises
+    ------
+    GridBudgetError
+    """
+    nodes = Grid.for_image(width, height, cell).n_nodes
+    if max_nodes is not None and nodes > max_nodes:
+        raise GridBudgetError(
+            f"this warp needs a grid of {nodes} nodes (cell {cell:.3g} px) to follow it within "
+            f"{MAX_PL_ERROR} px, above the {max_nodes} that the memory limit allows "
+            f"(a larger --max-memory, or a gentler warp)")

@@ -56,10 +56,6 @@ from .record import SolveRecord
 MIN_FEATURE_SIDE = 4
 
 
-class GridBudgetError(ValueError):
-    """The grid a warp needs is larger than the memory budget allows."""
-
-
 def load_warp(name: str):
     """The preset class registered under ``name`` in the ``featurewarp.warps`` group."""
     from ..plugins import load
@@ -126,7 +122,7 @@ class FeatureWarper:
     max_nodes : int, optional
         Largest grid allowed (a memory budget; see :func:`featurewarp_cli.io.limits.node_budget`).
         It only refuses: an explicit ``cell`` beyond it is a ValueError here, an automatic
-        grid beyond it a :class:`GridBudgetError` from :meth:`solve`. It never changes the
+        grid beyond it a :class:`fidelity.GridBudgetError` from :meth:`solve`. It never changes the
         grid, so a result does not depend on the machine's memory. Default: no limit (the
         automatic cell stops at :data:`fidelity.MAX_NODES`).
 
@@ -180,15 +176,6 @@ class FeatureWarper:
         self.factorizations = 0
         self.timings: dict[str, float] = {}
         self._states: dict[tuple, _GridState] = {}
-
-    def _check_budget(self, cell: float) -> None:
-        """Refuse an automatic grid above ``max_nodes`` (the budget never coarsens it)."""
-        nodes = Grid.for_image(self.width, self.height, cell).n_nodes
-        if self.max_nodes is not None and nodes > self.max_nodes:
-            raise GridBudgetError(
-                f"this warp needs a grid of {nodes} nodes (cell {cell:.3g} px) to follow it within "
-                f"{fidelity.MAX_PL_ERROR} px, above the {self.max_nodes} that the memory limit allows "
-                f"(a larger --max-memory, or a gentler warp)")
 
     def _state(self, grid: Grid, warped: np.ndarray, boundary: str) -> _GridState:
         """Features and border conditions on ``grid`` (built once per grid and border);
@@ -281,7 +268,7 @@ class FeatureWarper:
             cell, error = (self.cell or fidelity.auto_cell(self.width, self.height, None)[0]), float("nan")
         elif self.cell is None:
             cell, error = fidelity.auto_cell(self.width, self.height, warp)
-            self._check_budget(cell)
+            fidelity.check_budget(self.width, self.height, cell, self.max_nodes)
         else:
             cell = float(self.cell)
             error = fidelity.pl_error(Grid.for_image(self.width, self.height, cell), warp)
@@ -491,9 +478,22 @@ def warp(image: np.ndarray, mask: np.ndarray | None, preset: str, *, mode: str =
     -------
     ndarray
         The warped image on the preset's canvas.
+
+    Warns
+    -----
+    featurewarp_cli.FeatureWarpWarning
+        One per thing the solve could not do (a feature not kept, a warp with no effect):
+        the lines of ``mesh.record.warnings``.
     """
+    import warnings
+
+    from .. import FeatureWarpWarning
+
     height, width = image.shape[:2]
     w = load_warp(preset)(width, height, **params)
     warper = FeatureWarper(width, height, mask, cell=cell, feature_weight=feature_weight, decay=decay,
                            formulation=formulation, boundary=boundary, scale_prior=scale_prior)
-    return warper.render(image, warper.solve(w, mode), interp, background)
+    mesh = warper.solve(w, mode)
+    for line in mesh.record.warnings:
+        warnings.warn(line, FeatureWarpWarning, stacklevel=2)
+    return warper.render(image, mesh, interp, background)

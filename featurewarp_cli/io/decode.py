@@ -25,7 +25,7 @@ import numpy as np
 
 from . import ImageError
 from .capture import captured_stderr
-from .limits import MAX_PIXELS, check_pixels, limit_opencv_decoders, opencv_limit
+from .limits import MAX_PIXELS, check_pixels, limit_opencv_decoders, opencv_limit, size_text
 
 limit_opencv_decoders(MAX_PIXELS, replace=False)        # before cv2 loads; the CLI may have set it
 import cv2  # noqa: E402
@@ -100,25 +100,63 @@ class Header:
         return (self.height, self.width) if self.orientation >= 5 else (self.width, self.height)
 
 
-def read_bytes(path: str) -> bytes:
+#: The first bytes of every format the decoders read (a stream from stdin that starts with
+#: none of them is refused after its first bytes, not read to its end: ``< /dev/zero``).
+SIGNATURES = (b"\x89PNG", b"\xff\xd8\xff", b"GIF87a", b"GIF89a", b"BM", b"II*\x00", b"MM\x00*", b"II+\x00",
+              b"MM\x00+", b"RIFF", b"\x00\x00\x00\x0cjP", b"\xff\x4f\xff\x51", b"P1", b"P2", b"P3", b"P4", b"P5",
+              b"P6", b"P7", b"PF", b"Pf", b"#?RADIANCE", b"#?RGBE", b"v/1\x01", b"\x59\xa6\x6a\x95")
+#: ISO media (AVIF, HEIF): the brand box at byte 4.
+_FTYP = b"ftyp"
+_CHUNK = 1 << 20
+
+
+def looks_like_image(head: bytes) -> bool:
+    """Whether ``head`` (a file's first bytes) starts like a format the decoders read."""
+    return head.startswith(SIGNATURES) or head[4:8] == _FTYP
+
+
+def read_bytes(path: str, max_bytes: int | None = None) -> bytes:
     """The bytes of a file, or of stdin for ``-``.
+
+    Parameters
+    ----------
+    path : str
+    max_bytes : int, optional
+        A stream from stdin longer than this is refused while it is read (the memory
+        budget); one whose first bytes are no image format's is refused at once.
 
     Raises
     ------
     ImageError
-        When the file cannot be read.
+        When the file cannot be read, or stdin is too long or not an image.
     """
     if path == "-":
         if sys.stdin is None or getattr(sys.stdin, "closed", False):
             raise ImageError("stdin is closed; pipe an image into it (or give a file name)")
         if sys.stdin.isatty():
             raise ImageError("stdin is a terminal; pipe an image into it (or give a file name)")
-        return sys.stdin.buffer.read()
+        return _read_stream(sys.stdin.buffer, max_bytes)
     try:
         with open(path, "rb") as fh:
             return fh.read()
     except OSError as err:
         raise ImageError(f"cannot read {path}: {err.strerror or err}") from None
+
+
+def _read_stream(stream, max_bytes: int | None) -> bytes:
+    """Read a stream to its end in chunks, refusing it once it is not an image or too long."""
+    chunks, total = [], 0
+    while True:
+        chunk = stream.read(_CHUNK)
+        if not chunk:
+            break
+        if not chunks and len(chunk) >= 16 and not looks_like_image(chunk):
+            raise ImageError("stdin is not an image: its first bytes are no format featurewarp reads")
+        chunks.append(chunk)
+        total += len(chunk)
+        if max_bytes is not None and total > max_bytes:
+            raise ImageError(f"stdin holds more than the memory limit of {size_text(max_bytes)} (--max-memory)")
+    return b"".join(chunks)
 
 
 def _orientation(image: Image.Image, data: bytes) -> int:
@@ -263,19 +301,23 @@ def decode_image(data: bytes, name: str, max_pixels: int | None = MAX_PIXELS) ->
     return image
 
 
-def read_image(path: str, max_pixels: int | None = MAX_PIXELS) -> np.ndarray:
-    """Read and decode an image file (``-``: stdin); see :func:`decode_image`."""
-    return decode_image(read_bytes(path), "stdin" if path == "-" else path, max_pixels)
+def read_image(path: str, max_pixels: int | None = MAX_PIXELS, max_bytes: int | None = None) -> np.ndarray:
+    """Read and decode an image file (``-``: stdin, at most ``max_bytes``); see :func:`decode_image`."""
+    return decode_image(read_bytes(path, max_bytes), "stdin" if path == "-" else path, max_pixels)
 
 
 def mask_from_image(image: np.ndarray) -> np.ndarray:
-    """Boolean feature mask: gray value >= 128 of the mask composited over black.
+    """Boolean feature mask: gray value >= 128 of the mask composited over black; a one-channel
+    mask whose largest value is 1 (a 0/1 mask) marks its 1s, as the API does
+    (:func:`featurewarp_cli.engine.arrays.mask_array`).
 
     Transparent pixels of a mask with alpha therefore never mark a feature.
     """
     top = np.iinfo(image.dtype).max
     threshold = 128 * top / 255                     # 128 or 32896: whole numbers, exact
     if image.ndim == 2:
+        if image.size and image.max() == 1:
+            return image == 1
         return image >= threshold
     colour = image[:, :, :3] if image.shape[2] >= 3 else image[:, :, :1]
     gray = cv2.cvtColor(colour, cv2.COLOR_BGR2GRAY) if colour.shape[2] == 3 else colour[:, :, 0]

@@ -16,6 +16,9 @@ from . import ImageError
 
 #: Default limit on width * height of an input (``--max-pixels``).
 MAX_PIXELS = 200_000_000
+#: The largest ``--max-pixels`` accepted (2^40: beyond it OpenCV's decoder limit, a 64-bit
+#: count it parses, overflowed and aborted the process).
+MAX_PIXELS_LIMIT = 1 << 40
 #: The environment variable that limits OpenCV's decoders (read when cv2 is imported).
 OPENCV_VARIABLE = "OPENCV_IO_MAX_IMAGE_PIXELS"
 #: Peak bytes per grid node of a solve (factor, guard, quality), measured: 1.1 kB (12 MP,

@@ -1,0 +1,85 @@
+"""API conventions (issue 25, item 3): warnings of the package's own category, 0/1 masks."""
+
+from __future__ import annotations
+
+import os
+import warnings
+
+import numpy as np
+import pytest
+
+import featurewarp_cli
+from featurewarp_cli import FeatureWarpWarning, warp
+from featurewarp_cli.engine.arrays import mask_array
+from featurewarp_cli.io.decode import mask_from_image
+
+
+def test_warp_reports_what_it_could_not_do_as_warnings():
+    """A mask that fills the swirl's disc: the output is the input, said as a FeatureWarpWarning."""
+    image = np.random.default_rng(0).integers(0, 255, (60, 80, 3), dtype=np.uint8)
+    mask = np.ones((60, 80), bool)
+    with pytest.warns(FeatureWarpWarning) as caught:
+        warp(image, mask, "swirl", angle=180)
+    assert all(issubclass(w.category, UserWarning) for w in caught)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", FeatureWarpWarning)
+        with pytest.raises(FeatureWarpWarning):
+            warp(image, mask, "swirl", angle=180)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        warp(image, None, "swirl", angle=30)             # nothing to say: no warning at all
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16, np.int32, np.int64])
+def test_a_zero_one_integer_mask_marks_its_ones(dtype):
+    mask = np.zeros((4, 5), dtype)
+    mask[1:3, 2:4] = 1
+    np.testing.assert_array_equal(mask_array(mask, (4, 5)), mask == 1)
+    if dtype in (np.uint8, np.uint16):
+        np.testing.assert_array_equal(mask_from_image(mask), mask == 1)       # the command line's rule
+    wide = mask * 255 if dtype != np.uint16 else mask * 65535
+    wide[0, 0] = 1                                      # not a 0/1 mask: 1 is below the threshold
+    assert not mask_array(wide.astype(dtype), (4, 5))[0, 0]
+
+
+def test_the_package_says_it_is_typed():
+    assert os.path.isfile(os.path.join(os.path.dirname(featurewarp_cli.__file__), "py.typed"))
+
+
+@pytest.mark.parametrize("command", ["warp", "batch", "compare"])
+def test_a_misspelt_preset_gets_a_suggestion(command):
+    from click.testing import CliRunner
+
+    from featurewarp_cli.cli.main import cli
+
+    result = CliRunner().invoke(cli, [command, "swril", "in.png", "out.png"])
+    assert result.exit_code == 2 and "did you mean 'swirl'?" in result.output
+
+
+def test_the_api_suggests_too():
+    from featurewarp_cli.plugins import UnknownPreset, load
+
+    with pytest.raises(UnknownPreset, match="did you mean 'bulge'"):
+        load("bulg")
+
+
+def test_quiet_and_verbose_may_come_before_the_command(tmp_path):
+    import cv2
+    from click.testing import CliRunner
+
+    from featurewarp_cli.cli.main import cli
+
+    image = tmp_path / "in.png"
+    cv2.imwrite(str(image), np.full((40, 60, 3), 90, np.uint8))
+    mask = tmp_path / "m.png"
+    cv2.imwrite(str(mask), np.full((40, 60), 255, np.uint8))       # fills the swirl: a warning is due
+    runner = CliRunner()
+    loud = runner.invoke(cli, ["warp", "swirl", str(image), str(tmp_path / "o.png"), "-m", str(mask)])
+    assert loud.exit_code == 0 and "warning" in loud.output
+    for args in (["-q", "warp", "swirl"], ["warp", "swirl", "-q"]):
+        quiet = runner.invoke(cli, args + [str(image), str(tmp_path / "o.png"), "-m", str(mask)])
+        assert quiet.exit_code == 0 and quiet.output == "", quiet.output
+    verbose = runner.invoke(cli, ["-v", "warp", "swirl", str(image), str(tmp_path / "o.png")])
+    assert verbose.exit_code == 0 and "swirl" in verbose.output
+    same = runner.invoke(cli, ["-q", "diff", str(image), str(image)])
+    assert same.exit_code == 0 and same.output == ""

@@ -1,0 +1,82 @@
+"""Hostile input, round two (issue 24): reads that must be bounded, values that must not overflow.
+
+Each case runs the real command (stdin streams and devices are what is tested) and must end
+within seconds with one line on stderr, the right exit code, and no file written.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pytest
+
+from test_cli import listing, save, square_mask, textured
+
+TIMEOUT = 30
+
+
+def run(*args, stdin=None, input=None):
+    return subprocess.run([sys.executable, "-m", "featurewarp_cli", *map(str, args)], stdin=stdin, input=input,
+                          capture_output=True, timeout=TIMEOUT)
+
+
+def one_line(result, code, *words):
+    err = result.stderr.decode()
+    assert result.returncode == code, (result.returncode, err)
+    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err, err
+    for word in words:
+        assert word in err, err
+
+
+@pytest.fixture
+def scene(tmp_path):
+    return save(tmp_path / "in.png", textured()), save(tmp_path / "m.png", square_mask())
+
+
+@pytest.mark.parametrize("device", ["/dev/zero", "/dev/urandom"])
+@pytest.mark.parametrize("role", ["input", "mask"])
+def test_an_endless_stream_on_stdin_is_refused_at_once(tmp_path, scene, device, role):
+    image, mask = scene
+    before = listing(tmp_path)
+    args = ["warp", "swirl", "-", tmp_path / "o.png"] if role == "input" else \
+           ["warp", "swirl", image, tmp_path / "o.png", "-m", "-"]
+    with open(device, "rb") as stream:
+        result = run(*args, stdin=stream)
+    one_line(result, 1, "stdin is not an image")
+    assert listing(tmp_path) == before
+
+
+def test_a_stream_longer_than_the_budget_is_refused_while_read(tmp_path, scene):
+    image, _ = scene
+    data = open(image, "rb").read() + bytes(24 << 20)
+    result = run("warp", "swirl", "-", tmp_path / "o.png", "--max-memory", "16M", input=data)
+    one_line(result, 1, "stdin", "--max-memory")
+    assert not (tmp_path / "o.png").exists()
+
+
+def test_a_device_as_a_mask_is_named_for_what_it_is(tmp_path, scene):
+    image, _ = scene
+    one_line(run("warp", "swirl", image, tmp_path / "o.png", "-m", "/dev/zero"), 2, "--mask", "/dev/zero",
+             "not a regular file")
+    one_line(run("warp", "swirl", image, tmp_path / "o.png", "-m", tmp_path), 2, "--mask", "directory")
+
+
+@pytest.mark.parametrize("option,value", [
+    ("--max-pixels", "18446744073709551615"),      # SIGABRT inside OpenCV before
+    ("--scale-prior", "1e308"),                    # OverflowError before
+    ("--center", "1e308%,0"),                      # a transparent image with exit 0 before
+    ("--center", "1e308,1e308"),                   # 7 s, 1.2 GB and folds before
+    ("--center", "200000,0"),
+])
+def test_values_that_overflow_are_usage_errors(tmp_path, scene, option, value):
+    image, mask = scene
+    one_line(run("warp", "swirl", image, tmp_path / "o.png", "-m", mask, option, value), 2, option)
+    assert not (tmp_path / "o.png").exists()
+
+
+def test_a_stream_on_stdin_still_works(tmp_path, scene):
+    image, mask = scene
+    result = run("warp", "swirl", "-", tmp_path / "o.png", "-m", mask, input=open(image, "rb").read())
+    assert result.returncode == 0, result.stderr.decode()
+    assert (tmp_path / "o.png").stat().st_size > 0
