@@ -83,3 +83,27 @@ def test_quiet_and_verbose_may_come_before_the_command(tmp_path):
     assert verbose.exit_code == 0 and "swirl" in verbose.output
     same = runner.invoke(cli, ["-q", "diff", str(image), str(image)])
     assert same.exit_code == 0 and same.output == ""
+
+
+def test_diff_json_prints_one_object_and_keeps_the_exit_status(tmp_path):
+    import json
+
+    import cv2
+    from click.testing import CliRunner
+
+    from featurewarp_cli.cli.main import cli
+
+    a, b = tmp_path / "a.png", tmp_path / "b.png"
+    cv2.imwrite(str(a), np.zeros((10, 12, 3), np.uint8))
+    cv2.imwrite(str(b), np.full((10, 12, 3), 2, np.uint8))
+    same = CliRunner().invoke(cli, ["diff", str(a), str(a), "--json"])
+    assert same.exit_code == 0
+    assert json.loads(same.output) == {"a": str(a), "b": str(a), "rmse": 0.0, "psnr": None, "max_abs": 0.0,
+                                       "pixels_off": 0, "pixels": 120, "tolerance": 0.0, "within": True,
+                                       "failures": []}
+    off = CliRunner(mix_stderr=False).invoke(cli, ["diff", str(a), str(b), "--json", "--max-rmse", "1"]) \
+        if "mix_stderr" in CliRunner.__init__.__code__.co_varnames else CliRunner().invoke(
+            cli, ["diff", str(a), str(b), "--json", "--max-rmse", "1"])
+    assert off.exit_code == 1
+    line = json.loads(off.stdout.splitlines()[0])
+    assert line["rmse"] == 2.0 and not line["within"] and "--max-rmse" in line["failures"][0]

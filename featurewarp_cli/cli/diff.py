@@ -20,7 +20,10 @@ from .presets import click_error
 @click.option("--diff-image", type=click.Path(dir_okay=False), metavar="PATH",
               help="Write A in faded gray with the pixels off in red.")
 @click.option("-q", "--quiet", is_flag=True, help="Print no metrics; only the exit status tells.")
-def diff_command(a, b, max_rmse, min_psnr, max_pixels_off, tolerance, diff_image, quiet):
+@click.option("--json", "as_json", is_flag=True,
+              help="Print the metrics as one JSON object (rmse, psnr: null when identical, max_abs, "
+                   "pixels_off, pixels, tolerance, within, failures) instead of text.")
+def diff_command(a, b, max_rmse, min_psnr, max_pixels_off, tolerance, diff_image, quiet, as_json):
     """Compare images A and B (e.g. an output with its golden file).
 
     Prints RMSE, PSNR, the largest absolute difference and the pixels off, on
@@ -56,16 +59,28 @@ def diff_command(a, b, max_rmse, min_psnr, max_pixels_off, tolerance, diff_image
     if reason:
         raise click.ClickException(f"{a} and {b} cannot be compared: {reason}")
     result = diff.compare(first, second, tolerance)
-    if not quiet:
+    broken = diff.failures(result, max_rmse, min_psnr, max_pixels_off)
+    if as_json and not quiet:
+        click.echo(_as_json(a, b, result, broken))
+    elif not quiet:
         click.echo("\n".join(result.lines()))
     if diff_image:
         try:
             write.write_atomic(path, encode.encode_image(diff.highlight(first, result.off), fmt))
         except (ImageError, OSError) as err:
             raise click.ClickException(f"cannot write {path}: {err}") from err
-    broken = diff.failures(result, max_rmse, min_psnr, max_pixels_off)
     if broken:
         raise click.ClickException(f"{a} and {b} differ beyond tolerance: {'; '.join(broken)}")
+
+
+def _as_json(a: str, b: str, result, broken: list[str]) -> str:
+    """The metrics as one JSON line (infinite PSNR, identical images, as null)."""
+    import json
+    import math
+
+    return json.dumps({"a": a, "b": b, "rmse": result.rmse, "psnr": result.psnr if math.isfinite(result.psnr) else None,
+                       "max_abs": result.max_abs, "pixels_off": result.pixels_off, "pixels": result.pixels,
+                       "tolerance": result.tolerance, "within": not broken, "failures": broken})
 
 
 #: Peak bytes per pixel of a diff (both images as read, their float differences, the
