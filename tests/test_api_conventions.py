@@ -107,3 +107,20 @@ def test_diff_json_prints_one_object_and_keeps_the_exit_status(tmp_path):
     assert off.exit_code == 1
     line = json.loads(off.stdout.splitlines()[0])
     assert line["rmse"] == 2.0 and not line["within"] and "--max-rmse" in line["failures"][0]
+
+
+def test_dash_dash_writes_stdin_in_its_own_format(tmp_path):
+    """``cat in.png | featurewarp warp bulge - -``: stdout takes stdin's format, as ImageMagick's."""
+    import subprocess
+    import sys
+
+    import cv2
+
+    image = np.zeros((40, 60, 3), np.uint8)
+    image[10:30, 20:40] = 200
+    for ext, magic in ((".png", b"\x89PNG"), (".jpg", b"\xff\xd8\xff")):
+        data = cv2.imencode(ext, image)[1].tobytes()
+        run = subprocess.run([sys.executable, "-m", "featurewarp_cli", "warp", "bulge", "-", "-"], input=data,
+                             capture_output=True, timeout=60)
+        assert run.returncode == 0, run.stderr
+        assert run.stdout.startswith(magic)

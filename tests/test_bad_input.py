@@ -107,7 +107,6 @@ CASES = [
     ("output is a folder", "swirl {ok.png} {dir}", 2, ["is a directory"]),
     ("unknown extension", "swirl {ok.png} {dir}/out/o.xyz", 2, ["OUTPUT", "unknown output format", ".xyz"]),
     ("no extension", "swirl {ok.png} {dir}/out/o", 2, ["OUTPUT", "no extension"]),
-    ("stdout without format, stdin input", "swirl - -", 2, ["OUTPUT", "--format"]),
     ("prefix against --format", "swirl {ok.png} png:- --format jpg", 2, ["png", "jpg"]),
     ("mask and input both stdin", "swirl - {out} -m -", 2, ["--mask", "stdin"]),
     ("unknown preset", "twirl {ok.png} {out}", 2, ["unknown preset", "twirl", "swirl"]),

@@ -11,7 +11,8 @@ import os
 import time
 from dataclasses import dataclass
 
-from .pipeline import Settings, WarpError, _writable, file_problem, warp_file
+from ..io.decode import path_problem
+from .pipeline import Settings, WarpError, _writable, warp_file
 
 
 @dataclass(frozen=True)
@@ -111,7 +112,7 @@ def _worker_setup() -> None:
 def run_job(settings: Settings, job: Job) -> tuple[str | None, dict | None]:
     """Run one batch job; returns (error message or None, summary or None). Never raises."""
     if not os.path.isfile(job.input):                # named as the input, before its output or mask
-        return f"{job.input} {file_problem(job.input)}", None
+        return f"{job.input} {path_problem(job.input)}", None
     try:
         return None, warp_file(settings, job.input, job.output, job.mask)
     except WarpError as err:

@@ -13,7 +13,7 @@ import os
 import sys
 import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from .. import plugins, stages
 from ..engine.defaults import DECAY, FEATURE_WEIGHT, FORMULATION, INTERPOLATION, MODE, SCALE_PRIOR
@@ -131,14 +131,11 @@ def _writable(path: str, param: str) -> None:
         raise WarpError(str(err), param, usage=True) from None
 
 
-def file_problem(path: str) -> str:
-    """Why ``path`` cannot be read as an image file: 'does not exist', 'is a folder', or 'is a
-    device, pipe or socket, not a regular file' (use '-' to read a stream from stdin)."""
-    if not os.path.exists(path):
-        return "does not exist"
-    if os.path.isdir(path):
-        return "is a folder, not a file"
-    return "is a device, pipe or socket, not a regular file (use '-' to read a stream from stdin)"
+def _check_paths(input: str, mask: str | None) -> None:
+    """INPUT, then the mask, must be files (or '-'): a missing input is not its mask's fault."""
+    for path, param in ((input, "INPUT"), (mask, "--mask")):
+        if path not in (None, "-") and not os.path.isfile(path):
+            raise WarpError(f"{path} {decode.path_problem(path)}", param, usage=True)
 
 
 def read_input(path: str, param: str, max_pixels: int | None, data: bytes | None = None,
@@ -146,7 +143,7 @@ def read_input(path: str, param: str, max_pixels: int | None, data: bytes | None
     """Decode an image argument (``-``: stdin; ``data``: its bytes if already read); a missing file
     is a usage error, a bad one a processing error (:class:`WarpError`); ``param`` names it."""
     if path != "-" and not os.path.isfile(path):
-        raise WarpError(f"{path} {file_problem(path)}", param, usage=True)
+        raise WarpError(f"{path} {decode.path_problem(path)}", param, usage=True)
     try:
         if data is not None:
             return decode.decode_image(data, path, max_pixels)
@@ -188,10 +185,7 @@ def load_image_and_mask(settings: Settings, input: str, mask: str | None, data: 
     warnings : list of str
     """
     use_mask = mask is not None and settings.mode != "plain"
-    if input != "-" and not os.path.isfile(input):              # INPUT first: a missing input is
-        raise WarpError(f"{input} {file_problem(input)}", "INPUT", usage=True)   # not its mask's fault
-    if use_mask and mask != "-" and not os.path.isfile(mask):
-        raise WarpError(f"{mask} {file_problem(mask)}", "--mask", usage=True)
+    _check_paths(input, mask if use_mask else None)
     image = read_input(input, "INPUT", settings.max_pixels, data, settings.max_memory)
     height, width = image.shape[:2]
     feature_mask, warnings = _load_mask(settings, mask, (width, height)) if use_mask else (None, [])
@@ -258,7 +252,24 @@ class _Decoding:
         return self._image
 
 
-def start_loading(settings: Settings, input: str, mask: str | None):
+def _piped(settings: Settings, input: str, output: str) -> tuple[Settings, bytes | None]:
+    """For ``- -`` without --format: settings with stdin's own format, and stdin's bytes (read
+    now); else (settings, None)."""
+    if not (input == output == "-" and settings.fmt is None):
+        return settings, None
+    try:
+        data = decode.read_bytes("-", settings.max_memory)
+    except ImageError as err:
+        raise WarpError(str(err)) from None
+    header = decode.read_header(data)
+    name = formats.format_name(header.format) if header is not None else None
+    if name is None:
+        raise WarpError("stdout takes stdin's format, and stdin's is not one featurewarp writes; use --format "
+                        "or a prefix such as png:-", "OUTPUT", usage=True)
+    return replace(settings, fmt=name), data
+
+
+def start_loading(settings: Settings, input: str, mask: str | None, data: bytes | None = None):
     """Decode the mask, and start decoding INPUT in a thread when its header gives its size.
 
     The mesh needs only the size and the mask, so the solve runs while the
@@ -274,11 +285,8 @@ def start_loading(settings: Settings, input: str, mask: str | None):
         (width, height) of INPUT.
     """
     use_mask = mask is not None and settings.mode != "plain"
-    if input != "-" and not os.path.isfile(input):              # INPUT first: a missing input is
-        raise WarpError(f"{input} {file_problem(input)}", "INPUT", usage=True)   # not its mask's fault
-    if use_mask and mask != "-" and not os.path.isfile(mask):
-        raise WarpError(f"{mask} {file_problem(mask)}", "--mask", usage=True)
-    data = header = None
+    _check_paths(input, mask if use_mask else None)
+    header = decode.read_header(data) if data else None             # stdin, already read
     if input != "-" and os.path.isfile(input):
         check_file_size(input, "INPUT", settings.max_memory, settings.max_pixels)
         try:
@@ -445,13 +453,14 @@ def warp_file(settings: Settings, input: str, output: str, mask: str | None = No
     input = formats.split_prefix(input)[1]
     if mask == "-" and input == "-":
         raise WarpError("cannot be '-' when INPUT is '-' (stdin holds the image)", "--mask", usage=True)
+    settings, piped = _piped(settings, input, output)
     out_path, fmt = check_outputs(settings, output, (report, "--report"), (save_grid, "--save-grid"),
                                   like=input)
     check_distinct([(out_path, "OUTPUT"), (report, "--report"), (save_grid, "--save-grid")],
                    [(input, "INPUT"), (mask, "--mask"), *also_read])
     background = background_colour(settings.background, fmt)
     prefetch_engine(solver=mask is not None and settings.mode != "plain")
-    pending, feature_mask, warnings, (width, height) = start_loading(settings, input, mask)
+    pending, feature_mask, warnings, (width, height) = start_loading(settings, input, mask, piped)
     timings = {"load": time.perf_counter() - t0}
     try:
         warp, warper, mesh = solved(settings, width, height, feature_mask)
@@ -467,7 +476,6 @@ def warp_file(settings: Settings, input: str, output: str, mask: str | None = No
     result = rendered(warper, image, mesh, settings.interp, background)
     if draw_grid:
         from .panel import draw_grid as overlay
-
         result = overlay(result, mesh)
     timings.update(mesh.info["timings"])
 

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import importlib
 import io
+import os
 import sys
 import warnings
 from dataclasses import dataclass, field
@@ -113,6 +114,16 @@ _CHUNK = 1 << 20
 def looks_like_image(head: bytes) -> bool:
     """Whether ``head`` (a file's first bytes) starts like a format the decoders read."""
     return head.startswith(SIGNATURES) or head[4:8] == _FTYP
+
+
+def path_problem(path: str) -> str:
+    """Why ``path`` cannot be read as an image file: 'does not exist', 'is a folder', or 'is a
+    device, pipe or socket, not a regular file' (use '-' to read a stream from stdin)."""
+    if not os.path.exists(path):
+        return "does not exist"
+    if os.path.isdir(path):
+        return "is a folder, not a file"
+    return "is a device, pipe or socket, not a regular file (use '-' to read a stream from stdin)"
 
 
 def read_bytes(path: str, max_bytes: int | None = None) -> bytes:
