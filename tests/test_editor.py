@@ -293,3 +293,56 @@ def test_export_saves_the_handles_and_prints_the_command_that_reproduces_it(tmp_
     finally:
         process.send_signal(signal.SIGINT)
         process.wait(timeout=10)
+
+
+def test_posts_from_another_origin_are_refused(editor):
+    """A page of another site cannot post to the editor, even with the token in hand."""
+    _, url = editor
+    port = url.split(":")[2].split("/")[0]
+    base, query = url.split("?")
+    request = urllib.request.Request(base.rstrip("/") + "/save?" + query, data=b'{"handles": {"version": 2}}',
+                                     method="POST", headers={"Content-Type": "application/json",
+                                                             "Origin": "http://attacker.example"})
+    with pytest.raises(urllib.error.HTTPError) as err:
+        urllib.request.urlopen(request)
+    assert err.value.code == 403
+    code, answer = post(url, "/save", b'{"handles": {"version": 2}}', {"Origin": f"http://127.0.0.1:{port}"})
+    assert code == 400 and "version" in answer["error"]          # its own origin: served
+
+
+def test_idle_and_surplus_connections_are_closed(monkeypatch):
+    """A held connection is closed after the timeout; beyond the cap a new one is closed at once."""
+    import socket
+    import threading
+
+    from featurewarp_cli.app import editor as editor_module
+
+    monkeypatch.setattr(editor_module.EditorHandler, "timeout", 0.5)
+    monkeypatch.setattr(editor_module, "MAX_CONNECTIONS", 2)
+
+    class Nothing:
+        pass
+
+    server = editor_module.EditorServer.__new__(editor_module.EditorServer)
+    editor_module.EditorServer.__init__(server, Nothing(), 0)
+    thread = threading.Thread(target=server.serve_forever, daemon=True)
+    thread.start()
+    try:
+        held = [socket.create_connection(("127.0.0.1", server.server_port)) for _ in range(2)]
+        time.sleep(0.1)
+        extra = socket.create_connection(("127.0.0.1", server.server_port))
+        extra.settimeout(2)
+        started = time.monotonic()
+        assert extra.recv(1) == b"" and time.monotonic() - started < 0.4      # closed on arrival
+        for sock in held:
+            sock.settimeout(5)
+            assert sock.recv(1) == b""                                           # closed after 0.5 s idle
+        again = socket.create_connection(("127.0.0.1", server.server_port))     # slots are free again
+        again.sendall(b"GET / HTTP/1.1\r\nHost: x\r\n\r\n")
+        again.settimeout(5)
+        assert again.recv(12).startswith(b"HTTP/1.")
+        for sock in held + [extra, again]:
+            sock.close()
+    finally:
+        server.shutdown()
+        server.server_close()

@@ -8,7 +8,9 @@ templates, and the standard library keeps ``make install`` and the attack surfac
 Safety: the server listens on 127.0.0.1 only, on a free port unless one is given; every
 request must carry the random token of the URL it prints (compared in constant time) and a
 Host header naming 127.0.0.1 or localhost on its port (DNS rebinding), and POSTs must be
-JSON. It serves its own page and the one image; it writes only the handles file and the
+JSON and, when the browser says where they come from, from the editor's own origin (another
+site's page cannot post to it). Idle connections are closed after a timeout and the open
+ones are capped, so connections held open cannot tie up threads. It serves its own page and the one image; it writes only the handles file and the
 output the user named on the command line, atomically, through the ``deform`` pipeline.
 """
 
@@ -200,20 +202,49 @@ def page() -> bytes:
                 .replace("/*EDITOR_JS*/", (folder / "editor.js").read_text(encoding="utf-8"))).encode()
 
 
+#: Seconds a connection may sit idle (or trickle a request) before it is closed, and the
+#: connections served at once; more are closed on arrival (each open one costs a thread).
+SOCKET_TIMEOUT = 20.0
+MAX_CONNECTIONS = 32
+
+
 class EditorServer(ThreadingHTTPServer):
-    """The HTTP server of one :class:`EditorSession` on 127.0.0.1."""
+    """The HTTP server of one :class:`EditorSession` on 127.0.0.1.
+
+    Idle connections are closed after :data:`SOCKET_TIMEOUT` seconds and at most
+    :data:`MAX_CONNECTIONS` are served at once, so held connections cannot exhaust threads."""
 
     daemon_threads = True
+    open_connections = 0
 
     def __init__(self, session: EditorSession, port: int = 0, token: str | None = None):
         self.session = session
         self.token = token or secrets.token_urlsafe(24)
         self.page = page()
+        self._count = threading.Lock()
         super().__init__(("127.0.0.1", port), EditorHandler)
         self.hosts = {f"127.0.0.1:{self.server_port}", f"localhost:{self.server_port}"}
 
     def handle_error(self, request, client_address):
         """A client that hangs up (a reload, a closed tab) is not news: no traceback on stderr."""
+
+    def process_request(self, request, client_address):
+        """Serve in a thread, or close the connection at once when :data:`MAX_CONNECTIONS` are open."""
+        with self._count:
+            full = self.open_connections >= MAX_CONNECTIONS
+            if not full:
+                self.open_connections += 1
+        if full:
+            self.shutdown_request(request)
+            return
+        super().process_request(request, client_address)
+
+    def process_request_thread(self, request, client_address):
+        try:
+            super().process_request_thread(request, client_address)
+        finally:
+            with self._count:
+                self.open_connections -= 1
 
     @property
     def url(self) -> str:
@@ -225,6 +256,7 @@ class EditorHandler(BaseHTTPRequestHandler):
 
     server_version = "featurewarp-edit"
     protocol_version = "HTTP/1.1"
+    timeout = SOCKET_TIMEOUT
 
     def log_message(self, format, *args):       # quiet: the terminal belongs to the user
         pass
@@ -267,8 +299,9 @@ class EditorHandler(BaseHTTPRequestHandler):
         self._send(200, make(), kind)
 
     def do_POST(self):
-        if not self._allowed():
-            return self._send(403, b"forbidden", "text/plain")
+        origin = self.headers.get("Origin")
+        if not self._allowed() or (origin is not None and origin not in {f"http://{h}" for h in self.server.hosts}):
+            return self._send(403, b"forbidden", "text/plain")         # a page of another site
         route = urlsplit(self.path).path
         calls = {"/solve": self._solve, "/save": self.server.session.save, "/export": self.server.session.export}
         if route not in calls:
