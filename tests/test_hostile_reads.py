@@ -80,3 +80,33 @@ def test_a_stream_on_stdin_still_works(tmp_path, scene):
     result = run("warp", "swirl", "-", tmp_path / "o.png", "-m", mask, input=open(image, "rb").read())
     assert result.returncode == 0, result.stderr.decode()
     assert (tmp_path / "o.png").stat().st_size > 0
+
+
+def test_a_failing_device_leaves_every_file_as_it_was(tmp_path, scene):
+    """--report on /dev/full: nothing is linked into place before the device has been written."""
+    image, mask = scene
+    out = tmp_path / "o.png"
+    out.write_bytes(b"old")
+    one_line(run("warp", "swirl", image, out, "-m", mask, "--report", "/dev/full"), 1, "/dev/full")
+    assert out.read_bytes() == b"old"
+
+
+def test_a_fifo_without_a_reader_is_an_error_within_a_bounded_wait(tmp_path, scene, monkeypatch):
+    import os
+    import time
+
+    from click.testing import CliRunner
+
+    from featurewarp_cli.cli.main import cli
+    from featurewarp_cli.io import write
+
+    image, mask = scene
+    fifo = tmp_path / "pipe"
+    os.mkfifo(fifo)
+    monkeypatch.setattr(write, "FIFO_WAIT", 0.3)
+    started = time.monotonic()
+    result = CliRunner().invoke(cli, ["warp", "swirl", image, f"png:{fifo}", "-m", mask,
+                                      "--report", str(tmp_path / "r.json")])
+    assert result.exit_code == 1 and "no process reads this FIFO" in result.output and str(fifo) in result.output
+    assert time.monotonic() - started < 10
+    assert not (tmp_path / "r.json").exists()

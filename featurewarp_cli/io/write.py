@@ -143,12 +143,52 @@ def _replaced(path: str) -> str:
 
 
 def commit(outputs: list[Staged]) -> None:
-    """Put every staged output in place, in order (OSError on failure; the rest are discarded)."""
+    """Put every staged output in place (OSError naming the file on failure; the rest are
+    discarded). Streams (devices, FIFOs, stdout) are written first, files linked into place
+    last, so a device that fails (``/dev/full``) leaves every file as it was."""
     try:
-        for output in outputs:
+        for output in sorted(outputs, key=lambda o: o.kind not in ("direct", "stdout")):
             _commit_one(output)
     finally:
         discard(outputs)
+
+
+#: Seconds to wait for a process to open a FIFO output for reading before giving up.
+FIFO_WAIT = 10.0
+
+
+def _write_direct(path: str, data: bytes) -> None:
+    """Write to an existing device or FIFO (a FIFO with no reader: an error after :data:`FIFO_WAIT`)."""
+    try:
+        mode = _mode_of(path)
+        fd = _open_fifo(path) if mode is not None and stat.S_ISFIFO(mode) else \
+            os.open(path, os.O_WRONLY | os.O_CLOEXEC)
+        try:
+            _write_all(fd, data)
+        finally:
+            os.close(fd)
+    except OSError as err:
+        raise OSError(err.errno, err.strerror, path) from None
+
+
+def _open_fifo(path: str) -> int:
+    """A blocking write descriptor of a FIFO, once a reader has it open (ENXIO after the wait)."""
+    import errno
+    import time
+
+    deadline = time.monotonic() + FIFO_WAIT
+    while True:
+        try:
+            fd = os.open(path, os.O_WRONLY | os.O_NONBLOCK | os.O_CLOEXEC)
+        except OSError as err:
+            if err.errno != errno.ENXIO:
+                raise
+            if time.monotonic() > deadline:
+                raise OSError(errno.ENXIO, f"no process reads this FIFO (waited {FIFO_WAIT:g} s)", path) from None
+            time.sleep(0.05)
+            continue
+        os.set_blocking(fd, True)
+        return fd
 
 
 def _commit_one(output: Staged) -> None:
@@ -159,8 +199,7 @@ def _commit_one(output: Staged) -> None:
         except (AttributeError, ValueError):
             raise OSError(9, "standard output is closed") from None
     elif output.kind == "direct":
-        with open(output.target, "wb") as handle:
-            handle.write(output.data)
+        _write_direct(output.target, output.data)
     elif output.fd is not None:
         temp = os.path.join(os.path.dirname(output.target), f"{TEMP_PREFIX}{os.getpid()}-{id(output)}.tmp")
         _PENDING.add(temp)
