@@ -9,6 +9,7 @@ from __future__ import annotations
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 from test_cli import listing, save, square_mask, textured
@@ -110,3 +111,33 @@ def test_a_fifo_without_a_reader_is_an_error_within_a_bounded_wait(tmp_path, sce
     assert result.exit_code == 1 and "no process reads this FIFO" in result.output and str(fifo) in result.output
     assert time.monotonic() - started < 10
     assert not (tmp_path / "r.json").exists()
+
+
+@pytest.mark.parametrize("writer", ["opencv", "pillow-exif"])
+def test_tiff_in_tiff_out_is_a_tiff_both_libraries_read(tmp_path, writer):
+    """A TIFF's "EXIF" is its whole first directory; its layout tags must not reach the output
+    (it was written declaring float samples, and neither library read it back)."""
+    import cv2
+    from click.testing import CliRunner
+    from PIL import Image
+
+    from featurewarp_cli.cli.main import cli
+
+    pixels = textured()
+    source = tmp_path / "in.tif"
+    if writer == "opencv":
+        cv2.imwrite(str(source), pixels)
+    else:
+        exif = Image.Exif()
+        exif[271] = "Camera maker"
+        Image.fromarray(pixels[:, :, ::-1]).save(source, exif=exif)
+    out = tmp_path / "out.tif"
+    result = CliRunner().invoke(cli, ["warp", "swirl", str(source), str(out)])
+    assert result.exit_code == 0 and "warning" not in result.output, result.output
+    back = cv2.imread(str(out), cv2.IMREAD_UNCHANGED)
+    assert back is not None and back.dtype == np.uint8 and back.shape == pixels.shape
+    with Image.open(out) as image:
+        image.load()
+        assert image.mode == "RGB"
+        if writer == "pillow-exif":
+            assert image.getexif().get(271) == "Camera maker"

@@ -186,12 +186,27 @@ def _orientation(image: Image.Image, data: bytes) -> int:
     return value if value in ORIENTATIONS else 1
 
 
+#: The tags of a TIFF's first directory that describe the picture rather than its layout:
+#: a TIFF's "EXIF" is that whole directory, and its layout tags (sample format, strips,
+#: compression...) written into another file made it unreadable (float samples declared).
+TIFF_DESCRIPTIVE_TAGS = (270, 271, 272, 274, 282, 283, 296, 305, 306, 315, 33432)
+
+
 def _upright_exif(image: Image.Image) -> bytes | None:
-    """The image's EXIF block with its orientation set to 1, or None (none, or broken)."""
+    """The image's EXIF block with its orientation set to 1, or None (none, or broken); of a
+    TIFF, only its descriptive tags (:data:`TIFF_DESCRIPTIVE_TAGS`)."""
     if image.format not in ORIENTED or (image.format == "PNG" and "exif" not in image.info):
         return None
     try:
-        exif = image.getexif()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")            # a broken block is dropped, not reported
+            exif = image.getexif()
+        if image.format == "TIFF":
+            kept = Image.Exif()
+            for tag in TIFF_DESCRIPTIVE_TAGS:
+                if tag in exif:
+                    kept[tag] = exif[tag]
+            exif = kept
         if not len(exif):
             return None
         if _EXIF_ORIENTATION in exif:
