@@ -141,3 +141,13 @@ def test_a_missing_or_folder_input_fails_alone_and_is_named_as_the_input(tmp_pat
     assert "gone.png does not exist" in result.output and "gone_mask" not in result.output
     assert "folder is a folder, not a file" in result.output
     assert sorted(os.listdir(out)) == ["img00.png"]
+
+
+def test_the_memory_budget_is_the_whole_batchs(tmp_path):
+    """--max-memory is shared by the --jobs processes: a budget one job fits in, split four ways,
+    refuses the jobs (and says so), where one process at a time warps them all."""
+    inputs = make_inputs(tmp_path / "in", 4)
+    args = ["batch", "swirl", *inputs, "--out-dir", str(tmp_path / "out"), "--max-memory", "3M"]
+    assert CliRunner().invoke(cli, args).exit_code == 0
+    split = CliRunner().invoke(cli, args + ["--jobs", "4", "--out-dir", str(tmp_path / "out4")])
+    assert split.exit_code == 1 and "--max-memory" in split.output

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import os
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from ..io.decode import path_problem
 from .pipeline import Settings, WarpError, _writable, warp_file
@@ -142,7 +142,7 @@ def run_jobs(settings: Settings, jobs: list[Job], workers: int = 1, scheduler: s
 
     Locally (``scheduler`` None) the jobs run in order, in ``workers`` fresh processes when
     above 1 (spawned, not forked, so that no thread pool of a parent library is
-    inherited); on a Dask cluster (:mod:`featurewarp_cli.app.cluster`) they are yielded as
+    inherited), each with its share of ``settings.max_memory`` (the budget is the command's); on a Dask cluster (:mod:`featurewarp_cli.app.cluster`) they are yielded as
     they finish. The outputs are byte-identical either way.
     """
     if scheduler is not None:
@@ -151,6 +151,8 @@ def run_jobs(settings: Settings, jobs: list[Job], workers: int = 1, scheduler: s
         yield from run_on_cluster(settings, jobs, scheduler)
         return
     workers = max(1, min(workers, len(jobs)))
+    if workers > 1 and settings.max_memory is not None:     # one budget for the whole command
+        settings = replace(settings, max_memory=settings.max_memory // workers)
     if workers == 1:
         for i, job in enumerate(jobs):
             yield (i, job, *timed_job(settings, job))
