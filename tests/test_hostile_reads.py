@@ -141,3 +141,23 @@ def test_tiff_in_tiff_out_is_a_tiff_both_libraries_read(tmp_path, writer):
         assert image.mode == "RGB"
         if writer == "pillow-exif":
             assert image.getexif().get(271) == "Camera maker"
+
+
+def test_only_the_largest_components_get_free_scales():
+    """The scale set-up costs two solves per free component: the largest MAX_FREE_SCALES keep
+    free scales, the others (specks) the preset's lambda R, so time stays bounded by the image."""
+    from featurewarp_cli import FeatureWarper, load_warp
+    from featurewarp_cli.engine import components
+
+    node_component = np.array([-1, 0, 0, 1, 2, 2, 2, 3, 3, 3])
+    np.testing.assert_array_equal(components.largest(node_component, 4, 2), [False, False, True, True])
+    mask = np.zeros((240, 320), bool)
+    mask[5::10, 5::10] = True                          # 768 specks
+    mask[100:160, 120:200] = True                      # and one real feature
+    warper = FeatureWarper(320, 240, mask)
+    mesh = warper.solve(load_warp("stretch")(320, 240, sx=1.5))
+    assert mesh.flips() == 0
+    records = mesh.record.components
+    assert len(records) > components.MAX_FREE_SCALES
+    big = max(records, key=lambda c: c.quads)
+    assert big.kept
