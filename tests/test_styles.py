@@ -175,6 +175,7 @@ def test_perspective_sends_the_corners_where_asked():
     ({"tl": "0,0", "tr": "100%,0%", "br": "100%,4%", "bl": "50%,4%"}, r"angle at --(tl|bl) is"),
     ({"tl": "50%,49%", "tr": "100%,0%"}, r"angle at --tl is 17\d"),
     ({"tl": "1,2,3"}, "--tl"),
+    ({"tl": "49.9%,0%", "tr": "50.1%,0%"}, r"side from --tl to --tr is 0.2 %"),     # 60-120 s before
 ])
 def test_perspective_refuses_a_bad_quadrilateral(corners, message):
     with pytest.raises(ValueError, match=message):
