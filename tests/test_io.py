@@ -66,10 +66,13 @@ def test_jpeg_with_junk_before_a_segment_is_checked(monkeypatch):
         decode.decode_image(bytes(data), "x", max_pixels=1000)
 
 
-@pytest.mark.parametrize("ext", [".pam", ".hdr"])
-def test_formats_without_a_pillow_header_meet_opencvs_limit(tmp_path, ext):
-    """PAM and Radiance HDR: Pillow cannot read them, OpenCV's limit (set from --max-pixels
-    before OpenCV loads) refuses them inside its decoder."""
+@pytest.mark.parametrize("ext,message", [
+    (".pam", "above the limit of 599 pixels of the decoder (--max-pixels)"),
+    (".hdr", "Radiance HDR holds float samples"),                  # refused before decoding
+])
+def test_formats_without_a_pillow_header_meet_opencvs_limit(tmp_path, ext, message):
+    """PAM: Pillow cannot read it, OpenCV's limit (set from --max-pixels before OpenCV loads)
+    refuses it inside its decoder. Radiance HDR (float samples) is refused from its first bytes."""
     image = textured((30, 20)) if ext == ".pam" else textured((30, 20)).astype(np.float32) / 255
     path = tmp_path / f"big{ext}"
     assert cv2.imwrite(str(path), image)
@@ -77,7 +80,7 @@ def test_formats_without_a_pillow_header_meet_opencvs_limit(tmp_path, ext):
     run = command("warp", "swirl", path, tmp_path / "o.png", "--max-pixels", 599)
     lines = run.stderr.decode().splitlines()
     assert run.returncode == 1 and len(lines) == 1, lines
-    assert "above the limit of 599 pixels of the decoder (--max-pixels)" in lines[0]
+    assert message in lines[0]
     assert not (tmp_path / "o.png").exists()
 
 
