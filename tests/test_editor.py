@@ -346,3 +346,43 @@ def test_idle_and_surplus_connections_are_closed(monkeypatch):
     finally:
         server.shutdown()
         server.server_close()
+
+
+def test_a_trickled_request_is_cut_off(monkeypatch):
+    """Each byte within the socket timeout, the whole request not within the deadline: closed."""
+    import socket
+    import threading
+
+    from featurewarp_cli.app import editor as editor_module
+
+    monkeypatch.setattr(editor_module.EditorHandler, "timeout", 1.0)
+    monkeypatch.setattr(editor_module, "REQUEST_DEADLINE", 1.0)
+
+    class Nothing:
+        pass
+
+    server = editor_module.EditorServer.__new__(editor_module.EditorServer)
+    editor_module.EditorServer.__init__(server, Nothing(), 0)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    try:
+        sock = socket.create_connection(("127.0.0.1", server.server_port))
+        started, closed = time.monotonic(), False
+        for byte in b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nX-Slow: " + b"a" * 100:
+            try:
+                sock.sendall(bytes([byte]))
+            except OSError:
+                closed = True
+                break
+            time.sleep(0.1)
+            if time.monotonic() - started > 4:
+                break
+        sock.settimeout(3)
+        try:
+            closed = closed or sock.recv(1) == b""
+        except OSError:
+            closed = True
+        assert closed and time.monotonic() - started < 6
+        sock.close()
+    finally:
+        server.shutdown()
+        server.server_close()

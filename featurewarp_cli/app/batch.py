@@ -122,17 +122,26 @@ def run_job(settings: Settings, job: Job) -> tuple[str | None, dict | None]:
 
 
 def timed_job(settings: Settings, job: Job) -> tuple[str | None, dict | None, float]:
-    """:func:`run_job` and its seconds: (error, summary, seconds). Never raises."""
+    """:func:`run_job` and its seconds.
+
+    Returns
+    -------
+    (str or None, dict or None, float)
+        The error, the summary, the seconds. Never raises.
+    """
     t0 = time.perf_counter()
     error, summary = run_job(settings, job)
     return error, summary, time.perf_counter() - t0
 
 
 def up_to_date(job: Job) -> bool:
-    """The job's output exists and is at least as new as its input and mask (``--resume``)."""
+    """Whether the job's output exists and is newer than its input and mask (``--resume``).
+
+    Strictly newer: on a file system with coarse timestamps an input replaced in the same tick
+    as its output is warped again rather than skipped."""
     try:
         written = os.stat(job.output).st_mtime_ns
-        return all(os.stat(path).st_mtime_ns <= written for path in (job.input, job.mask) if path)
+        return all(os.stat(path).st_mtime_ns < written for path in (job.input, job.mask) if path)
     except OSError:
         return False
 
@@ -140,19 +149,39 @@ def up_to_date(job: Job) -> bool:
 def run_jobs(settings: Settings, jobs: list[Job], workers: int = 1, scheduler: str | None = None):
     """Run ``jobs``, yielding (index, job, error, summary, seconds).
 
-    Locally (``scheduler`` None) the jobs run in order, in ``workers`` fresh processes when
-    above 1 (spawned, not forked, so that no thread pool of a parent library is
-    inherited), each with its share of ``settings.max_memory`` (the budget is the command's); on a Dask cluster (:mod:`featurewarp_cli.app.cluster`) they are yielded as
-    they finish. The outputs are byte-identical either way.
+    Parameters
+    ----------
+    settings : Settings
+    jobs : list of Job
+    workers : int
+        Local worker processes (``--jobs``); above 1 they are spawned, not forked, so that no
+        thread pool of a parent library is inherited.
+    scheduler : str, optional
+        A Dask scheduler (:mod:`featurewarp_cli.app.cluster`); the jobs are then yielded as
+        they finish, locally in order.
+
+    Yields
+    ------
+    (int, Job, str or None, dict or None, float)
+
+    Notes
+    -----
+    ``settings.max_memory`` is the command's: ``--jobs N`` and ``local:N`` give each of their N
+    processes an Nth of it (so whether a file fits does not depend on how many are left); a
+    remote cluster's workers each have their own machine and get all of it. The files written
+    are byte-identical in every mode.
     """
+    if not jobs:
+        return
+    share = workers if scheduler is None else local_workers(scheduler)
+    if share > 1 and settings.max_memory is not None:       # one budget for the whole command
+        settings = replace(settings, max_memory=settings.max_memory // share)
     if scheduler is not None:
         from .cluster import run_on_cluster
 
         yield from run_on_cluster(settings, jobs, scheduler)
         return
     workers = max(1, min(workers, len(jobs)))
-    if workers > 1 and settings.max_memory is not None:     # one budget for the whole command
-        settings = replace(settings, max_memory=settings.max_memory // workers)
     if workers == 1:
         for i, job in enumerate(jobs):
             yield (i, job, *timed_job(settings, job))
@@ -165,6 +194,12 @@ def run_jobs(settings: Settings, jobs: list[Job], workers: int = 1, scheduler: s
         yield from ((i, job, *outcome) for i, (job, outcome) in enumerate(zip(jobs, outcomes)))
 
 
+def local_workers(scheduler: str) -> int:
+    """N of ``local:N`` (the processes on this machine that share its memory), else 1."""
+    count = scheduler.removeprefix("local:")
+    return int(count) if scheduler.startswith("local:") and count.isdigit() else 1
+
+
 def run_batch(settings: Settings, jobs: list[Job], workers: int = 1):
     """Run ``jobs`` locally, yielding (job, error, summary) in the order of ``jobs``
     (see :func:`run_jobs`)."""
@@ -174,8 +209,23 @@ def run_batch(settings: Settings, jobs: list[Job], workers: int = 1):
 
 def summary_record(index: int, job: Job, status: str, seconds: float = 0.0, summary: dict | None = None,
                    error: str | None = None) -> dict:
-    """One line of the JSON-lines summary (``--summary``): the job, its status ('ok', 'failed'
-    or 'skipped'), seconds, warnings and error."""
+    """One line of the JSON-lines summary (``--summary``).
+
+    Parameters
+    ----------
+    index : int
+        The job's place in the batch.
+    job : Job
+    status : {'ok', 'failed', 'skipped'}
+    seconds : float
+    summary : dict, optional
+        :func:`featurewarp_cli.app.report.summary` of a written file (its warnings are kept).
+    error : str, optional
+
+    Returns
+    -------
+    dict
+    """
     return {"job": index, "input": job.input, "mask": job.mask, "output": job.output, "status": status,
             "seconds": round(seconds, 4), "warnings": list(summary["warnings"]) if summary else [],
             "error": error}

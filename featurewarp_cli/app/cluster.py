@@ -17,6 +17,7 @@ only when complete, so a worker killed mid-job leaves nothing behind.
 from __future__ import annotations
 
 import os
+import threading
 import time
 from typing import Iterator
 
@@ -51,6 +52,10 @@ def connect(scheduler: str):
         ``tcp://host:port`` (or any address Dask takes), a scheduler file (``.json``, as
         ``dask scheduler --scheduler-file`` writes it), or ``local:N``.
 
+    Returns
+    -------
+    (distributed.Client, distributed.LocalCluster or None)
+
     Raises
     ------
     WarpError
@@ -84,6 +89,9 @@ def connect(scheduler: str):
 _M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
 _TRIM_BYTES, _MMAP_BYTES = 256 << 20, 64 << 20
 _malloc_tuned = False
+#: A worker started with several threads runs one job at a time: the decoders' stderr is
+#: captured per process (a truncated JPEG's warning must reach its own job).
+_ONE_AT_A_TIME = threading.Lock()
 
 
 def cluster_job(settings, job):
@@ -94,11 +102,24 @@ def cluster_job(settings, job):
     page faults, and a 1 MP warp took 1.1 s instead of 0.5 s (cProfile: numpy's take and
     sparse products 2-5 times slower, most of the time in the kernel). The first job on a
     worker sets fixed thresholds instead (arrays up to 64 MiB from the heap, trimmed above
-    256 MiB), as the local batch's processes get by default.
+    256 MiB), as the local batch's processes get by default. Jobs run one at a time per worker
+    process, and OpenCV's decoders get ``--max-pixels`` when this worker has not imported them.
+
+    Parameters
+    ----------
+    settings : Settings
+    job : Job
+
+    Returns
+    -------
+    (str or None, dict or None, float)
+        As :func:`featurewarp_cli.app.batch.timed_job`.
     """
     global _malloc_tuned
+    from ..io import limits
     from .batch import timed_job
 
+    limits.limit_opencv_decoders(settings.max_pixels)   # before this worker first imports cv2
     if not _malloc_tuned:
         _malloc_tuned = True
         try:
@@ -109,7 +130,8 @@ def cluster_job(settings, job):
             libc.mallopt(_M_TRIM_THRESHOLD, _TRIM_BYTES)
         except (OSError, AttributeError):
             pass                                    # not glibc: nothing to undo
-    return timed_job(settings, job)
+    with _ONE_AT_A_TIME:                            # stderr capture is per process: one job at a time
+        return timed_job(settings, job)
 
 
 def run_on_cluster(settings, jobs: list, scheduler: str) -> Iterator[tuple]:
@@ -117,6 +139,17 @@ def run_on_cluster(settings, jobs: list, scheduler: str) -> Iterator[tuple]:
 
     A job whose workers died too often (Dask's ``KilledWorker``) or that the cluster could
     not run is reported as failed with the reason; the others go on.
+
+    Parameters
+    ----------
+    settings : Settings
+    jobs : list of Job
+    scheduler : str
+        As :func:`connect`.
+
+    Yields
+    ------
+    (int, Job, str or None, dict or None, float)
     """
     distributed = _distributed()
     client, cluster = connect(scheduler)

@@ -21,6 +21,7 @@ import json
 import math
 import secrets
 import shlex
+import socket
 import struct
 import threading
 import time
@@ -206,13 +207,17 @@ def page() -> bytes:
 #: connections served at once; more are closed on arrival (each open one costs a thread).
 SOCKET_TIMEOUT = 20.0
 MAX_CONNECTIONS = 32
+#: Seconds to receive a whole request (line, headers and body): one trickled a byte at a
+#: time, each within the socket timeout, is cut off here.
+REQUEST_DEADLINE = 30.0
 
 
 class EditorServer(ThreadingHTTPServer):
     """The HTTP server of one :class:`EditorSession` on 127.0.0.1.
 
-    Idle connections are closed after :data:`SOCKET_TIMEOUT` seconds and at most
-    :data:`MAX_CONNECTIONS` are served at once, so held connections cannot exhaust threads."""
+    Idle connections are closed after :data:`SOCKET_TIMEOUT` seconds, a request must arrive
+    whole within :data:`REQUEST_DEADLINE`, and at most :data:`MAX_CONNECTIONS` are served at
+    once, so held or trickling connections cannot exhaust threads for long."""
 
     daemon_threads = True
     open_connections = 0
@@ -237,9 +242,15 @@ class EditorServer(ThreadingHTTPServer):
         if full:
             self.shutdown_request(request)
             return
-        super().process_request(request, client_address)
+        try:
+            super().process_request(request, client_address)
+        except BaseException:                       # no thread: the slot is free again
+            with self._count:
+                self.open_connections -= 1
+            raise
 
     def process_request_thread(self, request, client_address):
+        """Serve one connection, then free its slot."""
         try:
             super().process_request_thread(request, client_address)
         finally:
@@ -260,6 +271,22 @@ class EditorHandler(BaseHTTPRequestHandler):
 
     def log_message(self, format, *args):       # quiet: the terminal belongs to the user
         pass
+
+    def handle_one_request(self):
+        """One request, received within :data:`REQUEST_DEADLINE` seconds in all."""
+        self._deadline = threading.Timer(REQUEST_DEADLINE, self._cut_off)
+        self._deadline.daemon = True
+        self._deadline.start()
+        try:
+            super().handle_one_request()
+        finally:
+            self._deadline.cancel()
+
+    def _cut_off(self):
+        try:
+            self.connection.shutdown(socket.SHUT_RDWR)
+        except OSError:
+            pass
 
     def _allowed(self) -> bool:
         query = parse_qs(urlsplit(self.path).query)
@@ -285,6 +312,7 @@ class EditorHandler(BaseHTTPRequestHandler):
         self._send(code, json.dumps(data).encode())
 
     def do_GET(self):
+        self._deadline.cancel()                      # received: the answer may take its time
         if not self._allowed():
             return self._send(403, b"forbidden: open the URL that featurewarp edit printed", "text/plain")
         session, route = self.server.session, urlsplit(self.path).path
@@ -313,7 +341,9 @@ class EditorHandler(BaseHTTPRequestHandler):
             return self._json(400, {"error": "expected a JSON body (Content-Type: application/json, "
                                              f"Content-Length 1 to {MAX_BODY})"})
         try:
-            body = json.loads(self.rfile.read(int(length)))
+            data = self.rfile.read(int(length))
+            self._deadline.cancel()
+            body = json.loads(data)
             if not isinstance(body, dict):
                 raise ValueError("a JSON object is expected")
             result = calls[route](body)

@@ -146,7 +146,7 @@ def read_input(path: str, param: str, max_pixels: int | None, data: bytes | None
         raise WarpError(f"{path} {decode.path_problem(path)}", param, usage=True)
     try:
         if data is not None:
-            return decode.decode_image(data, path, max_pixels)
+            return decode.decode_image(data, "stdin" if path == "-" else path, max_pixels)
         return decode.read_image(path, max_pixels, max_bytes)
     except ImageError as err:
         raise WarpError(str(err), None if param == "INPUT" else param) from err
@@ -223,7 +223,7 @@ def _load_mask(settings: Settings, mask: str, size: tuple[int, int]):
                         f"image is {width}x{height}", "--mask", usage=True)
     warnings = []
     if not feature_mask.any():
-        warnings.append("the mask marks no feature (no pixel >= 128): plain warp")
+        warnings.append("the mask marks no feature (no pixel >= 128, nor a 1 of a 0/1 mask): plain warp")
     return feature_mask, warnings
 
 
@@ -262,7 +262,8 @@ def _piped(settings: Settings, input: str, output: str) -> tuple[Settings, bytes
     except ImageError as err:
         raise WarpError(str(err)) from None
     header = decode.read_header(data)
-    name = formats.format_name(header.format) if header is not None else None
+    kind = {"MPO": "JPEG"}.get(header.format, header.format) if header is not None else None   # a camera JPEG
+    name = formats.format_name(kind) if kind else None
     if name is None:
         raise WarpError("stdout takes stdin's format, and stdin's is not one featurewarp writes; use --format "
                         "or a prefix such as png:-", "OUTPUT", usage=True)
@@ -307,7 +308,8 @@ def start_loading(settings: Settings, input: str, mask: str | None, data: bytes 
         except WarpError:
             load_image_and_mask(settings, input, mask)       # the image's own error comes first
             raise
-    return _Decoding(data, input, settings.max_pixels, header), feature_mask, warnings, size
+    return (_Decoding(data, "stdin" if input == "-" else input, settings.max_pixels, header), feature_mask,
+            warnings, size)
 
 
 class _Ready:

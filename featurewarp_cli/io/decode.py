@@ -117,13 +117,33 @@ _CHUNK = 1 << 20
 
 
 def looks_like_image(head: bytes) -> bool:
-    """Whether ``head`` (a file's first bytes) starts like a format the decoders read."""
+    """Whether ``head`` (a file's first bytes) starts like a format the decoders read.
+
+    Parameters
+    ----------
+    head : bytes
+
+    Returns
+    -------
+    bool
+    """
     return head.startswith(SIGNATURES) or head[4:8] == _FTYP
 
 
 def path_problem(path: str) -> str:
-    """Why ``path`` cannot be read as an image file: 'does not exist', 'is a folder', or 'is a
-    device, pipe or socket, not a regular file' (use '-' to read a stream from stdin)."""
+    """Why ``path`` cannot be read as an image file (for a message: ``f"{path} {problem}"``).
+
+    Parameters
+    ----------
+    path : str
+        A path that is not a regular file.
+
+    Returns
+    -------
+    str
+        'does not exist', 'is a folder, not a file', or 'is a device, pipe or socket, not a
+        regular file (...)'.
+    """
     if not os.path.exists(path):
         return "does not exist"
     if os.path.isdir(path):
@@ -342,9 +362,9 @@ def read_image(path: str, max_pixels: int | None = MAX_PIXELS, max_bytes: int | 
 
 
 def mask_from_image(image: np.ndarray) -> np.ndarray:
-    """Boolean feature mask: gray value >= 128 of the mask composited over black; a one-channel
-    mask whose largest value is 1 (a 0/1 mask) marks its 1s, as the API does
-    (:func:`featurewarp_cli.engine.arrays.mask_array`).
+    """Boolean feature mask: gray value >= 128 of the mask composited over black; a mask whose
+    largest sample is 1 (a 0/1 mask, in one channel or in colour) marks its 1s, as the API
+    does (:func:`featurewarp_cli.engine.arrays.mask_array`).
 
     Transparent pixels of a mask with alpha therefore never mark a feature.
     """
@@ -358,4 +378,7 @@ def mask_from_image(image: np.ndarray) -> np.ndarray:
     gray = cv2.cvtColor(colour, cv2.COLOR_BGR2GRAY) if colour.shape[2] == 3 else colour[:, :, 0]
     if image.shape[2] == 4:
         gray = gray.astype(np.float64) * image[:, :, 3] / top
+    if colour.size and colour.max() == 1:                  # a 0/1 mask saved with colour channels
+        marked = colour.max(axis=2) == 1
+        return marked & (image[:, :, 3] > 0) if image.shape[2] == 4 else marked
     return gray >= threshold
