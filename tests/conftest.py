@@ -78,3 +78,25 @@ def border_mask():
     mask[90:, 125:] = True
     mask[50:70, 70:90] = True          # and one inside
     return mask
+
+
+@pytest.fixture(autouse=True)
+def every_report_validates(monkeypatch):
+    """Every report a test makes in this process is checked against the shipped JSON Schema."""
+    import json
+
+    import jsonschema
+    from importlib.resources import files
+
+    from featurewarp_cli.app import report
+
+    schema = json.loads((files("featurewarp_cli") / "schemas" / "report.schema.json").read_text())
+    validator = jsonschema.Draft202012Validator(schema)
+    build = report.build_report
+
+    def checked(*args, **kwargs):
+        made = build(*args, **kwargs)
+        validator.validate(json.loads(json.dumps(made)))
+        return made
+
+    monkeypatch.setattr(report, "build_report", checked)

@@ -11,6 +11,10 @@ import numpy as np
 from .. import __version__
 
 
+#: The report's own format version (``featurewarp schema report`` prints its JSON Schema).
+REPORT_SCHEMA = "featurewarp-report/1"
+
+
 def image_summary(path: str, image: np.ndarray) -> dict:
     """Path, size, channels and depth of an image."""
     return {
@@ -46,6 +50,7 @@ def build_report(input_path, output_path, image, result, warp, mesh, timings) ->
         seconds["total"] = round(float(timings["total"]), 6)
         seconds["other"] = round(max(0.0, seconds["total"] - sum(seconds[k] for k in stages)), 6)
     return {
+        "schema": REPORT_SCHEMA,
         "version": __version__,
         "preset": warp.name,
         "params": warp.values,

@@ -113,6 +113,19 @@ cli.add_command(diff_command)
 cli.add_command(measure_command)
 
 
+@cli.command("schema")
+@click.argument("kind", type=click.Choice(["report", "handles"]))
+def schema_command(kind):
+    """Print the JSON Schema (Draft 2020-12) of the --report file or of the handles file.
+
+    Each schema has a version of its own: the report's 'schema' key
+    (featurewarp-report/1), the handles file's 'version' key (1).
+    """
+    from importlib.resources import files
+
+    click.echo((files("featurewarp_cli") / "schemas" / f"{kind}.schema.json").read_text(encoding="utf-8"), nl=False)
+
+
 @cli.command("warps")
 @click.option("--json", "as_json", is_flag=True, help="Print machine-readable JSON.")
 def list_warps(as_json):

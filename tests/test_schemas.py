@@ -1,0 +1,59 @@
+"""JSON Schemas of the report and of the handles file (issue 25, item 2)."""
+
+from __future__ import annotations
+
+import glob
+import json
+import os
+from importlib.resources import files
+
+import jsonschema
+import pytest
+from click.testing import CliRunner
+
+from featurewarp_cli.cli.main import cli
+from featurewarp_cli.engine.handles import Handles
+
+SAMPLES = os.path.join(os.path.dirname(__file__), os.pardir, "samples")
+
+
+def schema(kind: str) -> dict:
+    return json.loads((files("featurewarp_cli") / "schemas" / f"{kind}.schema.json").read_text())
+
+
+@pytest.mark.parametrize("kind", ["report", "handles"])
+def test_the_schemas_are_draft_2020_12_and_printed_as_shipped(kind):
+    jsonschema.Draft202012Validator.check_schema(schema(kind))
+    printed = CliRunner().invoke(cli, ["schema", kind])
+    assert printed.exit_code == 0 and json.loads(printed.output) == schema(kind)
+
+
+@pytest.mark.parametrize("args", [
+    ["warp", "swirl", "--angle", "120"],
+    ["warp", "stretch", "--sx", "1.5", "--mode", "rigid"],
+    ["warp", "arc", "--mode", "plain"],
+    ["warp", "perspective", "--formulation", "paper"],
+])
+def test_reports_validate(tmp_path, args):
+    report = tmp_path / "r.json"
+    command = args[:2] + [os.path.join(SAMPLES, "shapes.png"), str(tmp_path / "o.png"), "-m",
+                          os.path.join(SAMPLES, "shapes_mask.png"), "--report", str(report)] + args[2:]
+    assert CliRunner().invoke(cli, command).exit_code == 0
+    made = json.loads(report.read_text())
+    assert made["schema"] == "featurewarp-report/1"
+    jsonschema.validate(made, schema("report"))
+
+
+def test_handles_files_validate_and_bad_ones_do_not():
+    validator = jsonschema.Draft202012Validator(schema("handles"))
+    samples = glob.glob(os.path.join(SAMPLES, "*handles*.json"))
+    assert samples
+    for path in samples:
+        with open(path) as f:
+            data = json.load(f)
+        validator.validate(data)
+        validator.validate(Handles.from_dict(data, 512, 512).as_dict())      # what edit saves
+    for bad in ({"version": 2}, {"version": 1, "points": [{"from": [1, 2]}]},
+                {"version": 1, "border": "loose"}, {"version": 1, "canvas": "big"},
+                {"version": 1, "curves": [{"from": [[1, 2]], "to": [[1, 2], [3, 4]]}]}):
+        assert not validator.is_valid(bad), bad
