@@ -7,6 +7,7 @@ for the README).
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import signal
@@ -313,21 +314,12 @@ def test_posts_from_another_origin_are_refused(editor):
 def test_idle_and_surplus_connections_are_closed(monkeypatch):
     """A held connection is closed after the timeout; beyond the cap a new one is closed at once."""
     import socket
-    import threading
 
     from featurewarp_cli.app import editor as editor_module
 
     monkeypatch.setattr(editor_module.EditorHandler, "timeout", 0.5)
     monkeypatch.setattr(editor_module, "MAX_CONNECTIONS", 2)
-
-    class Nothing:
-        pass
-
-    server = editor_module.EditorServer.__new__(editor_module.EditorServer)
-    editor_module.EditorServer.__init__(server, Nothing(), 0)
-    thread = threading.Thread(target=server.serve_forever, daemon=True)
-    thread.start()
-    try:
+    with bare_server() as server:
         held = [socket.create_connection(("127.0.0.1", server.server_port)) for _ in range(2)]
         time.sleep(0.1)
         extra = socket.create_connection(("127.0.0.1", server.server_port))
@@ -343,28 +335,17 @@ def test_idle_and_surplus_connections_are_closed(monkeypatch):
         assert again.recv(12).startswith(b"HTTP/1.")
         for sock in held + [extra, again]:
             sock.close()
-    finally:
-        server.shutdown()
-        server.server_close()
 
 
 def test_a_trickled_request_is_cut_off(monkeypatch):
     """Each byte within the socket timeout, the whole request not within the deadline: closed."""
     import socket
-    import threading
 
     from featurewarp_cli.app import editor as editor_module
 
     monkeypatch.setattr(editor_module.EditorHandler, "timeout", 1.0)
     monkeypatch.setattr(editor_module, "REQUEST_DEADLINE", 1.0)
-
-    class Nothing:
-        pass
-
-    server = editor_module.EditorServer.__new__(editor_module.EditorServer)
-    editor_module.EditorServer.__init__(server, Nothing(), 0)
-    threading.Thread(target=server.serve_forever, daemon=True).start()
-    try:
+    with bare_server() as server:
         sock = socket.create_connection(("127.0.0.1", server.server_port))
         started, closed = time.monotonic(), False
         for byte in b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nX-Slow: " + b"a" * 100:
@@ -383,6 +364,23 @@ def test_a_trickled_request_is_cut_off(monkeypatch):
             closed = True
         assert closed and time.monotonic() - started < 6
         sock.close()
+
+
+@contextlib.contextmanager
+def bare_server():
+    """An EditorServer with no session, serving in a thread (for connection-level tests)."""
+    import threading
+
+    from featurewarp_cli.app import editor as editor_module
+
+    class Nothing:
+        pass
+
+    server = editor_module.EditorServer.__new__(editor_module.EditorServer)
+    editor_module.EditorServer.__init__(server, Nothing(), 0)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    try:
+        yield server
     finally:
         server.shutdown()
         server.server_close()
