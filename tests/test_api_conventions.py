@@ -124,3 +124,13 @@ def test_dash_dash_writes_stdin_in_its_own_format(tmp_path):
                              capture_output=True, timeout=60)
         assert run.returncode == 0, run.stderr
         assert run.stdout.startswith(magic)
+
+
+def test_batch_help_names_the_batch_options():
+    from click.testing import CliRunner
+
+    from featurewarp_cli.cli.main import cli
+
+    text = CliRunner().invoke(cli, ["batch", "--help"]).output
+    for option in ("--out-dir", "--jobs", "--scheduler", "--summary", "--resume", "--mask-pattern"):
+        assert option in text, option

@@ -84,6 +84,18 @@ def batch():
 
     One line on stderr per failed file; the others are still written; exit 1
     if any failed. A progress bar is shown when stderr is a terminal.
+
+    \b
+    The batch's own options (with the preset's and warp's; all in
+    'featurewarp batch PRESET --help'):
+      -o, --out-dir DIR      folder for the outputs (created if missing)
+      --mask-pattern P       each input's mask, default {stem}_mask.png
+      --suffix S             outputs are DIR/{stem}S.ext
+      -j, --jobs N           local worker processes (same bytes as 1)
+      --scheduler ADDRESS    a Dask cluster instead: tcp://host:8786,
+                             a scheduler file, or local:N
+      --summary FILE         one JSON line per file ('-': stdout)
+      --resume               skip outputs newer than their input and mask
     """
 
 
