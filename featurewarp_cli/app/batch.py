@@ -173,12 +173,12 @@ def run_jobs(settings: Settings, jobs: list[Job], workers: int = 1, scheduler: s
     """
     if not jobs:
         return
+    from .cluster import local_workers, run_on_cluster        # imports no Dask
+
     share = workers if scheduler is None else local_workers(scheduler)
     if share > 1 and settings.max_memory is not None:       # one budget for the whole command
         settings = replace(settings, max_memory=settings.max_memory // share)
     if scheduler is not None:
-        from .cluster import run_on_cluster
-
         yield from run_on_cluster(settings, jobs, scheduler)
         return
     workers = max(1, min(workers, len(jobs)))
@@ -192,12 +192,6 @@ def run_jobs(settings: Settings, jobs: list[Job], workers: int = 1, scheduler: s
     with ProcessPoolExecutor(workers, mp_context=get_context("spawn"), initializer=_worker_setup) as pool:
         outcomes = pool.map(timed_job, [settings] * len(jobs), jobs)
         yield from ((i, job, *outcome) for i, (job, outcome) in enumerate(zip(jobs, outcomes)))
-
-
-def local_workers(scheduler: str) -> int:
-    """N of ``local:N`` (the processes on this machine that share its memory), else 1."""
-    count = scheduler.removeprefix("local:")
-    return int(count) if scheduler.startswith("local:") and count.isdigit() else 1
 
 
 def run_batch(settings: Settings, jobs: list[Job], workers: int = 1):

@@ -43,6 +43,15 @@ def _distributed():
     return distributed
 
 
+def local_workers(scheduler: str) -> int:
+    """N of ``local:N``: the processes on this machine that share its memory (0 when N is not
+    a whole number); 1 for any other scheduler (its workers have machines of their own)."""
+    if not scheduler.startswith(LOCAL_PREFIX):
+        return 1
+    count = scheduler[len(LOCAL_PREFIX):]
+    return int(count) if count.isdigit() else 0
+
+
 def connect(scheduler: str):
     """A ``distributed.Client`` for ``scheduler`` and the cluster it started (or None).
 
@@ -63,14 +72,14 @@ def connect(scheduler: str):
     """
     distributed = _distributed()
     if scheduler.startswith(LOCAL_PREFIX):
-        count = scheduler[len(LOCAL_PREFIX):]
-        if not count.isdigit() or not 1 <= int(count) <= 1024:
+        count = local_workers(scheduler)
+        if not 1 <= count <= 1024:
             raise WarpError(f"{scheduler!r}: local:N takes a number of workers from 1 to 1024", "--scheduler",
                             usage=True)
         import dask
 
         with dask.config.set(WORKER_CONFIG):
-            cluster = distributed.LocalCluster(n_workers=int(count), threads_per_worker=1, processes=True,
+            cluster = distributed.LocalCluster(n_workers=count, threads_per_worker=1, processes=True,
                                                dashboard_address=None)
         return distributed.Client(cluster), cluster
     try:
