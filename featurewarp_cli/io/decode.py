@@ -271,13 +271,15 @@ def read_header(data: bytes) -> Header | None:
     Header(format='PNG', width=5, height=3, orientation=1, animated=False)
     """
     try:
-        with warnings.catch_warnings(), Image.open(io.BytesIO(data), formats=HEADER_FORMATS) as image:
-            warnings.simplefilter("ignore")            # a broken tag is the decoder's to judge
-            size = image.size
-            if image.format == "TIFF":          # Pillow reports a turned TIFF's size as shown
-                size = image.tag_v2.get(256, size[0]), image.tag_v2.get(257, size[1])
-            return Header(image.format, *size, _orientation(image, data), bool(getattr(image, "is_animated", False)),
-                          image.info.get("icc_profile") or None, _upright_exif(image))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")            # a broken tag is the decoder's to judge; set
+            with Image.open(io.BytesIO(data), formats=HEADER_FORMATS) as image:   # before opening, where Pillow warns
+                size = image.size
+                if image.format == "TIFF":          # Pillow reports a turned TIFF's size as shown
+                    size = image.tag_v2.get(256, size[0]), image.tag_v2.get(257, size[1])
+                return Header(image.format, *size, _orientation(image, data),
+                              bool(getattr(image, "is_animated", False)), image.info.get("icc_profile") or None,
+                              _upright_exif(image))
     except Exception:  # UnidentifiedImageError, or whatever a broken header raises in a plugin
         return None
 
