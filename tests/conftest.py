@@ -85,13 +85,10 @@ def every_report_validates(monkeypatch):
     """Every report a test makes in this process is checked against the shipped JSON Schema."""
     import json
 
-    import jsonschema
-    from importlib.resources import files
-
+    from featurewarp_cli import schema
     from featurewarp_cli.app import report
 
-    schema = json.loads((files("featurewarp_cli") / "schemas" / "report.schema.json").read_text())
-    validator = jsonschema.Draft202012Validator(schema)
+    validator = schema.validator("report")
     build = report.build_report
 
     def checked(*args, **kwargs):

@@ -172,6 +172,22 @@ def test_embedding_reproduces_points():
     ({"version": 1, "border": {"top": [[0, 0], [10, 0]], "left": [[5, 5], [0, 100]]}}, "corner"),
     ({"version": 1, "border": {"top": {"bezier": [[0, 0], [1, 1]]}}}, "four points"),
     ([1, 2], "JSON object"),
+    # the shape, through the schema: the place, then what was expected
+    ({"version": 1, "points": [{"from": [1, 2]}]}, r'^points\[0\]: missing "to"$'),
+    ({"version": 1, "points": [{"from": [1, 2], "to": [3]}]},
+     r"^points\[0\]\.to: expected a point \[x, y\] of two numbers, got \[3\]$"),
+    ({"version": 1, "points": [{"from": [1, "a"], "to": [3, 4]}]}, r'^points\[0\]\.from\[1\]: expected a number, got "a"$'),
+    ({"version": 1, "points": [7]}, r"^points\[0\]: expected an object"),
+    ({"version": 1, "curves": [{"from": [[1, 2]], "to": [[1, 2], [3, 4]]}]}, r"^curves\[0\]\.from: expected a polyline"),
+    ({"version": 1, "border": "loose"}, r'^border: expected "free", "pinned" or an object'),
+    ({"version": 1, "border": {}}, r"^border: expected an object with some of top"),
+    ({"version": 1, "border": {"middle": [[0, 0], [9, 9]]}}, r'^border: unknown key "middle"; use top, right'),
+    ({"version": 1, "border": {"top": [[0, 0], [10, 0]], "left": 3}}, r"^border\.left: expected a polyline"),
+    ({"version": 1, "radius": -1}, r"^radius: expected a number >= 0, got -1$"),
+    ({"version": 1, "radius": 1e6, "border": "pinned"}, r"^radius: 1000000\.0; use a number of pixels from 0"),
+    ({"version": 1, "border": {"top": [[0, 0], [1e9, 0]]}}, r"^border\.top\[1\] \(1e\+09, 0\) lies more than"),
+    ({"version": 1, "curves": [{"from": [[1, 2], [3, 4]], "to": [[1, 2], [3, float("inf")]]}]},
+     r"^curves\[0\]\.to\[1\]: expected a point \[x, y\] of two finite numbers, got \[3, Infinity\]$"),
 ])
 def test_bad_handles_name_the_problem(data, message):
     with pytest.raises(ValueError, match=message):
@@ -238,6 +254,10 @@ def test_deform_usage_errors_exit_2_and_write_nothing(runner, tmp_path, args, me
 @pytest.mark.parametrize("content, message", [
     ("{not json", "not valid JSON"), ('{"version": 1, "points": [{"from": [NaN, 1], "to": [2, 2]}]}', "finite"),
     ('{"points": []}', "version"),
+    # the file's name, then the place in it
+    ('{"version": 1, "points": [{"from": [1, 2], "to": [3]}]}', "h.json: points[0].to: expected a point [x, y]"),
+    ('{"version": 1, "points": "all"}', 'h.json: points: expected a list, got "all"'),
+    ('{"version": 1, "points": [{"from": [9999, 2], "to": [3, 3]}]}', "h.json: points[0].from (9999, 2) lies outside"),
 ])
 def test_deform_bad_handles_file(runner, tmp_path, content, message):
     image, mask = files(tmp_path)
@@ -250,6 +270,18 @@ def test_deform_bad_handles_file(runner, tmp_path, content, message):
     assert out.read_bytes() == b"keep me"
     missing = runner("deform", image, out, "-m", mask, "--handles", tmp_path / "none.json")
     assert missing.code == 2 and "cannot read" in missing.stderr
+
+
+def test_errors_name_the_file_or_the_flag_that_gave_the_point(runner, tmp_path):
+    image, mask = files(tmp_path)
+    hfile = handles_file(tmp_path, {"version": 1, "points": [{"from": [5, 5], "to": [5, 5]}]})
+    run = runner("deform", image, tmp_path / "o.png", "--handles", hfile, "--pin", "9,9", "--move", "99999,1:2,2")
+    assert run.code == 2 and len(run.lines) == 1
+    assert run.lines[0].endswith("error: --move 99999,1:2,2 (from) (99999, 1) lies outside the 48x36 image "
+                                 "(pixel centres 0..47, 0..35)")
+    run = runner("deform", image, tmp_path / "o.png", "--handles", "-", "--pin", "5,5",
+                 input=json.dumps({"version": 1, "points": [{"from": [5, 5], "to": [5, 5]}]}).encode())
+    assert run.code == 2 and "error: stdin: points[0] and --pin 5,5 start 0 px apart" in run.stderr
 
 
 def test_an_image_laid_over_itself_is_refused(runner, tmp_path):

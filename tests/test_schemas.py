@@ -55,5 +55,25 @@ def test_handles_files_validate_and_bad_ones_do_not():
         validator.validate(Handles.from_dict(data, 512, 512).as_dict())      # what edit saves
     for bad in ({"version": 2}, {"version": 1, "points": [{"from": [1, 2]}]},
                 {"version": 1, "border": "loose"}, {"version": 1, "canvas": "big"},
-                {"version": 1, "curves": [{"from": [[1, 2]], "to": [[1, 2], [3, 4]]}]}):
+                {"version": 1, "curves": [{"from": [[1, 2]], "to": [[1, 2], [3, 4]]}]},
+                {"version": 1, "border": {}}, {"version": 1, "border": {"middle": [[0, 0], [1, 1]]}},
+                {"version": 1, "radius": -1}):
         assert not validator.is_valid(bad), bad
+    assert validator.is_valid({"version": 1, "radius": 0})                 # a handle that holds its point only
+
+
+def test_the_handles_file_is_checked_through_its_schema(monkeypatch):
+    """Handles.from_dict asks the shipped schema: a rule added there is enforced at once."""
+    from featurewarp_cli import schema as shipped
+
+    strict = json.loads(shipped.text("handles"))
+    strict["properties"]["canvas"] = {"enum": ["input"], "title": "only \"input\" (a test schema)"}
+    monkeypatch.setattr(shipped, "text", lambda kind: json.dumps(strict))
+    shipped.validator.cache_clear()
+    try:
+        with pytest.raises(ValueError, match=r'^canvas: expected only "input" \(a test schema\), got "fit"$'):
+            Handles.from_dict({"version": 1, "canvas": "fit", "border": "pinned"}, 64, 48)
+    finally:
+        monkeypatch.undo()
+        shipped.validator.cache_clear()
+    assert Handles.from_dict({"version": 1, "canvas": "fit", "border": "pinned"}, 64, 48).canvas == "fit"

@@ -72,22 +72,28 @@ def load_handles(path: str | None) -> dict | None:
 
 
 def merged_handles(data, moves, pins, canvas: str | None):
-    """The handles file's content with ``--move`` and ``--pin`` added and ``--canvas`` applied."""
+    """The handles file's content with ``--move`` and ``--pin`` added and ``--canvas`` applied
+    (points that are not a list stay as they are: the schema's check names them)."""
     merged = {"version": 1} if data is None else dict(data)      # load_handles gives a dict or None
-    if moves or pins or canvas:
-        points = merged.get("points", [])
-        if not isinstance(points, list):
-            raise click.BadParameter("'points' must be a list", param_hint="'--handles'")
+    points = merged.get("points", [])
+    if (moves or pins) and isinstance(points, list):
         merged["points"] = points + [{"from": list(a), "to": list(b)} for a, b in moves] + [
             {"from": list(p), "to": list(p)} for p in pins]
-        if canvas:
-            merged["canvas"] = canvas
+    if canvas:
+        merged["canvas"] = canvas
     return merged
 
 
-def named_flags(make, merged: dict, moves, pins):
-    """``make`` whose errors about the points that --move and --pin added name those flags."""
-    first = len(merged.get("points", [])) - len(moves) - len(pins)
+#: A place in the handles file at the start of an error (the point's index in group 1).
+FILE_PLACE = re.compile(r"^(?:points(?:\[(\d+)\])?|curves\[|border\b|radius\b|canvas\b|version\b)")
+POINT_PLACE = re.compile(r"points\[(\d+)\](?:\.(from|to))?")
+
+
+def named_places(make, merged: dict, moves, pins, source: str | None):
+    """``make`` whose errors say where the problem is: the ``--move`` or ``--pin`` that added
+    a point, or the handles file ``source`` ('-': stdin) before a place in it."""
+    points = merged.get("points")
+    first = len(points) - len(moves) - len(pins) if isinstance(points, list) and (moves or pins) else math.inf
     flags = [f"--move {a[0]:g},{a[1]:g}:{b[0]:g},{b[1]:g} ({{}})" for a, b in moves] + [
         f"--pin {p[0]:g},{p[1]:g}" for p in pins]
 
@@ -99,7 +105,11 @@ def named_flags(make, merged: dict, moves, pins):
         try:
             return make(width, height, mask)
         except ValueError as err:
-            raise ValueError(re.sub(r"points\[(\d+)\](?:\.(from|to))?", name, str(err))) from None
+            message = str(err)
+            place = FILE_PLACE.match(message)
+            in_file = source is not None and place is not None and int(place.group(1) or -1) < first
+            message = POINT_PLACE.sub(name, message)
+            raise ValueError(f"{'stdin' if source == '-' else source}: {message}" if in_file else message) from None
 
     return named
 
@@ -140,7 +150,7 @@ def deform_command() -> click.Command:
             raise click.BadParameter("cannot be '-' when INPUT is '-' (stdin holds the image)",
                                      param_hint="'--handles'")
         merged = merged_handles(data, move, pin, canvas)
-        settings = replace(settings, warp_factory=named_flags(handles_factory(merged), merged, move, pin))
+        settings = replace(settings, warp_factory=named_places(handles_factory(merged), merged, move, pin, handles))
         warp_one(settings, quiet, verbose, input, output, mask, report, save_grid, draw_grid,
                  also_read=((handles, "--handles"),) if handles else ())
 

@@ -133,9 +133,9 @@ def schema_command(kind):
     Each schema has a version of its own: the report's 'schema' key
     (featurewarp-report/1), the handles file's 'version' key (1).
     """
-    from importlib.resources import files
+    from .. import schema
 
-    click.echo((files("featurewarp_cli") / "schemas" / f"{kind}.schema.json").read_text(encoding="utf-8"), nl=False)
+    click.echo(schema.text(kind), nl=False)
 
 
 @cli.command("warps")

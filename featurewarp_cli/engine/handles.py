@@ -30,7 +30,6 @@ import numpy as np
 from .grid import Grid
 
 VERSION = 1
-SIDES = ("top", "right", "bottom", "left")
 KEYS = ("version", "points", "curves", "border", "canvas", "radius")
 #: Points a Bezier side is flattened to before it is resampled by arc length.
 BEZIER_POINTS = 256
@@ -69,45 +68,43 @@ class Handles:
 
     @classmethod
     def from_dict(cls, data, width: int, height: int) -> "Handles":
-        """Check ``data`` (a parsed handles file) against a ``width`` x ``height`` image.
+        """Check ``data`` (a parsed handles file) against a ``width`` x ``height`` image: its
+        version, then its shape through the shipped JSON Schema (``featurewarp schema
+        handles``), then what a schema cannot say (finite numbers, places in the image).
 
         Raises
         ------
         ValueError
-            One line naming the first problem (its key and index).
+            One line naming the first problem and its place (``points[2].to: ...``).
         """
+        from .. import schema
+
         if not isinstance(data, dict):
             raise ValueError("the handles file must hold a JSON object ({\"version\": 1, \"points\": [...]})")
         version = data.get("version")
-        if not (type(version) is int and version == VERSION):
-            raise ValueError(f"'version': {version!r}; this featurewarp reads version {VERSION}")
+        if not (type(version) is int and version == VERSION):      # which schema applies, before it does
+            raise ValueError(f"version: {version!r}; this featurewarp reads version {VERSION}")
+        schema.check("handles", data)
         notes = [f"handles: ignoring the key {key!r} (unknown to version {VERSION})" for key in data if key not in KEYS]
-        points = _list(data.get("points", []), "points")
-        pairs = [(_point(_entry(p, "points", i), "from", f"points[{i}].from"),
-                  _point(_entry(p, "points", i), "to", f"points[{i}].to")) for i, p in enumerate(points)]
-        sources = np.array([a for a, _ in pairs], float).reshape(-1, 2)
-        for i, (source, target) in enumerate(pairs):
-            _inside(source, width, height, f"points[{i}].from")
-            _near(target, width, height, f"points[{i}].to")
+        points = data.get("points", [])
+        sources = _points([p["from"] for p in points], "points[{}].from")
+        targets = _points([p["to"] for p in points], "points[{}].to")
+        _inside(sources, width, height, "points[{}].from")
+        _near(targets, width, height, "points[{}].to")
         _no_duplicates(sources)
         curves = []
-        for i, curve in enumerate(_list(data.get("curves", []), "curves")):
-            curve = _entry(curve, "curves", i)
-            start, end = (_polyline(curve.get(key), f"curves[{i}].{key}") for key in ("from", "to"))
-            for k, source in enumerate(start):
-                _inside(source, width, height, f"curves[{i}].from[{k}]")
-            for k, target in enumerate(end):
-                _near(target, width, height, f"curves[{i}].to[{k}]")
+        for i, curve in enumerate(data.get("curves", [])):
+            start = _points(curve["from"], f"curves[{i}].from[{{}}]")
+            end = _points(curve["to"], f"curves[{i}].to[{{}}]")
+            _inside(start, width, height, f"curves[{i}].from[{{}}]")
+            _near(end, width, height, f"curves[{i}].to[{{}}]")
             curves.append((start, end))
-        canvas = data.get("canvas", "fit")
-        if canvas not in ("fit", "input"):
-            raise ValueError(f"'canvas': {canvas!r}; use \"fit\" or \"input\"")
         radius = data.get("radius")
-        if radius is not None and not (_number(radius) and 0 <= radius <= max(width, height)):
-            raise ValueError(f"'radius': {radius!r}; use a number of pixels from 0 to {max(width, height)}")
+        if radius is not None and not (_finite(radius) and radius <= max(width, height)):
+            raise ValueError(f"radius: {radius!r}; use a number of pixels from 0 to {max(width, height)}")
         border = data.get("border", "free")
-        handles = cls(sources, np.array([b for _, b in pairs], float).reshape(-1, 2), curves,
-                      _border(border, width, height), canvas, None if radius is None else float(radius), notes,
+        handles = cls(sources, targets, curves, _border(border, width, height), data.get("canvas", "fit"),
+                      None if radius is None else float(radius), notes,
                       border if isinstance(border, str) else json.loads(json.dumps(border)))
         handles.check_enough()
         return handles
@@ -188,9 +185,10 @@ def _length(line: np.ndarray) -> float:
     return float(np.sum(np.hypot(*np.diff(line, axis=0).T)))
 
 
-def _number(value) -> bool:
+def _finite(value) -> bool:
+    """Whether the JSON number ``value`` is finite (Python's json reads NaN and Infinity)."""
     try:
-        return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+        return math.isfinite(value)
     except OverflowError:                      # an integer of hundreds of digits
         return False
 
@@ -199,44 +197,37 @@ def _plain(point) -> list:
     return [float(point[0]), float(point[1])]
 
 
-def _list(value, name: str) -> list:
-    if not isinstance(value, list):
-        raise ValueError(f"'{name}' must be a list")
-    return value
+def _points(values: list, where: str) -> np.ndarray:
+    """(n, 2) float array of the schema-checked points ``values``; ValueError naming
+    ``where.format(index)`` for the first point that is not two finite numbers."""
+    from .. import schema
+
+    for k, value in enumerate(values):
+        if not all(_finite(v) for v in value):
+            raise ValueError(f"{where.format(k)}: expected a point [x, y] of two finite numbers, "
+                             f"got {schema.shown(value)}")
+    return np.array(values, float).reshape(-1, 2)
 
 
-def _entry(value, name: str, index: int) -> dict:
-    if not isinstance(value, dict):
-        raise ValueError(f"{name}[{index}] must be an object with \"from\" and \"to\"")
-    return value
-
-
-def _point(entry: dict, key: str, where: str) -> tuple[float, float]:
-    value = entry.get(key)
-    if not (isinstance(value, list) and len(value) == 2 and all(_number(v) for v in value)):
-        raise ValueError(f"{where}: {value!r} is not a point [x, y] of two finite numbers")
-    return float(value[0]), float(value[1])
-
-
-def _polyline(value, where: str) -> np.ndarray:
-    if not (isinstance(value, list) and len(value) >= 2):
-        raise ValueError(f"{where}: a polyline needs a list of at least two points [x, y]")
-    return np.array([_point({"p": p}, "p", f"{where}[{k}]") for k, p in enumerate(value)], float)
-
-
-def _inside(point: np.ndarray, width: int, height: int, where: str) -> None:
-    x, y = point
-    if not (-0.5 <= x <= width - 0.5 and -0.5 <= y <= height - 0.5):
-        raise ValueError(f"{where} ({x:g}, {y:g}) lies outside the {width}x{height} image "
+def _inside(points: np.ndarray, width: int, height: int, where: str) -> None:
+    """ValueError naming ``where.format(index)`` of the first of ``points`` (n, 2) outside the image."""
+    outside = ~np.all((points >= -0.5) & (points <= np.array([width, height]) - 0.5), axis=1)
+    if np.any(outside):
+        k = int(np.argmax(outside))
+        x, y = points[k]
+        raise ValueError(f"{where.format(k)} ({x:g}, {y:g}) lies outside the {width}x{height} image "
                          f"(pixel centres 0..{width - 1}, 0..{height - 1})")
 
 
-def _near(point, width: int, height: int, where: str) -> None:
-    """ValueError when a target lies more than :data:`REACH` image sizes from the image."""
-    x, y = point
+def _near(points: np.ndarray, width: int, height: int, where: str) -> None:
+    """ValueError naming ``where.format(index)`` of the first of ``points`` (n, 2) lying more
+    than :data:`REACH` image sizes from the image."""
     reach = REACH * max(width, height)
-    if not (-reach <= x <= width + reach and -reach <= y <= height + reach):
-        raise ValueError(f"{where} ({x:g}, {y:g}) lies more than {REACH} image sizes away from the image")
+    far = ~np.all((points >= -reach) & (points <= np.array([width, height]) + reach), axis=1)
+    if np.any(far):
+        k = int(np.argmax(far))
+        x, y = points[k]
+        raise ValueError(f"{where.format(k)} ({x:g}, {y:g}) lies more than {REACH} image sizes away from the image")
 
 
 def _no_duplicates(sources: np.ndarray) -> None:
@@ -261,22 +252,18 @@ def _no_duplicates(sources: np.ndarray) -> None:
 
 
 def _border(value, width: int, height: int):
-    """'free', 'pinned' or {side: (n, 2) polyline} with matching corners."""
-    if value in ("free", "pinned"):
+    """'free', 'pinned' or {side: (n, 2) polyline} with matching corners (``value`` has passed
+    the schema)."""
+    if isinstance(value, str):
         return value
-    if not isinstance(value, dict) or not value or set(value) - set(SIDES):
-        raise ValueError(f"'border': use \"free\", \"pinned\" or an object with some of {', '.join(SIDES)}")
     sides = {}
     for side, line in value.items():
         if isinstance(line, dict):
-            control = _polyline(line.get("bezier"), f"border.{side}.bezier")
-            if len(control) != 4:
-                raise ValueError(f"border.{side}.bezier: a cubic Bezier has four points, not {len(control)}")
-            line = _bezier(control)
+            line = _bezier(_points(line["bezier"], f"border.{side}.bezier[{{}}]"))
+            _near(line, width, height, f"border.{side}.bezier")
         else:
-            line = _polyline(line, f"border.{side}")
-        for k, point in enumerate(line[:: max(1, len(line) // 64)]):
-            _near(point, width, height, f"border.{side}[{k}]")
+            line = _points(line, f"border.{side}[{{}}]")
+            _near(line, width, height, f"border.{side}[{{}}]")
         sides[side] = line
     corners = {("top", 0): "left", ("top", -1): "right", ("bottom", 0): "left", ("bottom", -1): "right"}
     for (row, end), column in corners.items():
