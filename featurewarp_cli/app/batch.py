@@ -2,7 +2,9 @@
 
 Every file goes through :func:`featurewarp_cli.app.pipeline.warp_file`; a batch only adds
 output naming, mask lookup, ``--resume``, a JSON-lines summary, and a process pool or a
-Dask cluster (:mod:`featurewarp_cli.app.cluster`).
+Dask cluster (:mod:`featurewarp_cli.app.cluster`). Inputs, masks and the output folder may
+be fsspec URLs (:mod:`featurewarp_cli.io.urls`; jobs with one run through
+:mod:`featurewarp_cli.app.remote`); plain paths never touch fsspec.
 """
 
 from __future__ import annotations
@@ -11,8 +13,10 @@ import os
 import time
 from dataclasses import dataclass, replace
 
+from ..io import urls
 from ..io.decode import path_problem
 from .pipeline import Settings, WarpError, _writable, warp_file
+from .remote import has_url, run_url_job, url_up_to_date
 
 
 @dataclass(frozen=True)
@@ -56,33 +60,80 @@ def plan(inputs, out_dir: str, suffix: str = "", fmt: str | None = None,
         except (KeyError, IndexError, ValueError) as err:
             raise WarpError(f"{mask_pattern!r} is not a valid pattern ({err!r}); use {{stem}}",
                             "--mask-pattern", usage=True) from None
-        return os.path.join(os.path.dirname(path), name)
+        if urls.is_url(path):
+            return _located(urls.join(urls.dirname(path), name), "--mask-pattern")
+        return _located(os.path.join(os.path.dirname(path), name), "--mask-pattern")
 
-    try:
-        os.makedirs(out_dir, exist_ok=True)
-    except OSError as err:
-        raise WarpError(f"cannot create {out_dir} ({err.strerror or err})", "--out-dir", usage=True) from None
-    _writable(os.path.join(out_dir, "probe"), "--out-dir")
-    masks = {os.path.realpath(mask_of(p)) for p in inputs} if mask_pattern else set()
+    inputs = [p for path in inputs for p in _expanded(path)]
+    out_dir = _located(out_dir, "--out-dir")
+    _create(out_dir)
+    masks = {_identity(mask_of(p)) for p in inputs} if mask_pattern else set()
     jobs, seen = [], {}
     for path in inputs:
-        if os.path.realpath(path) in masks:
+        if _identity(path) in masks:
             continue
         stem, ext = os.path.splitext(os.path.basename(path))
-        output = os.path.join(out_dir, stem + suffix + ("." + fmt if fmt else ext))
-        key = os.path.realpath(output)
+        name = stem + suffix + ("." + fmt if fmt else ext)
+        output = urls.join(out_dir, name) if urls.is_url(out_dir) else os.path.join(out_dir, name)
+        key = _identity(output)
         if key in seen:
             raise WarpError(f"{seen[key]} and {path} would both write {output}; use --suffix or "
                             "separate batches", usage=True)
         seen[key] = path
         jobs.append(Job(path, output, mask_of(path)))
-    read = {os.path.realpath(p): p for job in jobs for p in (job.input, job.mask) if p}
+    read = {_identity(p): p for job in jobs for p in (job.input, job.mask) if p}
     for job in jobs:
-        clash = read.get(os.path.realpath(job.output))
+        clash = read.get(_identity(job.output))
         if clash is not None and clash != job.input:
             raise WarpError(f"{job.input} would be written to {job.output}, which this batch also reads "
                             f"({clash}); use another --out-dir or --suffix", usage=True)
     return jobs
+
+
+def _located(path: str, param: str | None = "INPUT") -> str:
+    """``path``, a ``file://`` URL as its local path, another URL checked for its back-end
+    (a usage error naming what to install)."""
+    if not urls.is_url(path):
+        return path
+    try:
+        local = urls.local_path(path)
+        if local is None:
+            urls.filesystem(path)                   # its back-end is installed
+    except ValueError as err:
+        raise WarpError(str(err), param, usage=True) from None
+    return local or path
+
+
+def _expanded(path: str) -> list[str]:
+    """An INPUT: a path as it is, a URL located, a URL with glob characters as every object
+    it matches."""
+    if not urls.is_url(path):
+        return [path]
+    try:
+        return [_located(found) for found in urls.expand(path)]
+    except (OSError, ValueError) as err:
+        raise WarpError(str(err), "INPUT", usage=True) from None
+
+
+def _identity(path: str) -> str:
+    """What ``path`` names, for comparing: its real path, or a URL's protocol and path."""
+    return urls.key(path) if urls.is_url(path) else os.path.realpath(path)
+
+
+def _create(out_dir: str) -> None:
+    """Create ``--out-dir`` (a URL: where its store has folders) and check it can be written
+    (a URL: by the first write)."""
+    if urls.is_url(out_dir):
+        try:
+            urls.makedirs(out_dir)
+        except (OSError, ValueError, NotImplementedError) as err:
+            raise WarpError(f"cannot create {out_dir} ({err})", "--out-dir", usage=True) from None
+        return
+    try:
+        os.makedirs(out_dir, exist_ok=True)
+    except OSError as err:
+        raise WarpError(f"cannot create {out_dir} ({err.strerror or err})", "--out-dir", usage=True) from None
+    _writable(os.path.join(out_dir, "probe"), "--out-dir")
 
 
 def _worker_setup() -> None:
@@ -111,6 +162,8 @@ def _worker_setup() -> None:
 
 def run_job(settings: Settings, job: Job) -> tuple[str | None, dict | None]:
     """Run one batch job; returns (error message or None, summary or None). Never raises."""
+    if has_url(job):
+        return run_url_job(settings, job, run_job)
     if not os.path.isfile(job.input):                # named as the input, before its output or mask
         return f"{job.input} {path_problem(job.input)}", None
     try:
@@ -138,7 +191,9 @@ def up_to_date(job: Job) -> bool:
     """Whether the job's output exists and is newer than its input and mask (``--resume``).
 
     Strictly newer: on a file system with coarse timestamps an input replaced in the same tick
-    as its output is warped again rather than skipped."""
+    as its output is warped again rather than skipped. URLs: by their stores' times."""
+    if has_url(job):
+        return url_up_to_date(job)
     try:
         written = os.stat(job.output).st_mtime_ns
         return all(os.stat(path).st_mtime_ns < written for path in (job.input, job.mask) if path)
@@ -178,10 +233,12 @@ def run_jobs(settings: Settings, jobs: list[Job], workers: int = 1, scheduler: s
     share = workers if scheduler is None else local_workers(scheduler)
     if share > 1 and settings.max_memory is not None:       # one budget for the whole command
         settings = replace(settings, max_memory=settings.max_memory // share)
+    workers = max(1, min(workers, len(jobs)))
+    if workers > 1 or scheduler is not None:
+        _check_shared(jobs, "--scheduler" if scheduler is not None else "--jobs")
     if scheduler is not None:
         yield from run_on_cluster(settings, jobs, scheduler)
         return
-    workers = max(1, min(workers, len(jobs)))
     if workers == 1:
         for i, job in enumerate(jobs):
             yield (i, job, *timed_job(settings, job))
@@ -192,6 +249,15 @@ def run_jobs(settings: Settings, jobs: list[Job], workers: int = 1, scheduler: s
     with ProcessPoolExecutor(workers, mp_context=get_context("spawn"), initializer=_worker_setup) as pool:
         outcomes = pool.map(timed_job, [settings] * len(jobs), jobs)
         yield from ((i, job, *outcome) for i, (job, outcome) in enumerate(zip(jobs, outcomes)))
+
+
+def _check_shared(jobs: list[Job], param: str) -> None:
+    """Usage error when a job names a ``memory://`` URL: other processes do not see this one's."""
+    for job in jobs:
+        for path in (job.input, job.mask, job.output):
+            if urls.is_url(path) and urls.protocol(path) == "memory":
+                raise WarpError(f"{path}: memory:// lives in this process only; other processes do not see "
+                                "it (use --jobs 1 without --scheduler)", param, usage=True)
 
 
 def run_batch(settings: Settings, jobs: list[Job], workers: int = 1):

@@ -3,8 +3,8 @@
 Dask (``dask.distributed``) is an optional extra: ``pip install 'featurewarp[dask]'``.
 Each job is one call of :func:`featurewarp_cli.app.batch.timed_job` on a worker, exactly as
 the local batch runs it, so the outputs are the same bytes. Inputs, masks and the output
-folder must be paths that every worker sees (a shared file system); the workers need
-featurewarp installed in the same version.
+folder must be paths that every worker sees (a shared file system) or fsspec URLs
+(:mod:`featurewarp_cli.app.remote`); the workers need featurewarp installed in the same version.
 
 What the cluster gives beyond ``--jobs``: workers on other machines (started by
 dask-jobqueue on Slurm or PBS, by dask-kubernetes, or by hand with ``dask scheduler`` and

@@ -161,7 +161,9 @@ def batch_command(preset) -> click.Command:
     params = [click.Argument(["inputs"], nargs=-1, required=True, metavar="INPUT...",
                              type=click.Path()),           # a folder among them fails that file only
               click.Option(["-o", "--out-dir"], required=True, metavar="DIR",
-                           type=click.Path(file_okay=False), help="Folder for the outputs (created, with its parents, if missing)."),
+                           type=click.Path(file_okay=False),
+                           help="Folder for the outputs (created, with its parents, if missing). Inputs, "
+                                "masks and DIR may be fsspec URLs (s3://bucket/photos/*.jpg)."),
               click.Option(["--mask-pattern"], default="{stem}_mask.png", show_default=True,
                            metavar="PATTERN",
                            help="Mask file of each input; {stem} is the input's name without "
@@ -175,7 +177,7 @@ def batch_command(preset) -> click.Command:
                            help="Run the jobs on a Dask cluster instead of --jobs local processes: a "
                                 "scheduler address (tcp://host:8786), a scheduler file (.json, as "
                                 "'dask scheduler --scheduler-file' writes it), or local:N for a local "
-                                "cluster of N workers. Paths must be ones every worker sees. Needs "
+                                "cluster of N workers. Paths must be ones every worker sees (or URLs). Needs "
                                 "pip install 'featurewarp[dask]'."),
               click.Option(["--summary"], metavar="FILE", type=click.Path(dir_okay=False, allow_dash=True),
                            help="Write one JSON line per file (job, input, mask, output, status: ok, "
