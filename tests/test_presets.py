@@ -140,13 +140,31 @@ def test_arc_360_seam_maps_both_edges_onto_one_ray():
     np.testing.assert_allclose(left, right, atol=1e-9)
 
 
-def test_swirl_rotates_clockwise_on_screen_and_keeps_the_centre():
-    """swirl: the centre is fixed; positive angles turn clockwise on screen (x right, y down)."""
+def test_swirl_turns_as_imagemagick_and_keeps_the_centre():
+    """swirl: the centre is fixed; positive angles turn counter-clockwise on screen (x right, y down),
+    the way ImageMagick's ``-swirl`` turns (issue 25 item 4)."""
     w = load_warp("swirl")(W, H, angle=90, radius=0.5)
     c = np.array([(W - 1) / 2, (H - 1) / 2])
     np.testing.assert_allclose(w(c[None]), c[None], atol=1e-12)
-    p = w(c[None] + [[5.0, 0.0]])[0] - c             # a point right of the centre moves down
-    assert p[1] > 0 and abs(np.hypot(*p) - 5.0) < 1e-9
+    p = w(c[None] + [[5.0, 0.0]])[0] - c             # a point right of the centre moves up
+    assert p[1] < 0 and abs(np.hypot(*p) - 5.0) < 1e-9
+
+
+#: ``convert pts.png -swirl 120`` (ImageMagick 6.9.11) on a white 200 x 200 PNG with 3 x 3 red
+#: dots centred at (100, 50) and (150, 99.5): where the dots' red weight lands, in pixel
+#: coordinates. ImageMagick's swirl fades over radius max(w, h) / 2 as (1 - d/R)^2, as ours
+#: does at --radius 0.5 on a square; its centre is half a pixel from ours (w/2 against (w-1)/2).
+MAGICK_SWIRL_120 = {(100.0, 50.0): (75.03, 56.65), (150.0, 99.5): (142.78, 74.17)}
+MAGICK_SWIRL_MINUS_120 = {(100.0, 50.0): (124.97, 56.65), (150.0, 99.5): (143.83, 124.10)}
+
+
+@pytest.mark.parametrize("angle,measured", [(120, MAGICK_SWIRL_120), (-120, MAGICK_SWIRL_MINUS_120)])
+def test_swirl_moves_points_where_imagemagick_swirl_moves_them(angle, measured):
+    """--angle A takes a point where ``convert -swirl A`` takes it, within a pixel: the same
+    direction of turn (the opposite sign would land the first dot 50 px away)."""
+    w = load_warp("swirl")(200, 200, angle=angle, radius=0.5)
+    sources = np.array(list(measured))
+    np.testing.assert_allclose(w(sources), np.array(list(measured.values())), atol=1.0)
 
 
 # --- injectivity over the declared range ----------------------------------------------------
