@@ -21,7 +21,7 @@ from benchmarks.inputs import SIZES, upscale_mask
 
 #: preset -> (our options, ImageMagick's operation): the warps at their hard settings.
 HARD = {
-    "swirl": (["--angle", "180"], ["-swirl", "180"]),
+    "swirl": (["--angle", "180"], ["-swirl", "180"]),      # one sign, one direction of turn (issue 25)
     "arc": (["--angle", "300"], ["-distort", "Arc", "300"]),
     "bulge": (["--strength", "2.95"], ["-implode", "-2.95"]),      # the range's limit
 }

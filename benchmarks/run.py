@@ -84,7 +84,7 @@ QUICK_GRIDS = GRIDS[:5]
 
 #: Our presets and the ImageMagick operation each is compared with.
 PRESETS = {
-    "swirl": (["--angle", "180"], ["-swirl", "180"]),
+    "swirl": (["--angle", "180"], ["-swirl", "180"]),      # one sign, one direction of turn (issue 25)
     "bulge": (["--strength", "0.5"], ["-implode", "-0.5"]),
     "arc": (["--angle", "60"], ["-distort", "Arc", "60"]),
     "stretch": (["--sx", "2"], ["-liquid-rescale", "200x100%!"]),

@@ -41,9 +41,59 @@ from typing import TYPE_CHECKING, ClassVar
 if TYPE_CHECKING:                   # numpy is imported on first use: --help needs none of it
     import numpy as np
 
-__all__ = ["Param", "Warp", "load", "names", "known", "shadowing", "resolve_pair", "UnknownPreset", "GROUP",
-           "BUILTIN"]
+__all__ = ["Param", "ParamError", "option_flag", "Warp", "load", "names", "known", "shadowing", "resolve_pair",
+           "UnknownPreset", "GROUP", "BUILTIN"]
 
+
+def option_flag(name: str) -> str:
+    """The command line's flag of parameter ``name``: ``--inner-radius`` for ``inner_radius``."""
+    return "--" + name.replace("_", "-")
+
+
+class ParamError(ValueError):
+    """A refused parameter value, naming the parameters as its caller names them.
+
+    The message is written once, with the parameters' Python names: that is what the API
+    (:func:`featurewarp_cli.warp`, a preset's constructor, :meth:`Param.check`) raises,
+    ``angle: 900 is out of range (-720 <= DEG <= 720)``. The command line renders the
+    same error with its flags, ``--angle: 900 is out of range ...``, through
+    :meth:`render` and :func:`option_flag`.
+
+    Parameters
+    ----------
+    names : str or tuple of str
+        The parameter(s) at fault, by Python name: ``"angle"``, or ``("tl", "tr", "br", "bl")``.
+    reason : str
+        What is wrong. A parameter it names is written between backquotes (```where```) and
+        is one of ``names`` or ``mentions``, so that each caller names it its own way too.
+    mentions : tuple of str
+        Other parameters the reason names.
+
+    Examples
+    --------
+    >>> err = ParamError("angle", "171 is out of range when `where` is lower", mentions=("where",))
+    >>> str(err)
+    'angle: 171 is out of range when where is lower'
+    >>> err.render(option_flag)
+    '--angle: 171 is out of range when --where is lower'
+    """
+
+    def __init__(self, names: str | tuple[str, ...], reason: str, mentions: tuple[str, ...] = ()):
+        self.names = (names,) if isinstance(names, str) else tuple(names)
+        self.reason, self.mentions = reason, tuple(mentions)
+        super().__init__(self.render())
+
+    def __reduce__(self):                   # crosses process boundaries (batch workers) whole
+        return type(self), (self.names, self.reason, self.mentions)
+
+    def detail(self, name_of=str) -> str:
+        """The reason, each parameter it names written as ``name_of(name)``."""
+        named = set(self.names) | set(self.mentions)
+        return re.sub(r"`(\w+)`", lambda m: name_of(m[1]) if m[1] in named else m[0], self.reason)
+
+    def render(self, name_of=str) -> str:
+        """The whole message, each parameter written as ``name_of(name)`` (default: its Python name)."""
+        return f"{'/'.join(map(name_of, self.names))}: {self.detail(name_of)}"
 
 
 @dataclass(frozen=True)
@@ -106,33 +156,33 @@ class Param:
         return str(self.default) if self.type in (int, str) else f"{self.default:g}"
 
     def check(self, value):
-        """Convert and validate ``value``; raise ValueError naming the problem."""
+        """Convert and validate ``value``; raise :class:`ParamError` naming the problem."""
         if value is None:
             if self.default is None:
                 return None
-            raise ValueError(f"--{self.cli_name} needs a value")
+            raise ParamError(self.name, "a value is needed")
         if self.type is tuple:
             return self._check_pair(value)
         if self.type is str:
             return self._check_choice(value)
         if isinstance(value, bool):
-            raise ValueError(f"--{self.cli_name}: {value!r} is not a number")
+            raise ParamError(self.name, f"{value!r} is not a number")
         text = value.strip() if isinstance(value, str) else None
         try:
             number = float(text[:-1]) / 100.0 if self.percent and text and text.endswith("%") else float(value)
         except (TypeError, ValueError):
-            raise ValueError(f"--{self.cli_name}: {value!r} is not a number") from None
+            raise ParamError(self.name, f"{value!r} is not a number") from None
         if not math.isfinite(number):
-            raise ValueError(f"--{self.cli_name}: {value!r} is not a finite number")
+            raise ParamError(self.name, f"{value!r} is not a finite number")
         if self.type is int:
             if number != int(number):
-                raise ValueError(f"--{self.cli_name}: {value!r} is not a whole number")
+                raise ParamError(self.name, f"{value!r} is not a whole number")
             number = int(number)
         too_low = self.min is not None and (number < self.min or (self.min_open and number == self.min))
         too_high = self.max is not None and (number > self.max or (self.max_open and number == self.max))
         if too_low or too_high:
             shown = str(value).strip() if self.type is int else f"{number:g}"
-            raise ValueError(f"--{self.cli_name}: {shown} is out of range ({self.range_text()})")
+            raise ParamError(self.name, f"{shown} is out of range ({self.range_text()})")
         return number
 
     def _check_pair(self, value) -> tuple[str, str]:
@@ -143,22 +193,22 @@ class Param:
                 raise ValueError
             numbers = [float(str(part).strip().removesuffix("%")) for part in parts]
         except (TypeError, ValueError):
-            raise ValueError(f"--{self.cli_name}: {value!r} is not {self.metavar} "
-                             f"(two numbers of pixels or percentages)") from None
+            raise ParamError(self.name, f"{value!r} is not {self.metavar} "
+                                        f"(two numbers of pixels or percentages)") from None
         if not all(math.isfinite(n) for n in numbers):
-            raise ValueError(f"--{self.cli_name}: {value!r} is not finite")
+            raise ParamError(self.name, f"{value!r} is not finite")
         for part, number in zip(parts, numbers):
             limit = PAIR_PERCENT_LIMIT if str(part).strip().endswith("%") else PAIR_PIXEL_LIMIT
             if abs(number) > limit:
-                raise ValueError(f"--{self.cli_name}: {value!r} is out of range (each part within "
-                                 f"+-{PAIR_PIXEL_LIMIT:g} px or +-{PAIR_PERCENT_LIMIT:g} %)")
+                raise ParamError(self.name, f"{value!r} is out of range (each part within "
+                                            f"+-{PAIR_PIXEL_LIMIT:g} px or +-{PAIR_PERCENT_LIMIT:g} %)")
         return tuple(str(part).strip() for part in parts)
 
     def _check_choice(self, value) -> str:
         """One of ``choices``, whatever its case: ``'Lower'`` -> ``'lower'``."""
         word = value.strip().lower() if isinstance(value, str) else None
         if word not in self.choices:
-            raise ValueError(f"--{self.cli_name}: {value!r} is not one of {', '.join(self.choices)}")
+            raise ParamError(self.name, f"{value!r} is not one of {', '.join(self.choices)}")
         return word
 
     @property
@@ -168,6 +218,7 @@ class Param:
 
     @property
     def cli_name(self) -> str:
+        """The option's name without its dashes: ``inner-radius`` for ``inner_radius``."""
         return self.name.replace("_", "-")
 
     def as_dict(self) -> dict:

@@ -3,7 +3,8 @@
 Run ``python samples/make_masks.py`` (from anywhere) to rewrite, next to this file:
 
 * ``astronaut_mask.png`` and ``coins_mask.png``: rough, lasso-like selections for the
-  two photos (hard-coded polygon vertices below, in pixel coordinates x,y);
+  two photos (hard-coded polygon vertices below, in pixel coordinates x,y; the coins'
+  polygons trimmed apart where two face each other, :func:`separated`);
 * ``astronaut_body_mask.png``: a loose lasso of the astronaut's head and body, one
   component that runs out of the bottom and the left edge (a portrait cut by the frame);
 * ``astronaut_helmet_mask.png``: the head (as in ``astronaut_mask.png``) and the helmet
@@ -77,7 +78,8 @@ CLOSEUP = [
 
 # Coins (384x303): one loose polygon per coin, in reading order (4 rows of 6). Traced
 # once from a threshold + contour pass, sampled every ~20 degrees a few pixels outside
-# the coin's edge with slight jitter, then frozen here; neighbours stay >= 3 px apart.
+# the coin's edge with slight jitter, then frozen here; neighbours come within 3 px, so
+# the mask trims them apart (:func:`separated`).
 COINS = [
     [62,39, 67,46, 70,55, 67,64, 60,70, 54,76, 46,78, 38,77, 30,74, 23,69, 21,60, 18,51,
      23,43, 30,38, 37,35, 45,35, 55,33],
@@ -140,6 +142,29 @@ def polygon_mask(shape, polygons):
     return mask
 
 
+#: Least distance between two coins' polygons in the mask, px: the polygons come within 3 to
+#: 5 px of each other, under one 4 px grid cell, and there neighbouring coins share grid cells
+#: and become one feature: a row of four coins moves as one rigid piece, which no bend can
+#: carry (issue 25 item 6). 9 leaves every two coins at least 8 px (two cells) apart, each its
+#: own feature, trimming a polygon only where it faces a close neighbour (the coins
+#: themselves are 8 to 19 px apart: 41 pixels of their rims, at most 2 px deep, are left out).
+COIN_GAP = 9
+
+
+def separated(shape, polygons, gap):
+    """Fill each polygon, trimmed where it faces another, so that no two come within ``gap``
+    px: a pixel of one stays when its distance to the nearest other polygon plus its depth in
+    its own is at least ``gap`` (each of two close polygons gives up half the shortfall)."""
+    fills = [polygon_mask(shape, [p]) > 0 for p in polygons]
+    away = [cv2.distanceTransform((~f).view(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE) for f in fills]
+    mask = np.zeros(shape[:2], np.uint8)
+    for k, fill in enumerate(fills):
+        others = np.min([a for j, a in enumerate(away) if j != k], axis=0)
+        depth = cv2.distanceTransform(fill.view(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+        mask[fill & (others + depth >= gap)] = 255
+    return mask
+
+
 def make_closeup(astronaut):
     """Return the close-up: :data:`CLOSEUP_CROP` of ``astronaut`` upscaled 2x (bicubic)."""
     x0, y0, w, h = CLOSEUP_CROP
@@ -152,7 +177,8 @@ def main():
                            ("astronaut_helmet", ASTRONAUT[:1] + HELMET), ("coins", COINS),
                            ("closeup", CLOSEUP)):
         photo = cv2.imread(str(HERE / f"{name.split('_')[0]}.png"), cv2.IMREAD_UNCHANGED)
-        cv2.imwrite(str(HERE / f"{name}_mask.png"), polygon_mask(photo.shape, polygons))
+        mask = separated(photo.shape, polygons, COIN_GAP) if name == "coins" else polygon_mask(photo.shape, polygons)
+        cv2.imwrite(str(HERE / f"{name}_mask.png"), mask)
     img, mask = sample_scene()
     cv2.imwrite(str(HERE / "shapes.png"), img)
     cv2.imwrite(str(HERE / "shapes_mask.png"), mask.astype(np.uint8) * 255)

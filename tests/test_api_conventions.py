@@ -134,3 +134,50 @@ def test_batch_help_names_the_batch_options():
     text = CliRunner().invoke(cli, ["batch", "--help"]).output
     for option in ("--out-dir", "--jobs", "--scheduler", "--summary", "--resume", "--mask-pattern"):
         assert option in text, option
+
+
+#: (preset, parameters, what the API says, what the command line says): one error, two namings.
+NAMED = [
+    ("swirl", {"angle": 900}, "angle: 900 is out of range (-720 <= DEG <= 720)",
+     "Invalid value for '--angle': 900 is out of range (-720 <= DEG <= 720)"),
+    ("arc", {"where": "lower", "angle": 171}, "angle: 171 is out of range when where is lower (at most 170)",
+     "--angle: 171 is out of range when --where is lower (at most 170)"),
+    ("perspective", {"tl": "60%,60%"}, "tl/tr/br/bl: the quadrilateral is concave at tl",
+     "--tl/--tr/--br/--bl: the quadrilateral is concave at --tl"),
+    ("cylinder", {"distance": 1.5}, "angle: 120 degrees wraps cylinder too close to its silhouette seen from "
+     "distance 1.5", "--angle: 120 degrees wraps cylinder too close to its silhouette seen from --distance 1.5"),
+    ("stretch", {"size": "0x10"}, "size: the width 0 is out of range (1 <= PX <= 65535)",
+     "--size: the width 0 is out of range (1 <= PX <= 65535)"),
+    ("stretch", {"feature_weight": 0}, "feature_weight: 0 is out of range (0 < W <= 10000)",
+     "Invalid value for '--feature-weight': 0 is out of range (0 < W <= 10000)"),
+]
+
+
+@pytest.mark.parametrize("preset,params,api,command_line", NAMED, ids=[f"{c[0]}-{next(iter(c[1]))}" for c in NAMED])
+def test_errors_name_api_parameters_in_the_api_and_flags_on_the_command_line(preset, params, api,
+                                                                              command_line, tmp_path):
+    """Issue 25 item 3: ``warp(..., angle=900)`` says ``angle: ...``; ``--angle 900`` says ``--angle``."""
+    import cv2
+    from click.testing import CliRunner
+
+    from featurewarp_cli.cli.main import cli
+
+    image = np.full((30, 40, 3), 128, np.uint8)
+    with pytest.raises(ValueError) as err:
+        warp(image, None, preset, **params)
+    assert str(err.value).startswith(api) and "--" not in str(err.value)
+    cv2.imwrite(str(tmp_path / "in.png"), image)
+    args = [item for name, value in params.items() for item in (f"--{name.replace('_', '-')}", str(value))]
+    run = CliRunner().invoke(cli, ["warp", preset, str(tmp_path / "in.png"), str(tmp_path / "o.png"), *args])
+    assert run.exit_code == 2 and command_line in run.output, run.output
+
+
+def test_a_parameter_error_crosses_process_boundaries_whole():
+    """Batch workers send errors back pickled: the naming must survive."""
+    import pickle
+
+    from featurewarp_cli.plugins import ParamError, option_flag
+
+    err = pickle.loads(pickle.dumps(ParamError("angle", "171 is out of range when `where` is lower", ("where",))))
+    assert err.render(option_flag) == "--angle: 171 is out of range when --where is lower"
+    assert str(err) == "angle: 171 is out of range when where is lower"

@@ -140,13 +140,31 @@ def test_arc_360_seam_maps_both_edges_onto_one_ray():
     np.testing.assert_allclose(left, right, atol=1e-9)
 
 
-def test_swirl_rotates_clockwise_on_screen_and_keeps_the_centre():
-    """swirl: the centre is fixed; positive angles turn clockwise on screen (x right, y down)."""
+def test_swirl_turns_as_imagemagick_and_keeps_the_centre():
+    """swirl: the centre is fixed; positive angles turn counter-clockwise on screen (x right, y down),
+    the way ImageMagick's ``-swirl`` turns (issue 25 item 4)."""
     w = load_warp("swirl")(W, H, angle=90, radius=0.5)
     c = np.array([(W - 1) / 2, (H - 1) / 2])
     np.testing.assert_allclose(w(c[None]), c[None], atol=1e-12)
-    p = w(c[None] + [[5.0, 0.0]])[0] - c             # a point right of the centre moves down
-    assert p[1] > 0 and abs(np.hypot(*p) - 5.0) < 1e-9
+    p = w(c[None] + [[5.0, 0.0]])[0] - c             # a point right of the centre moves up
+    assert p[1] < 0 and abs(np.hypot(*p) - 5.0) < 1e-9
+
+
+#: ``convert pts.png -swirl 120`` (ImageMagick 6.9.11) on a white 200 x 200 PNG with 3 x 3 red
+#: dots centred at (100, 50) and (150, 99.5): where the dots' red weight lands, in pixel
+#: coordinates. ImageMagick's swirl fades over radius max(w, h) / 2 as (1 - d/R)^2, as ours
+#: does at --radius 0.5 on a square; its centre is half a pixel from ours (w/2 against (w-1)/2).
+MAGICK_SWIRL_120 = {(100.0, 50.0): (75.03, 56.65), (150.0, 99.5): (142.78, 74.17)}
+MAGICK_SWIRL_MINUS_120 = {(100.0, 50.0): (124.97, 56.65), (150.0, 99.5): (143.83, 124.10)}
+
+
+@pytest.mark.parametrize("angle,measured", [(120, MAGICK_SWIRL_120), (-120, MAGICK_SWIRL_MINUS_120)])
+def test_swirl_moves_points_where_imagemagick_swirl_moves_them(angle, measured):
+    """--angle A takes a point where ``convert -swirl A`` takes it, within a pixel: the same
+    direction of turn (the opposite sign would land the first dot 50 px away)."""
+    w = load_warp("swirl")(200, 200, angle=angle, radius=0.5)
+    sources = np.array(list(measured))
+    np.testing.assert_allclose(w(sources), np.array(list(measured.values())), atol=1.0)
 
 
 # --- injectivity over the declared range ----------------------------------------------------
@@ -246,35 +264,37 @@ def test_declared_ranges_match_the_advertised_limits(preset):
 # --- parameter checking ---------------------------------------------------------------------
 
 @pytest.mark.parametrize("preset,name,value,message", [
-    ("swirl", "angle", float("nan"), "--angle: nan is not a finite number"),
-    ("swirl", "angle", float("inf"), "--angle: inf is not a finite number"),
-    ("swirl", "angle", "-inf", "--angle: '-inf' is not a finite number"),
-    ("swirl", "angle", "ninety", "--angle: 'ninety' is not a number"),
-    ("swirl", "radius", 0, "--radius: 0 is out of range (0.001 <= F <= 10)"),
-    ("swirl", "radius", 10.5, "--radius: 10.5 is out of range"),
-    ("arc", "angle", 0, "--angle: 0 is out of range (0 < DEG <= 360)"),
-    ("arc", "angle", 360.0001, "--angle: 360 is out of range"),
-    ("arc", "angle", -30, "--angle: -30 is out of range"),
-    ("bulge", "strength", 3, "--strength: 3 is out of range (-0.95 <= S <= 2.95)"),
-    ("bulge", "strength", -1, "--strength: -1 is out of range"),
-    ("bulge", "strength", float("nan"), "--strength"),
-    ("stretch", "sx", 0, "--sx: 0 is out of range (0 < F <= 100)"),
-    ("stretch", "sy", -2, "--sy: -2 is out of range"),
-    ("stretch", "sy", float("inf"), "--sy: inf is not a finite number"),
-    ("stretch", "width", 10.5, "--width: 10.5 is not a whole number"),
-    ("stretch", "height", "7.25", "--height: '7.25' is not a whole number"),
-    ("stretch", "width", 0, "--width: 0 is out of range (1 <= PX <= 65535)"),
-    ("stretch", "height", 70000, "--height: 70000 is out of range"),
-    ("stretch", "width", float("nan"), "--width: nan is not a finite number"),
+    ("swirl", "angle", float("nan"), "angle: nan is not a finite number"),
+    ("swirl", "angle", float("inf"), "angle: inf is not a finite number"),
+    ("swirl", "angle", "-inf", "angle: '-inf' is not a finite number"),
+    ("swirl", "angle", "ninety", "angle: 'ninety' is not a number"),
+    ("swirl", "radius", 0, "radius: 0 is out of range (0.001 <= F <= 10)"),
+    ("swirl", "radius", 10.5, "radius: 10.5 is out of range"),
+    ("arc", "angle", 0, "angle: 0 is out of range (0 < DEG <= 360)"),
+    ("arc", "angle", 360.0001, "angle: 360 is out of range"),
+    ("arc", "angle", -30, "angle: -30 is out of range"),
+    ("bulge", "strength", 3, "strength: 3 is out of range (-0.95 <= S <= 2.95)"),
+    ("bulge", "strength", -1, "strength: -1 is out of range"),
+    ("bulge", "strength", float("nan"), "strength"),
+    ("stretch", "sx", 0, "sx: 0 is out of range (0 < F <= 100)"),
+    ("stretch", "sy", -2, "sy: -2 is out of range"),
+    ("stretch", "sy", float("inf"), "sy: inf is not a finite number"),
+    ("stretch", "width", 10.5, "width: 10.5 is not a whole number"),
+    ("stretch", "height", "7.25", "height: '7.25' is not a whole number"),
+    ("stretch", "width", 0, "width: 0 is out of range (1 <= PX <= 65535)"),
+    ("stretch", "height", 70000, "height: 70000 is out of range"),
+    ("stretch", "width", float("nan"), "width: nan is not a finite number"),
 ])
 def test_param_check_rejects_bad_values(preset, name, value, message):
-    """Bad values (nan, inf, text, out of range, fractional ints) raise ValueError naming the option."""
+    """Bad values (nan, inf, text, out of range, fractional ints) raise a ValueError that names the
+    parameter as the API calls it (issue 25 item 3): ``angle: ...``, not the option ``--angle``."""
     cls = load_warp(preset)
-    with pytest.raises(ValueError) as err:
+    with pytest.raises(plugins.ParamError) as err:
         cls(W, H, **{name: value})
-    assert message in str(err.value)
+    assert str(err.value).startswith(message) and "--" not in str(err.value)
+    assert err.value.render(plugins.option_flag).startswith(f"--{message}")
     param = next(p for p in cls.params if p.name == name)
-    with pytest.raises(ValueError, match=f"--{name}"):
+    with pytest.raises(ValueError, match=f"^{name}: "):
         param.check(value)
 
 
@@ -291,10 +311,12 @@ def test_param_check_accepts_and_converts_good_values(preset, name, value, expec
 
 
 def test_param_names_with_underscores_become_dashed_options():
-    """A parameter named with an underscore is reported as its --dashed option."""
+    """A parameter named with an underscore keeps its name in the API and is its --dashed option
+    on the command line."""
     p = Param("inner_radius", float, 1.0, "help", min=0)
-    with pytest.raises(ValueError, match="--inner-radius: -1 is out of range"):
+    with pytest.raises(ValueError, match="^inner_radius: -1 is out of range") as err:
         p.check(-1)
+    assert err.value.render(plugins.option_flag).startswith("--inner-radius: -1 is out of range")
 
 
 @pytest.mark.parametrize("preset", plugins.names())
@@ -337,7 +359,7 @@ def test_stretch_factors_take_percentages():
     """--sx 150% is 1.5; other parameters do not take percentages."""
     w = load_warp("stretch")(W, H, sx="150%", sy=" 50% ")
     assert (w.values["sx"], w.values["sy"]) == (1.5, 0.5)
-    with pytest.raises(ValueError, match="--angle"):
+    with pytest.raises(ValueError, match="^angle: "):
         load_warp("swirl")(W, H, angle="50%")
 
 
@@ -354,5 +376,5 @@ def test_radial_presets_take_a_centre_and_stretch_a_size():
     assert load_warp("stretch")(W, H, size="300x100").canvas == (300, 100)
     assert load_warp("stretch")(W, H, size="150%x50%").canvas == (round(1.5 * W), round(0.5 * H))
     for bad in ("300", "ax3", "0x10"):
-        with pytest.raises(ValueError, match="--size"):
+        with pytest.raises(ValueError, match="^size: "):
             load_warp("stretch")(W, H, size=bad)

@@ -27,9 +27,16 @@ def blocks() -> list[tuple[str, str]]:
     return [(kind, body) for kind, body in found if not any(word in body for word in SETUP)]
 
 
+def quick_start() -> str:
+    """The body of the Quick start's command block."""
+    text = (ROOT / "README.md").read_text()
+    return BLOCK.search(text, text.index("\n## Quick start")).group(2)
+
+
 def test_the_readme_has_commands_to_run():
     kinds = [kind for kind, _ in blocks()]
     assert kinds.count("sh") >= 4 and "make" in kinds and "python" in kinds
+    assert ("sh", quick_start()) in blocks() and "featurewarp warp" in quick_start()
 
 
 @pytest.mark.slow
@@ -47,6 +54,8 @@ def test_readme_block_runs_as_written(tmp_path, index):
         command = [sys.executable, "-c", body]
     run = subprocess.run(command, cwd=tmp_path, env=env, capture_output=True, text=True, timeout=240)
     assert run.returncode == 0, f"{kind} block {index}:\n{body}\n--- stderr:\n{run.stderr[-2000:]}"
+    if body == quick_start():           # the first commands a newcomer runs: no warning (issue 25 item 6)
+        assert "warning" not in run.stderr, run.stderr[-2000:]
 
 
 def gallery_commands() -> list[str]:

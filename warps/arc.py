@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-from featurewarp_cli.plugins import Param, Warp
+from featurewarp_cli.plugins import Param, ParamError, Warp
 
 from .common import fit_canvas
 
@@ -67,7 +67,8 @@ class Arc(Warp):
 
     def _setup_edge(self, angle):
         if angle > EDGE_MAX:
-            raise ValueError(f"--angle: {angle:g} is out of range with --where {self.where} (at most {EDGE_MAX:g})")
+            raise ParamError("angle", f"{angle:g} is out of range when `where` is {self.where} (at most {EDGE_MAX:g})",
+                             mentions=("where",))
         half = max(math.radians(angle), 1e-9) / 2.0
         self.radius = self.width / (2.0 * math.sin(half))      # the circle through the edge's ends
         self.chord_depth = self.radius * math.cos(half)         # from its centre to the chord

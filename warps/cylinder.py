@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from featurewarp_cli.plugins import Param, Warp, centre
+from featurewarp_cli.plugins import Param, ParamError, Warp, centre
 
 from .common import fit_canvas
 
@@ -51,13 +51,13 @@ def largest_angle(cos_at, distance, top):
 
 
 def check_view(warp, cos_at, angle, distance, top):
-    """ValueError naming --angle when ``angle`` wraps too close to the silhouette."""
+    """ParamError naming ``angle`` when ``angle`` wraps too close to the silhouette."""
     if squeeze(cos_at(math.radians(angle)), distance) >= MIN_SQUEEZE - 1e-12:
         return
-    seen = "seen from afar" if distance is None else f"seen from --distance {distance:g}"
+    seen = "seen from afar" if distance is None else f"seen from `distance` {distance:g}"
     limit = largest_angle(cos_at, distance, top)
-    raise ValueError(f"--angle: {angle:g} degrees wraps {warp.name} too close to its silhouette {seen} "
-                     f"(at most {math.floor(limit * 10) / 10:g} here)")
+    raise ParamError("angle", f"{angle:g} degrees wraps {warp.name} too close to its silhouette {seen} "
+                              f"(at most {math.floor(limit * 10) / 10:g} here)", mentions=("distance",))
 
 
 class Cylinder(Warp):

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from featurewarp_cli.plugins import Param, Warp, resolve_pair
+from featurewarp_cli.plugins import Param, ParamError, Warp, resolve_pair
 
 from .common import fit_canvas
 
@@ -37,7 +37,7 @@ def homography(source: np.ndarray, target: np.ndarray) -> np.ndarray:
 
 
 def check_quadrilateral(quad: np.ndarray) -> None:
-    """Raise ValueError unless ``quad`` (tl, tr, br, bl) is convex, in the image's order, its
+    """Raise ParamError unless ``quad`` (tl, tr, br, bl) is convex, in the image's order, its
     angles within :data:`MIN_ANGLE` of 0 and 180 degrees, its sides at least :data:`MIN_SIDE`.
 
     ``quad`` is in units of the image's width and height (its own corners at 0 and 1), so
@@ -51,29 +51,28 @@ def check_quadrilateral(quad: np.ndarray) -> None:
     incoming = np.roll(edges, 1, axis=0)
     turn = incoming[:, 0] * edges[:, 1] - incoming[:, 1] * edges[:, 0]
     lengths = np.hypot(edges[:, 0], edges[:, 1])
-    options = "--tl/--tr/--br/--bl"
     if lengths.min() <= 1e-9 * max(lengths.max(), 1.0):
-        raise ValueError(f"{options}: two corners coincide")
+        raise ParamError(CORNERS, "two corners coincide")
     sines = turn / (lengths * np.roll(lengths, 1))
     negative = np.flatnonzero(sines < 0)
     if len(negative) == 2:
-        raise ValueError(f"{options}: the quadrilateral crosses itself (its sides cross)")
+        raise ParamError(CORNERS, "the quadrilateral crosses itself (its sides cross)")
     if len(negative) == 4:
-        raise ValueError(f"{options}: the corners are in mirror order (the image would be flipped)")
+        raise ParamError(CORNERS, "the corners are in mirror order (the image would be flipped)")
     if len(negative):
         odd = negative[0] if len(negative) == 1 else np.flatnonzero(sines >= 0)[0]
-        raise ValueError(f"{options}: the quadrilateral is concave at --{CORNERS[odd]}")
+        raise ParamError(CORNERS, f"the quadrilateral is concave at `{CORNERS[odd]}`")
     cosines = -(incoming * edges).sum(1) / (lengths * np.roll(lengths, 1))
     angles = np.degrees(np.arccos(np.clip(cosines, -1.0, 1.0)))
     worst = int(np.argmax(np.abs(angles - 90.0)))
     if abs(angles[worst] - 90.0) > 90.0 - MIN_ANGLE:
-        raise ValueError(f"{options}: the angle at --{CORNERS[worst]} is {angles[worst]:.3g} degrees "
-                         f"({MIN_ANGLE:g} to {180 - MIN_ANGLE:g})")
+        raise ParamError(CORNERS, f"the angle at `{CORNERS[worst]}` is {angles[worst]:.3g} degrees "
+                                  f"({MIN_ANGLE:g} to {180 - MIN_ANGLE:g})")
     short = int(np.argmin(lengths))
     if lengths[short] < MIN_SIDE:
-        raise ValueError(f"{options}: the side from --{CORNERS[short]} to --{CORNERS[(short + 1) % 4]} is "
-                         f"{100 * lengths[short]:.3g} % of the image; at least {100 * MIN_SIDE:g} % (a shorter "
-                         f"one squeezes the image more than a grid can follow in bounded time)")
+        raise ParamError(CORNERS, f"the side from `{CORNERS[short]}` to `{CORNERS[(short + 1) % 4]}` is "
+                                  f"{100 * lengths[short]:.3g} % of the image; at least {100 * MIN_SIDE:g} % "
+                                  f"(a shorter one squeezes the image more than a grid can follow in bounded time)")
 
 
 class Perspective(Warp):
@@ -85,7 +84,7 @@ class Perspective(Warp):
 
     One-to-one: write ``W(p) = (a(p), b(p)) / c(p)`` with a, b, c affine. The corners must
     make a convex quadrilateral in the image's order (:func:`check_quadrilateral`, else a
-    ValueError naming the problem). Then c has one sign at the four corners (checked
+    ParamError naming the problem). Then c has one sign at the four corners (checked
     too): were it to change sign on the rectangle, W would send part of it beyond the line
     at infinity and the image would be unbounded, not the quadrilateral. c is affine, so
     it keeps that sign on the whole rectangle, where W is smooth with Jacobian determinant
@@ -107,7 +106,7 @@ class Perspective(Warp):
         self.matrix = homography(source, target)
         denominators = np.c_[source, np.ones(4)] @ self.matrix[2]
         if not (np.all(denominators > 0) or np.all(denominators < 0)) or not math.isfinite(self.matrix.sum()):
-            raise ValueError("--tl/--tr/--br/--bl: no perspective maps the image onto these corners")
+            raise ParamError(CORNERS, "no perspective maps the image onto these corners")
         self._shift = 0.0
         self._shift = fit_canvas(self, self.forward)
 

@@ -20,6 +20,7 @@ from ..io import formats, write
 from ..io.colours import parse_colour
 from ..io.depth import to_eight_bit
 from ..io.encode import encode_image
+from ..plugins import ParamError
 from .pipeline import (Settings, WarpError, background_colour, check_solution, load_image_and_mask, make_warper,
                        prefetch_engine, solve_within_budget)
 
@@ -44,8 +45,8 @@ def parse_vary(texts, preset) -> dict[str, tuple[float, float]]:
             raise WarpError(f"{name} is not a number and cannot vary", "--vary", usage=True)
         try:
             ranges[param.name] = (param.check(start), param.check(end))
-        except ValueError as err:
-            raise WarpError(str(err), "--vary", usage=True) from None
+        except ParamError as err:               # named as --vary names it: NAME=START:END
+            raise WarpError(err.render(lambda name: name.replace("_", "-")), "--vary", usage=True) from None
     if not ranges:
         raise WarpError("give at least one NAME=START:END", "--vary", usage=True)
     return ranges

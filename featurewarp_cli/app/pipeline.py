@@ -332,6 +332,8 @@ def make_warper(settings: Settings, width: int, height: int, feature_mask):
             warp = plugins.load(settings.preset)(width, height, **settings.params)
     except plugins.UnknownPreset as err:
         raise WarpError(str(err), usage=True) from None
+    except plugins.ParamError as err:           # the API names parameters, the command line its flags
+        raise WarpError(err.render(plugins.option_flag), usage=True) from None
     except ValueError as err:
         raise WarpError(str(err), usage=True) from None
     try:

@@ -15,7 +15,7 @@ import click
 from ..engine import defaults
 from ..io import limits
 from ..io.formats import NAMES as FORMAT_NAMES
-from ..plugins import Param
+from ..plugins import Param, ParamError, option_flag
 
 #: Keyword arguments of the commands that are engine or output settings, not preset parameters.
 SETTINGS = ("mode", "cell", "feature_weight", "decay", "formulation", "boundary", "scale_prior", "strict",
@@ -65,8 +65,8 @@ class ParamValue(click.ParamType):
     def convert(self, value, option, ctx):
         try:
             return self.param.check(value)
-        except ValueError as err:
-            self.fail(str(err).split(": ", 1)[-1], option, ctx)
+        except ParamError as err:               # click's message names the option already
+            self.fail(err.detail(option_flag), option, ctx)
 
 
 def declared(param: Param) -> dict:
