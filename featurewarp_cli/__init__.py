@@ -29,7 +29,11 @@ class FeatureWarpWarning(UserWarning):
 
 
 def __getattr__(name):
-    if name in {"warp", "FeatureWarper", "load_warp", "Mesh"}:
+    if name == "warp":
+        from .engine import api
+
+        return api.warp
+    if name in {"FeatureWarper", "load_warp", "Mesh"}:
         from .engine import warper
 
         return getattr(warper, name)

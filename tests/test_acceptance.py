@@ -11,7 +11,7 @@ import cv2
 import numpy as np
 import pytest
 
-from featurewarp_cli.engine.warper import warp
+from featurewarp_cli.engine.api import warp
 from samples.scenes import SHAPES, scene
 from shapes import area, distortions
 

@@ -26,6 +26,10 @@ def test_warp_reports_what_it_could_not_do_as_warnings():
         with pytest.raises(FeatureWarpWarning):
             warp(image, mask, "swirl", angle=180)
     with warnings.catch_warnings():
+        warnings.simplefilter("ignore")                 # strict raises whatever the filters say
+        with pytest.raises(FeatureWarpWarning, match="the output is the input"):
+            warp(image, mask, "swirl", angle=180, strict=True)
+    with warnings.catch_warnings():
         warnings.simplefilter("error")
         warp(image, None, "swirl", angle=30)             # nothing to say: no warning at all
 

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from featurewarp_cli import plugins
-from featurewarp_cli.engine.warper import FeatureWarper, load_warp, warp
+from featurewarp_cli.engine.api import warp
+from featurewarp_cli.engine.warper import FeatureWarper, load_warp
 from featurewarp_cli.engine.grid import signed_areas
 from featurewarp_cli.plugins import Param, Warp
 

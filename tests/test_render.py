@@ -8,7 +8,8 @@ import pytest
 
 from featurewarp_cli.render import raster as render
 from featurewarp_cli.render.antialias import AA_START, Footprints
-from featurewarp_cli.engine.warper import FeatureWarper, load_warp, warp
+from featurewarp_cli.engine.api import warp
+from featurewarp_cli.engine.warper import FeatureWarper, load_warp
 from featurewarp_cli.engine.grid import Grid
 from reference_render import ReferenceMap, reference_footprint
 

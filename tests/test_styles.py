@@ -15,7 +15,8 @@ from click.testing import CliRunner
 
 from featurewarp_cli.cli.main import cli
 from featurewarp_cli.engine.grid import Grid, signed_areas
-from featurewarp_cli.engine.warper import FeatureWarper, load_warp, warp
+from featurewarp_cli.engine.api import warp
+from featurewarp_cli.engine.warper import FeatureWarper, load_warp
 from samples.scenes import scene
 from shapes import distortions
 from test_presets import boundary_polygon, winding_numbers

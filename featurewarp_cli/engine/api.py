@@ -1,0 +1,67 @@
+"""The one-call API: :func:`warp` an image with a preset while masked features keep their shape."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .defaults import DECAY, FEATURE_WEIGHT, FORMULATION, INTERPOLATION, MODE, SCALE_PRIOR
+from .warper import FeatureWarper, load_warp
+
+
+def warp(image: np.ndarray, mask: np.ndarray | None, preset: str, *, mode: str = MODE,
+         cell: int | None = None, feature_weight: float = FEATURE_WEIGHT, decay: float = DECAY,
+         formulation: str = FORMULATION, boundary: str | None = None, interp: str = INTERPOLATION,
+         background=None, scale_prior: float = SCALE_PRIOR, strict: bool = False, **params) -> np.ndarray:
+    """Warp ``image`` with a preset while the features in ``mask`` keep their shape.
+
+    Parameters
+    ----------
+    image : (h, w) or (h, w, C) ndarray
+        Grey, grey + alpha, RGB or RGBA; uint8, uint16, bool, integers, or floats in
+        [0, 1] (returned in the same dtype; see :mod:`featurewarp_cli.engine.arrays`).
+    mask : (h, w) ndarray or None
+        Feature pixels: bool as is; integers at or above 128/255 of their maximum; floats >= 0.5.
+    preset : str
+        Registered preset name ('stretch', 'arc', 'swirl', 'bulge', or a plugin's).
+    mode, cell, feature_weight, decay, formulation, boundary, scale_prior
+        See :class:`FeatureWarper`.
+    interp : {'nearest', 'linear', 'cubic', 'lanczos'}
+    background : (r, g, b) of 0..255, colour text such as ``"white"``, or None
+        Fill for pixels no source pixel lands on; None: transparent (alpha added where
+        needed: RGBA for colour, grey + alpha for grey).
+    strict : bool
+        Raise the first warning as an error (:class:`featurewarp_cli.FeatureWarpWarning`)
+        instead of returning an image that has a compromise in it.
+    **params
+        The preset's parameters.
+
+    Returns
+    -------
+    ndarray
+        The warped image on the preset's canvas.
+
+    Raises
+    ------
+    featurewarp_cli.FeatureWarpWarning
+        With ``strict``: the first thing the solve could not do, as an error.
+
+    Warns
+    -----
+    featurewarp_cli.FeatureWarpWarning
+        One per thing the solve could not do (a feature not kept, a warp with no effect):
+        the lines of ``mesh.record.warnings``.
+    """
+    import warnings
+
+    from .. import FeatureWarpWarning
+
+    height, width = image.shape[:2]
+    w = load_warp(preset)(width, height, **params)
+    warper = FeatureWarper(width, height, mask, cell=cell, feature_weight=feature_weight, decay=decay,
+                           formulation=formulation, boundary=boundary, scale_prior=scale_prior)
+    mesh = warper.solve(w, mode)
+    if strict and mesh.record.warnings:
+        raise FeatureWarpWarning(mesh.record.warnings[0])
+    for line in mesh.record.warnings:
+        warnings.warn(line, FeatureWarpWarning, stacklevel=2)
+    return warper.render(image, mesh, interp, background)
