@@ -27,7 +27,12 @@ bulge_ARGS   := --strength 0.8
 # width lands in the 15 px margin at the left (background stretched 15x; the report's
 # background_stretch says so); with half a cell the gaps take it (7x). The astronaut's
 # fish at bend 50 squeezes the shuttle against the top edge (the gallery shows that case
-# and its warning); at 30 it is kept.
+# and its warning); at 30 it is kept. One warning is left on purpose: the shuttle's tank
+# reaches the top edge (and coins the right edge); under the presets that curve the outline
+# (arc, arch, flag, fish, rise, inflate, squeeze, shell, perspective, cylinder, sphere) that
+# feature lets go of the border to keep its shape and the output's edge steps by 2-10 px
+# there. The tool says so ("the output's outline leaves the plain warp's ...") until the
+# solver keeps the outline and lets the feature give way instead (issue 22, item 1).
 coins-stretch_ARGS  := --sx 1.6 --decay 0.5
 coins-arc_ARGS      := --angle 25
 coins-swirl_ARGS    := --angle 60
@@ -36,10 +41,12 @@ coins-flag_ARGS     := --bend 10
 coins-fish_ARGS     := --bend 10
 coins-rise_ARGS     := --bend 25
 coins-squeeze_ARGS  := --bend 15
-coins-shell_ARGS    := --bend 40
+coins-shell_ARGS    := --bend 30
 coins-cylinder_ARGS := --angle 60
-coins-sphere_ARGS   := --angle 60
+coins-sphere_ARGS   := --angle 45
 astronaut-fish_ARGS := --bend 30
+# At 120 the arc stretches the wall above the head 10x beyond the plain warp (streaks, said).
+astronaut-arc_ARGS  := --angle 100
 DEMO := $(foreach s,$(SAMPLES),$(foreach p,$(PRESETS),out/$(s)-$(p).png))
 
 .PHONY: install test demo bench gallery clean

@@ -1,4 +1,5 @@
-"""Issue 25 item 6: ``make demo`` shows the tool at its best, without a warning line.
+"""Issue 25 item 6: ``make demo`` shows the tool at its best, without a warning line but
+the outline's (the Makefile says why; it goes when issue 22 item 1 keeps the outline).
 
 The commands are the Makefile's own (``make -n demo``), run in this process through click's
 ``CliRunner`` at full size: the settings that keep every feature depend on the picture, so a
@@ -37,12 +38,15 @@ def test_the_demo_warps_every_sample_with_every_preset():
 
 @pytest.mark.slow
 def test_the_demo_prints_no_warning(tmp_path, monkeypatch):
-    """Every demo command exits 0 and says nothing (about 5 s of CPU for the 42 warps)."""
+    """Every demo command exits 0 and says nothing but, for a frame-cut feature under a preset
+    that curves the border, that the outline steps there (about 5 s of CPU for the 42 warps)."""
     monkeypatch.chdir(ROOT)
     noisy = []
     for args in demo_commands():
         args[3] = str(tmp_path / Path(args[3]).name)
         run = CliRunner().invoke(cli, args)
-        if run.exit_code != 0 or run.output.strip():
+        said = [line for line in run.output.splitlines() if line.strip()]
+        outline = [line for line in said if "the output's outline leaves the plain warp's" in line]
+        if run.exit_code != 0 or len(outline) != len(said) or (outline and args[1] in ("stretch", "swirl", "bulge")):
             noisy.append(f"featurewarp {shlex.join(args)}: exit {run.exit_code}\n{run.output[:600]}")
     assert not noisy, "\n".join(noisy)

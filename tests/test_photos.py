@@ -16,6 +16,7 @@ import pytest
 from featurewarp_cli import FeatureWarper, load_warp
 from featurewarp_cli.app.measure import measure
 from featurewarp_cli.cli.main import cli as main
+from featurewarp_cli.engine.record import STREAKS
 
 SAMPLES = os.path.join(os.path.dirname(__file__), os.pardir, "samples")
 
@@ -55,7 +56,9 @@ def test_the_portrait_is_cut_by_the_frame_and_the_closeup_fills_it(portrait, clo
                                          ("rigid", {"sx": 2})])
 def test_frame_cut_portrait_keeps_its_shape_in_the_image(portrait, mode, params):
     """Every masked region's keypoint-fitted map is a similarity within 0.03 (rigid: scale 1 +- 0.03),
-    and the report's figure agrees with the image's within 0.02."""
+    and the report's figure agrees with the image's within 0.02. What it costs, the strip that
+    the edge leaves between the subject and the frame stretched into streaks, is said: one
+    warning naming the place, and nothing else."""
     image, mask = portrait
     out, mesh = warped(image, mask, "stretch", mode, **params)
     fits = measure(image, out, mask)
@@ -66,7 +69,15 @@ def test_frame_cut_portrait_keeps_its_shape_in_the_image(portrait, mode, params)
         assert component["kept"]
         if mode == "rigid":
             assert abs(fit.scale - 1.0) <= 0.03
-    assert mesh.info["warnings"] == [] and mesh.flips() == 0
+    assert mesh.flips() == 0
+    stretch = mesh.info["background_stretch"]
+    said = [w for w in mesh.info["warnings"] if w.startswith("background stretched")]
+    assert len(said) == (stretch > STREAKS) and len(mesh.info["warnings"]) == len(said), mesh.info["warnings"]
+    if said:
+        x, y = mesh.info["background_stretch_at"]
+        assert f"near ({x:.0f}, {y:.0f})" in said[0]
+        width, height = mesh.canvas
+        assert 0 <= x < width and 0 <= y < height
 
 
 def test_rigid_portrait_that_cannot_fit_warns_and_is_no_worse_than_plain(portrait):
@@ -84,13 +95,14 @@ def test_rigid_portrait_that_cannot_fit_warns_and_is_no_worse_than_plain(portrai
 
 def test_portrait_background_stretch_is_spread(portrait):
     """With 40 px of room above the head, stretch --sy 2 stretches no background triangle more
-    than 8 times its area under the warp (the stretch is not piled into a few rows)."""
+    than 8.5 times beyond the warp (the stretch is not piled into a few rows; the figure is the
+    largest singular value, which the area ratio under 8 bounded before)."""
     image, mask = portrait
     image = cv2.copyMakeBorder(image, 40, 0, 0, 0, cv2.BORDER_REFLECT)
     mask = np.pad(mask, ((40, 0), (0, 0)))
     _, mesh = warped(image, mask, "stretch", sy=2)
     assert mesh.info["components"][0]["kept"]
-    assert mesh.info["background_stretch"] <= 8.0
+    assert mesh.info["background_stretch"] <= 8.5
 
 
 def test_subject_that_fills_the_height_grows_instead_of_streaking_the_sky(portrait, monkeypatch):

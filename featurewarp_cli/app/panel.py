@@ -113,7 +113,8 @@ def compare_file(settings, input: str, output: str, mask: str | None = None,
     Returns
     -------
     dict
-        :func:`featurewarp_cli.app.report.summary` of the similarity result.
+        :func:`featurewarp_cli.app.report.summary` of the similarity result; its warnings are
+        every view's, each line naming its view.
     """
     import time
     from dataclasses import replace
@@ -138,6 +139,7 @@ def compare_file(settings, input: str, output: str, mask: str | None = None,
     for mode in ("plain", "rigid", "similarity"):
         mesh = solve_within_budget(warper, warp, mode)
         check_solution(settings, mesh)
+        warnings.extend(f"{mode} view: {line}" for line in mesh.record.warnings)
         result = rendered(warper, image, mesh, settings.interp, background)
         tiles.append(draw_grid(result, mesh) if with_grid else result)
         labels.append(f"{mode} {settings.preset}" if mode == "plain" else f"featurewarp {mode}")

@@ -12,7 +12,7 @@ from .. import __version__
 
 
 #: The report's own format version (``featurewarp schema report`` prints its JSON Schema).
-REPORT_SCHEMA = "featurewarp-report/1"
+REPORT_SCHEMA = "featurewarp-report/2"
 
 
 def image_summary(path: str, image: np.ndarray) -> dict:
@@ -66,6 +66,12 @@ def build_report(input_path, output_path, image, result, warp, mesh, timings) ->
         "seconds": seconds,
         "features_kept": info["features_kept"],
         "background_stretch": info["background_stretch"],
+        "background_stretch_at": info.get("background_stretch_at", None),
+        "blank_share": info.get("blank_share", 0.0),
+        "plain_blank_share": info.get("plain_blank_share", 0.0),
+        "blank_extra_box": info.get("blank_extra_box", None),
+        "outline_departure": info.get("outline_departure", 0.0),
+        "outline_departure_at": info.get("outline_departure_at", None),
         "warnings": info["warnings"],
         "flipped_triangles": info["flipped_triangles"],
         "fold_guard": {

@@ -131,7 +131,7 @@ def schema_command(kind):
     """Print the JSON Schema (Draft 2020-12) of the --report file or of the handles file.
 
     Each schema has a version of its own: the report's 'schema' key
-    (featurewarp-report/1), the handles file's 'version' key (1).
+    (featurewarp-report/2), the handles file's 'version' key (1).
     """
     from .. import schema
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import quality
+from . import canvas, quality
 from .record import KEPT, ComponentRecord, SolveRecord, warnings_for
 
 #: Features (quads holding a mask pixel) covering more than this share of the grid get a warning.
@@ -32,8 +32,13 @@ def assess(state, target, warped, tied, unpinned, warp, record: SolveRecord, not
             kept=bool(figures["anisotropy_worst"][c] <= KEPT))
         for c in range(features.n_components)]
     if not quick:
-        record.background_stretch = quality.background_stretch(target, warped, state.triangles,
-                                                               state.tri_component < 0)
+        stretch, where = canvas.largest_stretch(target, warped, state.triangles[state.tri_component < 0])
+        record.background_stretch, record.background_stretch_at = stretch, where
+        grid = state.grid
+        record.blank_share, record.plain_blank_share, record.blank_extra_box = canvas.blank_shares(
+            target, warped, grid.nx, grid.ny, tuple(warp.canvas))
+        record.outline_departure, record.outline_departure_at = canvas.outline_departure(
+            target, warped, grid.nx, grid.ny)
     if record.mode != "plain" and not quick:
         record.warnings.extend(warnings_for(record, state.nodes, target, warped, warp))
         coverage = float(np.mean(features.is_feature))

@@ -217,15 +217,3 @@ def component_figures(source, target, warped, triangles, tri_component, node_com
     out["area_ratio"] = area_t / np.maximum(area_s, 1e-12)
     return out
 
-
-def background_stretch(target: np.ndarray, warped: np.ndarray, triangles: np.ndarray,
-                       background: np.ndarray) -> float:
-    """Largest ratio of a background triangle's area on the canvas to its area under W (1 if none)."""
-    if not background.any():
-        return 1.0
-    tris = triangles[background]
-    reference = signed_areas(warped, tris)
-    valid = reference > 1e-12
-    if not valid.any():
-        return 1.0
-    return float(max(1.0, (signed_areas(target, tris)[valid] / reference[valid]).max()))

@@ -55,6 +55,13 @@ class ComponentRecord:
 
 #: Largest anisotropy - 1 of a component's triangles for it to count as kept.
 KEPT = 0.02
+#: Background stretched beyond W by more than this (largest singular value) is said: from
+#: about 8x, stars become needles and fine texture streaks (README: Limits, with pictures).
+STREAKS = 8.0
+#: Blank canvas beyond the plain warp's by more than this share of the canvas is said.
+BLANK = 0.005
+#: An outline leaving the plain warp's by more than this many pixels is said.
+OUTLINE_PX = 1.0
 #: Where W moves pixels by more than NO_OP_WARP px, an output that moves the nodes W moves
 #: (by more than NO_OP_OUTPUT px) by at most NO_OP_OUTPUT px RMS, or by at most NO_OP_FRACTION
 #: of W's RMS displacement there, is reported as "the output is the input" (a swirl whose
@@ -80,8 +87,20 @@ class SolveRecord:
     quality : dict
         Mesh-wide figures (:func:`quality.mesh_quality`).
     background_stretch : float
-        Largest ratio, over background triangles, of a triangle's area on the
-        canvas to its area under W (1: the background follows W; large: streaks).
+        Largest stretch, over background triangles, beyond W: the largest singular value
+        of the affine map from a triangle's image under W to its image in the result (1:
+        the background follows W; 8 and more: stars become needles, texture streaks).
+    background_stretch_at : tuple of 2 floats or None
+        Canvas position of that triangle.
+    blank_share, plain_blank_share : float
+        Shares of the canvas no source pixel lands on, in the result and under W.
+    blank_extra_box : tuple of 4 ints or None
+        ``(x0, y0, x1, y1)`` around the pixels W fills and the result leaves blank.
+    outline_departure : float
+        Largest distance (px) of the result's border from W's outline (0: the canvas is
+        the warp's).
+    outline_departure_at : tuple of 2 floats or None
+        Where.
     warnings : list of str
         What the caller should be told: features not kept, features relaxed,
         an output that equals the input.
@@ -98,6 +117,12 @@ class SolveRecord:
     guard: GuardRecord = field(default_factory=GuardRecord)
     quality: dict = field(default_factory=dict)
     background_stretch: float = 1.0
+    background_stretch_at: tuple | None = None
+    blank_share: float = 0.0
+    plain_blank_share: float = 0.0
+    blank_extra_box: tuple | None = None
+    outline_departure: float = 0.0
+    outline_departure_at: tuple | None = None
     warnings: list = field(default_factory=list)
     timings: dict = field(default_factory=dict)
 
@@ -119,6 +144,12 @@ class SolveRecord:
             "components": [asdict(c) for c in self.components],
             "features_kept": self.features_kept,
             "background_stretch": self.background_stretch,
+            "background_stretch_at": _rounded(self.background_stretch_at),
+            "blank_share": self.blank_share,
+            "plain_blank_share": self.plain_blank_share,
+            "blank_extra_box": None if self.blank_extra_box is None else list(self.blank_extra_box),
+            "outline_departure": self.outline_departure,
+            "outline_departure_at": _rounded(self.outline_departure_at),
             "flipped_before_guard": guard.flipped_before,
             "untangle_iterations": guard.untangle_iterations,
             "untangle_window_quads": guard.window_quads,
@@ -135,6 +166,29 @@ class SolveRecord:
         }
 
 
+def _rounded(point) -> list | None:
+    return None if point is None else [round(float(v), 1) for v in point]
+
+
+def canvas_warnings(record: "SolveRecord") -> list[str]:
+    """One line per compromise the canvas shows: streaks, blank canvas, the outline let go."""
+    lines = []
+    if record.background_stretch > STREAKS:
+        x, y = record.background_stretch_at
+        lines.append(f"background stretched {record.background_stretch:.0f}x beyond the plain warp near "
+                     f"({x:.0f}, {y:.0f}) of the output: texture there turns into streaks")
+    if record.blank_share > record.plain_blank_share + BLANK:
+        x0, y0, x1, y1 = record.blank_extra_box
+        lines.append(f"{100 * record.blank_share:.1f} % of the output is blank where the plain warp leaves "
+                     f"{100 * record.plain_blank_share:.1f} % (between ({x0}, {y0}) and ({x1}, {y1})): "
+                     f"the features' shapes pull the image off the canvas there")
+    if record.outline_departure > OUTLINE_PX:
+        x, y = record.outline_departure_at
+        lines.append(f"the output's outline leaves the plain warp's by up to {record.outline_departure:.0f} px "
+                     f"near ({x:.0f}, {y:.0f}): a feature cut by the border let go of it to keep its shape")
+    return lines
+
+
 def warnings_for(record: "SolveRecord", source, target, warped, warp) -> list[str]:
     """One line per thing the caller should know: features not kept or relaxed, a no-op."""
     lines = []
@@ -149,8 +203,9 @@ def warnings_for(record: "SolveRecord", source, target, warped, warp) -> list[st
                      f"blend {record.guard.feature_blend:.2f})")
     for k, c in enumerate(record.components):
         if not c.kept:
-            lines.append(f"feature {k} ({c.quads} quads) not kept: distortion {c.anisotropy_worst:.3f} "
-                         f"(plain warp: {c.plain_anisotropy_worst:.3f})")
+            lines.append(f"feature {k} ({c.quads} quads) not kept: worst-triangle anisotropy "
+                         f"{c.anisotropy_worst:.3f} (plain warp: {c.plain_anisotropy_worst:.3f})")
+    lines.extend(canvas_warnings(record))
     if tuple(warp.canvas) == (warp.width, warp.height):
         wanted = np.hypot(*(warped - source).T)
         moving = wanted > NO_OP_OUTPUT

@@ -1,0 +1,101 @@
+"""Issue 22 item 3: every visible compromise is one warning line naming the place and the
+figure: background stretched into streaks, blank canvas beyond the plain warp's, the outline
+let go; ``--strict`` refuses each with nothing written, and ``compare`` says its views'."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from featurewarp_cli import FeatureWarper, load_warp
+from featurewarp_cli.cli.main import cli
+from featurewarp_cli.engine import canvas
+from featurewarp_cli.engine.grid import Grid
+from featurewarp_cli.engine.record import BLANK, OUTLINE_PX, STREAKS
+
+
+def test_the_outline_goes_once_around_the_grid():
+    ring = canvas.outline(5, 4)
+    assert ring.size == 2 * (5 + 4) - 4 and np.unique(ring).size == ring.size
+    grid = Grid.for_image(40, 30, 10)
+    assert set(canvas.outline(grid.nx, grid.ny)) == set(np.flatnonzero(grid.boundary()))
+
+
+def test_an_identity_mesh_leaves_nothing_blank_and_a_shifted_one_its_share():
+    grid = Grid.for_image(40, 30, 5)
+    nodes = grid.nodes()
+    blank, plain, box = canvas.blank_shares(nodes, nodes, grid.nx, grid.ny, (40, 30))
+    assert blank == plain == 0.0 and box is None
+    shifted = nodes + [10.0, 0.0]                              # a quarter of the width left blank
+    blank, plain, box = canvas.blank_shares(shifted, nodes, grid.nx, grid.ny, (40, 30))
+    assert blank == pytest.approx(0.25) and plain == 0.0 and box == (0, 0, 9, 29)
+
+
+def test_the_stretch_is_the_largest_singular_value_beyond_w():
+    grid = Grid.for_image(40, 30, 5)
+    nodes = grid.nodes()
+    sheared = nodes @ np.array([[3.0, 0.0], [0.0, 0.5]]).T     # 3x across, half height
+    stretch, where = canvas.largest_stretch(sheared, nodes, grid.triangles())
+    assert stretch == pytest.approx(3.0) and where is not None
+    assert canvas.largest_stretch(nodes, nodes, grid.triangles())[0] == 1.0
+
+
+def test_the_outline_counts_only_leaving_w_outline_not_sliding_along_it():
+    grid = Grid.for_image(40, 30, 5)
+    nodes = grid.nodes()
+    ring = canvas.outline(grid.nx, grid.ny)
+    slid = nodes.copy()
+    top = ring[1:grid.nx - 1]
+    slid[top, 0] += 2.0                                         # along the straight top edge
+    assert canvas.outline_departure(slid, nodes, grid.nx, grid.ny)[0] == pytest.approx(0.0)
+    lifted = nodes.copy()
+    lifted[top[3], 1] -= 4.0                                    # off it
+    distance, where = canvas.outline_departure(lifted, nodes, grid.nx, grid.ny)
+    assert distance == pytest.approx(4.0) and where == pytest.approx(tuple(lifted[top[3]]))
+
+
+@pytest.fixture(scope="module")
+def band_mesh():
+    """A feature band across the full height under stretch --sy 2, rigid: it keeps its height,
+    so the canvas above and below it is left blank and the outline leaves W's."""
+    mask = np.zeros((60, 80), bool)
+    mask[:, 20:60] = True
+    return FeatureWarper(80, 60, mask).solve(load_warp("stretch")(80, 60, sy=2), "rigid")
+
+
+def test_blank_canvas_and_an_outline_let_go_are_said_with_their_figures(band_mesh):
+    record = band_mesh.record
+    assert record.blank_share > record.plain_blank_share + BLANK
+    assert record.outline_departure > OUTLINE_PX
+    blank = [w for w in record.warnings if "is blank where the plain warp leaves" in w]
+    outline = [w for w in record.warnings if "outline leaves the plain warp's" in w]
+    assert len(blank) == 1 and f"{100 * record.blank_share:.1f} %" in blank[0]
+    assert len(outline) == 1 and f"{record.outline_departure:.0f} px" in outline[0]
+    x0, y0, x1, y1 = record.blank_extra_box
+    assert 0 <= x0 <= x1 < 80 and 0 <= y0 <= y1 < 120
+
+
+def test_the_plain_mode_and_an_easy_warp_say_nothing():
+    mask = np.zeros((60, 80), bool)
+    mask[20:40, 30:50] = True
+    for mode in ("plain", "similarity"):
+        mesh = FeatureWarper(80, 60, mask).solve(load_warp("stretch")(80, 60, sx=1.3), mode)
+        assert mesh.record.warnings == [] and mesh.record.background_stretch < STREAKS
+
+
+def test_compare_says_each_views_warnings_and_strict_writes_nothing(tmp_path):
+    import cv2
+
+    image = np.random.default_rng(1).integers(0, 255, (60, 80, 3), dtype=np.uint8)
+    mask = np.zeros((60, 80), np.uint8)
+    mask[:, 20:60] = 255
+    cv2.imwrite(str(tmp_path / "in.png"), image)
+    cv2.imwrite(str(tmp_path / "m.png"), mask)
+    args = ["compare", "stretch", str(tmp_path / "in.png"), str(tmp_path / "panel.png"), "-m", str(tmp_path / "m.png"),
+            "--sy", "2"]
+    run = CliRunner().invoke(cli, args)
+    assert run.exit_code == 0, run.output
+    assert "rigid view: " in run.output and "is blank where the plain warp leaves" in run.output
+    strict = CliRunner().invoke(cli, args[:3] + [str(tmp_path / "strict.png")] + args[4:] + ["--strict"])
+    assert strict.exit_code == 1 and "--strict" in strict.output and not (tmp_path / "strict.png").exists()
