@@ -31,8 +31,10 @@ install:
 	$(BIN)/python -m compileall -q featurewarp_cli warps   # an editable install is not byte-compiled
 	$(BIN)/python -c "import sksparse.cholmod, featurewarp_cli.render._raster; print('featurewarp installed; CHOLMOD (scikit-sparse) and the compiled rasterizer in use')"
 
+# Two workers (pytest-xdist): results do not depend on them; tests sharing an expensive
+# module fixture (a browser, a Dask cluster) are held in one worker by their xdist_group.
 test:
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -n 2 --dist loadgroup
 
 demo: $(DEMO)
 

@@ -4,7 +4,9 @@ peak memory) but not one per case: Python starts and imports once instead of onc
 Each command runs through the console script's entry point, ``featurewarp_cli.cli.main.main``,
 with file descriptor 2 sent to a file of its own, so that its stderr holds what C libraries
 write there too. What is reported for each: exit code, stderr, seconds, and the process's peak
-resident memory so far (``ru_maxrss`` only grows, so it bounds every command up to this one).
+resident memory so far (it only grows, so it bounds every command up to this one). The peak is
+Linux's VmHWM, not ``ru_maxrss``: that one keeps the resident size of the process that forked
+this one (a test worker's hundreds of MB), which exec does not reset.
 
     outcomes = run_commands([["warp", "stretch", "in.png", "out.png"], ...])
 """
@@ -44,10 +46,17 @@ def run_commands(commands: list[list[str]], timeout: float = 300) -> list[Outcom
             return [Outcome(**outcome) for outcome in json.load(f)]
 
 
+def peak_bytes() -> int:
+    """This process's peak resident memory since it was started (VmHWM)."""
+    with open("/proc/self/status") as status:
+        for line in status:
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) * 1024
+    raise RuntimeError("no VmHWM in /proc/self/status")
+
+
 def run_one(args: list[str]) -> dict:
     """Run one command in this process (fd 2 captured); its outcome as a dict."""
-    import resource
-
     from featurewarp_cli.cli.main import main
 
     with tempfile.TemporaryFile() as err:
@@ -67,8 +76,7 @@ def run_one(args: list[str]) -> dict:
             os.close(saved)
         err.seek(0)
         stderr = err.read().decode(errors="replace")
-    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
-    return {"returncode": code, "stderr": stderr, "seconds": seconds, "peak": peak}
+    return {"returncode": code, "stderr": stderr, "seconds": seconds, "peak": peak_bytes()}
 
 
 if __name__ == "__main__":
