@@ -32,15 +32,15 @@ class Outcome:
     peak: int
 
 
-def run_commands(commands: list[list[str]], timeout: float = 300) -> list[Outcome]:
+def run_commands(commands: list[list[str]], timeout: float = 300, env: dict | None = None) -> list[Outcome]:
     """Run ``commands`` (argument lists without the program name) one after another in one new
-    Python process; their outcomes in the same order."""
+    Python process (with environment ``env``, or this one's); their outcomes in the same order."""
     with tempfile.TemporaryDirectory() as folder:
         orders, results = os.path.join(folder, "commands.json"), os.path.join(folder, "outcomes.json")
         with open(orders, "w") as f:
             json.dump([[str(arg) for arg in command] for command in commands], f)
         run = subprocess.run([sys.executable, __file__, orders, results], capture_output=True, text=True,
-                             timeout=timeout)
+                             timeout=timeout, env=env)
         assert run.returncode == 0, run.stderr[-3000:]
         with open(results) as f:
             return [Outcome(**outcome) for outcome in json.load(f)]
