@@ -126,7 +126,6 @@ def outputs_under_two_hash_seeds(cli_inputs):
     return {k: ((outputs[1][k], outputs[2][k]), (outcomes[1][k], outcomes[2][k])) for k in range(len(SAME_COMMANDS))}
 
 
-@pytest.mark.xdist_group("hash-seeds")               # the two processes serve every case
 @pytest.mark.parametrize("case", range(len(SAME_COMMANDS)),
                          ids=lambda k: "-".join([SAME_COMMANDS[k][0][0], *SAME_COMMANDS[k][1:]]))
 def test_same_command_twice_gives_identical_bytes(outputs_under_two_hash_seeds, case):

@@ -44,7 +44,6 @@ def bomb_outcomes(tmp_path_factory):
     return {(name, role): (outcome, out) for (name, role, out), outcome in zip(cases, run_commands(commands))}
 
 
-@pytest.mark.xdist_group("bombs")            # one process for them all, not one per worker
 @pytest.mark.parametrize("name", sorted(BOMBS))
 @pytest.mark.parametrize("role", ["input", "mask"])
 def test_bombs_are_refused_fast_and_small(bomb_outcomes, name, role):

@@ -16,8 +16,6 @@ from click.testing import CliRunner
 from featurewarp_cli.app import batch
 from featurewarp_cli.cli.main import cli
 
-pytestmark = pytest.mark.xdist_group("cluster")      # one LocalCluster for the file
-
 SAMPLES = os.path.join(os.path.dirname(__file__), os.pardir, "samples")
 
 
