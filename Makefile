@@ -62,8 +62,11 @@ install:
 	$(BIN)/python -m compileall -q featurewarp_cli warps   # an editable install is not byte-compiled
 	$(BIN)/python -c "import sksparse.cholmod, featurewarp_cli.render._raster; print('featurewarp installed; CHOLMOD (scikit-sparse) and the compiled rasterizer in use')"
 
+# Two workers (pytest-xdist); results do not depend on them. --dist loadfile keeps each file in
+# one worker, so a module fixture (the browser, the Dask cluster, the bombs' one process) is
+# made once. (Not loadgroup: with pytest 9.2 it no longer groups, pytest-xdist issue 1386.)
 test:
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -n 2 --dist loadfile
 
 demo: $(DEMO)
 

@@ -4,14 +4,13 @@ from __future__ import annotations
 
 import functools
 import os
-import subprocess
-import sys
 
 import cv2
 import numpy as np
 import pytest
 
 from featurewarp_cli.engine.api import warp
+from one_process import run_commands
 from samples.scenes import SHAPES, scene
 from shapes import area, distortions
 
@@ -89,9 +88,6 @@ def test_uniform_double_size_scales_areas_as_the_mode_says(mode, factor, formula
 
 # --- the same command twice gives byte-identical files --------------------------------------
 
-FEATUREWARP = os.path.join(os.path.dirname(sys.executable), "featurewarp")
-
-
 @pytest.fixture(scope="module")
 def cli_inputs(tmp_path_factory):
     """A small PNG scene and its mask on disk."""
@@ -103,28 +99,40 @@ def cli_inputs(tmp_path_factory):
     return folder
 
 
-@pytest.mark.skipif(not os.path.exists(FEATUREWARP), reason="featurewarp console script not installed")
-@pytest.mark.parametrize("args,ext,formulation", [
+SAME_COMMANDS = [
     (["swirl", "--angle", "120"], "png", "exact"),
     (["swirl", "--angle", "120"], "png", "paper"),
     (["arc", "--angle", "120"], "png", "exact"),          # transparent corners
     (["swirl", "--angle", "120"], "jpg", "exact"),
     (["stretch", "--sx", "1.5", "--sy", "0.8"], "webp", "paper"),
     (["bulge", "--strength", "0.8"], "tif", "exact"),
-])
-def test_same_command_twice_gives_identical_bytes(cli_inputs, args, ext, formulation):
+]
+
+
+@pytest.fixture(scope="module")
+def outputs_under_two_hash_seeds(cli_inputs):
+    """Every command of SAME_COMMANDS run under hash seed 1 and under hash seed 2, each seed's
+    commands in one process of its own: {case index: (outputs, outcomes)}, one of each per seed."""
+    outputs = {seed: [] for seed in (1, 2)}
+    outcomes = {}
+    for seed in (1, 2):
+        commands = []
+        for args, ext, formulation in SAME_COMMANDS:
+            out = cli_inputs / f"{args[0]}-{formulation}-{seed}.{ext}"
+            outputs[seed].append(out)
+            commands.append(["warp", args[0], cli_inputs / "in.png", out, "--mask", cli_inputs / "mask.png",
+                             "--formulation", formulation, *args[1:]])
+        outcomes[seed] = run_commands(commands, timeout=120, env=dict(os.environ, PYTHONHASHSEED=str(seed)))
+    return {k: ((outputs[1][k], outputs[2][k]), (outcomes[1][k], outcomes[2][k])) for k in range(len(SAME_COMMANDS))}
+
+
+@pytest.mark.parametrize("case", range(len(SAME_COMMANDS)),
+                         ids=lambda k: "-".join([SAME_COMMANDS[k][0][0], *SAME_COMMANDS[k][1:]]))
+def test_same_command_twice_gives_identical_bytes(outputs_under_two_hash_seeds, case):
     """Two runs of `featurewarp warp ...` (different hash seeds) write byte-identical files."""
-    outputs, procs = [], []
-    for run in (1, 2):
-        out = cli_inputs / f"{args[0]}-{formulation}-{run}.{ext}"
-        outputs.append(out)
-        env = dict(os.environ, PYTHONHASHSEED=str(run))
-        cmd = [FEATUREWARP, "warp", args[0], str(cli_inputs / "in.png"), str(out),
-               "--mask", str(cli_inputs / "mask.png"), "--formulation", formulation, *args[1:]]
-        procs.append(subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE))
-    for proc in procs:
-        _, err = proc.communicate(timeout=60)
-        assert proc.returncode == 0, err.decode()
+    outputs, outcomes = outputs_under_two_hash_seeds[case]
+    for outcome in outcomes:
+        assert outcome.returncode == 0, outcome.stderr
     first, second = (o.read_bytes() for o in outputs)
     assert len(first) > 100
     assert first == second

@@ -1,18 +1,16 @@
 """featurewarp animate: frames, formats, one factorization, errors."""
 
-import subprocess
-import sys
-
 import cv2
 import numpy as np
 import pytest
 
 from samples import scenes
+from test_cli import Runner
 
 
 def run(*args):
-    return subprocess.run([sys.executable, "-m", "featurewarp_cli", "animate", *args], capture_output=True,
-                          text=True)
+    """``featurewarp animate ARGS`` in-process (CliRunner): exit code and stderr as the console script's."""
+    return Runner()("animate", *args)
 
 
 @pytest.fixture(scope="module")
@@ -30,7 +28,7 @@ def test_animated_image_has_every_frame(files, name):
     """An animated GIF/WebP/PNG holds --frames frames of the warp's canvas; one factorization."""
     out = run("swirl", str(files / "in.png"), str(files / name), "-m", str(files / "mask.png"),
               "--vary", "angle=0:90", "--frames", "5", "-v")
-    assert out.returncode == 0, out.stderr
+    assert out.code == 0, out.stderr
     assert "5 frames 250x180, 1 factorization(s)" in out.stderr
     ok, animation = cv2.imreadanimation(str(files / name))
     assert ok and len(animation.frames) == 5
@@ -42,7 +40,7 @@ def test_numbered_sequence_and_varying_canvas(files):
     """A %d pattern writes numbered PNGs; frames of a growing stretch are centred on the largest canvas."""
     out = run("stretch", str(files / "in.png"), str(files / "seq-%02d.png"), "-m", str(files / "mask.png"),
               "--vary", "sx=1:1.5", "--frames", "3")
-    assert out.returncode == 0, out.stderr
+    assert out.code == 0, out.stderr
     frames = [cv2.imread(str(files / f"seq-{i:02d}.png"), cv2.IMREAD_UNCHANGED) for i in range(3)]
     assert all(f.shape[:2] == (180, 375) for f in frames)
     assert frames[0][:, 0, 3].max() == 0 and frames[-1][:, 0, 3].min() == 255   # padding is transparent
@@ -52,7 +50,7 @@ def test_video(files):
     """An .mp4 is written through OpenCV's video writer."""
     out = run("bulge", str(files / "in.png"), str(files / "out.mp4"), "-m", str(files / "mask.png"),
               "--vary", "strength=0:1", "--frames", "4")
-    assert out.returncode == 0, out.stderr
+    assert out.code == 0, out.stderr
     video = cv2.VideoCapture(str(files / "out.mp4"))
     assert int(video.get(cv2.CAP_PROP_FRAME_COUNT)) == 4
 
@@ -62,7 +60,7 @@ def test_video(files):
 def test_bad_vary_is_a_usage_error(files, vary, message):
     """A malformed --vary, an unknown parameter or a bad value: one line, exit 2, no file."""
     out = run("swirl", str(files / "in.png"), str(files / "bad.gif"), "--vary", vary)
-    assert out.returncode == 2
+    assert out.code == 2
     assert message in out.stderr and len(out.stderr.strip().splitlines()) == 1
     assert not (files / "bad.gif").exists()
 
@@ -70,4 +68,4 @@ def test_bad_vary_is_a_usage_error(files, vary, message):
 def test_unknown_format_is_a_usage_error(files):
     """An output whose animation format cannot be told: exit 2."""
     out = run("swirl", str(files / "in.png"), str(files / "out.jpg"), "--vary", "angle=0:90")
-    assert out.returncode == 2 and "animation format" in out.stderr
+    assert out.code == 2 and "animation format" in out.stderr

@@ -3,68 +3,57 @@ images stay within the memory budget, declared ranges hold, and a folded result 
 
 from __future__ import annotations
 
-import subprocess
-import sys
-import time
-
 import cv2
 import numpy as np
 import pytest
 
 from bombs import BOMBS
+from one_process import run_commands
+from test_cli import Run, Runner
 from featurewarp_cli import FeatureWarper, load_warp
 from featurewarp_cli.io import limits
 
-CLI = [sys.executable, "-m", "featurewarp_cli"]
+run = Runner()                    # in-process (CliRunner): exit codes and messages as the console script's
 
 
-def run(*args, **kwargs) -> subprocess.CompletedProcess:
-    return subprocess.run([*CLI, *map(str, args)], capture_output=True, text=True, timeout=120, **kwargs)
-
-
-#: Runs a command and prints its peak resident memory (bytes) as the last line of stderr.
-MEASURE = ("import resource, subprocess, sys; r = subprocess.run(sys.argv[1:]); "
-           "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss * 1024, file=sys.stderr); "
-           "sys.exit(r.returncode)")
-
-
-def measured(*args) -> tuple[subprocess.CompletedProcess, float, int]:
-    """Run the CLI alone in a wrapper process: (result without the figure, seconds, peak bytes)."""
-    t0 = time.perf_counter()
-    result = subprocess.run([sys.executable, "-c", MEASURE, *CLI, *map(str, args)], capture_output=True,
-                            text=True, timeout=120)
-    seconds = time.perf_counter() - t0
-    *lines, peak = result.stderr.rstrip("\n").split("\n")
-    result.stderr = "\n".join(lines) + ("\n" if lines else "")
-    return result, seconds, int(peak)
-
-
-def one_line_error(result: subprocess.CompletedProcess, code: int, *words: str) -> None:
+def one_line_error(result: Run, code: int, *words: str) -> None:
     """Exit ``code``, one line on stderr holding ``words``, no traceback."""
-    assert result.returncode == code, (result.returncode, result.stderr)
+    assert result.code == code, (result.code, result.stderr)
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and "Traceback" not in result.stderr, result.stderr
     for word in words:
         assert word in lines[0], lines[0]
 
 
+@pytest.fixture(scope="module")
+def bomb_outcomes(tmp_path_factory):
+    """Every bomb as input and as mask, all in one process (its peak memory bounds each case's):
+    {(name, role): (outcome, output path)}."""
+    folder = tmp_path_factory.mktemp("bombs")
+    small = folder / "small.png"
+    cv2.imwrite(str(small), np.zeros((8, 8, 3), np.uint8))
+    cases, commands = [], []
+    for name, (suffix, data) in sorted(BOMBS.items()):
+        bomb = folder / f"{name}{suffix}"
+        bomb.write_bytes(data)
+        for role in ("input", "mask"):
+            source, mask = (bomb, small) if role == "input" else (small, bomb)
+            out = folder / f"{name}-{role}-out.png"
+            cases.append((name, role, out))
+            commands.append(["warp", "stretch", source, out, "-m", mask, "--sx", "2", "--max-pixels", "1000000"])
+    return {(name, role): (outcome, out) for (name, role, out), outcome in zip(cases, run_commands(commands))}
+
+
 @pytest.mark.parametrize("name", sorted(BOMBS))
 @pytest.mark.parametrize("role", ["input", "mask"])
-def test_bombs_are_refused_fast_and_small(tmp_path, name, role):
+def test_bombs_are_refused_fast_and_small(bomb_outcomes, name, role):
     """Every format's header bomb: refused within 1 s and 200 MB, nothing written."""
-    suffix, data = BOMBS[name]
-    bomb = tmp_path / f"bomb{suffix}"
-    bomb.write_bytes(data)
-    small = tmp_path / "small.png"
-    cv2.imwrite(str(small), np.zeros((8, 8, 3), np.uint8))
-    source, mask = (bomb, small) if role == "input" else (small, bomb)
-    result, seconds, peak = measured("warp", "stretch", source, tmp_path / "out.png", "-m", mask, "--sx", "2",
-                                     "--max-pixels", "1000000")
+    result, out = bomb_outcomes[name, role]
     assert result.returncode == 1 and len(result.stderr.strip().splitlines()) == 1, result.stderr
     assert "--max-pixels" in result.stderr or "cannot be decoded" in result.stderr, result.stderr
-    assert seconds < 5.0                  # 1 s on an idle machine; CI machines are shared
-    assert peak < 200 * 2**20
-    assert not (tmp_path / "out.png").exists()
+    assert result.seconds < 5.0           # 1 s on an idle machine; CI machines are shared
+    assert result.peak < 200 * 2**20
+    assert not out.exists()
 
 
 def test_explicit_cell_beyond_the_memory_budget_is_refused(tmp_path):
@@ -123,7 +112,7 @@ def test_a_folded_result_is_an_error_unless_allowed(tmp_path):
                    1, "folded triangles", "--allow-folds")
     assert not out.exists()
     allowed = run("warp", "swirl", image, out, "--angle", "720", "--cell", "16", "--mode", "plain", "--allow-folds")
-    assert allowed.returncode == 0 and out.exists()
+    assert allowed.code == 0 and out.exists()
 
 
 @pytest.mark.parametrize("option,value", [("--feature-weight", "1e8"), ("--decay", "1e6"), ("--angle", "1080")])

@@ -41,13 +41,26 @@ def start_editor(tmp_path, *extra):
     return process, url
 
 
-@pytest.fixture
-def editor(tmp_path):
-    process, url = start_editor(tmp_path)
-    yield process, url
+def stop_editor(process) -> None:
     if process.poll() is None:
         process.send_signal(signal.SIGINT)
         process.wait(timeout=10)
+
+
+@pytest.fixture
+def editor(tmp_path):
+    """An editor of its own, for a test that changes what it holds (handles, saved files)."""
+    process, url = start_editor(tmp_path)
+    yield process, url
+    stop_editor(process)
+
+
+@pytest.fixture(scope="module")
+def served_editor(tmp_path_factory):
+    """One editor shared by the tests that only read from it or send what it refuses."""
+    process, url = start_editor(tmp_path_factory.mktemp("served"))
+    yield process, url
+    stop_editor(process)
 
 
 @pytest.fixture(scope="module")
@@ -162,8 +175,8 @@ def test_editor_undo_delete_and_toggles(editor, browser):
     assert "plain map" in browser.find_element(By.ID, "status").text
 
 
-def test_requests_need_the_token_and_the_host(editor):
-    _, url = editor
+def test_requests_need_the_token_and_the_host(served_editor):
+    _, url = served_editor
     base = url.split("?")[0]
     with urllib.request.urlopen(url) as response:
         assert response.status == 200 and b"featurewarp edit" in response.read()
@@ -249,15 +262,15 @@ def post(url, route, body: bytes, headers=None):
     ("/save", b'{"handles": {"version": 2}}', "version"),
     ("/solve", b"not json", "Expecting value"),
 ])
-def test_bad_requests_get_a_json_error(editor, route, body, message):
-    process, url = editor
+def test_bad_requests_get_a_json_error(served_editor, route, body, message):
+    process, url = served_editor
     code, answer = post(url, route, body)
     assert code == 400 and message in answer["error"]
     assert process.poll() is None                      # still serving
 
 
-def test_bad_request_headers(editor):
-    _, url = editor
+def test_bad_request_headers(served_editor):
+    _, url = served_editor
     code, answer = post(url, "/solve", b"{}", {"Content-Type": "text/plain"})
     assert code == 400
     code, answer = post(url, "/solve", b"{}", {"Content-Length": "abc"})
@@ -265,12 +278,15 @@ def test_bad_request_headers(editor):
 
 
 def test_edit_refuses_to_overwrite_its_inputs(tmp_path):
-    from test_cli import command
+    """Each a usage error before any server starts (in one process with a timeout: were one not
+    refused, its editor would serve until the timeout ends it)."""
+    from one_process import run_commands
 
-    for args in (["-o", IMAGE], ["-o", str(tmp_path / "x.png"), "--handles", str(tmp_path / "x.png")],
-                 ["--handles", MASK], ["--handles", str(tmp_path / "missing" / "h.json")]):
-        run = command("edit", IMAGE, "-m", MASK, "--no-browser", *args)
-        assert run.returncode == 2 and len(run.stderr.splitlines()) == 1, run.stderr
+    refused = [["-o", IMAGE], ["-o", str(tmp_path / "x.png"), "--handles", str(tmp_path / "x.png")],
+               ["--handles", MASK], ["--handles", str(tmp_path / "missing" / "h.json")]]
+    runs = run_commands([["edit", IMAGE, "-m", MASK, "--no-browser", *args] for args in refused], timeout=120)
+    for args, run in zip(refused, runs):
+        assert run.returncode == 2 and len(run.stderr.splitlines()) == 1, (args, run.stderr)
 
 
 def test_export_saves_the_handles_and_prints_the_command_that_reproduces_it(tmp_path):
@@ -296,9 +312,9 @@ def test_export_saves_the_handles_and_prints_the_command_that_reproduces_it(tmp_
         process.wait(timeout=10)
 
 
-def test_posts_from_another_origin_are_refused(editor):
+def test_posts_from_another_origin_are_refused(served_editor):
     """A page of another site cannot post to the editor, even with the token in hand."""
-    _, url = editor
+    _, url = served_editor
     port = url.split(":")[2].split("/")[0]
     base, query = url.split("?")
     request = urllib.request.Request(base.rstrip("/") + "/save?" + query, data=b'{"handles": {"version": 2}}',
@@ -329,6 +345,9 @@ def test_idle_and_surplus_connections_are_closed(monkeypatch):
         for sock in held:
             sock.settimeout(5)
             assert sock.recv(1) == b""                                           # closed after 0.5 s idle
+        deadline = time.monotonic() + 5           # a thread frees its slot just after closing its socket
+        while server.open_connections and time.monotonic() < deadline:
+            time.sleep(0.01)
         again = socket.create_connection(("127.0.0.1", server.server_port))     # slots are free again
         again.sendall(b"GET / HTTP/1.1\r\nHost: x\r\n\r\n")
         again.settimeout(5)

@@ -1,8 +1,6 @@
 """Issue-3 behaviour: intuitive feature scale, sliding borders, smoothness, saved grids, panels."""
 
 import io
-import subprocess
-import sys
 
 import cv2
 import numpy as np
@@ -12,6 +10,7 @@ import shapes
 from samples import scenes
 from featurewarp_cli.engine.warper import FeatureWarper, load_warp
 from featurewarp_cli.engine.grid import signed_areas
+from test_cli import Runner
 
 
 @pytest.fixture(scope="module")
@@ -104,8 +103,9 @@ def test_report_quality_fields(scene):
     assert quality["background_rms_px"] > 0
 
 
-def run(*args, **kwargs):
-    return subprocess.run([sys.executable, "-m", "featurewarp_cli", *args], capture_output=True, **kwargs)
+def run(*args):
+    """The command in-process (CliRunner): exit code and stderr as the console script's."""
+    return Runner()(*args)
 
 
 @pytest.fixture(scope="module")
@@ -122,7 +122,7 @@ def test_save_grid_writes_the_mapping(files):
     coordinates; target is where the warp put the nodes on the canvas."""
     out = run("warp", "swirl", str(files / "in.png"), str(files / "out.png"), "-m", str(files / "mask.png"),
               "--save-grid", str(files / "grid.npz"), "--angle", "90")
-    assert out.returncode == 0, out.stderr
+    assert out.code == 0, out.stderr
     grid = np.load(files / "grid.npz")
     assert set(grid.files) == {"source", "target", "triangles"}
     n = grid["source"].shape[0]
@@ -141,7 +141,7 @@ def test_compare_writes_a_four_way_panel(files):
     for path, extra in ((plain, []), (gridded, ["--grid"])):
         out = run("compare", "arc", str(files / "in.png"), str(path), "-m", str(files / "mask.png"),
                   "--angle", "90", *extra)
-        assert out.returncode == 0, out.stderr
+        assert out.code == 0, out.stderr
     a, b = cv2.imread(str(plain)), cv2.imread(str(gridded))
     source = cv2.imread(str(files / "in.png"))
     assert a.shape == b.shape and a.shape[0] >= source.shape[0] + 28        # views at the input's pixels
@@ -150,11 +150,11 @@ def test_compare_writes_a_four_way_panel(files):
     small = files / "small.png"
     out = run("compare", "arc", str(files / "in.png"), str(small), "-m", str(files / "mask.png"), "--angle", "90",
               "--panel-width", "600")
-    assert out.returncode == 0 and cv2.imread(str(small)).shape[1] == 600
+    assert out.code == 0 and cv2.imread(str(small)).shape[1] == 600
 
 
 def test_compare_rejects_mode(files):
     """compare always shows all modes, so --mode is not one of its options (usage error, exit 2)."""
     out = run("compare", "arc", str(files / "in.png"), str(files / "p.png"), "--mode", "rigid")
-    assert out.returncode == 2
+    assert out.code == 2
     assert not (files / "p.png").exists()
