@@ -22,6 +22,7 @@ from hypothesis import strategies as st
 from featurewarp_cli.app import diff
 from featurewarp_cli.io import decode, encode
 from featurewarp_cli import plugins
+from featurewarp_cli.engine.grid import signed_areas
 from featurewarp_cli.engine.warper import FeatureWarper
 
 PRESETS = plugins.names()
@@ -121,8 +122,11 @@ def test_random_masks_and_params_never_break(preset, data):
     out = warper.render(image, mesh, case["interp"], case["background"])
     assert out.shape[:2] == (warp.canvas[1], warp.canvas[0])
     assert out.dtype == image.dtype
-    if case["cell"] is None:          # the automatic grid follows W closely enough for the guard
-        assert mesh.flips() == 0
+    if case["cell"] is None:          # the automatic grid follows W closely enough for the guard,
+        own = int(np.count_nonzero(signed_areas(warp(mesh.source), mesh.triangles) <= 0))
+        assert mesh.flips() == 0 if own == 0 else mesh.flips() <= own
+        if own:                       # unless W outruns the grid's node cap (the CLI refuses those)
+            event("W folds on the automatic grid at its node cap")
     else:
         event(f"flipped triangles with a fixed cell: {'some' if mesh.flips() else 'none'}")
 

@@ -72,24 +72,29 @@ def largest_stretch(target: np.ndarray, warped: np.ndarray, triangles: np.ndarra
     """
     if not triangles.size:
         return 1.0, None
-    reference = _edges(warped, triangles)
-    det = np.linalg.det(reference)
+    (a, b), (c, d) = _edges(warped, triangles)                     # W's edge matrix [[a, c], [b, d]]
+    det = a * d - b * c
     valid = np.abs(det) > 1e-12
     if not valid.any():
         return 1.0, None
-    maps = _edges(target, triangles)[valid] @ np.linalg.inv(reference[valid])
-    frobenius = np.einsum("kij,kij->k", maps, maps)
-    gap = np.sqrt(np.maximum(frobenius ** 2 - 4.0 * np.linalg.det(maps) ** 2, 0.0))
-    largest = np.sqrt(0.5 * (frobenius + gap))
+    (p, q), (r, t) = _edges(target, triangles)
+    inverse = 1.0 / np.where(valid, det, 1.0)
+    # maps = [[p, r], [q, t]] @ inv([[a, c], [b, d]]), entry by entry
+    m00, m01 = (p * d - r * b) * inverse, (r * a - p * c) * inverse
+    m10, m11 = (q * d - t * b) * inverse, (t * a - q * c) * inverse
+    frobenius = m00 * m00 + m01 * m01 + m10 * m10 + m11 * m11
+    gap = np.sqrt(np.maximum(frobenius ** 2 - 4.0 * (m00 * m11 - m01 * m10) ** 2, 0.0))
+    largest = np.where(valid, np.sqrt(0.5 * (frobenius + gap)), 0.0)
     worst = int(np.argmax(largest))
-    centre = target[triangles[valid][worst]].mean(axis=0)
+    centre = target[triangles[worst]].mean(axis=0)
     return float(max(1.0, largest[worst])), (float(centre[0]), float(centre[1]))
 
 
-def _edges(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
-    """(M, 2, 2): each triangle's two edges from its first corner, as columns."""
-    a, b, c = (points[triangles[:, k]] for k in range(3))
-    return np.stack([b - a, c - a], axis=2)
+def _edges(points: np.ndarray, triangles: np.ndarray):
+    """Each triangle's two edges from its first corner: ((x1, y1), (x2, y2)), each (M,)."""
+    x, y = points[:, 0], points[:, 1]
+    first, second, third = triangles[:, 0], triangles[:, 1], triangles[:, 2]
+    return (x[second] - x[first], y[second] - y[first]), (x[third] - x[first], y[third] - y[first])
 
 
 def outline_departure(target: np.ndarray, warped: np.ndarray, nx: int, ny: int):
