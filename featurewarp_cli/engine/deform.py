@@ -212,10 +212,10 @@ def carried_features(labels, nodes, handles: Handles, sources, targets, radii):
 
     Dragging a point of a face moves the face: the nodes of the rigid grid inside the
     feature's connected component are held to one similarity, the best fit of the handles on
-    it (with one handle: the handles' overall rotation and scale, and that handle's
-    translation), so the feature-aware solve, which keeps features as similarities of W,
-    keeps the handle where it was dragged. Point handles come first in ``sources`` (as
-    :meth:`Handles.constraints` orders them).
+    it (with one handle: the handles' overall rotation, or the handle's own angle, and scale,
+    and that handle's translation), so the feature-aware solve, which keeps features as
+    similarities of W, keeps the handle where it was dragged. Point handles come first in
+    ``sources`` (as :meth:`Handles.constraints` orders them).
     """
     h, w = labels.shape
     at = np.clip(np.rint(handles.points_from).astype(int), 0, [w - 1, h - 1])
@@ -231,6 +231,9 @@ def carried_features(labels, nodes, handles: Handles, sources, targets, radii):
         if len(inside) < 3:
             continue
         a, b = similarity_fit(handles.points_from[held], handles.points_to[held]) if len(held) > 1 else overall
+        if len(held) == 1 and np.isfinite(handles.angles[held[0]]):      # turned by its own angle
+            scale, angle = math.hypot(*overall), handles.angles[held[0]]
+            a, b = scale * math.cos(angle), scale * math.sin(angle)
         turn = np.array([[a, -b], [b, a]])
         shift = np.mean(handles.points_to[held] - handles.points_from[held] @ turn.T, axis=0)
         keep[held] = False
