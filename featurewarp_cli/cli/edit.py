@@ -16,24 +16,31 @@ KEEP = {"mode", "cell", "feature_weight", "decay", "scale_prior", "background", 
         "max_memory", "allow_folds", "quality", "strip", "quiet", "verbose"}
 
 
-def check_files(settings, input: str, mask: str | None, handles: str | None, output: str | None) -> None:
-    """Before the editor starts: Save's and Export's files can be written, and neither names
-    INPUT, the mask or the other (WarpError otherwise)."""
+def check_files(settings, input: str, mask: str | None, handles: str | None, output: str | None,
+                save_mask: str | None = None) -> None:
+    """Before the editor starts: every file Save and Export may write (those named, and the
+    handles file and painted mask they write beside the output when none is named) can be
+    written, and none names INPUT, the mask or another (WarpError otherwise)."""
+    from ..app.editor_session import companion
     from ..app.outputs import check_distinct
     from ..app.pipeline import WarpError, check_outputs
 
-    named = {"-o": output, "--handles": handles, "INPUT": input, "--mask": mask}
-    pairs = (("-o", "--handles"), ("-o", "INPUT"), ("-o", "--mask"), ("--handles", "INPUT"), ("--handles", "--mask"))
-    same = [(a, b) for a, b in pairs if named[a] and named[b] and os.path.realpath(named[a]) == os.path.realpath(named[b])]
+    writes = {"-o": output, "--handles": handles or companion(output, ".handles.json"),
+              "--save-mask": save_mask or companion(output or handles, ".mask.png")}
+    named = {**writes, "INPUT": input, "--mask": mask}
+    pairs = [(a, b) for i, a in enumerate(writes) for b in list(named)[i + 1:]]
+    same = [(a, b) for a, b in pairs
+            if named[a] and named[b] and os.path.realpath(named[a]) == os.path.realpath(named[b])]
     if same:
         a, b = same[0]
         raise WarpError(f"{a} {named[a]} is also {b}: the editor would overwrite it", usage=True)
+    extra = [(writes[key], key) for key in ("--handles", "--save-mask")]
     try:
         if output:
-            check_outputs(settings, output, (handles, "--handles"))
-            check_distinct([(output, "-o"), (handles, "--handles")], [(input, "INPUT"), (mask, "--mask")])
-        elif handles:
-            check_outputs(settings, "unused.png", (handles, "--handles"))
+            check_outputs(settings, output, *extra)
+            check_distinct([(output, "-o")] + extra, [(input, "INPUT"), (mask, "--mask")])
+        elif any(path for path, _ in extra):
+            check_outputs(settings, "unused.png", *extra)
     except WarpError as err:
         if err.param == "OUTPUT":
             err.param = "-o"
@@ -50,25 +57,28 @@ def edit_command() -> click.Command:
         click.Option(["-o", "--output"], type=click.Path(dir_okay=False), metavar="OUT",
                      help="Where Export writes the full-resolution image (exactly what "
                           "'featurewarp deform INPUT OUT --handles H.json' writes)."),
+        click.Option(["--save-mask"], type=click.Path(dir_okay=False), metavar="PATH",
+                     help="Where Save and Export write a mask painted in the page (default: beside -o, "
+                          "or beside --handles, as NAME.mask.png)."),
         click.Option(["--port"], type=click.IntRange(0, 65535), default=0, show_default=True,
                      help="Port on 127.0.0.1 (0: a free one)."),
         click.Option(["--no-browser"], is_flag=True, help="Print the URL only; do not open a browser."),
     ] + [o for o in engine_options() if o.name in KEEP]
 
-    def callback(input, mask, handles, output, port, no_browser, **kwargs):
+    def callback(input, mask, handles, output, save_mask, port, no_browser, **kwargs):
         from ..app.editor import EditorServer, EditorSession
         from ..app.pipeline import WarpError
         from .options import settings_from
 
-        if input == "-" or handles == "-":
-            raise click.UsageError("the editor reads INPUT again on Export and writes --handles on Save: "
-                                   "give files, not '-'")
+        if "-" in (input, handles, output, save_mask):
+            raise click.UsageError("the editor reads INPUT again on Export and writes --handles, -o and "
+                                   "--save-mask: give files, not '-'")
         kwargs.update(formulation="exact", boundary=None, strict=False)
         settings, quiet, _ = settings_from(Deform, kwargs)
         try:
-            check_files(settings, input, mask, handles, output)
+            check_files(settings, input, mask, handles, output, save_mask)
             data = load_handles(handles) if handles and os.path.exists(handles) else None
-            session = EditorSession(settings, input, mask, handles, output, data)
+            session = EditorSession(settings, input, mask, handles, output, data, save_mask)
         except WarpError as err:
             raise click_error(err) from err
         except ValueError as err:
