@@ -10,6 +10,7 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -117,8 +118,11 @@ def test_editor_add_drag_save_export(editor, browser, tmp_path):
     after = browser.execute_script("return document.getElementById('gl').toDataURL()")
     assert after != before                      # the preview follows the handles
 
-    if os.environ.get("FEATUREWARP_SCREENSHOT"):
+    if os.environ.get("FEATUREWARP_SCREENSHOT"):                # for the README: with the mesh shown
+        browser.find_element(By.ID, "grid").click()
+        settled(browser)
         browser.save_screenshot(os.environ["FEATUREWARP_SCREENSHOT"])
+        browser.find_element(By.ID, "grid").click()
 
     browser.find_element(By.ID, "save").click()
     wait_for(browser, "return featurewarp.saved")
@@ -271,9 +275,13 @@ def test_edit_refuses_to_overwrite_its_inputs(tmp_path):
     from test_cli import command
 
     for args in (["-o", IMAGE], ["-o", str(tmp_path / "x.png"), "--handles", str(tmp_path / "x.png")],
-                 ["--handles", MASK], ["--handles", str(tmp_path / "missing" / "h.json")]):
+                 ["--handles", MASK], ["--handles", str(tmp_path / "missing" / "h.json")],
+                 ["-o", str(tmp_path / "x.png"), "--save-mask", MASK], ["-o", "-"]):
         run = command("edit", IMAGE, "-m", MASK, "--no-browser", *args)
         assert run.returncode == 2 and len(run.stderr.splitlines()) == 1, run.stderr
+    shutil.copy(MASK, tmp_path / "a.mask.png")         # the painted mask's default place is the mask
+    run = command("edit", IMAGE, "-m", str(tmp_path / "a.mask.png"), "--no-browser", "-o", str(tmp_path / "a.png"))
+    assert run.returncode == 2 and b"the default beside -o; name another with --save-mask" in run.stderr
 
 
 def test_export_saves_the_handles_and_prints_the_command_that_reproduces_it(tmp_path):

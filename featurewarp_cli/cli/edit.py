@@ -33,7 +33,9 @@ def check_files(settings, input: str, mask: str | None, handles: str | None, out
             if named[a] and named[b] and os.path.realpath(named[a]) == os.path.realpath(named[b])]
     if same:
         a, b = same[0]
-        raise WarpError(f"{a} {named[a]} is also {b}: the editor would overwrite it", usage=True)
+        given = {"-o": output, "--handles": handles, "--save-mask": save_mask}
+        how = f" (the default beside {'-o' if output else '--handles'}; name another with {a})" if not given[a] else ""
+        raise WarpError(f"{a} {named[a]}{how} is also {b}: the editor would overwrite it", usage=True)
     extra = [(writes[key], key) for key in ("--handles", "--save-mask")]
     try:
         if output:
@@ -109,12 +111,16 @@ def edit_command() -> click.Command:
     doc = """Edit handles live in the browser: the result follows the pointer.
 
     Opens INPUT with its mask tinted. Click to add a handle, drag to move it,
-    shift-drag to draw a curve handle, Alt-click or Delete to remove one, drag
-    the square markers to reshape the border; toggles for plain vs
-    feature-aware, rigid vs similarity, the grid and the mask; Ctrl+Z undoes.
-    Save writes --handles; Export writes --output through exactly the deform
-    pipeline. The server listens on 127.0.0.1 only and requires the token in
-    the URL it prints. Ctrl-C stops it.
+    shift-drag to draw a curve handle, Alt-drag near a handle to turn around
+    it, shift-click or Ctrl-drag to select several (arrow keys nudge them),
+    Alt-click or Delete to remove; drag the square markers to reshape a side
+    of the border; paint or erase the mask with the brush; the wheel zooms,
+    space-drag pans; Ctrl+Z undoes, Ctrl+Shift+Z or Ctrl+Y redoes. Save
+    writes --handles (and a painted mask, --save-mask); Export writes
+    --output through exactly the deform pipeline and prints the command that
+    replays it (without --handles it writes OUT.handles.json for it). The
+    server listens on 127.0.0.1 only and requires the token in the URL it
+    prints. Ctrl-C stops it.
 
     \b
     Example:

@@ -94,15 +94,17 @@ function drawMesh(w, h) {
   gl.drawElements(gl.TRIANGLES, app.tris.length, gl.UNSIGNED_INT, 0);
   if ($("grid").checked) {
     const edges = gridLines();
-    gl.uniform4f(line, 0.1, 0.9, 1.0, 0.6);
+    gl.uniform4f(line, 0.1, 0.9, 1.0, 0.5);
+    gl.enable(gl.BLEND); gl.blendFunc(gl.SRC_ALPHA, gl.ONE_MINUS_SRC_ALPHA);
     gl.bindBuffer(gl.ELEMENT_ARRAY_BUFFER, buffers.edges);
     gl.bufferData(gl.ELEMENT_ARRAY_BUFFER, edges, gl.DYNAMIC_DRAW);
     gl.drawElements(gl.LINES, edges.length, gl.UNSIGNED_INT, 0);
+    gl.disable(gl.BLEND);
   }
 }
 
-function gridLines() {      // rows and columns of the grid, every k-th so lines stay >= 8 px apart on screen
-  const cell = app.info.width / (app.nx - 1) * app.view.scale, k = Math.max(1, Math.ceil(8 / cell));
+function gridLines() {      // rows and columns of the grid, every k-th so lines stay >= 12 px apart on screen
+  const cell = app.info.width / (app.nx - 1) * app.view.scale, k = Math.max(1, Math.ceil(12 / cell));
   if (app.edges && app.edges.step === k) return app.edges;
   const every = (n) => { const at = []; for (let i = 0; i < n; i += k) at.push(i); if (at[at.length - 1] !== n - 1) at.push(n - 1); return at; };
   const lines = [];
