@@ -9,8 +9,8 @@ server's state (the mask, an export without --handles) start their own.
 
 from __future__ import annotations
 
+import contextlib
 import json
-import os
 import shlex
 import signal
 import subprocess
@@ -295,17 +295,26 @@ def test_a_curve_across_a_feature_that_ends_off_target_warns(page):
     assert len(js(driver, "featurewarp.status.curve_ends[0]")) == 32
 
 
+@contextlib.contextmanager
+def editor_in(folder, driver, *args):
+    """``featurewarp edit IMAGE *args`` started in ``folder`` (relative names land there), its
+    page loaded and settled; yields the overlay element."""
+    process = subprocess.Popen([sys.executable, "-m", "featurewarp_cli", "edit", IMAGE, "--no-browser", *args],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=folder)
+    try:
+        driver.get(process.stdout.readline().strip())
+        settled(driver)
+        yield driver.find_element("id", "overlay")
+    finally:
+        process.send_signal(signal.SIGINT)
+        process.wait(timeout=10)
+
+
 def test_export_without_handles_writes_the_file_its_command_names(tmp_path, browser):  # noqa: F811
     """Started without --handles, Export writes OUT.handles.json and prints a command that
     replays as printed (run from the same folder, it rewrites the same bytes)."""
-    process = subprocess.Popen(
-        [sys.executable, "-m", "featurewarp_cli", "edit", IMAGE, "-m", MASK, "--no-browser", "-o", "out.png"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path)
-    try:
-        driver = browser
-        driver.get(process.stdout.readline().strip())
-        settled(driver)
-        overlay = driver.find_element("id", "overlay")
+    driver = browser
+    with editor_in(tmp_path, driver, "-m", MASK, "-o", "out.png") as overlay:
         add_pins(driver, overlay, [(60, 470), (450, 470)])
         drag(driver, overlay, (250, 100), (290, 80))
         settled(driver)
@@ -321,9 +330,6 @@ def test_export_without_handles_writes_the_file_its_command_names(tmp_path, brow
                              capture_output=True, timeout=120)
         assert run.returncode == 0, run.stderr
         assert (tmp_path / "out.png").read_bytes() == first
-    finally:
-        process.send_signal(signal.SIGINT)
-        process.wait(timeout=10)
 
 
 def test_the_mask_brush_paints_erases_undoes_and_saves_a_mask_deform_reads(tmp_path, browser):  # noqa: F811
@@ -331,14 +337,8 @@ def test_the_mask_brush_paints_erases_undoes_and_saves_a_mask_deform_reads(tmp_p
     OUT.mask.png, and Export's command (-m OUT.mask.png) gives the same bytes."""
     from selenium.webdriver.support.ui import Select
 
-    process = subprocess.Popen(
-        [sys.executable, "-m", "featurewarp_cli", "edit", IMAGE, "--no-browser", "-o", "out.png",
-         "--handles", "h.json"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path)
-    try:
-        driver = browser
-        driver.get(process.stdout.readline().strip())
-        settled(driver)
-        overlay = driver.find_element("id", "overlay")
+    driver = browser
+    with editor_in(tmp_path, driver, "-o", "out.png", "--handles", "h.json") as overlay:
         add_pins(driver, overlay, [(60, 470), (450, 470)])
         Select(driver.find_element("id", "tool")).select_by_value("paint")
         driver.execute_script("const b = document.getElementById('brush'); b.value = 40;"
@@ -378,9 +378,6 @@ def test_the_mask_brush_paints_erases_undoes_and_saves_a_mask_deform_reads(tmp_p
                              capture_output=True, timeout=120)
         assert run.returncode == 0, run.stderr
         assert (tmp_path / "again.png").read_bytes() == (tmp_path / "out.png").read_bytes()
-    finally:
-        process.send_signal(signal.SIGINT)
-        process.wait(timeout=10)
 
 
 def test_the_page_keeps_one_solve_in_flight_one_draw_a_frame_and_shows_late_answers(page):

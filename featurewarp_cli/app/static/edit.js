@@ -163,9 +163,9 @@ function moveTurn(p) {
 
 function nudge(dx, dy) {    // arrow keys: 1 px, with Shift 10 px; a run of presses is one undo step
   if (!app.selected.some((s) => s.kind !== "border")) return;
-  const now = performance.now();
-  if (now - app.lastNudge > 800) remember();
-  app.lastNudge = now;
+  const run = () => JSON.stringify(app.selected) + "@" + app.epoch;     // no other edit, the same selection
+  if (run() !== app.lastNudge) remember();
+  app.lastNudge = run();
   moveSelected(dx, dy); requestSolve();
 }
 

@@ -16,7 +16,7 @@ const app = {
   handles: { version: 1, points: [], curves: [], border: "free", canvas: "fit" },
   // editing: undo and redo stacks of states, the selection ({kind, index}), what the pointer does
   history: [], future: [], selected: [], drag: null, drawing: null, box: null, turning: null, panning: null,
-  hover: null, space: false, tool: "handles", lastNudge: 0,
+  hover: null, space: false, tool: "handles", lastNudge: "",
   // solving: at most one request in flight, the newest handles win, answers to older edits dropped
   busy: false, pending: false, solves: 0, seq: 0, shown: 0, epoch: 0, dropped: 0, inFlight: 0, maxInFlight: 0,
   late: false, client: Math.random().toString(36).slice(2, 12), maskPosting: null,
