@@ -49,6 +49,27 @@ def check_files(settings, input: str, mask: str | None, handles: str | None, out
         raise
 
 
+def serve(server, quiet: bool, no_browser: bool) -> None:
+    """Print the editor's URL, open it unless ``no_browser``, serve until Ctrl-C (exit 0)."""
+    signal.signal(signal.SIGINT, signal.default_int_handler)     # Ctrl-C stops it cleanly, exit 0
+    try:
+        click.echo(server.url)
+        sys.stdout.flush()
+        if not quiet:
+            click.echo("featurewarp: editor running; Ctrl-C stops it", err=True)
+        if not no_browser:
+            import webbrowser
+
+            webbrowser.open(server.url)
+        server.serve_forever(poll_interval=0.2)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        server.server_close()
+    if not quiet:
+        click.echo("featurewarp: editor stopped", err=True)
+
+
 def edit_command() -> click.Command:
     """``featurewarp edit INPUT -m MASK [--handles H.json] [--output OUT] [--port N] [--no-browser]``."""
     params = [
@@ -90,23 +111,7 @@ def edit_command() -> click.Command:
         except OSError as err:
             raise click.BadParameter(f"cannot listen on 127.0.0.1:{port}: {err.strerror or err} "
                                      f"(--port 0 takes a free one)", param_hint="'--port'") from None
-        signal.signal(signal.SIGINT, signal.default_int_handler)     # Ctrl-C stops it cleanly, exit 0
-        try:
-            click.echo(server.url)
-            sys.stdout.flush()
-            if not quiet:
-                click.echo("featurewarp: editor running; Ctrl-C stops it", err=True)
-            if not no_browser:
-                import webbrowser
-
-                webbrowser.open(server.url)
-            server.serve_forever(poll_interval=0.2)
-        except KeyboardInterrupt:
-            pass
-        finally:
-            server.server_close()
-        if not quiet:
-            click.echo("featurewarp: editor stopped", err=True)
+        serve(server, quiet, no_browser)
 
     doc = """Edit handles live in the browser: the result follows the pointer.
 
