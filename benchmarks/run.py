@@ -24,6 +24,9 @@ magick    ImageMagick's plain equivalents on the same files, each run right afte
           ratios ours / ImageMagick.
 deform    Issue 11's interactive case (benchmarks/deform_case.py): one of 10 handles moving
           on the 1 MP photo through the API's quick Deformer, median of 10 updates.
+drag      Issue 23's recorded drags (benchmarks/editor_drag.py): three 1-second drags at 60
+          pointer events a second through a ``featurewarp edit`` server on the 1 MP photo,
+          one solve in flight as the page keeps it; update p50/p95/max and the settle time.
 stability Issue 21's one-ulp harness (benchmarks/stability.py): twelve hard cases on the
           512 px astronaut, W's output nudged by one ulp in two patterns; the largest node
           move and image RMSE against the un-nudged run (targets 0.01 px, RMSE 0.5).
@@ -70,7 +73,7 @@ from benchmarks.hard_cases import bench_hard  # noqa: E402
 from benchmarks.inputs import make_photos  # noqa: E402
 from samples.scenes import disc_mask  # noqa: E402
 
-SECTIONS = ("table1", "render", "rewarp", "deform", "commands", "magick", "hard", "stability", "cluster")
+SECTIONS = ("table1", "render", "rewarp", "deform", "drag", "commands", "magick", "hard", "stability", "cluster")
 
 #: The paper's Table 1 (Pentium 4, 3.2 GHz): setup, factor, rhs setup, solve in seconds.
 PAPER_TABLE1 = {
@@ -403,7 +406,7 @@ def main(argv=None) -> int:
     with tempfile.TemporaryDirectory(prefix="featurewarp-bench-") as tmpdir:
         tmp = Path(tmpdir)
         photos = None
-        if {"render", "rewarp", "deform", "commands", "hard"} & set(sections):
+        if {"render", "rewarp", "deform", "drag", "commands", "hard"} & set(sections):
             photos = make_photos(ROOT / "samples", tmp)
         if "table1" in sections:
             report["table1"] = bench_table1(runs, QUICK_GRIDS if args.quick else GRIDS)
@@ -415,6 +418,10 @@ def main(argv=None) -> int:
             from benchmarks.deform_case import bench_deform
 
             report["deform"] = bench_deform(runs, *photos["1MP"], median)
+        if "drag" in sections:
+            from benchmarks.editor_drag import bench_drag
+
+            report["drag"] = bench_drag(*photos["1MP"])
         if "commands" in sections:
             commands, magick = bench_commands(runs, exe, photos, tmp, args.quick, "magick" in sections)
             report["commands"], report["magick"] = commands, magick

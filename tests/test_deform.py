@@ -166,7 +166,9 @@ def test_embedding_reproduces_points():
     ({"version": 1, "points": [{"from": [10, 10], "to": [20, 20]}, {"from": [10, 10], "to": [5, 5]}]},
      "apart"),
     ({"version": 1, "points": [{"from": [float("nan"), 10], "to": [20, 20]}]}, "finite"),
-    ({"version": 2, "points": []}, "version"),
+    ({"version": 3, "points": []}, "version"),
+    ({"version": 2, "points": [{"from": [1, 2], "to": [3, 4], "angle": float("inf")}, {"from": [9, 9], "to": [9, 9]}]},
+     "angle"),
     ({"version": 1, "points": "all"}, "list"),
     ({"version": 1, "canvas": "huge", "border": "pinned"}, "canvas"),
     ({"version": 1, "border": {"top": [[0, 0], [10, 0]], "left": [[5, 5], [0, 100]]}}, "corner"),
@@ -201,6 +203,36 @@ def test_handles_round_trip():
             "border": "pinned"}
     assert Handles.from_dict(data, W, H).as_dict() == data
     assert json.loads(json.dumps(data)) == data
+
+
+def test_an_angle_turns_the_pin_and_needs_version_2():
+    """Issue 23: a pin with an angle turns its neighbourhood that way; the file says version 2,
+    and a version-1 file's angle is ignored, with a note."""
+    pins = [{"from": [40, 40], "to": [40, 40]}, {"from": [460, 320], "to": [460, 320]}]
+    turned = {"from": [250, 180], "to": [250, 180], "angle": 40}
+    handles = Handles.from_dict({"version": 2, "canvas": "input", "points": pins + [turned]}, W, H)
+    assert handles.as_dict()["version"] == 2 and handles.as_dict()["points"][2]["angle"] == 40
+    warp = RigidMap(W, H).deformation(handles)
+    along = np.diff(warp(np.array([[250.0, 180.0], [256.0, 180.0]])), axis=0)[0]
+    assert 25 < math.degrees(math.atan2(along[1], along[0])) < 45
+    old = Handles.from_dict({"version": 1, "points": pins + [turned]}, W, H)
+    assert np.isnan(old.angles).all() and "angle" in old.notes[0] and old.as_dict()["version"] == 1
+
+
+def test_a_curve_that_a_feature_holds_off_target_warns():
+    """Issue 23: a curve across a feature, dragged against a pinned border, warns as a point
+    handle does, and the report gets how far it ended."""
+    mask = np.zeros((H, W), bool)
+    mask[150:260, 180:320] = True
+    data = {"version": 1, "canvas": "input", "border": "pinned",
+            "curves": [{"from": [[80, 200], [420, 200]], "to": [[80, 270], [420, 270]]}]}
+    deformer = Deformer(W, H, mask)
+    mesh = deformer.solve(Handles.from_dict(data, W, H))
+    error = deformer.warp.values["curve_error_px"]
+    assert error["max"] > 15 and any(w.startswith("curve 0 ends up to") for w in mesh.record.warnings)
+    data["curves"][0]["to"] = data["curves"][0]["from"]              # held where it is: no warning
+    mesh = deformer.solve(Handles.from_dict(data, W, H))
+    assert not any(w.startswith("curve") for w in mesh.record.warnings)
 
 
 # --- the command line ---------------------------------------------------------------------

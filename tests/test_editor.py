@@ -10,6 +10,7 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -89,8 +90,10 @@ def wait_for(driver, script, timeout=30.0):
 
 
 def settled(driver):
-    """Wait until no solve is running or pending; return how many have finished."""
-    wait_for(driver, "return document.body.dataset.ready === '1' && !featurewarp.busy && !featurewarp.pending")
+    """Wait until no solve is running or pending and the last answer is drawn; return how many
+    solves have finished."""
+    wait_for(driver, "return document.body.dataset.ready === '1' && !featurewarp.busy && !featurewarp.pending"
+                     " && !featurewarp.frameRequested && !featurewarp.maskPosting")
     return driver.execute_script("return featurewarp.solves")
 
 
@@ -128,8 +131,11 @@ def test_editor_add_drag_save_export(editor, browser, tmp_path):
     after = browser.execute_script("return document.getElementById('gl').toDataURL()")
     assert after != before                      # the preview follows the handles
 
-    if os.environ.get("FEATUREWARP_SCREENSHOT"):
+    if os.environ.get("FEATUREWARP_SCREENSHOT"):                # for the README: with the mesh shown
+        browser.find_element(By.ID, "grid").click()
+        settled(browser)
         browser.save_screenshot(os.environ["FEATUREWARP_SCREENSHOT"])
+        browser.find_element(By.ID, "grid").click()
 
     browser.find_element(By.ID, "save").click()
     wait_for(browser, "return featurewarp.saved")
@@ -212,7 +218,7 @@ def test_editor_binds_loopback_only_and_stops_on_ctrl_c(tmp_path):
 
 
 def test_editor_curve_and_border_outline(editor, browser):
-    """Shift-drag draws a curve handle; dragging a border marker turns the border into an outline."""
+    """Shift-drag draws a curve handle; dragging a corner marker reshapes its two sides only."""
     from selenium.webdriver.common.action_chains import ActionChains
     from selenium.webdriver.common.by import By
     from selenium.webdriver.common.keys import Keys
@@ -236,8 +242,9 @@ def test_editor_curve_and_border_outline(editor, browser):
         .move_to_element_with_offset(overlay, round(x2), round(y2)).release().perform()
     settled(browser)
     border = browser.execute_script("return featurewarp.handles.border")
-    assert isinstance(border, dict) and set(border) == {"top", "right", "bottom", "left"}, border
-    assert abs(border["right"][2][0] - 560) < 3 and abs(border["right"][2][1] - 540) < 3
+    assert isinstance(border, dict) and set(border) == {"right", "bottom"}, border      # a corner: its two sides
+    assert abs(border["right"]["bezier"][3][0] - 560) < 3 and abs(border["right"]["bezier"][3][1] - 540) < 3
+    assert border["bottom"]["bezier"][3] == border["right"]["bezier"][3]
     status = browser.find_element(By.ID, "status").text
     assert "folds 0" in status, status
 
@@ -259,7 +266,7 @@ def post(url, route, body: bytes, headers=None):
     ("/solve", b'{"handles": {"version": 1, "points": [{"from": [1, 2], "to": [1' + b"0" * 400 + b', 1]}]}}', "finite"),
     ("/solve", b'{"handles": {"version": 1, "points": []}}', "at least two handles"),
     ("/solve", b'{"handles": 5}', "JSON object"),
-    ("/save", b'{"handles": {"version": 2}}', "version"),
+    ("/save", b'{"handles": {"version": 3}}', "version"),
     ("/solve", b"not json", "Expecting value"),
 ])
 def test_bad_requests_get_a_json_error(served_editor, route, body, message):
@@ -283,10 +290,15 @@ def test_edit_refuses_to_overwrite_its_inputs(tmp_path):
     from one_process import run_commands
 
     refused = [["-o", IMAGE], ["-o", str(tmp_path / "x.png"), "--handles", str(tmp_path / "x.png")],
-               ["--handles", MASK], ["--handles", str(tmp_path / "missing" / "h.json")]]
-    runs = run_commands([["edit", IMAGE, "-m", MASK, "--no-browser", *args] for args in refused], timeout=120)
+               ["--handles", MASK], ["--handles", str(tmp_path / "missing" / "h.json")],
+               ["-o", str(tmp_path / "x.png"), "--save-mask", MASK], ["-o", "-"]]
+    shutil.copy(MASK, tmp_path / "a.mask.png")         # the painted mask's default place is the mask
+    default_clash = ["edit", IMAGE, "-m", str(tmp_path / "a.mask.png"), "--no-browser", "-o", str(tmp_path / "a.png")]
+    runs = run_commands([["edit", IMAGE, "-m", MASK, "--no-browser", *args] for args in refused] + [default_clash],
+                        timeout=120)
     for args, run in zip(refused, runs):
         assert run.returncode == 2 and len(run.stderr.splitlines()) == 1, (args, run.stderr)
+    assert runs[-1].returncode == 2 and "the default beside -o; name another with --save-mask" in runs[-1].stderr
 
 
 def test_export_saves_the_handles_and_prints_the_command_that_reproduces_it(tmp_path):
@@ -317,13 +329,13 @@ def test_posts_from_another_origin_are_refused(served_editor):
     _, url = served_editor
     port = url.split(":")[2].split("/")[0]
     base, query = url.split("?")
-    request = urllib.request.Request(base.rstrip("/") + "/save?" + query, data=b'{"handles": {"version": 2}}',
+    request = urllib.request.Request(base.rstrip("/") + "/save?" + query, data=b'{"handles": {"version": 3}}',
                                      method="POST", headers={"Content-Type": "application/json",
                                                              "Origin": "http://attacker.example"})
     with pytest.raises(urllib.error.HTTPError) as err:
         urllib.request.urlopen(request)
     assert err.value.code == 403
-    code, answer = post(url, "/save", b'{"handles": {"version": 2}}', {"Origin": f"http://127.0.0.1:{port}"})
+    code, answer = post(url, "/save", b'{"handles": {"version": 3}}', {"Origin": f"http://127.0.0.1:{port}"})
     assert code == 400 and "version" in answer["error"]          # its own origin: served
 
 

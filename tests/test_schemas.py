@@ -53,7 +53,7 @@ def test_handles_files_validate_and_bad_ones_do_not():
             data = json.load(f)
         validator.validate(data)
         validator.validate(Handles.from_dict(data, 512, 512).as_dict())      # what edit saves
-    for bad in ({"version": 2}, {"version": 1, "points": [{"from": [1, 2]}]},
+    for bad in ({"version": 3}, {"version": 1, "points": [{"from": [1, 2]}]},
                 {"version": 1, "border": "loose"}, {"version": 1, "canvas": "big"},
                 {"version": 1, "curves": [{"from": [[1, 2]], "to": [[1, 2], [3, 4]]}]},
                 {"version": 1, "border": {}}, {"version": 1, "border": {"middle": [[0, 0], [1, 1]]}},

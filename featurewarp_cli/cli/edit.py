@@ -16,28 +16,58 @@ KEEP = {"mode", "cell", "feature_weight", "decay", "scale_prior", "background", 
         "max_memory", "allow_folds", "quality", "strip", "quiet", "verbose"}
 
 
-def check_files(settings, input: str, mask: str | None, handles: str | None, output: str | None) -> None:
-    """Before the editor starts: Save's and Export's files can be written, and neither names
-    INPUT, the mask or the other (WarpError otherwise)."""
+def check_files(settings, input: str, mask: str | None, handles: str | None, output: str | None,
+                save_mask: str | None = None) -> None:
+    """Before the editor starts: every file Save and Export may write (those named, and the
+    handles file and painted mask they write beside the output when none is named) can be
+    written, and none names INPUT, the mask or another (WarpError otherwise)."""
+    from ..app.editor_session import companion
     from ..app.outputs import check_distinct
     from ..app.pipeline import WarpError, check_outputs
 
-    named = {"-o": output, "--handles": handles, "INPUT": input, "--mask": mask}
-    pairs = (("-o", "--handles"), ("-o", "INPUT"), ("-o", "--mask"), ("--handles", "INPUT"), ("--handles", "--mask"))
-    same = [(a, b) for a, b in pairs if named[a] and named[b] and os.path.realpath(named[a]) == os.path.realpath(named[b])]
+    writes = {"-o": output, "--handles": handles or companion(output, ".handles.json"),
+              "--save-mask": save_mask or companion(output or handles, ".mask.png")}
+    named = {**writes, "INPUT": input, "--mask": mask}
+    pairs = [(a, b) for i, a in enumerate(writes) for b in list(named)[i + 1:]]
+    same = [(a, b) for a, b in pairs
+            if named[a] and named[b] and os.path.realpath(named[a]) == os.path.realpath(named[b])]
     if same:
         a, b = same[0]
-        raise WarpError(f"{a} {named[a]} is also {b}: the editor would overwrite it", usage=True)
+        given = {"-o": output, "--handles": handles, "--save-mask": save_mask}
+        how = f" (the default beside {'-o' if output else '--handles'}; name another with {a})" if not given[a] else ""
+        raise WarpError(f"{a} {named[a]}{how} is also {b}: the editor would overwrite it", usage=True)
+    extra = [(writes[key], key) for key in ("--handles", "--save-mask")]
     try:
         if output:
-            check_outputs(settings, output, (handles, "--handles"))
-            check_distinct([(output, "-o"), (handles, "--handles")], [(input, "INPUT"), (mask, "--mask")])
-        elif handles:
-            check_outputs(settings, "unused.png", (handles, "--handles"))
+            check_outputs(settings, output, *extra)
+            check_distinct([(output, "-o")] + extra, [(input, "INPUT"), (mask, "--mask")])
+        elif any(path for path, _ in extra):
+            check_outputs(settings, "unused.png", *extra)
     except WarpError as err:
         if err.param == "OUTPUT":
             err.param = "-o"
         raise
+
+
+def serve(server, quiet: bool, no_browser: bool) -> None:
+    """Print the editor's URL, open it unless ``no_browser``, serve until Ctrl-C (exit 0)."""
+    signal.signal(signal.SIGINT, signal.default_int_handler)     # Ctrl-C stops it cleanly, exit 0
+    try:
+        click.echo(server.url)
+        sys.stdout.flush()
+        if not quiet:
+            click.echo("featurewarp: editor running; Ctrl-C stops it", err=True)
+        if not no_browser:
+            import webbrowser
+
+            webbrowser.open(server.url)
+        server.serve_forever(poll_interval=0.2)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        server.server_close()
+    if not quiet:
+        click.echo("featurewarp: editor stopped", err=True)
 
 
 def edit_command() -> click.Command:
@@ -50,25 +80,28 @@ def edit_command() -> click.Command:
         click.Option(["-o", "--output"], type=click.Path(dir_okay=False), metavar="OUT",
                      help="Where Export writes the full-resolution image (exactly what "
                           "'featurewarp deform INPUT OUT --handles H.json' writes)."),
+        click.Option(["--save-mask"], type=click.Path(dir_okay=False), metavar="PATH",
+                     help="Where Save and Export write a mask painted in the page (default: beside -o, "
+                          "or beside --handles, as NAME.mask.png)."),
         click.Option(["--port"], type=click.IntRange(0, 65535), default=0, show_default=True,
                      help="Port on 127.0.0.1 (0: a free one)."),
         click.Option(["--no-browser"], is_flag=True, help="Print the URL only; do not open a browser."),
     ] + [o for o in engine_options() if o.name in KEEP]
 
-    def callback(input, mask, handles, output, port, no_browser, **kwargs):
+    def callback(input, mask, handles, output, save_mask, port, no_browser, **kwargs):
         from ..app.editor import EditorServer, EditorSession
         from ..app.pipeline import WarpError
         from .options import settings_from
 
-        if input == "-" or handles == "-":
-            raise click.UsageError("the editor reads INPUT again on Export and writes --handles on Save: "
-                                   "give files, not '-'")
+        if "-" in (input, handles, output, save_mask):
+            raise click.UsageError("the editor reads INPUT again on Export and writes --handles, -o and "
+                                   "--save-mask: give files, not '-'")
         kwargs.update(formulation="exact", boundary=None, strict=False)
         settings, quiet, _ = settings_from(Deform, kwargs)
         try:
-            check_files(settings, input, mask, handles, output)
+            check_files(settings, input, mask, handles, output, save_mask)
             data = load_handles(handles) if handles and os.path.exists(handles) else None
-            session = EditorSession(settings, input, mask, handles, output, data)
+            session = EditorSession(settings, input, mask, handles, output, data, save_mask)
         except WarpError as err:
             raise click_error(err) from err
         except ValueError as err:
@@ -78,33 +111,21 @@ def edit_command() -> click.Command:
         except OSError as err:
             raise click.BadParameter(f"cannot listen on 127.0.0.1:{port}: {err.strerror or err} "
                                      f"(--port 0 takes a free one)", param_hint="'--port'") from None
-        signal.signal(signal.SIGINT, signal.default_int_handler)     # Ctrl-C stops it cleanly, exit 0
-        try:
-            click.echo(server.url)
-            sys.stdout.flush()
-            if not quiet:
-                click.echo("featurewarp: editor running; Ctrl-C stops it", err=True)
-            if not no_browser:
-                import webbrowser
-
-                webbrowser.open(server.url)
-            server.serve_forever(poll_interval=0.2)
-        except KeyboardInterrupt:
-            pass
-        finally:
-            server.server_close()
-        if not quiet:
-            click.echo("featurewarp: editor stopped", err=True)
+        serve(server, quiet, no_browser)
 
     doc = """Edit handles live in the browser: the result follows the pointer.
 
     Opens INPUT with its mask tinted. Click to add a handle, drag to move it,
-    shift-drag to draw a curve handle, Alt-click or Delete to remove one, drag
-    the square markers to reshape the border; toggles for plain vs
-    feature-aware, rigid vs similarity, the grid and the mask; Ctrl+Z undoes.
-    Save writes --handles; Export writes --output through exactly the deform
-    pipeline. The server listens on 127.0.0.1 only and requires the token in
-    the URL it prints. Ctrl-C stops it.
+    shift-drag to draw a curve handle, Alt-drag near a handle to turn around
+    it, shift-click or Ctrl-drag to select several (arrow keys nudge them),
+    Alt-click or Delete to remove; drag the square markers to reshape a side
+    of the border; paint or erase the mask with the brush; the wheel zooms,
+    space-drag pans; Ctrl+Z undoes, Ctrl+Shift+Z or Ctrl+Y redoes. Save
+    writes --handles (and a painted mask, --save-mask); Export writes
+    --output through exactly the deform pipeline and prints the command that
+    replays it (without --handles it writes OUT.handles.json for it). The
+    server listens on 127.0.0.1 only and requires the token in the URL it
+    prints. Ctrl-C stops it.
 
     \b
     Example:

@@ -33,7 +33,7 @@ from .arap import RigidDeformer, embed, similarity_fit
 from .defaults import MODE
 from .grid import Grid, grid_shape, signed_areas
 from .injectivity import border_crossings
-from .handles import Handles, default_radius
+from .handles import Handles, default_radius, resample
 from .mesh import Mesh
 from .warper import FeatureWarper
 
@@ -41,6 +41,8 @@ from .warper import FeatureWarper
 #: if larger) before a warning says so.
 HANDLE_SLACK_PX = 3.0
 HANDLE_SLACK = 0.02
+#: Points along a curve handle where it is measured (its target and where it ended).
+CURVE_SAMPLES = 32
 #: Deformed images smaller than this share of the input's area get a warning.
 SHRUNK = 0.01
 #: Nodes of the grid the rigid map is solved on (about; it is coarser than the feature grid:
@@ -100,7 +102,7 @@ class HandleWarp:
 
     def review(self, mesh: Mesh, quick: bool = False) -> list[str]:
         """Warnings on the solved ``mesh`` of these handles (also kept in ``values`` for the
-        report): how far each point handle ended from its target, a border that crosses
+        report): how far each point and curve handle ended from its target, a border that crosses
         itself (``mesh.crossings``), an image shrunk away or moved off the canvas; ``quick``
         (the editor's live updates) notes a fold fallback cut short."""
         warnings = list(self.notes)
@@ -120,6 +122,7 @@ class HandleWarp:
                 (x, y), (tx, ty) = self.handles.points_from[k], self.handles.points_to[k]
                 warnings.append(f"handle {k} ({x:g},{y:g} -> {tx:g},{ty:g}) ends {error[k]:.0f} px from its "
                                 f"target: a feature that keeps its shape, or the border, holds it")
+        warnings += self._review_curves(mesh)
         area = float(np.sum(signed_areas(mesh.target, mesh.triangles)))
         if area < SHRUNK * self.width * self.height:
             warnings.append(f"the handles shrink the image to {100 * area / (self.width * self.height):.1f} % "
@@ -129,13 +132,42 @@ class HandleWarp:
             warnings.append("the deformed image lies outside the canvas: the output is empty")
         return warnings
 
+    def _review_curves(self, mesh: Mesh) -> list[str]:
+        """Warnings for the curve handles that end farther from their targets than
+        :func:`handle_slack` anywhere along them (``values["curve_error_px"]``: the largest
+        and the mean distance over their samples)."""
+        curves = self.curve_ends(mesh)
+        if not curves:
+            return []
+        errors = [np.hypot(*(ended - wanted).T) for wanted, ended in curves]
+        every = np.concatenate(errors)
+        self.values["curve_error_px"] = {"max": round(float(every.max()), 3), "mean": round(float(every.mean()), 3)}
+        warnings = []
+        for k, error in enumerate(errors):
+            if error.max() > handle_slack(self.width, self.height) and len(warnings) < 3:
+                warnings.append(f"curve {k} ends up to {error.max():.0f} px from its target: a feature that "
+                                f"keeps its shape, or the border, holds it")
+        return warnings
+
     def ends(self, mesh: Mesh) -> np.ndarray | None:
         """Where the point handles ended in ``mesh``, in input pixel coordinates (None: no handles)."""
         if self.handles is None or not len(self.handles.points_from):
             return None
+        return self.mapped(mesh, self.handles.points_from)
+
+    def curve_ends(self, mesh: Mesh) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Per curve handle, (its target, where it ended in ``mesh``): :data:`CURVE_SAMPLES`
+        points each, evenly spaced by arc length, in input pixel coordinates."""
+        if self.handles is None:
+            return []
+        return [(resample(end, CURVE_SAMPLES), self.mapped(mesh, resample(start, CURVE_SAMPLES)))
+                for start, end in self.handles.curves]
+
+    def mapped(self, mesh: Mesh, points: np.ndarray) -> np.ndarray:
+        """Where the source ``points`` (K, 2) went in ``mesh``, in input pixel coordinates."""
         nx, ny = grid_shape(mesh.source)
         grid = Grid(self.width, self.height, 0, nx, ny)
-        return embed(grid, self.handles.points_from) @ mesh.target + np.asarray(self.offset)
+        return embed(grid, points) @ mesh.target + np.asarray(self.offset)
 
     def __call__(self, points) -> np.ndarray:
         points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
@@ -212,10 +244,10 @@ def carried_features(labels, nodes, handles: Handles, sources, targets, radii):
 
     Dragging a point of a face moves the face: the nodes of the rigid grid inside the
     feature's connected component are held to one similarity, the best fit of the handles on
-    it (with one handle: the handles' overall rotation and scale, and that handle's
-    translation), so the feature-aware solve, which keeps features as similarities of W,
-    keeps the handle where it was dragged. Point handles come first in ``sources`` (as
-    :meth:`Handles.constraints` orders them).
+    it (with one handle: the handles' overall rotation, or the handle's own angle, and scale,
+    and that handle's translation), so the feature-aware solve, which keeps features as
+    similarities of W, keeps the handle where it was dragged. Point handles come first in
+    ``sources`` (as :meth:`Handles.constraints` orders them).
     """
     h, w = labels.shape
     at = np.clip(np.rint(handles.points_from).astype(int), 0, [w - 1, h - 1])
@@ -231,6 +263,9 @@ def carried_features(labels, nodes, handles: Handles, sources, targets, radii):
         if len(inside) < 3:
             continue
         a, b = similarity_fit(handles.points_from[held], handles.points_to[held]) if len(held) > 1 else overall
+        if len(held) == 1 and np.isfinite(handles.angles[held[0]]):      # turned by its own angle
+            scale, angle = math.hypot(*overall), handles.angles[held[0]]
+            a, b = scale * math.cos(angle), scale * math.sin(angle)
         turn = np.array([[a, -b], [b, a]])
         shift = np.mean(handles.points_to[held] - handles.points_from[held] @ turn.T, axis=0)
         keep[held] = False

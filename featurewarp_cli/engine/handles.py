@@ -1,9 +1,9 @@
 """Handles: the positional constraints of the interactive mode, and their JSON format.
 
-A handles file (version 1) is a JSON object::
+A handles file (version 2; version 1 is version 2 without ``angle``) is a JSON object::
 
-    {"version": 1,
-     "points": [{"from": [x, y], "to": [x, y]}, ...],       # from == to: a pin
+    {"version": 2,
+     "points": [{"from": [x, y], "to": [x, y], "angle": A}, ...],   # from == to: a pin
      "curves": [{"from": [[x, y], ...], "to": [[x, y], ...]}, ...],
      "border": "free" | "pinned" | {"top": SIDE, "right": SIDE, "bottom": SIDE, "left": SIDE},
      "canvas": "fit" | "input",
@@ -11,12 +11,16 @@ A handles file (version 1) is a JSON object::
 
 Coordinates are pixels with pixel centres at whole numbers (the image spans -0.5 to
 width - 0.5). A point handle holds a disc of radius R pixels (default: see
-:func:`default_radius`). A curve's two polylines may have different numbers of points:
+:func:`default_radius`), turned by the handles' overall rotation, or by ``angle`` degrees
+when it has one (version 2: the editor's Alt-drag around a pin; positive turns +x towards
++y, clockwise on screen). A curve's two polylines may have different numbers of points:
 both are resampled by arc length. A border SIDE is a polyline ``[[x, y], ...]`` or a cubic
 Bezier ``{"bezier": [p0, p1, p2, p3]}``, running left to right (top, bottom) or top to bottom
 (left, right), giving where that edge of the image goes; sides not given are free.
 ``canvas``: ``fit`` (default) is the bounding box of the deformed image, ``input`` keeps
-the input's size and coordinates. Keys this version does not know are ignored, with a note.
+the input's size and coordinates. Keys this version does not know are ignored, with a note
+(``angle`` in a version-1 file too). :meth:`Handles.as_dict` writes version 1 when nothing
+needs version 2, so files stay readable by the featurewarp that wrote them before.
 """
 
 from __future__ import annotations
@@ -29,8 +33,12 @@ import numpy as np
 
 from .grid import Grid
 
-VERSION = 1
+VERSION = 2
+#: The versions this featurewarp reads.
+VERSIONS = (1, 2)
 KEYS = ("version", "points", "curves", "border", "canvas", "radius")
+#: Samples on the ring of a point handle with an ``angle`` (its centre is one more).
+RING_POINTS = 8
 #: Points a Bezier side is flattened to before it is resampled by arc length.
 BEZIER_POINTS = 256
 #: Targets may lie at most this many image sizes beyond the image.
@@ -49,6 +57,8 @@ class Handles:
     curves : list of ((n, 2) ndarray, (m, 2) ndarray)
     border : 'free', 'pinned' or dict side -> (n, 2) ndarray
     canvas : 'fit' or 'input'
+    angles : (K,) ndarray
+        Each point handle's turn in radians (NaN: none given, the overall rotation applies).
     radius : float or None
         Disc radius of the point handles; None: :func:`default_radius`.
     notes : list of str
@@ -65,6 +75,11 @@ class Handles:
     radius: float | None = None
     notes: list = field(default_factory=list)
     border_spec: object = "free"
+    angles: np.ndarray = None
+
+    def __post_init__(self):
+        if self.angles is None:
+            self.angles = np.full(len(self.points_from), np.nan)
 
     @classmethod
     def from_dict(cls, data, width: int, height: int) -> "Handles":
@@ -82,11 +97,13 @@ class Handles:
         if not isinstance(data, dict):
             raise ValueError("the handles file must hold a JSON object ({\"version\": 1, \"points\": [...]})")
         version = data.get("version")
-        if not (type(version) is int and version == VERSION):      # which schema applies, before it does
-            raise ValueError(f"version: {version!r}; this featurewarp reads version {VERSION}")
+        if not (type(version) is int and version in VERSIONS):      # which schema applies, before it does
+            raise ValueError(f"version: {version!r}; this featurewarp reads versions "
+                             f"{', '.join(map(str, VERSIONS))}")
         schema.check("handles", data)
-        notes = [f"handles: ignoring the key {key!r} (unknown to version {VERSION})" for key in data if key not in KEYS]
+        notes = [f"handles: ignoring the key {key!r} (unknown to version {version})" for key in data if key not in KEYS]
         points = data.get("points", [])
+        angles = _angles(points, version, notes)
         sources = _points([p["from"] for p in points], "points[{}].from")
         targets = _points([p["to"] for p in points], "points[{}].to")
         _inside(sources, width, height, "points[{}].from")
@@ -105,7 +122,7 @@ class Handles:
         border = data.get("border", "free")
         handles = cls(sources, targets, curves, _border(border, width, height), data.get("canvas", "fit"),
                       None if radius is None else float(radius), notes,
-                      border if isinstance(border, str) else json.loads(json.dumps(border)))
+                      border if isinstance(border, str) else json.loads(json.dumps(border)), angles)
         handles.check_enough()
         return handles
 
@@ -113,7 +130,7 @@ class Handles:
     def from_moves(cls, moves, pins, width: int, height: int, canvas: str = "fit") -> "Handles":
         """Handles from ``--move X,Y:X2,Y2`` and ``--pin X,Y`` pairs (already parsed to numbers)."""
         points = [{"from": list(a), "to": list(b)} for a, b in moves] + [{"from": list(p), "to": list(p)} for p in pins]
-        return cls.from_dict({"version": VERSION, "points": points, "canvas": canvas}, width, height)
+        return cls.from_dict({"version": 1, "points": points, "canvas": canvas}, width, height)
 
     def check_enough(self) -> None:
         """ValueError unless at least two distinct places are held (a rotation and a scale)."""
@@ -124,9 +141,13 @@ class Handles:
                              "one handle alone leaves the rotation and scale free")
 
     def as_dict(self) -> dict:
-        """The JSON-ready handles file."""
-        data = {"version": VERSION,
-                "points": [{"from": _plain(a), "to": _plain(b)} for a, b in zip(self.points_from, self.points_to)],
+        """The JSON-ready handles file (version 1 unless a point has an ``angle``)."""
+        points = [{"from": _plain(a), "to": _plain(b)} for a, b in zip(self.points_from, self.points_to)]
+        for point, angle in zip(points, self.angles):
+            if np.isfinite(angle):
+                point["angle"] = round(math.degrees(angle), 6)
+        data = {"version": 2 if np.any(np.isfinite(self.angles)) else 1,
+                "points": points,
                 "curves": [{"from": [_plain(p) for p in a], "to": [_plain(p) for p in b]} for a, b in self.curves],
                 "border": self.border_spec,
                 "canvas": self.canvas}
@@ -136,9 +157,13 @@ class Handles:
 
     def constraints(self, grid: Grid, radius: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Source points, their targets and their disc radii: point handles (radius
-        ``radius``), curves resampled every half cell, and the border's nodes."""
+        ``radius``; one with an angle holds its centre, and its ring turned by that angle and
+        scaled by the other handles' overall scale, after the curves), curves resampled every
+        half cell, and the border's nodes."""
         step = 0.5 * min(grid.spacing)
-        sources, targets, radii = [self.points_from], [self.points_to], [np.full(len(self.points_from), radius)]
+        turned = np.isfinite(self.angles)
+        sources, targets = [self.points_from], [self.points_to]
+        radii = [np.where(turned, 0.0, radius)]
         for start, end in self.curves:
             count = max(2, math.ceil(_length(start) / step) + 1)
             sources.append(resample(start, count))
@@ -150,7 +175,29 @@ class Handles:
                     sources.append(nodes)
                     targets.append(nodes if self.border == "pinned" else along(self.border[side], fraction))
                     radii.append(np.zeros(len(nodes)))
+        if np.any(turned) and radius > 0:
+            ring_from, ring_to = self._rings(np.concatenate(sources), np.concatenate(targets), radius)
+            sources.append(ring_from)
+            targets.append(ring_to)
+            radii.append(np.zeros(len(ring_from)))
         return np.concatenate(sources), np.concatenate(targets), np.concatenate(radii)
+
+    def _rings(self, sources: np.ndarray, targets: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
+        """The rings of the point handles with an angle: :data:`RING_POINTS` sources each at
+        ``radius`` around the handle, and their targets turned by its angle and scaled by the
+        similarity that best fits ``sources`` onto ``targets`` (all the other constraints)."""
+        from .arap import similarity_fit
+
+        a, b = similarity_fit(sources, targets)
+        scale = math.hypot(a, b) or 1.0
+        turned = np.flatnonzero(np.isfinite(self.angles))
+        around = np.arange(RING_POINTS) * (2.0 * math.pi / RING_POINTS)
+        ring = radius * np.stack([np.cos(around), np.sin(around)], axis=1)
+        angle = self.angles[turned][:, None]
+        turned_ring = scale * np.stack([np.cos(angle) * ring[:, 0] - np.sin(angle) * ring[:, 1],
+                                        np.sin(angle) * ring[:, 0] + np.cos(angle) * ring[:, 1]], axis=-1)
+        return ((self.points_from[turned][:, None, :] + ring).reshape(-1, 2),
+                (self.points_to[turned][:, None, :] + turned_ring).reshape(-1, 2))
 
 
 def default_radius(width: int, height: int, cell: float) -> float:
@@ -195,6 +242,22 @@ def _finite(value) -> bool:
 
 def _plain(point) -> list:
     return [float(point[0]), float(point[1])]
+
+
+def _angles(points: list, version: int, notes: list) -> np.ndarray:
+    """Each point's ``angle`` in radians (NaN where none is given; in a version-1 file it is
+    ignored, with a note); ValueError for one that is not finite."""
+    angles = np.full(len(points), np.nan)
+    for k, point in enumerate(points):
+        if "angle" not in point:
+            continue
+        if version < 2:
+            notes.append(f"handles: ignoring points[{k}].angle (version 2 reads it; this file says version 1)")
+            continue
+        if not _finite(point["angle"]):
+            raise ValueError(f"points[{k}].angle: expected a finite number of degrees, got {point['angle']!r}")
+        angles[k] = math.radians(point["angle"])
+    return angles
 
 
 def _points(values: list, where: str) -> np.ndarray:

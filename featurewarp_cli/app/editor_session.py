@@ -1,0 +1,340 @@
+"""What ``featurewarp edit`` works on: the image, its mask, the deformer, and what Save and
+Export write (the HTTP side is :mod:`featurewarp_cli.app.editor`).
+
+Live updates follow a small protocol (issue 23): the page keeps at most one solve in flight
+and numbers its requests (``client``, ``seq``); a request older than the newest one seen
+from its page, on arrival or after waiting for the solver, is answered ``stale`` at once
+without solving, so the newest pointer position always wins. A request marked ``drag``
+caps the rigid map's injective fallback at :data:`DRAG_INJECTIVE_STEPS` (the page sends
+one unmarked request when the pointer is released, so what stays on screen is the full
+preview).
+"""
+
+from __future__ import annotations
+
+import base64
+import binascii
+import json
+import math
+import os
+import shlex
+import struct
+import threading
+import time
+from dataclasses import replace
+
+import numpy as np
+
+from ..io import write
+from .pipeline import Settings, WarpError, load_image_and_mask, warp_file
+
+#: The live preview keeps its grid at about this many nodes at most at the normal density
+#: (Export uses the full pipeline, whose grid follows the warp).
+PREVIEW_NODES = 65_000
+#: Longest side of the image the browser gets as its texture (and paints the mask on).
+TEXTURE_SIDE = 4096
+#: The injective fallback's steps per update at most (a drag stays live; Export runs it fully),
+#: and while the pointer is still dragging.
+EDITOR_INJECTIVE_STEPS = 8
+DRAG_INJECTIVE_STEPS = 2
+#: The page's mesh densities: the preview cell's factor against the normal one.
+DENSITIES = {"fewer": 2.0, "normal": 1.0, "more": 0.5}
+#: Pages whose newest request number is remembered.
+CLIENTS = 16
+
+
+def companion(path: str | None, suffix: str) -> str | None:
+    """``path`` with its extension replaced by ``suffix`` (``out.png`` -> ``out.handles.json``)."""
+    if not path or path == "-":
+        return None
+    return os.path.splitext(path)[0] + suffix
+
+
+class EditorSession:
+    """What the editor works on: the image, its mask, the deformer and the files it may write.
+
+    Parameters
+    ----------
+    settings : Settings
+        The ``deform`` options (mode, cell, weights, output format and quality).
+    input, mask : str
+        The image and its feature mask (mask may be None).
+    handles_path, output_path : str or None
+        Where Save and Export write (None: the browser downloads instead). Export without
+        ``handles_path`` writes the handles beside the output (``OUT.handles.json``).
+    handles : dict or None
+        The handles to start from (a parsed handles file; ValueError when they do not fit).
+    mask_out : str or None
+        Where Save and Export write a mask painted in the page (default: beside the output,
+        or beside the handles file, ``*.mask.png``).
+    """
+
+    def __init__(self, settings: Settings, input: str, mask: str | None, handles_path: str | None,
+                 output_path: str | None, handles: dict | None = None, mask_out: str | None = None):
+        from ..engine.fidelity import base_cell
+
+        self.settings, self.input, self.mask = settings, input, mask
+        self.handles_path, self.output_path = handles_path, output_path
+        self.export_handles_path = handles_path or companion(output_path, ".handles.json")
+        self.mask_out = mask_out or companion(output_path or handles_path, ".mask.png")
+        image, self.feature_mask, self.warnings = load_image_and_mask(replace(settings, mode="similarity"),
+                                                                      input, mask)
+        self.height, self.width = image.shape[:2]
+        self.normal_cell = settings.cell or max(base_cell(self.width, self.height),
+                                                math.sqrt(self.width * self.height / PREVIEW_NODES))
+        self.density, self.cell, self.painted = "normal", self.normal_cell, False
+        texture = _texture(image)
+        self.texture_size = (texture.shape[1], texture.shape[0])
+        self.image_png = _png(texture)
+        self.mask_png = _png(_texture(self._mask_image()))
+        self.notes = []
+        self.initial = ({"version": 1, "points": [], "curves": [], "border": "free", "canvas": "fit"}
+                        if handles is None else self._checked({"handles": handles}, self.notes))
+        self.lock, self._seen = threading.Lock(), threading.Lock()
+        self.newest = {}
+        self._build()
+
+    def _build(self) -> None:
+        """The deformer of the current mask and cell (factored on its first solve)."""
+        from ..engine.deform import Deformer
+
+        settings = self.settings
+        mask = self.feature_mask if self.feature_mask is not None and self.feature_mask.any() else None
+        self.deformer = Deformer(self.width, self.height, mask, quick=True, cell=self.cell,
+                                 injective_steps=EDITOR_INJECTIVE_STEPS, feature_weight=settings.feature_weight,
+                                 decay=settings.decay, scale_prior=settings.scale_prior)
+
+    def _mask_image(self) -> np.ndarray:
+        """The feature mask as 8 bits (0 or 255), at the image's size."""
+        if self.feature_mask is None:
+            return np.zeros((self.height, self.width), np.uint8)
+        return self.feature_mask.astype(np.uint8) * 255
+
+    def state(self) -> dict:
+        """What the page needs to start (or to start over after a density change)."""
+        return {"width": self.width, "height": self.height, "handles": self.initial, "mode": self.settings.mode,
+                "cell": self.cell, "density": self.density, "densities": list(DENSITIES),
+                "texture": list(self.texture_size), "save_to": self.handles_path,
+                "export_to": self.output_path, "mask_to": self.mask_out,
+                "has_mask": self.mask is not None or self.painted, "warnings": self.warnings + self.notes}
+
+    def grid(self) -> bytes:
+        """The preview grid: node count, triangle count, nodes per row and per column (uint32),
+        texture coordinates (float32, 0..1) and triangles (uint32), little-endian."""
+        from ..engine.grid import Grid
+
+        grid = Grid.for_image(self.width, self.height, self.cell)
+        nodes = grid.nodes()
+        uv = np.stack([(nodes[:, 0] + 0.5) / self.width, (nodes[:, 1] + 0.5) / self.height], axis=1)
+        triangles = grid.triangles()
+        return (struct.pack("<IIII", len(nodes), len(triangles), grid.nx, grid.ny) + uv.astype("<f4").tobytes()
+                + triangles.astype("<u4").tobytes())
+
+    def solve(self, body: dict) -> tuple[dict, bytes]:
+        """Solve the handles of ``body``: (status, node positions in input pixels as float32);
+        a request superseded by a newer one of its page: ({"stale": True, ...}, b"")."""
+        from ..engine.handles import Handles
+
+        mode = body.get("mode", self.settings.mode)
+        if mode not in ("similarity", "rigid", "plain"):
+            raise ValueError(f"mode {mode!r}: use similarity, rigid or plain")
+        ticket = _ticket(body)
+        if self._superseded(ticket, arriving=True):
+            return {"stale": True, "seq": ticket[1]}, b""
+        handles = Handles.from_dict(body.get("handles"), self.width, self.height)
+        with self.lock:
+            if self._superseded(ticket):            # a newer request came while this one waited
+                return {"stale": True, "seq": ticket[1]}, b""
+            self.deformer.rigid.injective_steps = DRAG_INJECTIVE_STEPS if body.get("drag") is True \
+                else EDITOR_INJECTIVE_STEPS
+            t0 = time.perf_counter()
+            mesh = self.deformer.solve(handles, mode)
+            seconds = time.perf_counter() - t0
+            warp = self.deformer.warp
+            offset = np.asarray(warp.offset)
+            ends, curves = warp.ends(mesh), warp.curve_ends(mesh)
+            turns = _turns(warp, mesh, handles, max(1.0, 0.5 * self.cell))
+        components = mesh.record.components
+        status = {"ms": round(1000 * seconds, 1), "folds": mesh.flips() + mesh.crossings,
+                  "seq": ticket[1] if ticket else None,
+                  "components": len(components), "kept": sum(c.kept for c in components) if mode != "plain" else 0,
+                  "canvas": list(mesh.canvas), "warnings": mesh.record.warnings[:3],
+                  "ends": [] if ends is None else np.round(ends, 2).tolist(), "turns": turns,
+                  "curve_ends": [np.round(ended, 2).tolist() for _, ended in curves]}
+        return status, (mesh.target + offset).astype("<f4").tobytes()
+
+    def _superseded(self, ticket: tuple | None, arriving: bool = False) -> bool:
+        """Whether a newer request than ``ticket`` (client, seq) has arrived from its page;
+        ``arriving``: also record it as the newest."""
+        if ticket is None:
+            return False
+        client, seq = ticket
+        with self._seen:
+            newest = self.newest.get(client, -1)
+            if arriving and seq > newest:
+                self.newest.pop(client, None)
+                self.newest[client] = seq
+                while len(self.newest) > CLIENTS:
+                    self.newest.pop(next(iter(self.newest)))
+            return seq < newest
+
+    def set_density(self, body: dict) -> dict:
+        """Change the preview mesh's density (``fewer``, ``normal``, ``more``); the new state."""
+        density = body.get("density")
+        if density not in DENSITIES:
+            raise ValueError(f"density {density!r}: use {', '.join(DENSITIES)}")
+        most = 4 * PREVIEW_NODES
+        cell = max(self.normal_cell * DENSITIES[density], math.sqrt(self.width * self.height / most))
+        with self.lock:
+            self.density, self.cell = density, round(cell, 4)
+            self._build()
+        return self.state()
+
+    def set_mask(self, body: dict) -> dict:
+        """Replace the feature mask by the one painted in the page (``png``: a data URL of a
+        PNG of the texture's size; white is feature)."""
+        import cv2
+
+        painted = _decode_mask(body.get("png"), self.texture_size)
+        if painted.shape != (self.height, self.width):
+            painted = cv2.resize(painted, (self.width, self.height), interpolation=cv2.INTER_LINEAR)
+        with self.lock:
+            self.feature_mask, self.painted = painted >= 128, True
+            self.mask_png = _png(_texture(self._mask_image()))
+            self._build()
+        return {"mask": True, "coverage": round(float(self.feature_mask.mean()), 4)}
+
+    def save(self, body: dict) -> dict:
+        """Write the handles to ``handles_path`` and a painted mask to ``mask_out`` (checked
+        first); return what was written, and the content of what had nowhere to go."""
+        data = self._checked(body)
+        answer = {"saved": self.handles_path, "handles": data, "mask_saved": None}
+        if self.handles_path:
+            write.write_atomic(self.handles_path, (json.dumps(data, indent=2) + "\n").encode())
+        if self.painted:
+            if self.mask_out:
+                answer["mask_saved"] = self._write_mask()
+            else:
+                answer["mask_png"] = base64.b64encode(_png(self._mask_image())).decode()
+        return answer
+
+    def _write_mask(self) -> str:
+        write.write_atomic(self.mask_out, _png(self._mask_image()))
+        return self.mask_out
+
+    def export(self, body: dict) -> dict:
+        """Render the full-resolution result through exactly the ``deform`` pipeline, after
+        writing the handles file (and a painted mask) that the printed command names."""
+        from ..engine.deform import handles_factory
+
+        data = self._checked(body)
+        if not self.output_path:
+            raise ValueError("start the editor with --output OUT to export")
+        handles_path = self.export_handles_path
+        write.write_atomic(handles_path, (json.dumps(data, indent=2) + "\n").encode())
+        mask = self._write_mask() if self.painted else self.mask
+        mode = body.get("mode", self.settings.mode)
+        settings = replace(self.settings, mode=mode, warp_factory=handles_factory(data))
+        if self.density != "normal":
+            settings = replace(settings, cell=self.cell)
+        summary = warp_file(settings, self.input, self.output_path, mask, also_read=((handles_path, "--handles"),))
+        command = ["featurewarp", "deform", self.input, self.output_path] + (["-m", mask] if mask else [])
+        command += ["--handles", handles_path] + (["--mode", mode] if mode != "similarity" else [])
+        command += options_given(settings)
+        return {"exported": self.output_path, "seconds": round(summary["seconds"], 2),
+                "handles_saved": handles_path, "mask_saved": mask if self.painted else None,
+                "warnings": summary["warnings"][:3], "command": " ".join(shlex.quote(c) for c in command)}
+
+    def _checked(self, body: dict, notes: list | None = None) -> dict:
+        from ..engine.handles import Handles
+
+        handles = Handles.from_dict(body.get("handles"), self.width, self.height)
+        if notes is not None:
+            notes.extend(handles.notes)
+        return handles.as_dict()
+
+
+def _ticket(body: dict) -> tuple | None:
+    """(client, seq) of a solve request, or None when it has none (ValueError when malformed)."""
+    if "seq" not in body:
+        return None
+    client, seq = body.get("client", ""), body["seq"]
+    if not (isinstance(client, str) and len(client) <= 64) or type(seq) is not int or seq < 0:
+        raise ValueError("seq must be a whole number >= 0 and client a string of 64 characters at most")
+    return client, seq
+
+
+def _turns(warp, mesh, handles, step: float) -> list:
+    """How far (degrees) the map turns the neighbourhood of each point handle: its angle
+    if it has one, else what the solve gave, measured over ``step`` px (the page starts an
+    Alt-drag from it)."""
+    if not len(handles.points_from):
+        return []
+    along = warp.mapped(mesh, handles.points_from + [step, 0.0]) - warp.mapped(mesh, handles.points_from)
+    solved = np.degrees(np.arctan2(along[:, 1], along[:, 0]))
+    return np.round(np.where(np.isfinite(handles.angles), np.degrees(handles.angles), solved), 2).tolist()
+
+
+def _decode_mask(data, size: tuple[int, int]) -> np.ndarray:
+    """The 8-bit mask of a ``data:image/png;base64,...`` URL whose PNG is ``size`` (w, h)."""
+    import cv2
+
+    prefix = "data:image/png;base64,"
+    if not isinstance(data, str) or not data.startswith(prefix):
+        raise ValueError("png: expected a data URL of a PNG (data:image/png;base64,...)")
+    try:
+        raw = base64.b64decode(data[len(prefix):], validate=True)
+    except (binascii.Error, ValueError):
+        raise ValueError("png: not valid base64") from None
+    if raw[:8] != b"\x89PNG\r\n\x1a\n" or raw[12:16] != b"IHDR" or len(raw) < 24:
+        raise ValueError("png: not a PNG")
+    width, height = struct.unpack(">II", raw[16:24])          # before decoding: no bomb gets decoded
+    if (width, height) != tuple(size):
+        raise ValueError(f"png: the mask is {width}x{height}; the page's texture is {size[0]}x{size[1]}")
+    image = cv2.imdecode(np.frombuffer(raw, np.uint8), cv2.IMREAD_GRAYSCALE)
+    if image is None or image.shape != (height, width):
+        raise ValueError("png: cannot decode the mask")
+    return image
+
+
+def options_given(settings: Settings) -> list[str]:
+    """The command-line options of ``settings`` that differ from deform's defaults (for the
+    command Export prints; numbers exactly, so that it replays as printed)."""
+    default = Settings(settings.preset)
+    flags = {"cell": "--cell", "feature_weight": "--feature-weight", "decay": "--decay",
+             "scale_prior": "--scale-prior", "background": "--background", "interp": "--interp",
+             "fmt": "--format", "quality": "--quality", "max_pixels": "--max-pixels"}
+    given = []
+    for name, flag in flags.items():
+        value = getattr(settings, name)
+        if value != getattr(default, name):
+            given += [flag, _number(value) if isinstance(value, float) else str(value)]
+    return given + (["--strip"] if settings.strip else []) + (["--allow-folds"] if settings.allow_folds else [])
+
+
+def _number(value: float) -> str:
+    """``value`` as short as it reads back exactly (``8`` for 8.0, ``7.8125``)."""
+    short = f"{value:g}"
+    return short if float(short) == value else repr(value)
+
+
+def _texture(image: np.ndarray) -> np.ndarray:
+    """``image`` scaled down to :data:`TEXTURE_SIDE` at most (8 bits)."""
+    import cv2
+
+    if image.dtype != np.uint8:
+        image = (image / (257.0 if image.dtype == np.uint16 else 1.0 / 255.0)).clip(0, 255).astype(np.uint8)
+    side = max(image.shape[:2])
+    if side > TEXTURE_SIDE:
+        scale = TEXTURE_SIDE / side
+        image = cv2.resize(image, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
+    return image
+
+
+def _png(image: np.ndarray) -> bytes:
+    import cv2
+
+    ok, data = cv2.imencode(".png", image, [cv2.IMWRITE_PNG_COMPRESSION, 1])
+    if not ok:
+        raise WarpError("cannot encode the editor's texture")
+    return data.tobytes()

@@ -1,0 +1,154 @@
+"""The editor's server side of live updates (issue 23 item 2) and of its new calls, in-process:
+a request overtaken by a newer one of its page is answered ``stale`` without a solve, a drag
+caps the fallback, the painted mask and the density are checked."""
+
+from __future__ import annotations
+
+import base64
+import json
+import os
+import threading
+import time
+import urllib.request
+
+import cv2
+import numpy as np
+import pytest
+
+from featurewarp_cli.app import editor_session
+from featurewarp_cli.app.editor import EditorServer
+from featurewarp_cli.app.editor_session import EditorSession, options_given
+from featurewarp_cli.app.pipeline import Settings
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+IMAGE = os.path.join(ROOT, "samples", "astronaut.png")
+MASK = os.path.join(ROOT, "samples", "astronaut_mask.png")
+PINS = [{"from": [60, 470], "to": [60, 470]}, {"from": [450, 470], "to": [450, 470]}]
+
+
+@pytest.fixture(scope="module")
+def session(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("session")
+    return EditorSession(Settings("deform"), IMAGE, MASK, None, str(folder / "out.png"))
+
+
+def request(seq, client="page", to=(150, 60), **extra):
+    return {"handles": {"version": 1, "points": PINS + [{"from": [130, 60], "to": list(to)}]}, "seq": seq,
+            "client": client, **extra}
+
+
+@pytest.fixture
+def counted(session, monkeypatch):
+    """The session with its deformer's solves counted (and the fallback cap each one saw)."""
+    calls = []
+    solve = session.deformer.solve
+
+    def counting(handles, mode=None):
+        calls.append(session.deformer.rigid.injective_steps)
+        return solve(handles, mode)
+
+    monkeypatch.setattr(session.deformer, "solve", counting)
+    session.newest.clear()
+    return session, calls
+
+
+def test_an_older_request_is_answered_stale_without_a_solve(counted):
+    session, calls = counted
+    status, positions = session.solve(request(5))
+    assert status["seq"] == 5 and not status.get("stale") and len(positions) > 0
+    status, positions = session.solve(request(4, to=(160, 50)))
+    assert status == {"stale": True, "seq": 4} and positions == b""
+    assert len(calls) == 1
+    status, _ = session.solve(request(1, client="another page"))          # pages are apart
+    assert not status.get("stale") and len(calls) == 2
+    status, _ = session.solve({"handles": request(0)["handles"]})          # no number: always solved
+    assert not status.get("stale") and len(calls) == 3
+
+
+def test_a_request_overtaken_while_it_waits_for_the_solver_is_dropped(counted):
+    """Two requests wait while a solve runs: only the newer one is solved."""
+    session, calls = counted
+    answers = {}
+
+    def send(seq):
+        answers[seq] = session.solve(request(seq, to=(150 + seq, 60)))[0]
+
+    with session.lock:                                  # a solve in progress
+        older = threading.Thread(target=send, args=(10,))
+        older.start()
+        wait_until(lambda: session.newest.get("page") == 10)
+        newer = threading.Thread(target=send, args=(11,))
+        newer.start()
+        wait_until(lambda: session.newest.get("page") == 11)
+    older.join(30)
+    newer.join(30)
+    assert answers[10] == {"stale": True, "seq": 10}
+    assert answers[11]["seq"] == 11 and not answers[11].get("stale")
+    assert len(calls) == 1
+
+
+def wait_until(condition, timeout=10.0):
+    end = time.monotonic() + timeout
+    while not condition():
+        assert time.monotonic() < end, "timed out"
+        time.sleep(0.005)
+
+
+def test_a_drag_caps_the_fallback_and_the_release_does_not(counted):
+    session, calls = counted
+    session.solve(request(20, drag=True))
+    session.solve(request(21, drag=False))
+    assert calls == [editor_session.DRAG_INJECTIVE_STEPS, editor_session.EDITOR_INJECTIVE_STEPS]
+
+
+@pytest.mark.parametrize("body", [{"seq": -1}, {"seq": 1.5}, {"seq": True}, {"seq": 1, "client": 7},
+                                  {"seq": 1, "client": "x" * 65}])
+def test_malformed_request_numbers_are_refused(session, body):
+    with pytest.raises(ValueError, match="seq must be"):
+        session.solve({**request(0), **body})
+
+
+def test_stale_answers_over_http(session):
+    """Through the server: a stale answer is its 4-byte length and status, no positions."""
+    server = EditorServer(session, 0)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    session.newest.clear()
+    try:
+        def solve(seq):
+            data = json.dumps(request(seq)).encode()
+            req = urllib.request.Request(server.url.replace("/?", "/solve?"), data=data, method="POST",
+                                         headers={"Content-Type": "application/json"})
+            with urllib.request.urlopen(req) as response:
+                body = response.read()
+            length = int.from_bytes(body[:4], "little")
+            start = 4 + length + (-(4 + length) % 4)            # the positions start 4-aligned
+            return json.loads(body[4:4 + length]), len(body) - start
+
+        status, rest = solve(31)
+        assert status["seq"] == 31 and rest > 0 and rest % 8 == 0              # float32 x, y per node
+        assert solve(30) == ({"stale": True, "seq": 30}, 0)
+    finally:
+        server.shutdown()
+        server.server_close()
+
+
+def test_the_painted_mask_is_checked_before_it_is_decoded(session):
+    width, height = session.texture_size
+    for bad, message in [("nope", "data URL"), ("data:image/png;base64,%%%", "base64"),
+                         ("data:image/png;base64," + base64.b64encode(b"GIF89a" + b"0" * 40).decode(), "not a PNG")]:
+        with pytest.raises(ValueError, match=message):
+            session.set_mask({"png": bad})
+    small = cv2.imencode(".png", np.zeros((8, 8), np.uint8))[1].tobytes()
+    with pytest.raises(ValueError, match=f"texture is {width}x{height}"):
+        session.set_mask({"png": "data:image/png;base64," + base64.b64encode(small).decode()})
+
+
+def test_density_and_the_exact_cell_in_the_printed_command(tmp_path):
+    session = EditorSession(Settings("deform"), IMAGE, MASK, None, str(tmp_path / "out.png"))
+    normal = session.cell
+    with pytest.raises(ValueError, match="density 'many'"):
+        session.set_density({"density": "many"})
+    state = session.set_density({"density": "fewer"})
+    assert state["density"] == "fewer" and state["cell"] == pytest.approx(2 * normal, abs=1e-3)
+    assert options_given(Settings("deform", cell=7.8125)) == ["--cell", "7.8125"]
+    assert options_given(Settings("deform", cell=1 / 3)) == ["--cell", repr(1 / 3)]
