@@ -171,3 +171,18 @@ def test_strict_turns_the_warning_into_exit_1_with_nothing_written(tmp_path):
     assert not out.exists() and not report.exists()
     quiet = runner.invoke(main, args + ["-q"])
     assert quiet.exit_code == 0 and quiet.output == ""
+
+
+@pytest.mark.parametrize("preset", ["cylinder", "sphere", "inflate"])
+def test_a_closeup_is_never_worse_than_plain_globally_nor_locally(closeup, preset):
+    """Issue 22 item 2: the close-up (its mask fills 83 % of the frame) under the presets that
+    made its overall proportions worse than the plain warp's (affine fit 0.115 against 0.094
+    under cylinder): per component, both the affine fit and the worst triangle are no worse
+    than under the plain warp, as the report measures them (over the mesh's nodes; keypoints
+    on the image weigh the textured face more: under sphere they read 0.036 against the plain
+    warp's 0.017, which the issue's acceptance still asks for)."""
+    image, mask = closeup
+    _, mesh = warped(image, mask, preset)
+    for component in mesh.info["components"]:
+        assert component["distortion"] <= component["plain_distortion"] + 1e-6, component
+        assert component["anisotropy_worst"] <= component["plain_anisotropy_worst"] + 1e-6, component

@@ -351,6 +351,14 @@ def _anisotropy(state, points: np.ndarray) -> np.ndarray:
     return out
 
 
+def _fit_per_component(state, points: np.ndarray) -> np.ndarray:
+    """Anisotropy of each component's best-fitting affine map under ``points`` (what keypoints
+    matched in its region measure): (C,)."""
+    on = state.node_component >= 0
+    fits = quality.affine_fits(state.nodes[on], points[on], state.node_component[on], state.features.n_components)
+    return np.nan_to_num(quality.map_anisotropy(np.nan_to_num(fits)), nan=1.0, posinf=1e9)
+
+
 def _worst_per_component(state, anisotropy: np.ndarray) -> np.ndarray:
     """Worst of ``anisotropy`` over each component's triangles: (C,)."""
     on = state.tri_component >= 0
@@ -372,7 +380,9 @@ def _taper(state, quads: np.ndarray) -> np.ndarray:
 
 def no_worse_than_plain(state, x: np.ndarray, warped: np.ndarray, record, problem: Problem | None = None) -> np.ndarray:
     """``x``, or ``x`` moved towards W where components came out more anisotropic than under
-    W, as little as makes every component no worse than W, without folds.
+    W, as little as makes every component no worse than W, without folds. A component is
+    worse when its worst triangle is, or its best-fitting affine map (its overall
+    proportions) is.
 
     Tried in turn, each with its blend bisected: the move ``(1 - t) w (W - x)`` with ``w``
     1 around the offending triangles, tapering to 0 over :data:`TAPER_CELLS` cells (then
@@ -382,10 +392,12 @@ def no_worse_than_plain(state, x: np.ndarray, warped: np.ndarray, record, proble
     towards W."""
     if np.any(signed_areas(warped, state.triangles) <= 0):
         return x
-    plain = _worst_per_component(state, _anisotropy(state, warped)) * (1.0 + 1e-9) + 1e-9
+    plain = (_worst_per_component(state, _anisotropy(state, warped)) * (1.0 + 1e-9) + 1e-9,
+             _fit_per_component(state, warped) * (1.0 + 1e-9) + 1e-9)
 
     def ok(points):
-        return (bool(np.all(_worst_per_component(state, _anisotropy(state, points)) <= plain))
+        return (bool(np.all(_worst_per_component(state, _anisotropy(state, points)) <= plain[0]))
+                and bool(np.all(_fit_per_component(state, points) <= plain[1]))
                 and not np.any(signed_areas(points, state.triangles) <= 0))
 
     if ok(x):
@@ -412,12 +424,15 @@ def no_worse_than_plain(state, x: np.ndarray, warped: np.ndarray, record, proble
     return warped
 
 
-def _worse(state, points: np.ndarray, plain: np.ndarray) -> np.ndarray:
-    """Feature triangles more anisotropic under ``points`` than their component's worst under W."""
-    return (state.tri_component >= 0) & (_anisotropy(state, points) > plain[np.maximum(state.tri_component, 0)])
+def _worse(state, points: np.ndarray, plain: tuple) -> np.ndarray:
+    """Feature triangles more anisotropic under ``points`` than their component's worst under W,
+    and every triangle of a component whose affine fit is (``plain``: both figures under W)."""
+    component = np.maximum(state.tri_component, 0)
+    fit_worse = _fit_per_component(state, points) > plain[1]
+    return (state.tri_component >= 0) & ((_anisotropy(state, points) > plain[0][component]) | fit_worse[component])
 
 
-def _tapered_fix(state, points: np.ndarray, warped: np.ndarray, plain: np.ndarray, ok):
+def _tapered_fix(state, points: np.ndarray, warped: np.ndarray, plain: tuple, ok):
     """``points`` moved towards W around the offending triangles (then components), tapered,
     as little as passes ``ok``: (positions, t) as :func:`_bisect_move`, or None where even
     the whole move does not pass."""
