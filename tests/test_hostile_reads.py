@@ -6,6 +6,7 @@ within seconds with one line on stderr, the right exit code, and no file written
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 
@@ -161,3 +162,60 @@ def test_only_the_largest_components_get_free_scales():
     assert len(records) > components.MAX_FREE_SCALES
     big = max(records, key=lambda c: c.quads)
     assert big.kept
+
+
+def test_a_scribbled_curve_costs_what_the_grid_can_follow(tmp_path, monkeypatch):
+    """A curve of 100 000 random points (a scribble 5 M px long at 1 MP: 23.8 GB and killed
+    before) is sampled at most CURVE_SAMPLES_PER_CELL times per cell of the rigid grid, and
+    the schema sees its well-formed polylines cut to their ends (jsonschema: 5 000 points/s)."""
+    from click.testing import CliRunner
+
+    from featurewarp_cli import schema
+    from featurewarp_cli.cli.main import cli
+    from featurewarp_cli.engine.deform import rigid_grid
+    from featurewarp_cli.engine.handles import CURVE_SAMPLES_PER_CELL, Handles
+
+    width, height = 96, 72
+    line = np.random.default_rng(24).uniform(0, height - 1, (100_000, 2)).round(2).tolist()
+    data = {"version": 1, "points": [{"from": [1, 1], "to": [1, 1]}],
+            "curves": [{"from": line, "to": line}, {"from": [[5, 5], [50, 60]], "to": [[6, 5], [50, 61]]}]}
+    seen = []
+    check = schema.check
+    monkeypatch.setattr(schema, "check", lambda kind, value: (seen.append(value), check(kind, value))[1])
+    handles = Handles.from_dict(data, width, height)
+    assert [len(curve["from"]) for curve in seen[0]["curves"]] == [2]
+    grid = rigid_grid(width, height)
+    sources, targets, _ = handles.constraints(grid, 2.0)
+    assert len(sources) <= 1 + CURVE_SAMPLES_PER_CELL * (grid.nx - 1) * (grid.ny - 1) + 2 * len(handles.curves)
+    (tmp_path / "h.json").write_text(json.dumps(data))
+    image = save(tmp_path / "in.png", textured((width, height)))
+    result = CliRunner().invoke(cli, ["deform", image, str(tmp_path / "o.png"), "--handles", str(tmp_path / "h.json")])
+    assert result.exit_code == 0, result.output
+
+
+@pytest.mark.parametrize("key", ["points", "curves"])
+def test_more_handles_than_a_file_may_hold_is_one_line(tmp_path, key):
+    """10 001 point handles or curves: one line naming the file, exit 2 (490 000 pins in
+    16 MiB took 2.2 GB before)."""
+    from featurewarp_cli.engine.handles import MOST
+
+    grid = np.stack(np.meshgrid(np.arange(101), np.arange(100)), -1).reshape(-1, 2)[: MOST[key] + 1].tolist()
+    items = ([{"from": p, "to": p} for p in grid] if key == "points" else
+             [{"from": [p, [p[0], p[1] + 0.5]], "to": [p, [p[0], p[1] + 0.5]]} for p in grid])
+    (tmp_path / "h.json").write_text(json.dumps({"version": 1, key: items}))
+    image = save(tmp_path / "in.png", textured((120, 110)))
+    result = run("deform", image, tmp_path / "o.png", "--handles", tmp_path / "h.json")
+    one_line(result, 2, "h.json", f"{key}: {MOST[key] + 1}", f"at most {MOST[key]}")
+    assert not (tmp_path / "o.png").exists()
+
+
+def test_the_schema_and_the_counts_agree_and_a_bad_point_far_down_is_named():
+    from featurewarp_cli import schema
+    from featurewarp_cli.engine.handles import MOST, Handles
+
+    properties = json.loads(schema.text("handles"))["properties"]
+    assert {key: properties[key]["maxItems"] for key in MOST} == MOST
+    line = [[float(k % 90), float(k % 70)] for k in range(9000)]
+    line[8765] = [3, True]
+    with pytest.raises(ValueError, match=r"^curves\[0\]\.from\[8765\]\[1\]: expected a number, got true"):
+        Handles.from_dict({"version": 1, "curves": [{"from": line, "to": line[:2]}]}, 96, 72)
