@@ -219,3 +219,81 @@ def test_the_schema_and_the_counts_agree_and_a_bad_point_far_down_is_named():
     line[8765] = [3, True]
     with pytest.raises(ValueError, match=r"^curves\[0\]\.from\[8765\]\[1\]: expected a number, got true"):
         Handles.from_dict({"version": 1, "curves": [{"from": line, "to": line[:2]}]}, 96, 72)
+
+
+def _odd_inputs(folder) -> dict:
+    """Unusual but valid (or slightly broken) files: {name: path}."""
+    import io
+    import struct
+    import zlib
+
+    from PIL import Image, ImageCms
+
+    y, x = np.mgrid[0:36, 0:48]
+    rgb = np.dstack([x * 5 % 256, y * 7 % 256, (x + y) * 3 % 256]).astype(np.uint8)
+    srgb = ImageCms.ImageCmsProfile(ImageCms.createProfile("sRGB")).tobytes()
+    files = {}
+
+    def keep(name, image, **options):
+        files[name] = str(folder / name)
+        image.save(files[name], **options)
+
+    keep("16bit.png", Image.fromarray((x * 1300).astype(np.uint16)))
+    keep("palette-trns.png", Image.fromarray(np.dstack([rgb, (x * 5).astype(np.uint8)])).quantize(16))
+    keep("cmyk-profile.jpg", Image.fromarray(rgb).convert("CMYK"), icc_profile=srgb[:16] + b"CMYK" + srgb[20:])
+    keep("grey-rgb-profile.png", Image.fromarray(rgb).convert("L"), icc_profile=srgb)
+    camera = Image.Exif()
+    camera[271] = "Camera maker"
+    camera.get_ifd(0x8769)[0x829A] = 0.01                  # exposure time, in the Exif sub-directory
+    camera.get_ifd(0x8825)[1] = "N"                        # GPS
+    keep("camera.jpg", Image.fromarray(rgb), exif=camera)
+    png = io.BytesIO()
+    Image.fromarray(rgb).save(png, "PNG")
+    data = png.getvalue()
+    at = data.index(b"IDAT") - 4
+
+    def chunk(kind, payload):
+        return struct.pack(">I", len(payload)) + kind + payload + struct.pack(">I", zlib.crc32(kind + payload))
+
+    for name, extra in (("bad-iccp.png", chunk(b"iCCP", b"p\x00\x00" + zlib.compress(b"junk" * 20))),
+                        ("bad-exif.png", chunk(b"eXIf", b"MM\x00\x2a\x00\x00\x00\x08\x00\x05" + bytes(7)))):
+        files[name] = str(folder / name)
+        (folder / name).write_bytes(data[:at] + extra + data[at:])
+    files["truncated.png"] = str(folder / "truncated.png")
+    (folder / "truncated.png").write_bytes(data[: len(data) * 2 // 3])
+    return files
+
+
+def test_unusual_inputs_say_nothing_or_one_line_of_ours(tmp_path, capfd):
+    """16-bit, palette with transparency, CMYK with its profile, broken chunks, a camera's
+    EXIF, a truncated file: no Python warning, nothing of a C library on stderr, at most one
+    line of ours. A camera JPEG written as TIFF failed (libtiff: 'Bad LONG8 or IFD8 value'
+    and a RuntimeError); a CMYK JPEG's profile was kept on the RGB pixels it decodes to."""
+    import warnings
+
+    import cv2
+    from click.testing import CliRunner
+    from PIL import Image
+
+    from featurewarp_cli.cli.main import cli
+
+    capfd.readouterr()
+    for name, path in _odd_inputs(tmp_path).items():
+        for ext in ("png", "tif", "jpg"):
+            out = tmp_path / f"out.{ext}"
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always")
+                result = CliRunner().invoke(cli, ["warp", "swirl", path, str(out)])
+            assert not caught, (name, ext, [str(w.message) for w in caught])
+            assert capfd.readouterr().err == "", (name, ext)
+            if name == "truncated.png":
+                assert result.exit_code == 1 and len(result.output.strip().splitlines()) == 1, result.output
+                continue
+            assert result.exit_code == 0 and result.output == "", (name, ext, result.output)
+            assert cv2.imread(str(out), cv2.IMREAD_UNCHANGED) is not None
+            with Image.open(out) as image:
+                image.load()
+                profile = image.info.get("icc_profile")
+                assert not profile or profile[16:20] == (b"GRAY" if image.mode in ("L", "I;16") else b"RGB "), name
+                if name == "camera.jpg":
+                    assert image.getexif().get(271) == "Camera maker"

@@ -217,6 +217,18 @@ def _orientation(image: Image.Image, data: bytes) -> int:
 TIFF_DESCRIPTIVE_TAGS = (270, 271, 272, 274, 282, 283, 296, 305, 306, 315, 33432)
 
 
+def descriptive_exif(exif: Image.Exif) -> Image.Exif:
+    """The tags of ``exif``'s main directory listed in :data:`TIFF_DESCRIPTIVE_TAGS`: what
+    of a TIFF's directory describes the picture, and what a TIFF written through libtiff can
+    hold (it writes no sub-directory: a camera's Exif and GPS blocks made it fail with
+    'Bad LONG8 or IFD8 value' on stderr and a RuntimeError)."""
+    kept = Image.Exif()
+    for tag in TIFF_DESCRIPTIVE_TAGS:
+        if tag in exif:
+            kept[tag] = exif[tag]
+    return kept
+
+
 def _upright_exif(image: Image.Image) -> bytes | None:
     """The image's EXIF block with its orientation set to 1, or None (none, or broken); of a
     TIFF, only its descriptive tags (:data:`TIFF_DESCRIPTIVE_TAGS`)."""
@@ -227,11 +239,7 @@ def _upright_exif(image: Image.Image) -> bytes | None:
             warnings.simplefilter("ignore")            # a broken block is dropped, not reported
             exif = image.getexif()
         if image.format == "TIFF":
-            kept = Image.Exif()
-            for tag in TIFF_DESCRIPTIVE_TAGS:
-                if tag in exif:
-                    kept[tag] = exif[tag]
-            exif = kept
+            exif = descriptive_exif(exif)
         if not len(exif):
             return None
         if _EXIF_ORIENTATION in exif:
