@@ -297,3 +297,52 @@ def test_unusual_inputs_say_nothing_or_one_line_of_ours(tmp_path, capfd):
                 assert not profile or profile[16:20] == (b"GRAY" if image.mode in ("L", "I;16") else b"RGB "), name
                 if name == "camera.jpg":
                     assert image.getexif().get(271) == "Camera maker"
+
+
+def _zlib_bomb(width: int, height: int) -> bytes:
+    """A valid grey PNG of zeros: 7 KB for 4 000 x 4 000 (the issue's 14 100 x 14 100 was 580 KB)."""
+    import struct
+    import zlib
+
+    def chunk(kind, data):
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+
+    packer = zlib.compressobj(9)
+    row = bytes(width + 1)
+    data = b"".join(packer.compress(row) for _ in range(height)) + packer.flush()
+    return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0))
+            + chunk(b"IDAT", data) + chunk(b"IEND", b""))
+
+
+def test_within_limit_bombs_are_refused_before_decoding(tmp_path, monkeypatch):
+    """The default --max-pixels (160 MP) refuses the issue's bombs from their headers; a bomb
+    within it is refused by --max-memory before a pixel is decoded (a 4 KB AVIF of 14 000^2
+    decoded to 3.3 GB before a 2 GB budget refused it), and so is the canvas a warp would
+    need (the decoding thread starts once every check that needs no pixels has passed)."""
+    import time
+
+    from click.testing import CliRunner
+
+    import bombs
+    from featurewarp_cli.app import pipeline
+    from featurewarp_cli.cli.main import cli
+    from featurewarp_cli.io import limits
+
+    assert limits.MAX_PIXELS == 160_000_000
+    (tmp_path / "claims.png").write_bytes(bombs.png(14_100, 14_100))
+    started = time.monotonic()
+    one_line(run("warp", "swirl", tmp_path / "claims.png", tmp_path / "o.png"), 1, "above the limit", "--max-pixels")
+    assert time.monotonic() - started < 10
+    (tmp_path / "bomb.png").write_bytes(_zlib_bomb(4000, 4000))
+    decoded = []
+    monkeypatch.setattr(pipeline._Decoding, "start", lambda self: decoded.append(self))
+    runner = CliRunner()
+    for command, args, words in ((["warp"], ["--max-memory", "300M"], ("needs about 366 MiB", "--max-memory")),
+                                 (["compare"], ["--max-memory", "300M"], ("needs about 366 MiB", "--max-memory")),
+                                 (["warp"], ["--max-memory", "1G", "--size", "400%x100%"], ("canvas", "--max-memory"))):
+        for source in (str(tmp_path / "bomb.png"), "-"):
+            result = runner.invoke(cli, [*command, "stretch", source, str(tmp_path / "o.png"), *args],
+                                   input=(tmp_path / "bomb.png").read_bytes())
+            assert result.exit_code == 1 and all(word in result.output for word in words), (args, result.output)
+            assert len(result.output.strip().splitlines()) == 1 and not decoded
+    assert not (tmp_path / "o.png").exists()
