@@ -7,6 +7,7 @@ within seconds with one line on stderr, the right exit code, and no file written
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 
@@ -346,3 +347,37 @@ def test_within_limit_bombs_are_refused_before_decoding(tmp_path, monkeypatch):
             assert result.exit_code == 1 and all(word in result.output for word in words), (args, result.output)
             assert len(result.output.strip().splitlines()) == 1 and not decoded
     assert not (tmp_path / "o.png").exists()
+
+
+@pytest.mark.parametrize("angle", ["720", "-720"])
+def test_swirl_beyond_one_and_a_half_turns_is_a_usage_error(tmp_path, scene, angle):
+    """Swirl +-720 took 18-44 s CPU at 0.08 to 1 MP (80-120 s wall), the features wound past
+    recognition and relaxed to the plain warp: the range is +-540 (at most 17 s CPU at 1 MP)."""
+    image, mask = scene
+    one_line(run("warp", "swirl", image, tmp_path / "o.png", "-m", mask, "--angle", angle), 2, "--angle",
+             "out of range (-540 <= DEG <= 540)")
+    assert not (tmp_path / "o.png").exists()
+
+
+@pytest.mark.parametrize("size", [(320, 240), (1024, 1024), (4000, 3000)])
+@pytest.mark.parametrize("angle", [540, -540, 90])
+def test_a_swirl_too_tight_for_the_grid_is_refused_and_the_tightest_accepted_is_followed(size, angle):
+    """540 degrees over a 102 px radius at 1 MP folded 632 triangles of the finest automatic grid
+    (exit 1 after the solve); now the warp is refused at once, naming the radius it needs, and
+    at that radius the automatic grid follows it within 0.5 px without a fold."""
+    import math
+
+    from featurewarp_cli import load_warp
+    from featurewarp_cli.engine import fidelity
+    from featurewarp_cli.engine.grid import Grid
+
+    width, height = size
+    swirl = load_warp("swirl")
+    with pytest.raises(ValueError, match=r"^--angle: .* needs a swirl radius of .* use --radius ([0-9.]+) or more") as err:
+        swirl(width, height, angle=angle, radius=0.001)
+    radius = float(re.search(r"use --radius ([0-9.]+)", str(err.value)).group(1))
+    warp = swirl(width, height, angle=angle, radius=radius)
+    cell, error = fidelity.auto_cell(width, height, warp)
+    assert fidelity.follows(Grid.for_image(width, height, cell), warp) == (True, error) and error <= 0.5
+    limit = int(re.search(r"within \+-(\d+)", str(err.value)).group(1))
+    swirl(width, height, angle=math.copysign(limit, angle), radius=0.001)
