@@ -349,13 +349,18 @@ def test_within_limit_bombs_are_refused_before_decoding(tmp_path, monkeypatch):
     assert not (tmp_path / "o.png").exists()
 
 
-@pytest.mark.parametrize("angle", ["720", "-720"])
-def test_swirl_beyond_one_and_a_half_turns_is_a_usage_error(tmp_path, scene, angle):
-    """Swirl +-720 took 18-44 s CPU at 0.08 to 1 MP (80-120 s wall), the features wound past
-    recognition and relaxed to the plain warp: the range is +-540 (at most 17 s CPU at 1 MP)."""
+@pytest.mark.parametrize("args,words", [
+    (["swirl", "--angle", "720"], ["out of range (-540 <= DEG <= 540)"]),
+    (["swirl", "--angle", "-720"], ["out of range (-540 <= DEG <= 540)"]),
+    (["arc", "--where", "upper", "--angle", "160"], ["with --where upper (at most 150)"]),
+])
+def test_ranges_that_took_too_long_are_usage_errors(tmp_path, scene, args, words):
+    """Swirl +-720 took 18-44 s CPU at 0.08 to 1 MP (80-120 s wall), its features wound past
+    recognition and relaxed to the plain warp; Arc Upper and Lower at 170 took 34-60 s CPU and
+    2.3 GB at 1 MP: the ranges are +-540 and 150 (at most 17 and 11 s, benchmarks/extremes.py --1mp)."""
     image, mask = scene
-    one_line(run("warp", "swirl", image, tmp_path / "o.png", "-m", mask, "--angle", angle), 2, "--angle",
-             "out of range (-540 <= DEG <= 540)")
+    preset, *options = args
+    one_line(run("warp", preset, image, tmp_path / "o.png", "-m", mask, *options), 2, "--angle", *words)
     assert not (tmp_path / "o.png").exists()
 
 
