@@ -55,7 +55,7 @@ class ParamError(ValueError):
 
     The message is written once, with the parameters' Python names: that is what the API
     (:func:`featurewarp_cli.warp`, a preset's constructor, :meth:`Param.check`) raises,
-    ``angle: 900 is out of range (-720 <= DEG <= 720)``. The command line renders the
+    ``angle: 900 is out of range (-540 <= DEG <= 540)``. The command line renders the
     same error with its flags, ``--angle: 900 is out of range ...``, through
     :meth:`render` and :func:`option_flag`.
 

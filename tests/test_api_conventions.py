@@ -142,8 +142,8 @@ def test_batch_help_names_the_batch_options():
 
 #: (preset, parameters, what the API says, what the command line says): one error, two namings.
 NAMED = [
-    ("swirl", {"angle": 900}, "angle: 900 is out of range (-720 <= DEG <= 720)",
-     "Invalid value for '--angle': 900 is out of range (-720 <= DEG <= 720)"),
+    ("swirl", {"angle": 900}, "angle: 900 is out of range (-540 <= DEG <= 540)",
+     "Invalid value for '--angle': 900 is out of range (-540 <= DEG <= 540)"),
     ("arc", {"where": "lower", "angle": 171}, "angle: 171 is out of range when where is lower (at most 170)",
      "--angle: 171 is out of range when --where is lower (at most 170)"),
     ("perspective", {"tl": "60%,60%"}, "tl/tr/br/bl: the quadrilateral is concave at tl",

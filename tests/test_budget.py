@@ -84,7 +84,7 @@ def test_a_budget_refuses_the_automatic_grid_but_never_coarsens_it():
     result must not depend on the machine's memory)."""
     from featurewarp_cli.engine.fidelity import GridBudgetError
 
-    warp = load_warp("swirl")(320, 240, angle=720)
+    warp = load_warp("swirl")(320, 240, angle=540)
     free = FeatureWarper(320, 240).solve(warp, "plain")
     needed = free.record.grid["nodes"]
     assert needed > 20_000
@@ -97,7 +97,7 @@ def test_a_budget_refuses_the_automatic_grid_but_never_coarsens_it():
 def test_a_grid_above_the_budget_is_a_one_line_error(tmp_path):
     image = tmp_path / "in.png"
     cv2.imwrite(str(image), np.zeros((240, 320, 3), np.uint8))
-    one_line_error(run("warp", "swirl", image, tmp_path / "o.png", "--angle", "720", "--max-memory", "12M"),
+    one_line_error(run("warp", "swirl", image, tmp_path / "o.png", "--angle", "540", "--max-memory", "12M"),
                    1, "memory limit", "--max-memory")
     assert list(tmp_path.iterdir()) == [image]
 
@@ -108,10 +108,10 @@ def test_a_folded_result_is_an_error_unless_allowed(tmp_path):
     image = tmp_path / "in.png"
     cv2.imwrite(str(image), np.zeros((120, 160, 3), np.uint8))
     out = tmp_path / "o.png"
-    one_line_error(run("warp", "swirl", image, out, "--angle", "720", "--cell", "16", "--mode", "plain"),
+    one_line_error(run("warp", "swirl", image, out, "--angle", "540", "--cell", "16", "--mode", "plain"),
                    1, "folded triangles", "--allow-folds")
     assert not out.exists()
-    allowed = run("warp", "swirl", image, out, "--angle", "720", "--cell", "16", "--mode", "plain", "--allow-folds")
+    allowed = run("warp", "swirl", image, out, "--angle", "540", "--cell", "16", "--mode", "plain", "--allow-folds")
     assert allowed.code == 0 and out.exists()
 
 

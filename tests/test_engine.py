@@ -318,7 +318,7 @@ def test_no_fold_overs_in_the_acceptance_swirl():
     assert flipped(mesh) == 0
 
 
-@pytest.mark.parametrize("angle", [720, -720])
+@pytest.mark.parametrize("angle", [540, -540])
 def test_plain_swirl_mesh_does_not_fold(angle):
     """The plain swirl is injective for every angle, so its mesh has no flipped triangle."""
     mesh = FeatureWarper(500, 360, None).solve(load_warp("swirl")(500, 360, angle=angle), "plain")

@@ -109,7 +109,11 @@ def test_preset_parameter_fuzz(name):
     for _ in range(6):
         values = {p.name: _random_value(p, rng) for p in preset.params
                   if p.name not in ("width", "height") and p.type not in (tuple, str)}
-        warp = preset(48, 36, **values)
+        try:
+            warp = preset(48, 36, **values)
+        except ValueError as err:      # a combination the grid cannot follow (swirl: a tight radius), named
+            assert str(err).startswith("--") and "\n" not in str(err), err
+            continue
         t0 = time.perf_counter()
         mesh = FeatureWarper(48, 36, mask).solve(warp)
         assert mesh.flips() == 0, (name, values, mesh.info["fold_guard"])

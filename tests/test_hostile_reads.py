@@ -6,6 +6,8 @@ within seconds with one line on stderr, the right exit code, and no file written
 
 from __future__ import annotations
 
+import json
+import re
 import subprocess
 import sys
 
@@ -161,3 +163,228 @@ def test_only_the_largest_components_get_free_scales():
     assert len(records) > components.MAX_FREE_SCALES
     big = max(records, key=lambda c: c.quads)
     assert big.kept
+
+
+def test_a_scribbled_curve_costs_what_the_grid_can_follow(tmp_path, monkeypatch):
+    """A curve of 100 000 random points (a scribble 5 M px long at 1 MP: 23.8 GB and killed
+    before) is sampled at most CURVE_SAMPLES_PER_CELL times per cell of the rigid grid, and
+    the schema sees its well-formed polylines cut to their ends (jsonschema: 5 000 points/s)."""
+    from click.testing import CliRunner
+
+    from featurewarp_cli import schema
+    from featurewarp_cli.cli.main import cli
+    from featurewarp_cli.engine.deform import rigid_grid
+    from featurewarp_cli.engine.handles import CURVE_SAMPLES_PER_CELL, Handles
+
+    width, height = 96, 72
+    line = np.random.default_rng(24).uniform(0, height - 1, (100_000, 2)).round(2).tolist()
+    data = {"version": 1, "points": [{"from": [1, 1], "to": [1, 1]}],
+            "curves": [{"from": line, "to": line}, {"from": [[5, 5], [50, 60]], "to": [[6, 5], [50, 61]]}]}
+    seen = []
+    check = schema.check
+    monkeypatch.setattr(schema, "check", lambda kind, value: (seen.append(value), check(kind, value))[1])
+    handles = Handles.from_dict(data, width, height)
+    assert [len(curve["from"]) for curve in seen[0]["curves"]] == [2]
+    grid = rigid_grid(width, height)
+    sources, targets, _ = handles.constraints(grid, 2.0)
+    assert len(sources) <= 1 + CURVE_SAMPLES_PER_CELL * (grid.nx - 1) * (grid.ny - 1) + 2 * len(handles.curves)
+    (tmp_path / "h.json").write_text(json.dumps(data))
+    image = save(tmp_path / "in.png", textured((width, height)))
+    result = CliRunner().invoke(cli, ["deform", image, str(tmp_path / "o.png"), "--handles", str(tmp_path / "h.json")])
+    assert result.exit_code == 0, result.output
+
+
+@pytest.mark.parametrize("key", ["points", "curves"])
+def test_more_handles_than_a_file_may_hold_is_one_line(tmp_path, key):
+    """10 001 point handles or curves: one line naming the file, exit 2 (490 000 pins in
+    16 MiB took 2.2 GB before)."""
+    from featurewarp_cli.engine.handles import MOST
+
+    grid = np.stack(np.meshgrid(np.arange(101), np.arange(100)), -1).reshape(-1, 2)[: MOST[key] + 1].tolist()
+    items = ([{"from": p, "to": p} for p in grid] if key == "points" else
+             [{"from": [p, [p[0], p[1] + 0.5]], "to": [p, [p[0], p[1] + 0.5]]} for p in grid])
+    (tmp_path / "h.json").write_text(json.dumps({"version": 1, key: items}))
+    image = save(tmp_path / "in.png", textured((120, 110)))
+    result = run("deform", image, tmp_path / "o.png", "--handles", tmp_path / "h.json")
+    one_line(result, 2, "h.json", f"{key}: {MOST[key] + 1}", f"at most {MOST[key]}")
+    assert not (tmp_path / "o.png").exists()
+
+
+def test_the_schema_and_the_counts_agree_and_a_bad_point_far_down_is_named():
+    from featurewarp_cli import schema
+    from featurewarp_cli.engine.handles import MOST, Handles
+
+    properties = json.loads(schema.text("handles"))["properties"]
+    assert {key: properties[key]["maxItems"] for key in MOST} == MOST
+    line = [[float(k % 90), float(k % 70)] for k in range(9000)]
+    line[8765] = [3, True]
+    with pytest.raises(ValueError, match=r"^curves\[0\]\.from\[8765\]\[1\]: expected a number, got true"):
+        Handles.from_dict({"version": 1, "curves": [{"from": line, "to": line[:2]}]}, 96, 72)
+
+
+def _odd_inputs(folder) -> dict:
+    """Unusual but valid (or slightly broken) files: {name: path}."""
+    import io
+    import struct
+    import zlib
+
+    from PIL import Image, ImageCms
+
+    y, x = np.mgrid[0:36, 0:48]
+    rgb = np.dstack([x * 5 % 256, y * 7 % 256, (x + y) * 3 % 256]).astype(np.uint8)
+    srgb = ImageCms.ImageCmsProfile(ImageCms.createProfile("sRGB")).tobytes()
+    files = {}
+
+    def keep(name, image, **options):
+        files[name] = str(folder / name)
+        image.save(files[name], **options)
+
+    keep("16bit.png", Image.fromarray((x * 1300).astype(np.uint16)))
+    keep("palette-trns.png", Image.fromarray(np.dstack([rgb, (x * 5).astype(np.uint8)])).quantize(16))
+    keep("cmyk-profile.jpg", Image.fromarray(rgb).convert("CMYK"), icc_profile=srgb[:16] + b"CMYK" + srgb[20:])
+    keep("grey-rgb-profile.png", Image.fromarray(rgb).convert("L"), icc_profile=srgb)
+    camera = Image.Exif()
+    camera[271] = "Camera maker"
+    camera.get_ifd(0x8769)[0x829A] = 0.01                  # exposure time, in the Exif sub-directory
+    camera.get_ifd(0x8825)[1] = "N"                        # GPS
+    keep("camera.jpg", Image.fromarray(rgb), exif=camera)
+    png = io.BytesIO()
+    Image.fromarray(rgb).save(png, "PNG")
+    data = png.getvalue()
+    at = data.index(b"IDAT") - 4
+
+    def chunk(kind, payload):
+        return struct.pack(">I", len(payload)) + kind + payload + struct.pack(">I", zlib.crc32(kind + payload))
+
+    for name, extra in (("bad-iccp.png", chunk(b"iCCP", b"p\x00\x00" + zlib.compress(b"junk" * 20))),
+                        ("bad-exif.png", chunk(b"eXIf", b"MM\x00\x2a\x00\x00\x00\x08\x00\x05" + bytes(7)))):
+        files[name] = str(folder / name)
+        (folder / name).write_bytes(data[:at] + extra + data[at:])
+    files["truncated.png"] = str(folder / "truncated.png")
+    (folder / "truncated.png").write_bytes(data[: len(data) * 2 // 3])
+    return files
+
+
+def test_unusual_inputs_say_nothing_or_one_line_of_ours(tmp_path, capfd):
+    """16-bit, palette with transparency, CMYK with its profile, broken chunks, a camera's
+    EXIF, a truncated file: no Python warning, nothing of a C library on stderr, at most one
+    line of ours. A camera JPEG written as TIFF failed (libtiff: 'Bad LONG8 or IFD8 value'
+    and a RuntimeError); a CMYK JPEG's profile was kept on the RGB pixels it decodes to."""
+    import warnings
+
+    import cv2
+    from click.testing import CliRunner
+    from PIL import Image
+
+    from featurewarp_cli.cli.main import cli
+
+    capfd.readouterr()
+    for name, path in _odd_inputs(tmp_path).items():
+        for ext in ("png", "tif", "jpg"):
+            out = tmp_path / f"out.{ext}"
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always")
+                result = CliRunner().invoke(cli, ["warp", "swirl", path, str(out)])
+            assert not caught, (name, ext, [str(w.message) for w in caught])
+            assert capfd.readouterr().err == "", (name, ext)
+            if name == "truncated.png":
+                assert result.exit_code == 1 and len(result.output.strip().splitlines()) == 1, result.output
+                continue
+            assert result.exit_code == 0 and result.output == "", (name, ext, result.output)
+            assert cv2.imread(str(out), cv2.IMREAD_UNCHANGED) is not None
+            with Image.open(out) as image:
+                image.load()
+                profile = image.info.get("icc_profile")
+                assert not profile or profile[16:20] == (b"GRAY" if image.mode in ("L", "I;16") else b"RGB "), name
+                if name == "camera.jpg":
+                    assert image.getexif().get(271) == "Camera maker"
+
+
+def _zlib_bomb(width: int, height: int) -> bytes:
+    """A valid grey PNG of zeros: 7 KB for 4 000 x 4 000 (the issue's 14 100 x 14 100 was 580 KB)."""
+    import struct
+    import zlib
+
+    def chunk(kind, data):
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+
+    packer = zlib.compressobj(9)
+    row = bytes(width + 1)
+    data = b"".join(packer.compress(row) for _ in range(height)) + packer.flush()
+    return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0))
+            + chunk(b"IDAT", data) + chunk(b"IEND", b""))
+
+
+def test_within_limit_bombs_are_refused_before_decoding(tmp_path, monkeypatch):
+    """The default --max-pixels (160 MP) refuses the issue's bombs from their headers; a bomb
+    within it is refused by --max-memory before a pixel is decoded (a 4 KB AVIF of 14 000^2
+    decoded to 3.3 GB before a 2 GB budget refused it), and so is the canvas a warp would
+    need (the decoding thread starts once every check that needs no pixels has passed)."""
+    import time
+
+    from click.testing import CliRunner
+
+    import bombs
+    from featurewarp_cli.app import pipeline
+    from featurewarp_cli.cli.main import cli
+    from featurewarp_cli.io import limits
+
+    assert limits.MAX_PIXELS == 160_000_000
+    (tmp_path / "claims.png").write_bytes(bombs.png(14_100, 14_100))
+    started = time.monotonic()
+    one_line(run("warp", "swirl", tmp_path / "claims.png", tmp_path / "o.png"), 1, "above the limit", "--max-pixels")
+    assert time.monotonic() - started < 10
+    (tmp_path / "bomb.png").write_bytes(_zlib_bomb(4000, 4000))
+    decoded = []
+    monkeypatch.setattr(pipeline._Decoding, "start", lambda self: decoded.append(self))
+    runner = CliRunner()
+    for command, args, words in ((["warp"], ["--max-memory", "300M"], ("needs about 366 MiB", "--max-memory")),
+                                 (["compare"], ["--max-memory", "300M"], ("needs about 366 MiB", "--max-memory")),
+                                 (["warp"], ["--max-memory", "1G", "--size", "400%x100%"], ("canvas", "--max-memory"))):
+        for source in (str(tmp_path / "bomb.png"), "-"):
+            result = runner.invoke(cli, [*command, "stretch", source, str(tmp_path / "o.png"), *args],
+                                   input=(tmp_path / "bomb.png").read_bytes())
+            assert result.exit_code == 1 and all(word in result.output for word in words), (args, result.output)
+            assert len(result.output.strip().splitlines()) == 1 and not decoded
+    assert not (tmp_path / "o.png").exists()
+
+
+@pytest.mark.parametrize("args,words", [
+    (["swirl", "--angle", "720"], ["--angle", "out of range (-540 <= DEG <= 540)"]),
+    (["swirl", "--angle", "-720"], ["--angle", "out of range (-540 <= DEG <= 540)"]),
+    (["arc", "--where", "upper", "--angle", "160"], ["--angle", "with --where upper (at most 150)"]),
+    (["perspective", "--tl", "45%,45%"], ["--tl", "the angle at --tl is 174 degrees (5 to 170)"]),
+])
+def test_ranges_that_took_too_long_are_usage_errors(tmp_path, scene, args, words):
+    """Swirl +-720 took 18-44 s CPU at 0.08 to 1 MP (80-120 s wall), its features wound past
+    recognition and relaxed to the plain warp; Arc Upper and Lower at 170 took 34-60 s CPU and
+    2.3 GB at 1 MP, perspective with a corner of 174 degrees 34 s: the ranges are +-540, 150 and
+    corners of 5 to 170 degrees (at most 17, 11 and 5 s: benchmarks/extremes.py --1mp)."""
+    image, mask = scene
+    preset, *options = args
+    one_line(run("warp", preset, image, tmp_path / "o.png", "-m", mask, *options), 2, *words)
+    assert not (tmp_path / "o.png").exists()
+
+
+@pytest.mark.parametrize("size", [(320, 240), (1024, 1024), (4000, 3000)])
+@pytest.mark.parametrize("angle", [540, -540, 90])
+def test_a_swirl_too_tight_for_the_grid_is_refused_and_the_tightest_accepted_is_followed(size, angle):
+    """540 degrees over a 102 px radius at 1 MP folded 632 triangles of the finest automatic grid
+    (exit 1 after the solve); now the warp is refused at once, naming the radius it needs, and
+    at that radius the automatic grid follows it within 0.5 px without a fold."""
+    import math
+
+    from featurewarp_cli import load_warp
+    from featurewarp_cli.engine import fidelity
+    from featurewarp_cli.engine.grid import Grid
+
+    width, height = size
+    swirl = load_warp("swirl")
+    with pytest.raises(ValueError, match=r"^--angle: .* needs a swirl radius of .* use --radius ([0-9.]+) or more") as err:
+        swirl(width, height, angle=angle, radius=0.001)
+    radius = float(re.search(r"use --radius ([0-9.]+)", str(err.value)).group(1))
+    warp = swirl(width, height, angle=angle, radius=radius)
+    cell, error = fidelity.auto_cell(width, height, warp)
+    assert fidelity.follows(Grid.for_image(width, height, cell), warp) == (True, error) and error <= 0.5
+    limit = int(re.search(r"within \+-(\d+)", str(err.value)).group(1))
+    swirl(width, height, angle=math.copysign(limit, angle), radius=0.001)

@@ -51,17 +51,17 @@ def test_sweep_has_no_fold_overs(preset, params, mask_name, feature_weight):
         assert np.isfinite(mesh.target).all()
 
 
-@pytest.mark.parametrize("angle", [-720, 720])
+@pytest.mark.parametrize("angle", [-540, 540])
 def test_extreme_swirl_plain_grid_does_not_fold(angle):
-    """Swirl +-720 without features: the automatic grid is fine enough that W itself does not fold."""
+    """Swirl +-540 without features: the automatic grid is fine enough that W itself does not fold."""
     mesh = FeatureWarper(W, H, None).solve(load_warp("swirl")(W, H, angle=angle), "plain")
     assert mesh.flips() == 0
 
 
 @pytest.mark.slow
 def test_extreme_swirl_with_features_does_not_fold():
-    """Swirl 720 with features (the slowest case: sub-pixel grid, features relaxed towards W)."""
-    mesh = FeatureWarper(W, H, blobs()).solve(load_warp("swirl")(W, H, angle=720))
+    """Swirl 540 with features (the slowest case: sub-pixel grid, features relaxed towards W)."""
+    mesh = FeatureWarper(W, H, blobs()).solve(load_warp("swirl")(W, H, angle=540))
     assert mesh.info["flipped_before_guard"] > 0
     assert mesh.flips() == 0
 
@@ -146,7 +146,7 @@ def test_max_step_stops_before_the_first_fold():
 
 def test_auto_cell_follows_the_warp():
     """The automatic grid stays within 0.5 px of the analytic warp and folds nothing of it."""
-    for angle in (90, 360, 720):
+    for angle in (90, 360, 540):
         warper = FeatureWarper(W, H, None)
         mesh = warper.solve(load_warp("swirl")(W, H, angle=angle), "plain")
         assert mesh.info["grid"]["pl_error_px"] <= 0.5

@@ -33,8 +33,8 @@ EXTREMES = (
        for b, h, v in ((100, 0, 0), (-100, 0, 0), (100, 90, 90), (-100, -90, -90), (0, 90, -90))]
     + [("flag", {"waves": 12, "bend": 100}), ("flag", {"waves": 12, "bend": -100})]
     + [("shell", {"side": "upper", "bend": b, "hdistort": 90}) for b in (100, -100)]
-    + [("arc", {"where": w, "angle": a}) for w in ("lower", "upper") for a in (1e-6, 90, 170)]
-    + [("perspective", TILT), ("perspective", {"tl": "45%,45%"}), ("perspective", {"br": "300%,400%"})]
+    + [("arc", {"where": w, "angle": a}) for w in ("lower", "upper") for a in (1e-6, 90, 150)]
+    + [("perspective", TILT), ("perspective", {"tl": "43%,43%"}), ("perspective", {"br": "300%,400%"})]
     + [("cylinder", {"angle": a}) for a in (1e-6, 160)] + [("cylinder", {"angle": 160, "axis": "horizontal"})]
     + [("cylinder", {"angle": 1, "distance": 1.001}), ("cylinder", {"angle": 60, "distance": 1000}),
        ("cylinder", {"angle": 100, "distance": 3})]

@@ -11,8 +11,10 @@ from featurewarp_cli.plugins import Param, ParamError, Warp
 
 from .common import fit_canvas
 
-#: Largest angle of --where lower or upper: at 180 degrees the bowed edge turns vertical.
-EDGE_MAX = 170.0
+#: Largest angle of --where lower or upper: at 180 degrees the bowed edge turns vertical, and
+#: from 160 the fold-over guard's work grows fast (at 1 MP with features, 170 took 34 to 60 s
+#: CPU and 2.3 GB, 160 up to 28 s; 150 takes at most 11 s).
+EDGE_MAX = 150.0
 
 
 class Arc(Warp):

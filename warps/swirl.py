@@ -2,9 +2,39 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-from featurewarp_cli.plugins import Param, Warp, centre, resolve_pair
+from featurewarp_cli.engine.fidelity import MAX_PL_ERROR, finest_cell
+from featurewarp_cli.plugins import Param, ParamError, Warp, centre, resolve_pair
+
+#: The largest angle, in degrees. Beyond one and a half turns the fold-over guard relaxes the
+#: features all the way to the plain warp (they are wound past recognition), and that took
+#: 18-44 s CPU at 720 degrees on photos of 0.08 to 1 MP; 540 takes at most 10 s at 1 MP.
+MAX_ANGLE = 540.0
+#: A swirl folds the triangles of a grid of cells c px unless its radius R spans enough of
+#: them: angle^2 * c / R at most this (degrees squared; measured at 1 and 4 MP without
+#: features, folds from about 2 800, none below 2 400).
+FOLD_RATE = 2200.0
+
+
+def smallest_radius(angle: float, cell: float) -> float:
+    """The smallest radius in pixels at which a grid of ``cell`` px follows a swirl of
+    ``angle`` degrees: without a fold (:data:`FOLD_RATE`), and within 0.5 px (the largest
+    gap between the swirl and its grid is about ``c^2 t (0.8 + 0.1 t) / R`` for t radians,
+    fitted on 1 MP runs from 90 to 720 degrees)."""
+    turn = math.radians(abs(angle))
+    return max(angle * angle * cell / FOLD_RATE, cell * cell * turn * (0.8 + 0.1 * turn) / MAX_PL_ERROR)
+
+
+def largest_angle(radius: float, cell: float) -> float:
+    """The largest angle in degrees that a grid of ``cell`` px follows at a swirl radius of
+    ``radius`` px (the inverse of :func:`smallest_radius`)."""
+    folds = math.sqrt(FOLD_RATE * radius / cell)
+    square = cell * cell
+    gaps = (-0.8 * square + math.sqrt(0.64 * square * square + 0.4 * MAX_PL_ERROR * square * radius)) / (0.2 * square)
+    return min(folds, math.degrees(gaps), MAX_ANGLE)
 
 
 class Swirl(Warp):
@@ -16,9 +46,10 @@ class Swirl(Warp):
     takes a mark above the centre to its upper left, and so does ``--angle 120`` here (before
     issue 25 the sign was the opposite). R = radius * min(w, h). The rotation and its derivative fall to zero at R,
     so the swirl joins the unmoved outside smoothly. Each circle about the centre
-    maps onto itself, so the map is injective for every angle; the declared range
-    (two turns either way) is where the automatic grid follows it within its node
-    limit and the result has no fold (320x240 with features at 720: 13 s, 0.7 GB).
+    maps onto itself, so the map is injective for every angle. The declared range
+    (one and a half turns either way) is delivered in bounded time; a tight swirl
+    (a large angle over a small radius in pixels) that even the finest automatic
+    grid cannot follow without folds is refused, naming the radius it needs.
     Canvas = input size.
     """
 
@@ -27,9 +58,10 @@ class Swirl(Warp):
                "centre by an angle, fading smoothly to zero at a radius.")
     params = (
         Param("angle", float, 90.0, "Rotation at the centre in degrees (positive: counter-clockwise "
-              "on screen, as ImageMagick's -swirl), at most two turns either way: beyond, the grid that follows the swirl "
-              "outgrows its node limit and features can no longer be kept apart.",
-              min=-720, max=720, metavar="DEG"),
+              "on screen, as ImageMagick's -swirl), at most one and a half turns either way; a large "
+              "angle needs a radius of enough pixels for the grid to follow it (refused otherwise, "
+              "naming it).",
+              min=-MAX_ANGLE, max=MAX_ANGLE, metavar="DEG"),
         Param("radius", float, 0.5, "Radius of the swirl as a fraction of min(width, height).",
               min=0.001, max=10),
         Param("center", tuple, None, "Centre of the effect: X,Y in pixels (pixel centres at whole "
@@ -41,6 +73,15 @@ class Swirl(Warp):
                        np.array(resolve_pair(center, self.width, self.height, position=True)))
         self.r = radius * min(self.width, self.height)
         self.theta = np.deg2rad(angle)
+        cell = finest_cell(self.width, self.height)
+        need = smallest_radius(angle, cell)
+        if self.r < need:
+            least = math.ceil(need / min(self.width, self.height) * 1000.0) / 1000.0
+            raise ParamError("angle", f"{angle:g} degrees needs a swirl radius of {need:.3g} px or more on a "
+                                      f"{self.width}x{self.height} image (the finest grid folds or strays on a "
+                                      f"tighter one), and `radius` {radius:g} is {self.r:.3g} px: use `radius` "
+                                      f"{least:g} or more, or an angle within +-"
+                                      f"{math.floor(largest_angle(self.r, cell)):g}", mentions=("radius",))
 
     def forward(self, points):
         d = points - self.centre

@@ -146,7 +146,7 @@ def read_input(path: str, param: str, max_pixels: int | None, data: bytes | None
         raise WarpError(f"{path} {decode.path_problem(path)}", param, usage=True)
     try:
         if data is not None:
-            return decode.decode_image(data, "stdin" if path == "-" else path, max_pixels)
+            return decode.decode_image(data, "stdin" if path == "-" else path, max_pixels, max_bytes)
         return decode.read_image(path, max_pixels, max_bytes)
     except ImageError as err:
         raise WarpError(str(err), None if param == "INPUT" else param) from err
@@ -206,7 +206,7 @@ def check_file_size(path: str, param: str, max_memory: int | None, max_pixels: i
                         f"{limits.size_text(max_memory)} (--max-memory)")
     if header is not None:
         try:
-            limits.check_pixels(header.width, header.height, path, max_pixels)
+            limits.check_size(header.width, header.height, path, max_pixels, max_memory)
         except ImageError as err:
             raise WarpError(str(err)) from None
 
@@ -228,7 +228,8 @@ def _load_mask(settings: Settings, mask: str, size: tuple[int, int]):
 
 
 class _Decoding:
-    """INPUT decoding in a thread (OpenCV releases the GIL): ``result()`` waits for the image."""
+    """INPUT decoding in a thread (OpenCV releases the GIL), from ``start()``, once every check
+    that needs no pixels has passed: ``result()`` waits for the image."""
 
     def __init__(self, data: bytes, name: str, max_pixels: int | None, header=None):
         self._image = self._error = None
@@ -243,9 +244,13 @@ class _Decoding:
                 self._error = err
 
         self._thread = threading.Thread(target=work, name="featurewarp-decode")
+
+    def start(self):
         self._thread.start()
 
     def result(self):
+        if self._thread.ident is None:
+            self.start()
         self._thread.join()
         if self._error is not None:
             raise self._error
@@ -295,7 +300,7 @@ def start_loading(settings: Settings, input: str, mask: str | None, data: bytes 
         except ImageError:
             pass                                             # reported by the serial path below
         header = decode.read_header(data) if data else None
-    if header is None or (settings.max_pixels and header.width * header.height > settings.max_pixels):
+    if header is None or not limits.fits(header.width, header.height, settings.max_pixels, settings.max_memory):
         image, feature_mask, warnings = load_image_and_mask(settings, input, mask, data)
         return _Ready(image, header), feature_mask, warnings, (image.shape[1], image.shape[0])
     size = header.upright_size
@@ -316,6 +321,9 @@ class _Ready:
     def __init__(self, image, header=None):
         self._image = image
         self.header = header
+
+    def start(self):
+        pass
 
     def result(self):
         return self._image
@@ -352,24 +360,18 @@ def make_warper(settings: Settings, width: int, height: int, feature_mask):
 
 
 def solve_within_budget(warper, warp, mode: str):
-    """``warper.solve(warp, mode)``; a grid above the memory budget is a WarpError (exit 1)."""
+    """``warper.solve(warp, mode)``, the warp's own ``review`` of the mesh (deform's: handles
+    reached, an image laid over itself) joining its warnings; a grid above the memory budget
+    is a WarpError (exit 1)."""
     from ..engine.fidelity import GridBudgetError
 
     try:
-        return warper.solve(warp, mode)
+        mesh = warper.solve(warp, mode)
     except GridBudgetError as err:
         raise WarpError(str(err)) from None
-
-
-def solved(settings: Settings, width: int, height: int, feature_mask):
-    """(warp, warper, mesh) for an image of this size and mask; the warp's own ``review`` of the
-    mesh (deform's: handles reached, an image laid over itself) joins its warnings."""
-    warp, warper = make_warper(settings, width, height, feature_mask)
-    mesh = solve_within_budget(warper, warp, settings.mode)
-    review = getattr(warp, "review", None)
-    if review is not None:
-        mesh.record.warnings.extend(review(mesh))
-    return warp, warper, mesh
+    if getattr(warp, "review", None) is not None:
+        mesh.record.warnings.extend(warp.review(mesh))
+    return mesh
 
 
 def rendered(warper, image, mesh, interp: str, background):
@@ -466,15 +468,16 @@ def warp_file(settings: Settings, input: str, output: str, mask: str | None = No
     prefetch_engine(solver=mask is not None and settings.mode != "plain")
     pending, feature_mask, warnings, (width, height) = start_loading(settings, input, mask, piped)
     timings = {"load": time.perf_counter() - t0}
+    warp, warper = make_warper(settings, width, height, feature_mask)    # the canvas and the budget, undecoded
+    pending.start()
     try:
-        warp, warper, mesh = solved(settings, width, height, feature_mask)
+        mesh = solve_within_budget(warper, warp, settings.mode)
     finally:
         t1 = time.perf_counter()
         image = pending.result()               # a decoding error outranks any from the solve
         timings["load"] += time.perf_counter() - t1
     if image.shape[:2] != (height, width):
-        raise WarpError(f"{input} decodes to {image.shape[1]}x{image.shape[0]}, its header says "
-                        f"{width}x{height}")
+        raise WarpError(f"{input} decodes to {image.shape[1]}x{image.shape[0]}, its header says {width}x{height}")
     warnings.extend(mesh.record.warnings)
     check_solution(settings, mesh)
     result = rendered(warper, image, mesh, settings.interp, background)
@@ -482,7 +485,6 @@ def warp_file(settings: Settings, input: str, output: str, mask: str | None = No
         from .panel import draw_grid as overlay
         result = overlay(result, mesh)
     timings.update(mesh.info["timings"])
-
     stages.enter("write")
     t1 = time.perf_counter()
     kept = None if settings.strip else getattr(pending, "header", None)

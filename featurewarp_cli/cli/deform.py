@@ -85,7 +85,7 @@ def merged_handles(data, moves, pins, canvas: str | None):
 
 
 #: A place in the handles file at the start of an error (the point's index in group 1).
-FILE_PLACE = re.compile(r"^(?:points(?:\[(\d+)\])?|curves\[|border\b|radius\b|canvas\b|version\b)")
+FILE_PLACE = re.compile(r"^(?:points(?:\[(\d+)\])?|curves\b|border\b|radius\b|canvas\b|version\b)")
 POINT_PLACE = re.compile(r"points\[(\d+)\](?:\.(from|to))?")
 
 

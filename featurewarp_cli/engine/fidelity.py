@@ -96,6 +96,18 @@ def base_cell(width: int, height: int) -> float:
     return max(4.0, math.sqrt(width * height / BASE_NODES))
 
 
+def finest_cell(width: int, height: int) -> float:
+    """The coarsest cell at which :func:`auto_cell` may stop refining: the last rung of its
+    ladder within :data:`MAX_NODES`. A warp this grid cannot follow (within 0.5 px, without
+    a fold) is followed by no automatic grid, so a preset can refuse such parameters
+    before any solve (``swirl``: a tight radius at a large angle)."""
+    cell = base_cell(width, height)
+    smallest = min(_cell_for_nodes(width, height, MAX_NODES), cell)
+    while cell / math.sqrt(2.0) >= smallest:
+        cell /= math.sqrt(2.0)
+    return cell
+
+
 def follows(grid: Grid, warp) -> tuple[bool, float]:
     """Whether ``grid`` follows ``warp``: error <= 0.5 px and no triangle folded by W.
 

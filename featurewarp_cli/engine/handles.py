@@ -41,6 +41,12 @@ KEYS = ("version", "points", "curves", "border", "canvas", "radius")
 RING_POINTS = 8
 #: Points a Bezier side is flattened to before it is resampled by arc length.
 BEZIER_POINTS = 256
+#: Point handles and curves a handles file may hold (the schema's maxItems): each point
+#: handle is a disc of 17 samples of the rigid map and each curve costs a few array passes,
+#: so 490 000 handles (16 MiB) took 2.2 GB; a grid of 4 096 nodes cannot follow more anyway.
+MOST = {"points": 10_000, "curves": 10_000}
+#: Curve samples per cell of the grid a curve is followed on, at most (all curves together).
+CURVE_SAMPLES_PER_CELL = 2
 #: Targets may lie at most this many image sizes beyond the image.
 REACH = 10
 #: Point handles must start at least this far apart (px).
@@ -92,15 +98,13 @@ class Handles:
         ValueError
             One line naming the first problem and its place (``points[2].to: ...``).
         """
-        from .. import schema
-
         if not isinstance(data, dict):
             raise ValueError("the handles file must hold a JSON object ({\"version\": 1, \"points\": [...]})")
         version = data.get("version")
         if not (type(version) is int and version in VERSIONS):      # which schema applies, before it does
             raise ValueError(f"version: {version!r}; this featurewarp reads versions "
                              f"{', '.join(map(str, VERSIONS))}")
-        schema.check("handles", data)
+        _check_shape(data)
         notes = [f"handles: ignoring the key {key!r} (unknown to version {version})" for key in data if key not in KEYS]
         points = data.get("points", [])
         angles = _angles(points, version, notes)
@@ -158,14 +162,21 @@ class Handles:
     def constraints(self, grid: Grid, radius: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Source points, their targets and their disc radii: point handles (radius
         ``radius``; one with an angle holds its centre, and its ring turned by that angle and
-        scaled by the other handles' overall scale, after the curves), curves resampled every
-        half cell, and the border's nodes."""
-        step = 0.5 * min(grid.spacing)
+        scaled by the other handles' overall scale, after the curves), curves resampled by arc
+        length, and the border's nodes.
+
+        A curve is sampled every half cell of ``grid``, and the curves together at most
+        :data:`CURVE_SAMPLES_PER_CELL` times per cell: a curve cannot say more than the grid
+        can follow, and a longer one (a scribble that crosses the image many times over) is
+        sampled more sparsely instead of costing time and memory in proportion to its length."""
+        lengths = [_length(start) for start, _ in self.curves]
+        budget = CURVE_SAMPLES_PER_CELL * (grid.nx - 1) * (grid.ny - 1)
+        step = max(0.5 * min(grid.spacing), sum(lengths) / budget)
         turned = np.isfinite(self.angles)
         sources, targets = [self.points_from], [self.points_to]
         radii = [np.where(turned, 0.0, radius)]
-        for start, end in self.curves:
-            count = max(2, math.ceil(_length(start) / step) + 1)
+        for (start, end), length in zip(self.curves, lengths):
+            count = max(2, math.ceil(length / step) + 1)
             sources.append(resample(start, count))
             targets.append(resample(end, count))
             radii.append(np.zeros(count))
@@ -312,6 +323,54 @@ def _no_duplicates(sources: np.ndarray) -> None:
         a, b = sorted(np.unravel_index(np.argmin(gap), gap.shape))
     raise ValueError(f"points[{a}] and points[{b}] start {np.hypot(*(sources[a] - sources[b])):.3g} px apart "
                      f"(at least {MIN_SPACING:g} px between handles); one place can have one handle")
+
+
+def _plain_point(value) -> bool:
+    """Whether ``value`` is a point the schema accepts: a list of two JSON numbers."""
+    return type(value) is list and len(value) == 2 and type(value[0]) in (int, float) and type(value[1]) in (int, float)
+
+
+def _plain_line(value) -> bool:
+    """Whether ``value`` is a polyline the schema accepts: a list of two or more plain points."""
+    return type(value) is list and len(value) >= 2 and all(map(_plain_point, value))
+
+
+def _cut_line(value):
+    """A plain polyline cut to its first two points (what the schema needs to see of it)."""
+    return value[:2] if _plain_line(value) else value
+
+
+def _check_shape(data: dict) -> None:
+    """Check ``data`` against the handles schema, counts first (:data:`MOST`).
+
+    jsonschema checks about 5 000 points a second (a file of 150 000 point handles took 26 s,
+    one curve of 100 000 points over a minute), so it sees every list whose items all have
+    the right shape cut to its first items; this plain pass takes well under a second for
+    the largest file read (16 MiB). A list with any item of another shape stays whole, and
+    the schema names that item at its true index.
+    """
+    from .. import schema
+
+    for key, most in MOST.items():
+        if type(data.get(key)) is list and len(data[key]) > most:
+            raise ValueError(f"{key}: {len(data[key])} {'point handles' if key == 'points' else key}; "
+                             f"a handles file holds at most {most}")
+    view = dict(data)
+    points = data.get("points")
+    if type(points) is list and all(type(p) is dict and _plain_point(p.get("from")) and _plain_point(p.get("to"))
+                                    for p in points):
+        view["points"] = points[:1]
+    curves = data.get("curves")
+    if type(curves) is list and all(type(c) is dict and _plain_line(c.get("from")) and _plain_line(c.get("to"))
+                                    for c in curves):
+        curves = curves[:1]
+    if type(curves) is list:
+        view["curves"] = [{key: _cut_line(line) if key in ("from", "to") else line for key, line in c.items()}
+                          if type(c) is dict else c for c in curves]
+    border = data.get("border")
+    if type(border) is dict:
+        view["border"] = {side: _cut_line(line) for side, line in border.items()}
+    schema.check("handles", view)
 
 
 def _border(value, width: int, height: int):

@@ -26,7 +26,7 @@ import numpy as np
 
 from . import ImageError
 from .capture import captured_stderr
-from .limits import MAX_PIXELS, check_pixels, limit_opencv_decoders, opencv_limit, size_text
+from .limits import MAX_PIXELS, check_pixels, check_size, limit_opencv_decoders, opencv_limit, size_text
 
 limit_opencv_decoders(MAX_PIXELS, replace=False)        # before cv2 loads; the CLI may have set it
 import cv2  # noqa: E402
@@ -217,6 +217,18 @@ def _orientation(image: Image.Image, data: bytes) -> int:
 TIFF_DESCRIPTIVE_TAGS = (270, 271, 272, 274, 282, 283, 296, 305, 306, 315, 33432)
 
 
+def descriptive_exif(exif: Image.Exif) -> Image.Exif:
+    """The tags of ``exif``'s main directory listed in :data:`TIFF_DESCRIPTIVE_TAGS`: what
+    of a TIFF's directory describes the picture, and what a TIFF written through libtiff can
+    hold (it writes no sub-directory: a camera's Exif and GPS blocks made it fail with
+    'Bad LONG8 or IFD8 value' on stderr and a RuntimeError)."""
+    kept = Image.Exif()
+    for tag in TIFF_DESCRIPTIVE_TAGS:
+        if tag in exif:
+            kept[tag] = exif[tag]
+    return kept
+
+
 def _upright_exif(image: Image.Image) -> bytes | None:
     """The image's EXIF block with its orientation set to 1, or None (none, or broken); of a
     TIFF, only its descriptive tags (:data:`TIFF_DESCRIPTIVE_TAGS`)."""
@@ -227,11 +239,7 @@ def _upright_exif(image: Image.Image) -> bytes | None:
             warnings.simplefilter("ignore")            # a broken block is dropped, not reported
             exif = image.getexif()
         if image.format == "TIFF":
-            kept = Image.Exif()
-            for tag in TIFF_DESCRIPTIVE_TAGS:
-                if tag in exif:
-                    kept[tag] = exif[tag]
-            exif = kept
+            exif = descriptive_exif(exif)
         if not len(exif):
             return None
         if _EXIF_ORIENTATION in exif:
@@ -313,7 +321,8 @@ def _opencv_decode(data: bytes, name: str) -> np.ndarray:
     return image
 
 
-def decode_image(data: bytes, name: str, max_pixels: int | None = MAX_PIXELS) -> np.ndarray:
+def decode_image(data: bytes, name: str, max_pixels: int | None = MAX_PIXELS,
+                 max_memory: int | None = None) -> np.ndarray:
     """Decode image bytes (format sniffed from them) keeping depth and alpha, upright.
 
     The size in the header is checked against ``max_pixels`` before decoding;
@@ -329,6 +338,9 @@ def decode_image(data: bytes, name: str, max_pixels: int | None = MAX_PIXELS) ->
         Used in error messages.
     max_pixels : int or None
         Largest accepted width * height; None: no limit.
+    max_memory : int or None
+        Memory budget in bytes: an image whose header claims more than it can hold
+        (:func:`featurewarp_cli.io.limits.check_memory`) is refused before decoding.
 
     Returns
     -------
@@ -347,7 +359,7 @@ def decode_image(data: bytes, name: str, max_pixels: int | None = MAX_PIXELS) ->
                              f"warps 8- and 16-bit images (convert it first)")
     header = read_header(data)
     if header is not None:
-        check_pixels(header.width, header.height, name, max_pixels)
+        check_size(header.width, header.height, name, max_pixels, max_memory)
     image = _opencv_decode(data, name)
     if image.dtype not in (np.uint8, np.uint16):
         raise ImageError(f"{name} has unsupported sample type {image.dtype}")
@@ -359,8 +371,9 @@ def decode_image(data: bytes, name: str, max_pixels: int | None = MAX_PIXELS) ->
 
 
 def read_image(path: str, max_pixels: int | None = MAX_PIXELS, max_bytes: int | None = None) -> np.ndarray:
-    """Read and decode an image file (``-``: stdin, at most ``max_bytes``); see :func:`decode_image`."""
-    return decode_image(read_bytes(path, max_bytes), "stdin" if path == "-" else path, max_pixels)
+    """Read and decode an image file (``-``: stdin, at most ``max_bytes``, the memory budget,
+    which its header's size must also fit); see :func:`decode_image`."""
+    return decode_image(read_bytes(path, max_bytes), "stdin" if path == "-" else path, max_pixels, max_bytes)
 
 
 def mask_from_image(image: np.ndarray) -> np.ndarray:

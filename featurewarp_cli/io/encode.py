@@ -106,7 +106,9 @@ def _pillow_encode(image: np.ndarray, fmt: str, quality: int | None, icc: bytes 
 
     if image.ndim == 3:
         image = cv2.cvtColor(image, cv2.COLOR_BGRA2RGBA if image.shape[2] == 4 else cv2.COLOR_BGR2RGB)
-    options = {"icc_profile": icc} if icc else {}
+    options = {"icc_profile": icc} if icc and icc_space(icc) == ("RGB " if image.ndim == 3 else "GRAY") else {}
+    if exif and fmt == "tiff":
+        exif = _tiff_exif(exif)
     if exif:
         options["exif"] = exif
     options.update({"jpg": {"quality": quality or 95, "optimize": False, "progressive": False},
@@ -114,5 +116,35 @@ def _pillow_encode(image: np.ndarray, fmt: str, quality: int | None, icc: bytes 
                     "webp": {"quality": quality} if quality else {"lossless": True, "quality": 100},
                     "tiff": {"compression": "tiff_lzw"}}[fmt])
     buffer = io.BytesIO()
-    Image.fromarray(image).save(buffer, METADATA_FORMATS[fmt], **options)
+    with captured_stderr() as printed:
+        try:
+            Image.fromarray(image).save(buffer, METADATA_FORMATS[fmt], **options)
+        except Exception as err:  # whatever an encoder raises on metadata it cannot write
+            reason = "; ".join(printed) or f"{type(err).__name__}: {err}"
+            raise ImageError(f"cannot encode the result as {fmt} with the input's metadata ({reason})") from None
     return buffer.getvalue()
+
+
+def icc_space(icc: bytes) -> str | None:
+    """The colour space an ICC profile's pixels are in (``'RGB '``, ``'GRAY'``, ``'CMYK'``,
+    ``'Lab '``...; bytes 16-19 of its header), None for a block too short to be one. Only a
+    profile of the written pixels' space is kept: a CMYK JPEG's profile on the RGB pixels it
+    is decoded to, or an RGB profile on a grey PNG, makes viewers show wrong colours (and
+    libpng warn about the file)."""
+    return icc[16:20].decode("latin-1") if len(icc) >= 128 else None
+
+
+def _tiff_exif(exif: bytes) -> bytes | None:
+    """An EXIF block as a TIFF written through libtiff can hold it: the main directory's
+    descriptive tags (:func:`featurewarp_cli.io.decode.descriptive_exif`); None if broken or empty."""
+    from PIL import Image
+
+    from .decode import descriptive_exif
+
+    try:
+        whole = Image.Exif()
+        whole.load(exif)
+        kept = descriptive_exif(whole)
+        return kept.tobytes() if len(kept) else None
+    except Exception:  # a broken block is not kept
+        return None

@@ -14,8 +14,11 @@ import sys
 
 from . import ImageError
 
-#: Default limit on width * height of an input (``--max-pixels``).
-MAX_PIXELS = 200_000_000
+#: Default limit on width * height of an input (``--max-pixels``): every single-shot camera
+#: (the largest, 151 MP); stitched panoramas and pixel-shift composites need the option. At
+#: 200 MP a 580 KB PNG or a 4 KB AVIF of 14 000 x 14 000 was accepted and cost 12 s CPU and
+#: 1.3-3.3 GB; a 160 MP photo costs 11-13 s and 2 GB (README, Limits).
+MAX_PIXELS = 160_000_000
 #: The largest ``--max-pixels`` accepted (2^40: beyond it OpenCV's decoder limit, a 64-bit
 #: count it parses, overflowed and aborted the process).
 MAX_PIXELS_LIMIT = 1 << 40
@@ -76,11 +79,27 @@ def node_budget(width: int, height: int, canvas: tuple[int, int], max_memory: in
     Raises ImageError when the images alone exceed the budget."""
     if max_memory is None:
         return None
-    images = width * height * INPUT_PIXEL_BYTES + canvas[0] * canvas[1] * OUTPUT_PIXEL_BYTES
+    images = image_bytes(width, height) + canvas[0] * canvas[1] * OUTPUT_PIXEL_BYTES
     if images >= max_memory:
         raise ImageError(f"a {width}x{height} input warped onto a {canvas[0]}x{canvas[1]} canvas needs about "
                          f"{size_text(images)}, above the memory limit of {size_text(max_memory)} (--max-memory)")
     return int((max_memory - images) // NODE_BYTES)
+
+
+def image_bytes(width: int, height: int) -> int:
+    """Peak bytes a ``width`` x ``height`` input takes once decoded (:data:`INPUT_PIXEL_BYTES`
+    a pixel: the image, its mask, the prefilter pyramid)."""
+    return width * height * INPUT_PIXEL_BYTES
+
+
+def check_memory(width: int, height: int, name: str, max_memory: int | None) -> None:
+    """Raise ImageError, before decoding, if a ``width`` x ``height`` input alone needs more
+    than ``max_memory`` bytes (:func:`image_bytes`; None: no limit). A 4 KB AVIF of 14 000 x
+    14 000 pixels was decoded (3.3 GB) before the memory limit refused it."""
+    if max_memory is not None and image_bytes(width, height) >= max_memory:
+        raise ImageError(f"{name} is {width}x{height}: decoding and warping it needs about "
+                         f"{size_text(image_bytes(width, height))}, above the memory limit of "
+                         f"{size_text(max_memory)} (--max-memory)")
 
 
 def check_pixels(width: int, height: int, name: str, max_pixels: int | None) -> None:
@@ -99,6 +118,21 @@ def check_pixels(width: int, height: int, name: str, max_pixels: int | None) -> 
     if max_pixels is not None and width * height > max_pixels:
         raise ImageError(f"{name} is {width}x{height} = {width * height} pixels, above the limit "
                          f"of {max_pixels} (--max-pixels)")
+
+
+def check_size(width: int, height: int, name: str, max_pixels: int | None, max_memory: int | None) -> None:
+    """What a header's size must pass before decoding: :func:`check_pixels`, :func:`check_memory`."""
+    check_pixels(width, height, name, max_pixels)
+    check_memory(width, height, name, max_memory)
+
+
+def fits(width: int, height: int, max_pixels: int | None, max_memory: int | None) -> bool:
+    """Whether a ``width`` x ``height`` input passes :func:`check_size`."""
+    try:
+        check_size(width, height, "", max_pixels, max_memory)
+    except ImageError:
+        return False
+    return True
 
 
 def limit_opencv_decoders(max_pixels: int | None, replace: bool = True) -> bool:
