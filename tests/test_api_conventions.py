@@ -144,8 +144,8 @@ def test_batch_help_names_the_batch_options():
 NAMED = [
     ("swirl", {"angle": 900}, "angle: 900 is out of range (-540 <= DEG <= 540)",
      "Invalid value for '--angle': 900 is out of range (-540 <= DEG <= 540)"),
-    ("arc", {"where": "lower", "angle": 171}, "angle: 171 is out of range when where is lower (at most 170)",
-     "--angle: 171 is out of range when --where is lower (at most 170)"),
+    ("arc", {"where": "lower", "angle": 171}, "angle: 171 is out of range when where is lower (at most 150)",
+     "--angle: 171 is out of range when --where is lower (at most 150)"),
     ("perspective", {"tl": "60%,60%"}, "tl/tr/br/bl: the quadrilateral is concave at tl",
      "--tl/--tr/--br/--bl: the quadrilateral is concave at --tl"),
     ("cylinder", {"distance": 1.5}, "angle: 120 degrees wraps cylinder too close to its silhouette seen from "

@@ -352,7 +352,7 @@ def test_within_limit_bombs_are_refused_before_decoding(tmp_path, monkeypatch):
 @pytest.mark.parametrize("args,words", [
     (["swirl", "--angle", "720"], ["--angle", "out of range (-540 <= DEG <= 540)"]),
     (["swirl", "--angle", "-720"], ["--angle", "out of range (-540 <= DEG <= 540)"]),
-    (["arc", "--where", "upper", "--angle", "160"], ["--angle", "with --where upper (at most 150)"]),
+    (["arc", "--where", "upper", "--angle", "160"], ["--angle", "out of range when --where is upper (at most 150)"]),
     (["perspective", "--tl", "45%,45%"], ["--tl", "the angle at --tl is 174 degrees (5 to 170)"]),
 ])
 def test_ranges_that_took_too_long_are_usage_errors(tmp_path, scene, args, words):
@@ -380,9 +380,9 @@ def test_a_swirl_too_tight_for_the_grid_is_refused_and_the_tightest_accepted_is_
 
     width, height = size
     swirl = load_warp("swirl")
-    with pytest.raises(ValueError, match=r"^--angle: .* needs a swirl radius of .* use --radius ([0-9.]+) or more") as err:
+    with pytest.raises(ValueError, match=r"^angle: .* needs a swirl radius of .* use radius ([0-9.]+) or more") as err:
         swirl(width, height, angle=angle, radius=0.001)
-    radius = float(re.search(r"use --radius ([0-9.]+)", str(err.value)).group(1))
+    radius = float(re.search(r"use radius ([0-9.]+)", str(err.value)).group(1))
     warp = swirl(width, height, angle=angle, radius=radius)
     cell, error = fidelity.auto_cell(width, height, warp)
     assert fidelity.follows(Grid.for_image(width, height, cell), warp) == (True, error) and error <= 0.5
