@@ -115,12 +115,12 @@ def outline_departure(target: np.ndarray, warped: np.ndarray, nx: int, ny: int):
     if not moved.size:
         return 0.0, None
     starts = warped[ring]
-    ends = np.roll(starts, -1, axis=0)
+    along = np.roll(starts, -1, axis=0) - starts
+    squared = np.maximum(np.sum(along * along, axis=1), 1e-300)
     distance = np.empty(moved.size)
     for chunk in range(0, moved.size, 256):                         # bounded memory: 256 x segments
         p = target[moved[chunk:chunk + 256], None, :]
-        along = ends - starts
-        t = np.clip(np.sum((p - starts) * along, axis=2) / np.maximum(np.sum(along * along, axis=1), 1e-300), 0, 1)
+        t = np.clip(np.sum((p - starts) * along, axis=2) / squared, 0, 1)
         nearest = starts + t[:, :, None] * along
         distance[chunk:chunk + 256] = np.sqrt(np.min(np.sum((p - nearest) ** 2, axis=2), axis=1))
     worst = int(np.argmax(distance))
