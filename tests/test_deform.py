@@ -344,7 +344,7 @@ def test_a_handle_the_border_holds_is_reported():
     sources, targets = [(15, 180), (250, 180)], [(-40, 180), (250, 180)]
     deformer = Deformer(W, H)
     mesh = deformer.solve(handles_for(sources, targets, border="pinned", canvas="input"))
-    assert deformer.warp.values["handle_error_px"]["max"] > 20
+    assert deformer.warp.values["handle_error_px"]["max"] > 10      # 55 px asked beyond a pinned border
     assert any("handle 0" in w and "ends" in w for w in mesh.record.warnings)
 
 

@@ -44,7 +44,7 @@ def counted(session, monkeypatch):
     solve = session.deformer.solve
 
     def counting(handles, mode=None):
-        calls.append(session.deformer.rigid.injective_steps)
+        calls.append(session.deformer.rigid.rigid_steps)
         return solve(handles, mode)
 
     monkeypatch.setattr(session.deformer, "solve", counting)
@@ -98,7 +98,7 @@ def test_a_drag_caps_the_fallback_and_the_release_does_not(counted):
     session, calls = counted
     session.solve(request(20, drag=True))
     session.solve(request(21, drag=False))
-    assert calls == [editor_session.DRAG_INJECTIVE_STEPS, editor_session.EDITOR_INJECTIVE_STEPS]
+    assert calls == [editor_session.DRAG_RIGID_STEPS, editor_session.EDITOR_RIGID_STEPS]
 
 
 @pytest.mark.parametrize("body", [{"seq": -1}, {"seq": 1.5}, {"seq": True}, {"seq": 1, "client": 7},

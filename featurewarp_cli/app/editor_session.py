@@ -5,7 +5,7 @@ Live updates follow a small protocol (issue 23): the page keeps at most one solv
 and numbers its requests (``client``, ``seq``); a request older than the newest one seen
 from its page, on arrival or after waiting for the solver, is answered ``stale`` at once
 without solving, so the newest pointer position always wins. A request marked ``drag``
-caps the rigid map's injective fallback at :data:`DRAG_INJECTIVE_STEPS` (the page sends
+caps the rigid map's Newton steps at :data:`DRAG_RIGID_STEPS` (the page sends
 one unmarked request when the pointer is released, so what stays on screen is the full
 preview).
 """
@@ -33,10 +33,10 @@ from .pipeline import Settings, WarpError, load_image_and_mask, warp_file
 PREVIEW_NODES = 65_000
 #: Longest side of the image the browser gets as its texture (and paints the mask on).
 TEXTURE_SIDE = 4096
-#: The injective fallback's steps per update at most (a drag stays live; Export runs it fully),
-#: and while the pointer is still dragging.
-EDITOR_INJECTIVE_STEPS = 8
-DRAG_INJECTIVE_STEPS = 2
+#: The rigid map's Newton steps per update at most (each warm-started from the last update;
+#: Export runs them to convergence), and while the pointer is still dragging.
+EDITOR_RIGID_STEPS = 8
+DRAG_RIGID_STEPS = 2
 #: The page's mesh densities: the preview cell's factor against the normal one.
 DENSITIES = {"fewer": 2.0, "normal": 1.0, "more": 0.5}
 #: Pages whose newest request number is remembered.
@@ -101,7 +101,7 @@ class EditorSession:
         settings = self.settings
         mask = self.feature_mask if self.feature_mask is not None and self.feature_mask.any() else None
         self.deformer = Deformer(self.width, self.height, mask, quick=True, cell=self.cell,
-                                 injective_steps=EDITOR_INJECTIVE_STEPS, feature_weight=settings.feature_weight,
+                                 rigid_steps=EDITOR_RIGID_STEPS, feature_weight=settings.feature_weight,
                                  decay=settings.decay, scale_prior=settings.scale_prior)
 
     def _mask_image(self) -> np.ndarray:
@@ -121,9 +121,9 @@ class EditorSession:
     def grid(self) -> bytes:
         """The preview grid: node count, triangle count, nodes per row and per column (uint32),
         texture coordinates (float32, 0..1) and triangles (uint32), little-endian."""
-        from ..engine.grid import Grid
+        from ..engine.deform import solve_grid
 
-        grid = Grid.for_image(self.width, self.height, self.cell)
+        grid = solve_grid(self.width, self.height, self.cell)
         nodes = grid.nodes()
         uv = np.stack([(nodes[:, 0] + 0.5) / self.width, (nodes[:, 1] + 0.5) / self.height], axis=1)
         triangles = grid.triangles()
@@ -145,8 +145,8 @@ class EditorSession:
         with self.lock:
             if self._superseded(ticket):            # a newer request came while this one waited
                 return {"stale": True, "seq": ticket[1]}, b""
-            self.deformer.rigid.injective_steps = DRAG_INJECTIVE_STEPS if body.get("drag") is True \
-                else EDITOR_INJECTIVE_STEPS
+            self.deformer.rigid.rigid_steps = DRAG_RIGID_STEPS if body.get("drag") is True \
+                else EDITOR_RIGID_STEPS
             t0 = time.perf_counter()
             mesh = self.deformer.solve(handles, mode)
             seconds = time.perf_counter() - t0

@@ -1,43 +1,28 @@
 """As-rigid-as-possible deformation of the grid from positional handles (the paper's
 interactive mode, section 3).
 
-The method is the two-step one of Igarashi, Moscovich and Hughes (2005), "As-rigid-
-as-possible shape manipulation", on the grid's triangles:
+The map is the minimum of one energy (:mod:`featurewarp_cli.engine.rigid_energy`):
+converged as-rigid-as-possible (Sorkine and Alexa 2007) with an area barrier that keeps
+every triangle the right way round, the handles as heavily weighted penalty rows. The
+triangles' rest size is 1 (a squash does not shrink the direction it leaves alone), or the
+handles' own scale where one similarity explains the handles (:func:`rest_scale`), so
+handles that describe a similarity give exactly that similarity.
 
-1. *similarity step*: each triangle keeps its shape up to a similarity. For every
-   triangle and each of its vertices, the vertex is written in the frame of the
-   opposite edge (``v_k = v_i + x (v_j - v_i) + y R90 (v_j - v_i)``, with x, y from the
-   source); the squared error of these equations is a quadratic energy in the node
-   positions, zero exactly for similarities. With the handles as heavily weighted
-   penalty rows it is one sparse least-squares system in (x, y) together.
-2. *rigid step*: each triangle's closest similarity to its step-1 image gives it a
-   rotation; the triangle's edges are asked to be the source edges rotated so and
-   scaled by the handles' overall scale ``s`` (the scale of the similarity that best
-   fits the handles); one Laplacian system per axis.
-
-Both matrices depend on the grid and on where the handles sit in the source, never on
-where they are dragged: they are factored once per handle set, and moving a handle costs
-back-substitutions and a per-triangle fit (what made the paper's editing interactive).
-Igarashi's method was chosen over Sorkine and Alexa's local/global ARAP for that reason:
-it is two linear solves with fixed matrices, no iteration to convergence, so an update
-takes a bounded, small time. Handles that describe one similarity give exactly that
-similarity: its energy is zero in both steps (step 2's triangles are asked to be the
-source scaled by ``s``, the handles' own scale, instead of Igarashi's scale 1).
+Its Newton minimiser starts from an injective map near the answer: the caller's last
+result while a handle is dragged, else Igarashi, Moscovich and Hughes' (2005) similarity
+step (each triangle keeps its shape up to a similarity: for each triangle and vertex, the
+vertex written in the frame of the opposite edge, ``v_k = v_i + x (v_j - v_i) + y R90 (v_j -
+v_i)``; one sparse least-squares system, factored once per handle set) followed by a few
+local/global iterations (one back-substitution each), the last of them that folds nothing.
 
 Handles are points anywhere in the image, tied to the grid by barycentric coordinates in
 the triangle that holds them. A point handle of a Puppet-Warp kind holds a small disc
 (``radius``) rather than a point: a pull on one point of a triangle mesh concentrates the
 strain on the triangles around it (the displacement of a point force decays only as log r)
 and folds them at drags of a few cells; a disc spreads it. The disc moves as the handle,
-turned and scaled by the handles' overall similarity, so a similarity stays exact.
-
-When the two-step result still folds (handles dragged across each other, or far towards a
-pin), the map is found again by scalable locally injective mapping (SLIM, Rabinovich et al.
-2017) started from an injective map (the handles' best similarity, or the caller's last
-result): the symmetric Dirichlet energy, infinite at a flip, lowered by reweighted least
-squares with a line search cut short before the first flip (:func:`injectivity.max_step`).
-No triangle of the result folds; the handles are then held only as far as the image can
-follow.
+turned and scaled by the handles' overall similarity, so a similarity stays exact. Where
+the handles ask for a fold (dragged across each other, or far towards a pin), the barrier
+holds the triangles and the handles are held only as far as the image can follow.
 """
 
 from __future__ import annotations
@@ -46,7 +31,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .grid import Grid, signed_areas
-from .injectivity import max_step
+from . import rigid_energy
 from .solver import spd_solver
 
 #: Weight of a handle's penalty row against one triangle's shape equations: the handles
@@ -55,10 +40,11 @@ HANDLE_WEIGHT = 1e4
 #: Samples of a disc handle: its centre and two rings of this many points (at half and
 #: full radius).
 DISC_POINTS = 8
-#: Iterations of the injective fallback at most, and the relative decrease of its energy
-#: below which it stops.
-INJECTIVE_STEPS = 100
-SLIM_TOLERANCE = 1e-4
+#: Local/global iterations (Sorkine and Alexa 2007) that make the Newton minimiser's start.
+GUESS_STEPS = 10
+#: How far from one similarity the handles may be (their fit's residual against their
+#: spread) before the triangles' rest size is 1 instead of the handles' scale.
+SIMILARITY_RESIDUAL = 0.01
 
 
 def embed(grid: Grid, points: np.ndarray) -> sp.csr_matrix:
@@ -135,6 +121,27 @@ def similarity_fit(sources: np.ndarray, targets: np.ndarray) -> tuple[float, flo
     return (float(np.sum(p * q)) / spread, float(np.sum(p[:, 0] * q[:, 1] - p[:, 1] * q[:, 0])) / spread)
 
 
+def rest_scale(sources: np.ndarray, targets: np.ndarray) -> float:
+    """The size the rigid map asks of every triangle: the handles' scale ``s`` where a
+    similarity explains them, 1 where it does not, and ``s ** c`` between.
+
+    ``c = (1 - rho / SIMILARITY_RESIDUAL) ** 2`` (0 beyond), with ``rho`` the residual of the
+    handles' best similarity against the targets' spread: handles that scale the image
+    uniformly scale it exactly, while a squash does not shrink the direction it leaves alone
+    (a rest size of ``s`` would: a half-width squash fits ``s`` = 0.63). It is a continuous
+    function of the handles, so no drag flips it."""
+    a, b = similarity_fit(sources, targets)
+    scale = float(np.hypot(a, b))
+    spread = float(np.sum((targets - targets.mean(axis=0)) ** 2))
+    if not (scale > 0 and spread > 0):
+        return 1.0
+    turn = np.array([[a, -b], [b, a]])
+    shift = targets.mean(axis=0) - sources.mean(axis=0) @ turn.T
+    residual = float(np.sum((sources @ turn.T + shift - targets) ** 2)) / spread
+    weight = max(0.0, 1.0 - residual / SIMILARITY_RESIDUAL) ** 2
+    return scale ** weight
+
+
 def _disc_offsets(radius: np.ndarray) -> np.ndarray:
     """(K, 1 + 2 DISC_POINTS, 2) sample offsets of each handle's disc (all zero for radius 0)."""
     angle = np.arange(DISC_POINTS) * (2.0 * np.pi / DISC_POINTS)
@@ -190,73 +197,70 @@ class RigidDeformer:
         self._source_edges = np.asarray(self._edges @ self.nodes).reshape(-1, 3, 2)
         corners = self.nodes[self.triangles]
         self._centred_source = corners - corners.mean(axis=1, keepdims=True)
-        #: Local/global steps the last :meth:`deform` took to stay injective (0: none needed).
-        self.injective_steps = 0
+        #: Newton steps the last :meth:`deform` took, and whether it converged.
+        self.newton_steps, self.converged = 0, True
+        self._rigid_energy = None
 
     def deform(self, targets: np.ndarray, start: np.ndarray | None = None, steps: int | None = None) -> np.ndarray:
         """Node positions (N, 2) that carry the handles to ``targets`` (K, 2) as rigidly as
-        possible, without a fold.
+        possible, without a fold: the minimum of :mod:`rigid_energy`'s energy.
 
         ``start``: an injective map (N, 2) close to the answer (the last one, while a handle
-        is dragged) for the injective fallback; default: the handles' best similarity.
-        ``steps``: the fallback's iterations at most (default :data:`INJECTIVE_STEPS`)."""
+        is dragged) to start from instead of the similarity step. ``steps``: Newton steps at
+        most (default :data:`rigid_energy.MAX_STEPS`)."""
         targets = np.asarray(targets, dtype=np.float64).reshape(self.sources.shape)
         a, b = similarity_fit(self.sources, targets)
         turn = np.array([[a, -b], [b, a]])
+        scale = rest_scale(self.sources, targets)
         samples = (targets[:, None, :] + self.offsets @ turn.T).reshape(-1, 2)
+        if start is None or not np.all(signed_areas(start, self.triangles) > 0):
+            start = self._first_guess(samples, turn, targets, scale)
+        energy = self._energy(scale)
+        root = np.sqrt(self.weight / self.offsets.shape[1])
+        x, self.newton_steps, self.converged = rigid_energy.minimise(energy, start, samples * root,
+                                                                      steps or rigid_energy.MAX_STEPS)
+        return x
+
+    def _energy(self, scale: float) -> rigid_energy.RigidEnergy:
+        """The energy for triangles of rest size ``scale`` (built once per handle set)."""
+        if self._rigid_energy is None:
+            root = np.sqrt(self.weight / self.offsets.shape[1])
+            self._rigid_energy = rigid_energy.RigidEnergy(self.nodes, self.triangles, self.embedding * root)
+        self._rigid_energy.rescale(scale)
+        return self._rigid_energy
+
+    def _first_guess(self, samples: np.ndarray, turn: np.ndarray, targets: np.ndarray, scale: float) -> np.ndarray:
+        """An injective start near the answer: Igarashi's similarity step, then local/global
+        iterations (:data:`GUESS_STEPS`), the last of these that folds nothing; the handles'
+        best similarity where all fold."""
         pulled = (self.embedding.T @ samples) * (self.weight / self.offsets.shape[1])
         first = self._step1(np.concatenate([pulled[:, 0], pulled[:, 1]]))
         n = self.grid.n_nodes
-        x = self._rigid_step(np.stack([first[:n], first[n:]], axis=1), np.hypot(a, b), pulled)
-        self.injective_steps = 0
-        if np.all(signed_areas(x, self.triangles) > 0):
-            return x
-        if start is None or not np.all(signed_areas(start, self.triangles) > 0):
-            centre_s, centre_t = self.sources.mean(axis=0), targets.mean(axis=0)
-            start = (self.nodes - centre_s) @ turn.T + centre_t
-            if not (a * a + b * b > 0):
-                start = self.nodes + (centre_t - centre_s)
-        return self._injective(start, np.hypot(a, b) or 1.0, samples, steps or INJECTIVE_STEPS)
+        x = np.stack([first[:n], first[n:]], axis=1)
+        best = None
+        for _ in range(GUESS_STEPS + 1):
+            if np.all(signed_areas(x, self.triangles) > 0):
+                best = x
+            x = np.asarray(self._step2(self._edges.T @ self._wanted(x, scale).reshape(-1, 2) + pulled))
+        if best is not None:
+            return best
+        centre_s, centre_t = self.sources.mean(axis=0), targets.mean(axis=0)
+        if not (turn[0, 0] ** 2 + turn[1, 0] ** 2 > 0):
+            return self.nodes + (centre_t - centre_s)
+        return (self.nodes - centre_s) @ turn.T + centre_t
+
+    def _wanted(self, positions: np.ndarray, scale: float) -> np.ndarray:
+        """(M, 3, 2) source edges of each triangle turned by its closest rotation to ``positions``
+        and scaled by ``scale``."""
+        angle = self._rotations(positions)
+        c, s = np.cos(angle)[:, None], np.sin(angle)[:, None]
+        src = self._source_edges
+        return scale * np.stack([c * src[..., 0] - s * src[..., 1], s * src[..., 0] + c * src[..., 1]], axis=-1)
 
     def centres(self, nodes: np.ndarray) -> np.ndarray:
         """Where the handles' centres are under the node positions ``nodes``: (K, 2)."""
         centre = self.embedding[:: self.offsets.shape[1]]
         return np.asarray(centre @ nodes)
-
-    def _rigid_step(self, positions: np.ndarray, scale: float, pulled: np.ndarray) -> np.ndarray:
-        """Step 2: the triangles rotated as in ``positions``, scaled by ``scale``, joined."""
-        angle = self._rotations(positions)
-        c, s = np.cos(angle)[:, None], np.sin(angle)[:, None]
-        src = self._source_edges
-        wanted = scale * np.stack([c * src[..., 0] - s * src[..., 1], s * src[..., 0] + c * src[..., 1]], axis=-1)
-        return np.asarray(self._step2(self._edges.T @ wanted.reshape(-1, 2) + pulled))
-
-    def _injective(self, x: np.ndarray, scale: float, samples: np.ndarray, steps: int) -> np.ndarray:
-        """Scalable locally injective mapping (Rabinovich et al. 2017) from the injective ``x``:
-        the symmetric Dirichlet energy of each triangle against its source scaled by ``scale``
-        (infinite at a flip) plus the handles' penalty, lowered by reweighted least squares
-        with a line search that stops short of the first flip."""
-        rest = self.nodes * scale
-        grads, areas = _basis_gradients(rest, self.triangles)
-        root = np.sqrt(self.weight / self.offsets.shape[1])
-        penalty_rows, targets = (self.embedding * root).tocsr(), samples * root
-        energy = _slim_energy(x, self.triangles, grads, areas, penalty_rows, targets)
-        for step in range(1, steps + 1):
-            proposal = _slim_step(x, self.triangles, grads, areas, penalty_rows, targets)
-            t = min(1.0, 0.9 * max_step(x, proposal, self.triangles))
-            while t > 1e-6:
-                trial = x + t * (proposal - x)
-                trial_energy = _slim_energy(trial, self.triangles, grads, areas, penalty_rows, targets)
-                if trial_energy <= energy:
-                    break
-                t *= 0.5
-            self.injective_steps = step
-            if t <= 1e-6 or energy - trial_energy <= SLIM_TOLERANCE * energy:
-                if t > 1e-6:
-                    x = trial
-                break
-            x, energy = trial, trial_energy
-        return x
 
     def _rotations(self, positions: np.ndarray) -> np.ndarray:
         """Angle of each triangle's closest similarity from the source to ``positions``."""
@@ -266,72 +270,3 @@ class RigidDeformer:
         dot = np.sum(p * q, axis=(1, 2))
         cross = np.sum(p[..., 0] * q[..., 1] - p[..., 1] * q[..., 0], axis=1)
         return np.arctan2(cross, dot)
-
-
-def _basis_gradients(rest: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Gradients (M, 3, 2) of each triangle's barycentric basis functions on ``rest``, and
-    the triangles' areas (M,): the Jacobian of a map is sum_k q_k g_k^T."""
-    p = rest[triangles]
-    e1, e2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
-    det = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
-    inverse = np.stack([np.stack([e2[:, 1], -e2[:, 0]], -1), np.stack([-e1[:, 1], e1[:, 0]], -1)], 1) / det[:, None, None]
-    g1, g2 = inverse[:, 0], inverse[:, 1]          # rows of [e1 e2]^-1: gradients of basis 1 and 2
-    return np.stack([-g1 - g2, g1, g2], axis=1), 0.5 * det
-
-
-def _jacobians(x: np.ndarray, triangles: np.ndarray, grads: np.ndarray) -> np.ndarray:
-    """(M, 2, 2) Jacobian of the piecewise-linear map with node images ``x``."""
-    return np.einsum("mki,mkj->mij", x[triangles], grads)
-
-
-def _slim_energy(x, triangles, grads, areas, penalty_rows, targets) -> float:
-    """Symmetric Dirichlet energy plus the handles' penalty |P x - targets|^2 (inf where a
-    triangle flips)."""
-    jac = _jacobians(x, triangles, grads)
-    det = jac[:, 0, 0] * jac[:, 1, 1] - jac[:, 0, 1] * jac[:, 1, 0]
-    if np.any(det <= 0):
-        return np.inf
-    frob = np.sum(jac * jac, axis=(1, 2))
-    residual = penalty_rows @ x - targets
-    return float(np.sum(areas * (frob + frob / (det * det))) + np.sum(residual * residual))
-
-
-def _slim_weights(jac: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """SLIM's per-triangle weight W = U diag(w(sigma)) U^T and target W R for Jacobians ``jac``
-    (M, 2, 2) with a positive determinant, from the closed-form 2x2 SVD J = U(phi) S U(theta)
-    (the closest rotation R is the rotation by phi + theta)."""
-    e = (jac[:, 0, 0] + jac[:, 1, 1]) / 2
-    f = (jac[:, 0, 0] - jac[:, 1, 1]) / 2
-    g = (jac[:, 1, 0] + jac[:, 0, 1]) / 2
-    h = (jac[:, 1, 0] - jac[:, 0, 1]) / 2
-    q, r = np.hypot(e, h), np.hypot(f, g)
-    sigma = np.maximum(np.stack([q + r, q - r], axis=1), 1e-8)
-    turn, spread = np.arctan2(h, e), np.arctan2(g, f)
-    phi = (turn + spread) / 2
-    w = np.sqrt((sigma + 1) * (sigma * sigma + 1) / sigma ** 3)        # symmetric Dirichlet's reweighting
-    c, s = np.cos(phi), np.sin(phi)
-    weight = np.empty_like(jac)
-    weight[:, 0, 0] = w[:, 0] * c * c + w[:, 1] * s * s
-    weight[:, 1, 1] = w[:, 0] * s * s + w[:, 1] * c * c
-    weight[:, 0, 1] = weight[:, 1, 0] = (w[:, 0] - w[:, 1]) * c * s
-    rc, rs = np.cos(turn), np.sin(turn)
-    rotation = np.stack([np.stack([rc, -rs], -1), np.stack([rs, rc], -1)], -2)
-    return weight, weight @ rotation
-
-
-def _slim_step(x, triangles, grads, areas, penalty_rows, targets) -> np.ndarray:
-    """The reweighted least-squares proposal of one SLIM iteration."""
-    weight, target = _slim_weights(_jacobians(x, triangles, grads))
-    m, n = len(triangles), len(x)
-    # rows (triangle, column c, output i): sum_k g_k[c] (W[i,0] x_k + W[i,1] y_k) = (W R)[i, c]
-    root = np.sqrt(areas)
-    coef = np.einsum("mkc,mij->mcikj", grads, weight) * root[:, None, None, None, None]   # (M, 2, 2, 3, 2)
-    rows = np.broadcast_to(np.arange(4 * m).reshape(m, 2, 2, 1, 1), coef.shape)
-    cols = np.broadcast_to(triangles[:, None, None, :, None] + n * np.arange(2)[None, None, None, None, :], coef.shape)
-    shape_rows = sp.csr_matrix((coef.ravel(), (rows.ravel(), cols.ravel())), shape=(4 * m, 2 * n))
-    rhs_shape = (np.transpose(target, (0, 2, 1)) * root[:, None, None]).ravel()
-    pen = sp.block_diag([penalty_rows, penalty_rows]).tocsr()
-    rhs_pen = np.concatenate([targets[:, 0], targets[:, 1]])
-    normal = (shape_rows.T @ shape_rows + pen.T @ pen).tocsc()
-    solution = spd_solver(normal)(shape_rows.T @ rhs_shape + pen.T @ rhs_pen)
-    return np.stack([solution[:n], solution[n:]], axis=1)

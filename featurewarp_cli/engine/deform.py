@@ -30,8 +30,8 @@ import math
 import numpy as np
 
 from .arap import RigidDeformer, embed, similarity_fit
-from .defaults import MODE
-from .grid import Grid, grid_shape, signed_areas
+from .defaults import DECAY, MODE
+from .grid import Grid, grid_for, grid_shape, signed_areas
 from .injectivity import border_crossings
 from .handles import Handles, default_radius, resample
 from .mesh import Mesh
@@ -58,6 +58,11 @@ def handle_slack(width: int, height: int) -> float:
 def rigid_grid(width: int, height: int) -> Grid:
     """The coarse grid of the rigid map: about :data:`RIGID_NODES` nodes, cells of 4 px or more."""
     return Grid.for_image(width, height, max(4.0, math.sqrt(width * height / RIGID_NODES)))
+
+
+def solve_grid(width: int, height: int, cell: float) -> Grid:
+    """The grid a handles solve of about ``cell``-pixel cells uses: the rigid grid refined."""
+    return grid_for(width, height, cell, rigid_grid(width, height))
 
 
 class HandleWarp:
@@ -98,7 +103,10 @@ class HandleWarp:
         self._embeddings = {} if embeddings is None else embeddings
         self.notes = []
         self.handles = None
-        self.capped = False                 # the injective fallback stopped at its cap
+        #: The map is linear on this grid's triangles: a solve refines it (:func:`grid.grid_for`),
+        #: so that no triangle straddles two of the map's and W folds none.
+        self.lattice = grid
+        self.capped = False                 # the rigid map stopped at its step cap, not converged
 
     def review(self, mesh: Mesh, quick: bool = False) -> list[str]:
         """Warnings on the solved ``mesh`` of these handles (also kept in ``values`` for the
@@ -107,8 +115,8 @@ class HandleWarp:
         (the editor's live updates) notes a fold fallback cut short."""
         warnings = list(self.notes)
         if quick and self.capped:
-            warnings.append("preview: the unfolding was cut short to stay live; Export finishes it "
-                            "(and may differ)")
+            warnings.append("preview: the rigid map was not run to convergence to stay live; Export "
+                            "finishes it (and may differ)")
         mesh.crossings = border_crossings(mesh.source, mesh.target)
         if mesh.crossings:
             warnings.append(f"the handles lay the image over itself (its border crosses itself "
@@ -188,16 +196,16 @@ class RigidMap:
     ----------
     width, height : int
         Source image size.
-    injective_steps : int, optional
-        Cap on the injective fallback's iterations (default :data:`arap.INJECTIVE_STEPS`).
+    rigid_steps : int, optional
+        Cap on the rigid map's Newton steps (default :data:`rigid_energy.MAX_STEPS`).
     mask : (height, width) bool ndarray, optional
         The feature mask: a point handle on a feature carries the whole feature (see
         :func:`carried_features`).
     """
 
-    def __init__(self, width: int, height: int, injective_steps: int | None = None, mask=None):
+    def __init__(self, width: int, height: int, rigid_steps: int | None = None, mask=None):
         self.width, self.height = int(width), int(height)
-        self.injective_steps = injective_steps
+        self.rigid_steps = rigid_steps
         self.grid = rigid_grid(width, height)
         self.labels = None
         if mask is not None and np.any(mask):
@@ -217,29 +225,27 @@ class RigidMap:
         sources, targets, radii = handles.constraints(self.grid, radius)
         if self.labels is not None and len(handles.points_from):
             sources, targets, radii = carried_features(self.labels, self.grid.nodes(), handles, sources, targets,
-                                                       radii)
+                                                       radii, DECAY * max(self.grid.spacing))
         key = (sources.tobytes(), radii.tobytes())
         if key != self._key:
             self.rigid = RigidDeformer(self.grid, sources, radii)
             self._key, self._last = key, None
-        nodes = self.rigid.deform(targets, start=self._last, steps=self.injective_steps)
+        nodes = self.rigid.deform(targets, start=self._last, steps=self.rigid_steps)
         self._last = nodes
         values = {"points": len(handles.points_from), "curves": len(handles.curves),
                   "border": handles.border if isinstance(handles.border, str) else sorted(handles.border),
                   "canvas": handles.canvas, "radius": radius}
         warp = HandleWarp(self.width, self.height, self.grid, nodes, handles.canvas, values, self._embeddings)
         warp.notes, warp.handles = list(handles.notes), handles
-        steps = self.rigid.injective_steps
-        if steps:
-            held = np.hypot(*(self.rigid.centres(nodes) - targets).T).max()
-            warp.capped = bool(self.injective_steps and steps >= self.injective_steps)
-            if held > handle_slack(self.width, self.height):
-                warp.notes.append(f"the handles ask for a fold; they are held as far as the image can follow "
-                                  f"without one (up to {held:.0f} px from their targets)")
+        warp.capped = not self.rigid.converged
+        held = np.hypot(*(self.rigid.centres(nodes) - targets).T).max()
+        if held > handle_slack(self.width, self.height):
+            warp.notes.append(f"the handles ask for a fold; they are held as far as the image can follow "
+                              f"without one (up to {held:.0f} px from their targets)")
         return warp
 
 
-def carried_features(labels, nodes, handles: Handles, sources, targets, radii):
+def carried_features(labels, nodes, handles: Handles, sources, targets, radii, band: float = 0.0):
     """The constraints with every point handle that sits on a feature replaced by that feature.
 
     Dragging a point of a face moves the face: the nodes of the rigid grid inside the
@@ -247,18 +253,24 @@ def carried_features(labels, nodes, handles: Handles, sources, targets, radii):
     it (with one handle: the handles' overall rotation, or the handle's own angle, and scale,
     and that handle's translation), so the feature-aware solve, which keeps features as
     similarities of W, keeps the handle where it was dragged. Point handles come first in
-    ``sources`` (as :meth:`Handles.constraints` orders them).
+    ``sources`` (as :meth:`Handles.constraints` orders them). The nodes within ``band`` px
+    of the feature move with it too: the feature-aware solve asks its transition band (the
+    paper's rho cells around a feature) to be the feature's similarity, and a band that W
+    compresses instead pulls the feature off the handle (by about the band's width).
     """
+    import cv2
+
     h, w = labels.shape
     at = np.clip(np.rint(handles.points_from).astype(int), 0, [w - 1, h - 1])
     on = labels[at[:, 1], at[:, 0]]
     node_at = np.clip(np.rint(nodes).astype(int), 0, [w - 1, h - 1])
-    node_label = labels[node_at[:, 1], node_at[:, 0]]
     overall = similarity_fit(sources, targets)
     keep = np.ones(len(sources), bool)
     extra_sources, extra_targets = [], []
     for label in np.unique(on[on > 0]):
-        inside = nodes[node_label == label]
+        outside = np.ascontiguousarray(labels != label, dtype=np.uint8)
+        distance = cv2.distanceTransform(outside, cv2.DIST_L2, 5) if band > 0 else outside.astype(np.float32)
+        inside = nodes[distance[node_at[:, 1], node_at[:, 0]] <= band]
         held = np.flatnonzero(on == label)
         if len(inside) < 3:
             continue
@@ -290,8 +302,8 @@ class Deformer:
     mode : {'similarity', 'rigid', 'plain'}
     quick : bool
         Skip what an interactive update can do without (see :meth:`FeatureWarper.solve`).
-    injective_steps : int, optional
-        Cap on the rigid map's injective fallback per update (see :class:`RigidMap`).
+    rigid_steps : int, optional
+        Cap on the rigid map's Newton steps per update (see :class:`RigidMap`).
     **options
         :class:`FeatureWarper` options (cell, feature_weight, decay, scale_prior, max_nodes, ...).
 
@@ -304,11 +316,11 @@ class Deformer:
     """
 
     def __init__(self, width: int, height: int, mask: np.ndarray | None = None, *, mode: str = MODE,
-                 quick: bool = False, injective_steps: int | None = None, **options):
+                 quick: bool = False, rigid_steps: int | None = None, **options):
         self.mode = mode
         self.quick = quick
         self.warper = FeatureWarper(width, height, mask, **options)         # the border: HandleWarp.boundary
-        self.rigid = RigidMap(width, height, injective_steps, self.warper.mask)
+        self.rigid = RigidMap(width, height, rigid_steps, self.warper.mask)
         self.handles = None
         self.warp = None
 

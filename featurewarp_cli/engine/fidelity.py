@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from .grid import Grid
+from .grid import Grid, grid_for
 
 #: Largest piecewise-linear deviation from the warp the automatic cell allows, in pixels.
 MAX_PL_ERROR = 0.5
@@ -152,12 +152,13 @@ def auto_cell(width: int, height: int, warp=None) -> tuple[float, float]:
     if warp is None:
         return cell, float("nan")
     smallest = min(_cell_for_nodes(width, height, MAX_NODES), cell)
-    ok, error = follows(Grid.for_image(width, height, cell), warp)
+    lattice = getattr(warp, "lattice", None)
+    ok, error = follows(grid_for(width, height, cell, lattice), warp)
     while not ok and cell / math.sqrt(2.0) >= smallest:
         # The error scales with the cell's square: skip rungs that cannot suffice.
         rungs = max(1, math.floor(math.log(max(error, 1e-9) / MAX_PL_ERROR, 2.0)))
         cell = max(cell / math.sqrt(2.0) ** rungs, smallest)
-        ok, error = follows(Grid.for_image(width, height, cell), warp)
+        ok, error = follows(grid_for(width, height, cell, lattice), warp)
     return cell, error
 
 

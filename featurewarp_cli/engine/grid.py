@@ -37,6 +37,16 @@ class Grid:
         ny = max(1, round(height / cell)) + 1
         return cls(int(width), int(height), int(cell), nx, ny)
 
+    def refined(self, k: int) -> "Grid":
+        """This grid with every cell cut into ``k`` x ``k``: its nodes are among the result's,
+        and each triangle of the result lies inside one of this grid's triangles (both cut
+        their quads along the same diagonal), so a map that is linear on this grid's
+        triangles is linear on each of the result's, and folds none of them where it folds
+        none of these."""
+        k = max(1, int(k))
+        return Grid(self.width, self.height, max(1, round(min(self.spacing) / k)),
+                    (self.nx - 1) * k + 1, (self.ny - 1) * k + 1)
+
     @property
     def spacing(self) -> tuple[float, float]:
         """Cell width and height in pixels."""
@@ -82,6 +92,15 @@ class Grid:
         rows = np.minimum(((np.arange(self.height) + 0.5) * qy / self.height).astype(int), qy - 1)
         cols = np.minimum(((np.arange(self.width) + 0.5) * qx / self.width).astype(int), qx - 1)
         return rows, cols
+
+
+def grid_for(width: int, height: int, cell: float, lattice: Grid | None = None) -> Grid:
+    """The grid of about ``cell``-pixel cells over a ``width`` x ``height`` image; where
+    ``lattice`` is given (a warp that is linear on that grid's triangles, as the rigid map of
+    handles), its refinement (:meth:`Grid.refined`) whose cells come closest to ``cell``."""
+    if lattice is None:
+        return Grid.for_image(width, height, cell)
+    return lattice.refined(max(1, round(max(lattice.spacing) / cell)))
 
 
 def grid_shape(nodes: np.ndarray) -> tuple[int, int]:

@@ -46,7 +46,7 @@ from . import arrays, components, fidelity, guard, scale_search, system, targets
 from . import features as feat
 from .defaults import (BOUNDARIES, DECAY, DECAY_PARAM, FEATURE_WEIGHT, FEATURE_WEIGHT_PARAM, FORMULATION,
                        FORMULATIONS, INTERPOLATION, MODE, MODES, SCALE_PRIOR, SCALE_PRIOR_PARAM)
-from .grid import Grid, signed_areas
+from .grid import Grid, grid_for, signed_areas
 from .mesh import Mesh
 from .assess import assess
 from .record import SolveRecord
@@ -271,9 +271,9 @@ class FeatureWarper:
             fidelity.check_budget(self.width, self.height, cell, self.max_nodes)
         else:
             cell = float(self.cell)
-            error = fidelity.pl_error(Grid.for_image(self.width, self.height, cell), warp)
+            error = fidelity.pl_error(grid_for(self.width, self.height, cell, getattr(warp, "lattice", None)), warp)
         boundary = self.boundary or getattr(warp, "boundary", "fixed")
-        grid = Grid.for_image(self.width, self.height, cell)
+        grid = grid_for(self.width, self.height, cell, getattr(warp, "lattice", None))
         warped = warp(grid.nodes())
         state = self._state(grid, warped, boundary)
         self.timings["grid"] = time.perf_counter() - t0

@@ -9,14 +9,18 @@ const toScreen = (p) => [p[0] * app.view.scale + app.view.ox, p[1] * app.view.sc
 const onStage = (e) => { const r = overlay.getBoundingClientRect(); return [e.clientX - r.left, e.clientY - r.top]; };
 const toWorld = (e) => { const [x, y] = onStage(e); return [(x - app.view.ox) / app.view.scale, (y - app.view.oy) / app.view.scale]; };
 
-function growView() {      // keep the whole deformed image in view (never shrink while editing)
+function growView() {      // keep the whole deformed image in view (never shrink while editing);
+  // while a handle is dragged the view stays put (the pointer keeps its place on the image), and
+  // fits once the gesture has ended
   const v = app.view, p = app.positions;
-  let grown = false;
+  let grown = !!v.refit;
   for (let i = 0; i < p.length; i += 2) {
     if (p[i] < v.x0) { v.x0 = p[i] - 20; grown = true; } if (p[i] > v.x1) { v.x1 = p[i] + 20; grown = true; }
     if (p[i + 1] < v.y0) { v.y0 = p[i + 1] - 20; grown = true; } if (p[i + 1] > v.y1) { v.y1 = p[i + 1] + 20; grown = true; }
   }
-  if (grown && !v.user) fitView();
+  const gesture = app.drag || app.turning || app.drawing || app.box;
+  v.refit = grown && !v.user && !!gesture;
+  if (grown && !v.user && !gesture) fitView();
 }
 
 function zoomAt(x, y, factor) {     // zoom by factor around the screen point (x, y)
