@@ -24,6 +24,8 @@ magick    ImageMagick's plain equivalents on the same files, each run right afte
           ratios ours / ImageMagick.
 deform    Issue 11's interactive case (benchmarks/deform_case.py): one of 10 handles moving
           on the 1 MP photo through the API's quick Deformer, median of 10 updates.
+rigid     Issue 23's rigid map against libigl's converged ARAP (benchmarks/rigidity.py):
+          seven handle sets at 512 x 384; area ratio, rigidity, folds, Newton steps.
 drag      Issue 23's recorded drags (benchmarks/editor_drag.py): three 1-second drags at 60
           pointer events a second through a ``featurewarp edit`` server on the 1 MP photo,
           one solve in flight as the page keeps it; update p50/p95/max and the settle time.
@@ -73,7 +75,7 @@ from benchmarks.hard_cases import bench_hard  # noqa: E402
 from benchmarks.inputs import make_photos  # noqa: E402
 from samples.scenes import disc_mask  # noqa: E402
 
-SECTIONS = ("table1", "render", "rewarp", "deform", "drag", "commands", "magick", "hard", "stability", "cluster")
+SECTIONS = ("table1", "render", "rewarp", "deform", "rigid", "drag", "commands", "magick", "hard", "stability", "cluster")
 
 #: The paper's Table 1 (Pentium 4, 3.2 GHz): setup, factor, rhs setup, solve in seconds.
 PAPER_TABLE1 = {
@@ -418,6 +420,10 @@ def main(argv=None) -> int:
             from benchmarks.deform_case import bench_deform
 
             report["deform"] = bench_deform(runs, *photos["1MP"], median)
+        if "rigid" in sections:
+            from benchmarks.rigidity import bench_rigid
+
+            report["rigid"] = bench_rigid()
         if "drag" in sections:
             from benchmarks.editor_drag import bench_drag
 

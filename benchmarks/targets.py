@@ -16,6 +16,10 @@ REWARP_1MP_S = 0.15              # API: re-solve + re-render 1 MP with new param
 CLUSTER_OVERHEAD = 0.15         # issue 25: 2 local Dask workers against the fastest of batch -j 2 / make -j 2
 STABLE_NODE_PX = 0.01           # issue 21: largest node move under a one-ulp nudge of W
 DEFORM_1MP_S = 0.05              # API: one of 10 handles moved on 1 MP (quick Deformer), both factorizations reused
+RIGIDITY_RATIO = 1.2             # issue 23: rigid map's rigidity error / libigl's ARAP, where libigl folds nothing
+AREA_DEVIATION = 0.05            # issue 23: |area ratio / libigl's - 1|, the same cases
+DRAG_P95_S = 0.15                # issue 23: recorded drags at 1 MP, update p95
+DRAG_MAX_S = 0.5                 #           and the slowest update
 
 
 def _row(name, value, limit, unit="s"):
@@ -41,6 +45,16 @@ def evaluate(report: dict) -> list[dict]:
     deform = report.get("deform")
     if deform:
         rows.append(_row("1 MP deform update, 10 handles (API)", deform["median_s"], DEFORM_1MP_S))
+    for name, r in report.get("rigid", {}).items():
+        if r["libigl"]["folds"] == 0:
+            rows.append(_row(f"rigid map '{name}': rigidity / libigl's ARAP",
+                             r["ours"]["rigidity"] / r["libigl"]["rigidity"], RIGIDITY_RATIO, "x"))
+            rows.append(_row(f"rigid map '{name}': area off libigl's",
+                             abs(r["ours"]["area_ratio"] / r["libigl"]["area_ratio"] - 1), AREA_DEVIATION, ""))
+    for name, r in report.get("drag", {}).items():
+        if isinstance(r, dict) and "p95_s" in r:
+            rows.append(_row(f"drag '{name}' at 1 MP: update p95", r["p95_s"], DRAG_P95_S))
+            rows.append(_row(f"drag '{name}' at 1 MP: slowest update", r["max_s"], DRAG_MAX_S))
     commands = report.get("commands", {})
     for name, r in commands.get("startup", {}).items():
         rows.append(_row(f"featurewarp {name} start-up", r["median_s"], STARTUP_S))
