@@ -77,7 +77,10 @@ function showLate(late) {   // the busy state: an answer is late
   $("busy").hidden = !late;
 }
 
-function setStatus(text, error) { $("status").textContent = text; $("status").className = error ? "error" : ""; }
+function setStatus(text, error) {      // the full text also as the tooltip (the line is cut to one)
+  const status = $("status");
+  status.textContent = text; status.title = text; status.className = error ? "error" : "";
+}
 
 async function post(path, body) {
   const response = await fetch(url(path), { method: "POST", headers: { "Content-Type": "application/json" },
