@@ -36,7 +36,7 @@ TEXTURE_SIDE = 4096
 #: The rigid map's Newton steps per update at most (each warm-started from the last update;
 #: Export runs them to convergence), and while the pointer is still dragging.
 EDITOR_RIGID_STEPS = 8
-DRAG_RIGID_STEPS = 2
+DRAG_RIGID_STEPS = 1
 #: The page's mesh densities: the preview cell's factor against the normal one.
 DENSITIES = {"fewer": 2.0, "normal": 1.0, "more": 0.5}
 #: Pages whose newest request number is remembered.
