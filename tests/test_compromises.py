@@ -99,3 +99,27 @@ def test_compare_says_each_views_warnings_and_strict_writes_nothing(tmp_path):
     assert "rigid view: " in run.output and "is blank where the plain warp leaves" in run.output
     strict = CliRunner().invoke(cli, args[:3] + [str(tmp_path / "strict.png")] + args[4:] + ["--strict"])
     assert strict.exit_code == 1 and "--strict" in strict.output and not (tmp_path / "strict.png").exists()
+
+
+def test_many_features_not_kept_are_named_ten_at_a_time():
+    """A noisy mask of thousands of specks printed a line for each; the ten largest are named,
+    the rest counted in one line (the report keeps each)."""
+    from types import SimpleNamespace
+
+    from featurewarp_cli.engine.record import MOST_LISTED, ComponentRecord, SolveRecord, warnings_for
+
+    record = SolveRecord("similarity", "exact", "slide", {})
+    record.components = [ComponentRecord(quads=1 + k % 7, tied=True, unpinned=False, scale=1.0, rotation_deg=0.0,
+                                         distortion=0.5, anisotropy_worst=0.5, anisotropy_mean=0.2,
+                                         plain_distortion=0.5, plain_anisotropy_worst=0.5, area_ratio=1.0,
+                                         kept=k % 3 != 0) for k in range(60)]
+    nodes = np.zeros((4, 2))
+    warp = SimpleNamespace(canvas=(10, 10), width=20, height=20)
+    lines = warnings_for(record, nodes, nodes, nodes, warp)
+    named = [line for line in lines if line.startswith("feature ")]
+    lost = [k for k, c in enumerate(record.components) if not c.kept]
+    shown = [int(line.split()[1]) for line in named]
+    rest = [record.components[k].quads for k in lost if k not in shown]
+    assert len(named) == MOST_LISTED and min(record.components[k].quads for k in shown) >= max(rest)
+    assert lines[-1] == (f"{len(rest)} smaller features not kept either ({min(rest)} to {max(rest)} quads; "
+                         f"the report lists each)")

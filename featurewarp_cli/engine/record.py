@@ -189,22 +189,41 @@ def canvas_warnings(record: "SolveRecord") -> list[str]:
     return lines
 
 
+#: Components a warning names one by one at most; the rest are counted (a noisy mask of
+#: 10 000 specks printed 4 000 lines).
+MOST_LISTED = 10
+
+
+def _listed(ids) -> str:
+    """``1, 5, 9`` or ``1, 5, 9, ... and 4585 more``."""
+    ids = list(ids)
+    shown = ", ".join(map(str, ids[:MOST_LISTED]))
+    return shown if len(ids) <= MOST_LISTED else f"{shown} and {len(ids) - MOST_LISTED} more"
+
+
 def warnings_for(record: "SolveRecord", source, target, warped, warp) -> list[str]:
-    """One line per thing the caller should know: features not kept or relaxed, a no-op."""
+    """One line per thing the caller should know: features not kept or relaxed, a no-op (the
+    :data:`MOST_LISTED` largest features not kept one by one, the others in one line)."""
     lines = []
     if record.guard.plain_blend < 1.0:
         which = record.guard.degraded_components
         lines.append(f"features degraded towards the plain warp ("
-                     + (f"components {', '.join(map(str, which))}; " if which else "")
+                     + (f"components {_listed(which)}; " if which else "")
                      + f"blend {record.guard.plain_blend:.2f}) so that none is more distorted than under it")
     if record.guard.release_rounds:
         lines.append(f"features relaxed towards the plain warp to avoid fold-overs "
-                     f"(components {', '.join(map(str, record.guard.released_components))}; "
+                     f"(components {_listed(record.guard.released_components)}; "
                      f"blend {record.guard.feature_blend:.2f})")
-    for k, c in enumerate(record.components):
-        if not c.kept:
-            lines.append(f"feature {k} ({c.quads} quads) not kept: worst-triangle anisotropy "
-                         f"{c.anisotropy_worst:.3f} (plain warp: {c.plain_anisotropy_worst:.3f})")
+    lost = sorted((k for k, c in enumerate(record.components) if not c.kept),
+                  key=lambda k: -record.components[k].quads)
+    for k in sorted(lost[:MOST_LISTED]):
+        c = record.components[k]
+        lines.append(f"feature {k} ({c.quads} quads) not kept: worst-triangle anisotropy "
+                     f"{c.anisotropy_worst:.3f} (plain warp: {c.plain_anisotropy_worst:.3f})")
+    if len(lost) > MOST_LISTED:
+        rest = [record.components[k] for k in lost[MOST_LISTED:]]
+        lines.append(f"{len(rest)} smaller features not kept either ({min(c.quads for c in rest)} to "
+                     f"{max(c.quads for c in rest)} quads; the report lists each)")
     lines.extend(canvas_warnings(record))
     if tuple(warp.canvas) == (warp.width, warp.height):
         wanted = np.hypot(*(warped - source).T)

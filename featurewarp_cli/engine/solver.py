@@ -49,6 +49,9 @@ from . import cholmod
 _fallback_noted = False
 
 #: Pieces of the grid with at most this many live nodes are not dissected further.
+#: More shared unknowns (tied features) than this and the grid order, which eliminates them
+#: last (a dense block of their count), gives way to CHOLMOD's own (see ReducedSystem).
+MAX_SHARED_LAST = 256
 _LEAF_NODES = 16
 #: A cut may move this fraction of a piece's extent away from its middle (to cross holes).
 _CUT_WINDOW = 0.1
@@ -335,6 +338,9 @@ class ReducedSystem:
         row, col, val, ur, uc = row[keep], col[keep], val[keep], ur[keep], uc[keep]
         val = np.where((ur == uc) & (row != col), 2 * val, val)
         nx = _grid_width(row, col, matrix.shape[0])
+        shared = np.count_nonzero(np.bincount(unknown[unknown >= 0], minlength=n) > 1)
+        if shared > MAX_SHARED_LAST:
+            nx = None           # many tied features: CHOLMOD's own ordering (see MAX_SHARED_LAST)
         position = unknown[unknown >= 0]
         if nx is not None:
             rank = np.empty(n, dtype=np.int64)
