@@ -96,7 +96,7 @@ def libigl_arap(grid, sources, targets, iterations: int = 2000) -> np.ndarray:
 
 def compare(handles: dict, width: int, height: int, mask=None, iterations: int = 2000) -> dict:
     """Our rigid map and libigl's ARAP on one handle set: {'ours': ..., 'libigl': ...}."""
-    from featurewarp_cli.engine.arap import _disc_offsets, similarity_fit
+    from featurewarp_cli.engine.arap import _disc_offsets, disc_turn, rest_scale, similarity_fit
     from featurewarp_cli.engine.deform import DECAY, RigidMap, carried_features, default_radius
     from featurewarp_cli.engine.handles import Handles
 
@@ -112,10 +112,10 @@ def compare(handles: dict, width: int, height: int, mask=None, iterations: int =
     if mask is not None:
         sources, targets, radii = carried_features(rigid.labels, source, parsed, sources, targets, radii,
                                                    DECAY * max(grid.spacing))
-    a, b = similarity_fit(sources, targets)
     offsets = _disc_offsets(radii)
     samples_from = (sources[:, None] + offsets).reshape(-1, 2)
-    samples_to = (targets[:, None] + offsets @ np.array([[a, -b], [b, a]]).T).reshape(-1, 2)
+    samples_to = (targets[:, None] + offsets @ disc_turn(*similarity_fit(sources, targets),
+                                                         rest_scale(sources, targets)).T).reshape(-1, 2)
     t0 = time.perf_counter()
     reference = libigl_arap(grid, samples_from, samples_to, iterations)
     reference_seconds = time.perf_counter() - t0

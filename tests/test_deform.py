@@ -322,7 +322,7 @@ def test_an_image_laid_over_itself_is_refused(runner, tmp_path):
     w, h = SIZE
     out = tmp_path / "out.png"
     run = runner("deform", image, out, "-m", mask, "--pin", f"2,{h - 3}", "--pin", f"{w - 3},{h - 3}",
-                 "--move", f"{w / 2},5:{w / 2},{-6 * h}", "--canvas", "input")
+                 "--move", f"{w / 2},5:{w / 2},{3 * h}", "--canvas", "input")      # down through the pins
     assert run.code == 1 and "lays the image over itself" in run.stderr and not out.exists()
 
 

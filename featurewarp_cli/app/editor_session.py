@@ -155,10 +155,13 @@ class EditorSession:
             ends, curves = warp.ends(mesh), warp.curve_ends(mesh)
             turns = _turns(warp, mesh, handles, max(1.0, 0.5 * self.cell))
         components = mesh.record.components
+        warnings = mesh.record.warnings
+        if body.get("drag") is True:        # a drag's updates are cut short by design: say so at the release
+            warnings = [w for w in warnings if not w.startswith("preview: the rigid map")]
         status = {"ms": round(1000 * seconds, 1), "folds": mesh.flips() + mesh.crossings,
                   "seq": ticket[1] if ticket else None,
                   "components": len(components), "kept": sum(c.kept for c in components) if mode != "plain" else 0,
-                  "canvas": list(mesh.canvas), "warnings": mesh.record.warnings[:3],
+                  "canvas": list(mesh.canvas), "warnings": warnings[:3],
                   "ends": [] if ends is None else np.round(ends, 2).tolist(), "turns": turns,
                   "curve_ends": [np.round(ended, 2).tolist() for _, ended in curves]}
         return status, (mesh.target + offset).astype("<f4").tobytes()
@@ -234,7 +237,7 @@ class EditorSession:
         write.write_atomic(handles_path, (json.dumps(data, indent=2) + "\n").encode())
         mask = self._write_mask() if self.painted else self.mask
         mode = body.get("mode", self.settings.mode)
-        settings = replace(self.settings, mode=mode, warp_factory=handles_factory(data))
+        settings = replace(self.settings, mode=mode, warp_factory=handles_factory(data, self.settings.decay))
         if self.density != "normal":
             settings = replace(settings, cell=self.cell)
         summary = warp_file(settings, self.input, self.output_path, mask, also_read=((handles_path, "--handles"),))

@@ -150,7 +150,8 @@ def deform_command() -> click.Command:
             raise click.BadParameter("cannot be '-' when INPUT is '-' (stdin holds the image)",
                                      param_hint="'--handles'")
         merged = merged_handles(data, move, pin, canvas)
-        settings = replace(settings, warp_factory=named_places(handles_factory(merged), merged, move, pin, handles))
+        factory = handles_factory(merged, settings.decay)
+        settings = replace(settings, warp_factory=named_places(factory, merged, move, pin, handles))
         warp_one(settings, quiet, verbose, input, output, mask, report, save_grid, draw_grid,
                  also_read=((handles, "--handles"),) if handles else ())
 

@@ -142,6 +142,16 @@ def rest_scale(sources: np.ndarray, targets: np.ndarray) -> float:
     return scale ** weight
 
 
+def disc_turn(a: float, b: float, scale: float) -> np.ndarray:
+    """The 2x2 map a handle's disc moves by: the handles' best rotation (from their similarity
+    fit (a, b)) at the triangles' rest size ``scale`` (:func:`rest_scale`), so that the disc is
+    as large as the triangles around it are asked to be."""
+    norm = float(np.hypot(a, b))
+    if not norm > 0:
+        return scale * np.eye(2)
+    return (scale / norm) * np.array([[a, -b], [b, a]])
+
+
 def _disc_offsets(radius: np.ndarray) -> np.ndarray:
     """(K, 1 + 2 DISC_POINTS, 2) sample offsets of each handle's disc (all zero for radius 0)."""
     angle = np.arange(DISC_POINTS) * (2.0 * np.pi / DISC_POINTS)
@@ -212,7 +222,7 @@ class RigidDeformer:
         a, b = similarity_fit(self.sources, targets)
         turn = np.array([[a, -b], [b, a]])
         scale = rest_scale(self.sources, targets)
-        samples = (targets[:, None, :] + self.offsets @ turn.T).reshape(-1, 2)
+        samples = (targets[:, None, :] + self.offsets @ disc_turn(a, b, scale).T).reshape(-1, 2)
         if start is None or not np.all(signed_areas(start, self.triangles) > 0):
             start = self._first_guess(samples, turn, targets, scale)
         energy = self._energy(scale)
@@ -237,11 +247,11 @@ class RigidDeformer:
         first = self._step1(np.concatenate([pulled[:, 0], pulled[:, 1]]))
         n = self.grid.n_nodes
         x = np.stack([first[:n], first[n:]], axis=1)
-        best = None
-        for _ in range(GUESS_STEPS + 1):
+        best = x if np.all(signed_areas(x, self.triangles) > 0) else None
+        for _ in range(GUESS_STEPS):
+            x = np.asarray(self._step2(self._edges.T @ self._wanted(x, scale).reshape(-1, 2) + pulled))
             if np.all(signed_areas(x, self.triangles) > 0):
                 best = x
-            x = np.asarray(self._step2(self._edges.T @ self._wanted(x, scale).reshape(-1, 2) + pulled))
         if best is not None:
             return best
         centre_s, centre_t = self.sources.mean(axis=0), targets.mean(axis=0)

@@ -112,11 +112,15 @@ class HandleWarp:
         """Warnings on the solved ``mesh`` of these handles (also kept in ``values`` for the
         report): how far each point and curve handle ended from its target, a border that crosses
         itself (``mesh.crossings``), an image shrunk away or moved off the canvas; ``quick``
-        (the editor's live updates) notes a fold fallback cut short."""
+        (the editor's live updates) notes a rigid map cut short, and a full solve one that
+        did not converge within :data:`rigid_energy.MAX_STEPS` steps."""
         warnings = list(self.notes)
         if quick and self.capped:
             warnings.append("preview: the rigid map was not run to convergence to stay live; Export "
                             "finishes it (and may differ)")
+        elif self.capped:
+            warnings.append("the rigid map did not converge within its step limit: the result has no "
+                            "fold but may differ slightly between machines")
         mesh.crossings = border_crossings(mesh.source, mesh.target)
         if mesh.crossings:
             warnings.append(f"the handles lay the image over itself (its border crosses itself "
@@ -201,11 +205,15 @@ class RigidMap:
     mask : (height, width) bool ndarray, optional
         The feature mask: a point handle on a feature carries the whole feature (see
         :func:`carried_features`).
+    decay : float
+        rho, the feature-aware solve's transition band in cells: a carried feature takes
+        this many cells of the rigid grid around it along.
     """
 
-    def __init__(self, width: int, height: int, rigid_steps: int | None = None, mask=None):
+    def __init__(self, width: int, height: int, rigid_steps: int | None = None, mask=None, decay: float = DECAY):
         self.width, self.height = int(width), int(height)
         self.rigid_steps = rigid_steps
+        self.decay = float(decay)
         self.grid = rigid_grid(width, height)
         self.labels = None
         if mask is not None and np.any(mask):
@@ -225,7 +233,7 @@ class RigidMap:
         sources, targets, radii = handles.constraints(self.grid, radius)
         if self.labels is not None and len(handles.points_from):
             sources, targets, radii = carried_features(self.labels, self.grid.nodes(), handles, sources, targets,
-                                                       radii, DECAY * max(self.grid.spacing))
+                                                       radii, self.decay * max(self.grid.spacing))
         key = (sources.tobytes(), radii.tobytes())
         if key != self._key:
             self.rigid = RigidDeformer(self.grid, sources, radii)
@@ -254,12 +262,11 @@ def carried_features(labels, nodes, handles: Handles, sources, targets, radii, b
     and that handle's translation), so the feature-aware solve, which keeps features as
     similarities of W, keeps the handle where it was dragged. Point handles come first in
     ``sources`` (as :meth:`Handles.constraints` orders them). The nodes within ``band`` px
-    of the feature move with it too: the feature-aware solve asks its transition band (the
-    paper's rho cells around a feature) to be the feature's similarity, and a band that W
+    of the feature move with it too (:class:`RigidMap` gives rho cells of the rigid grid,
+    at least the rho cells of the finer grid the feature-aware solve refines it into): that
+    solve asks its transition band to be the feature's similarity, and a band that W
     compresses instead pulls the feature off the handle (by about the band's width).
     """
-    import cv2
-
     h, w = labels.shape
     at = np.clip(np.rint(handles.points_from).astype(int), 0, [w - 1, h - 1])
     on = labels[at[:, 1], at[:, 0]]
@@ -268,9 +275,7 @@ def carried_features(labels, nodes, handles: Handles, sources, targets, radii, b
     keep = np.ones(len(sources), bool)
     extra_sources, extra_targets = [], []
     for label in np.unique(on[on > 0]):
-        outside = np.ascontiguousarray(labels != label, dtype=np.uint8)
-        distance = cv2.distanceTransform(outside, cv2.DIST_L2, 5) if band > 0 else outside.astype(np.float32)
-        inside = nodes[distance[node_at[:, 1], node_at[:, 0]] <= band]
+        inside = nodes[_near_label(labels, label, band, node_at)]
         held = np.flatnonzero(on == label)
         if len(inside) < 3:
             continue
@@ -288,6 +293,28 @@ def carried_features(labels, nodes, handles: Handles, sources, targets, radii, b
     extra = np.concatenate(extra_sources)
     return (np.concatenate([sources[keep], extra]), np.concatenate([targets[keep], *extra_targets]),
             np.concatenate([radii[keep], np.zeros(len(extra))]))
+
+
+def _near_label(labels: np.ndarray, label: int, band: float, at: np.ndarray) -> np.ndarray:
+    """(K,) bool: the pixels ``at`` ((K, 2) int, x and y) within ``band`` px of the label's.
+
+    The exact Euclidean distance (OpenCV's precise mask, rounded through its square as
+    :mod:`features` does: an ulp must not move a node in or out), on the label's bounding
+    box grown by the band only."""
+    import cv2
+
+    ys, xs = np.nonzero(labels == label)
+    reach = int(math.ceil(band)) + 1
+    x0, y0 = max(0, xs.min() - reach), max(0, ys.min() - reach)
+    x1, y1 = min(labels.shape[1], xs.max() + reach + 1), min(labels.shape[0], ys.max() + reach + 1)
+    box = at[:, 0] >= x0
+    box &= (at[:, 0] < x1) & (at[:, 1] >= y0) & (at[:, 1] < y1)
+    outside = np.ascontiguousarray(labels[y0:y1, x0:x1] != label, dtype=np.uint8)
+    distance = cv2.distanceTransform(outside, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    exact = np.sqrt(np.rint(distance.astype(np.float64) ** 2))
+    near = np.zeros(len(at), bool)
+    near[box] = exact[at[box, 1] - y0, at[box, 0] - x0] <= band
+    return near
 
 
 class Deformer:
@@ -320,7 +347,7 @@ class Deformer:
         self.mode = mode
         self.quick = quick
         self.warper = FeatureWarper(width, height, mask, **options)         # the border: HandleWarp.boundary
-        self.rigid = RigidMap(width, height, rigid_steps, self.warper.mask)
+        self.rigid = RigidMap(width, height, rigid_steps, self.warper.mask, self.warper.decay)
         self.handles = None
         self.warp = None
 
@@ -349,10 +376,11 @@ class Deformer:
         return self.solve(Handles.from_dict(data, self.warper.width, self.warper.height), mode)
 
 
-def handles_factory(data):
+def handles_factory(data, decay: float = DECAY):
     """``make(width, height, mask)``: the map W of the handles file ``data`` (parsed JSON) for an
-    image of that size and feature mask (ValueError when the handles do not fit it)."""
+    image of that size and feature mask (ValueError when the handles do not fit it); ``decay``
+    as the feature-aware solve's (see :class:`RigidMap`)."""
     def make(width: int, height: int, mask=None) -> HandleWarp:
-        return RigidMap(width, height, mask=mask).deformation(Handles.from_dict(data, width, height))
+        return RigidMap(width, height, mask=mask, decay=decay).deformation(Handles.from_dict(data, width, height))
 
     return make

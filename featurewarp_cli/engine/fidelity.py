@@ -166,14 +166,15 @@ class GridBudgetError(ValueError):
     """The grid a warp needs is larger than the memory budget allows."""
 
 
-def check_budget(width: int, height: int, cell: float, max_nodes: int | None) -> None:
-    """Refuse an automatic grid above ``max_nodes`` (the budget never coarsens it).
+def check_budget(width: int, height: int, cell: float, max_nodes: int | None, lattice: Grid | None = None) -> None:
+    """Refuse an automatic grid above ``max_nodes`` (the budget never coarsens it); the grid
+    is :func:`grid_for`'s (``lattice``: the warp's own, for a handles warp).
 
     Raises
     ------
     GridBudgetError
     """
-    nodes = Grid.for_image(width, height, cell).n_nodes
+    nodes = grid_for(width, height, cell, lattice).n_nodes
     if max_nodes is not None and nodes > max_nodes:
         raise GridBudgetError(
             f"this warp needs a grid of {nodes} nodes (cell {cell:.3g} px) to follow it within "

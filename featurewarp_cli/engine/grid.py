@@ -97,7 +97,8 @@ class Grid:
 def grid_for(width: int, height: int, cell: float, lattice: Grid | None = None) -> Grid:
     """The grid of about ``cell``-pixel cells over a ``width`` x ``height`` image; where
     ``lattice`` is given (a warp that is linear on that grid's triangles, as the rigid map of
-    handles), its refinement (:meth:`Grid.refined`) whose cells come closest to ``cell``."""
+    handles), its refinement (:meth:`Grid.refined`) whose cells come closest to ``cell``,
+    never coarser than the lattice itself (a coarser grid would cut across the map's kinks)."""
     if lattice is None:
         return Grid.for_image(width, height, cell)
     return lattice.refined(max(1, round(max(lattice.spacing) / cell)))

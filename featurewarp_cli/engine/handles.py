@@ -196,11 +196,10 @@ class Handles:
     def _rings(self, sources: np.ndarray, targets: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
         """The rings of the point handles with an angle: :data:`RING_POINTS` sources each at
         ``radius`` around the handle, and their targets turned by its angle and scaled by the
-        similarity that best fits ``sources`` onto ``targets`` (all the other constraints)."""
-        from .arap import similarity_fit
+        rest size the rigid map gives the other constraints (:func:`arap.rest_scale`)."""
+        from .arap import rest_scale
 
-        a, b = similarity_fit(sources, targets)
-        scale = math.hypot(a, b) or 1.0
+        scale = rest_scale(sources, targets)
         turned = np.flatnonzero(np.isfinite(self.angles))
         around = np.arange(RING_POINTS) * (2.0 * math.pi / RING_POINTS)
         ring = radius * np.stack([np.cos(around), np.sin(around)], axis=1)

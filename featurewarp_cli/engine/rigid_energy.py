@@ -30,14 +30,14 @@ import numpy as np
 import scipy.sparse as sp
 
 from . import cholmod
-from .grid import signed_areas
 from .injectivity import max_step
 
 #: A triangle may shrink to this fraction of its rest area before the barrier acts.
 SAFE_AREA = 0.5
 #: The barrier's weight against the rigidity energy, per unit of rest area.
 BARRIER_WEIGHT = 100.0
-#: Stop when the Newton decrement is below this fraction of the energy.
+#: Stop when the Newton decrement (g.H^-1 g, twice the model's predicted decrease) is below
+#: this fraction of the energy.
 TOLERANCE = 1e-7
 #: Newton steps at most.
 MAX_STEPS = 200
@@ -47,7 +47,17 @@ _LONGEST = 16.0
 
 
 def barrier(r: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The clamped log barrier of area ratios ``r`` (> 0) and its first two derivatives."""
+    """The clamped log barrier of area ratios and its first two derivatives.
+
+    Parameters
+    ----------
+    r : (M,) ndarray
+        Area ratios, positive.
+
+    Returns
+    -------
+    value, slope, curvature : (M,) ndarray
+        ``-(r - s)^2 log(r / s)`` and its derivatives below ``s`` = :data:`SAFE_AREA`, 0 above."""
     s = SAFE_AREA
     low = r < s
     q = np.where(low, r, s)
@@ -128,7 +138,15 @@ class RigidEnergy:
                                           + BARRIER_WEIGHT * barrier(det)[0])) + np.sum(held * held))
 
     def newton_step(self, x: np.ndarray, targets: np.ndarray) -> tuple[np.ndarray, float]:
-        """The projected Newton step (N, 2) at the injective ``x`` and its decrement -g.d."""
+        """The projected Newton step at the injective ``x``.
+
+        Returns
+        -------
+        step : (N, 2) ndarray
+            ``-H^-1 g`` with H the sum of the triangles' Hessians made positive
+            semi-definite and the penalty's.
+        decrement : float
+            ``-g.step`` (twice the decrease the quadratic model predicts)."""
         f = self.jacobians(x)
         flat = f.reshape(-1, 4)
         det = flat[:, 0] * flat[:, 3] - flat[:, 1] * flat[:, 2]
@@ -167,11 +185,33 @@ class RigidEnergy:
 
 def minimise(energy: RigidEnergy, x: np.ndarray, targets: np.ndarray,
              steps: int = MAX_STEPS) -> tuple[np.ndarray, int, bool]:
-    """Lower ``energy`` from the injective ``x``: (x, Newton steps taken, converged)."""
+    """Lower ``energy`` from the injective ``x``.
+
+    Parameters
+    ----------
+    energy : RigidEnergy
+    x : (N, 2) ndarray
+        Start; every triangle positively oriented.
+    targets : (K, 2) ndarray
+        The handles' penalty targets ``h`` (scaled as the penalty rows).
+    steps : int
+        Newton steps at most.
+
+    Returns
+    -------
+    x : (N, 2) ndarray
+        Every triangle positively oriented.
+    steps : int
+        Newton steps taken.
+    converged : bool
+        The Newton decrement ``g.H^-1 g`` fell below :data:`TOLERANCE` times the energy
+        (False: the step cap was reached, or no step lowered the energy)."""
     value = energy.value(x, targets)
     for step in range(1, steps + 1):
         direction, decrement = energy.newton_step(x, targets)
-        if not decrement > TOLERANCE * value:
+        if not np.isfinite(decrement):
+            return x, step - 1, False
+        if decrement <= TOLERANCE * value:
             return x, step - 1, True
         bound = max_step(x, x + direction, energy.triangles)       # 1.0: the whole step folds nothing
         alpha = 1.0 if bound >= 1.0 else _FLIP_MARGIN * bound

@@ -268,7 +268,7 @@ class FeatureWarper:
             cell, error = (self.cell or fidelity.auto_cell(self.width, self.height, None)[0]), float("nan")
         elif self.cell is None:
             cell, error = fidelity.auto_cell(self.width, self.height, warp)
-            fidelity.check_budget(self.width, self.height, cell, self.max_nodes)
+            fidelity.check_budget(self.width, self.height, cell, self.max_nodes, getattr(warp, "lattice", None))
         else:
             cell = float(self.cell)
             error = fidelity.pl_error(grid_for(self.width, self.height, cell, getattr(warp, "lattice", None)), warp)
