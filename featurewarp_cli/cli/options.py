@@ -112,7 +112,11 @@ def engine_options() -> list[click.Option]:
                           "slide along it, so features cut by the border keep their shape and the "
                           "canvas stays exact. Default: slide (for stretch; it amounts to fixed for "
                           "swirl and bulge, whose border stays put, and for arc, whose sides are "
-                          "curves and oblique rays)."),
+                          "curves and oblique rays). Either way the outline is the warp's: a "
+                          "feature cut by a border it cannot follow as one similarity (an arc's "
+                          "curved side) gives way, and a warning says so. release: the preset's "
+                          "own, but such a feature keeps its shape and lets go of that border "
+                          "(the outline leaves the warp's there)."),
         param_option(defaults.SCALE_PRIOR_PARAM),
         click.Option(["--strict"], is_flag=True,
                      help="Exit 1 and write nothing when the run warns: a feature could not be "

@@ -35,8 +35,10 @@ MODE = "similarity"
 FORMULATIONS = ("exact", "paper")
 FORMULATION = "exact"
 #: fixed: border nodes stay on W (the paper); slide: they may slide along the sides W
-#: maps onto axis-parallel lines. The default is the preset's own (``Warp.boundary``).
-BOUNDARIES = ("fixed", "slide")
+#: maps onto axis-parallel lines; release: the preset's own, but a feature cut by a border
+#: that no similarity of it can follow (an arc's curved side) lets go of that border to keep
+#: its shape. The default is the preset's own (``Warp.boundary``), the outline held.
+BOUNDARIES = ("fixed", "slide", "release")
 #: Resampling filters of the renderer (OpenCV's nearest-neighbour, linear, cubic and Lanczos-4
 #: interpolation). Nearest copies source values only (label maps, pixel art): no prefilter,
 #: no feathered silhouette.

@@ -87,6 +87,9 @@ class HandleWarp:
 
     name = "deform"
     boundary = "fixed"
+    #: A feature cut by the image's border keeps its shape and lets go of it (the border is
+    #: where the handles put it, not an envelope the output must fill); presets: "give".
+    cut_features = "keep"
 
     def __init__(self, width: int, height: int, grid: Grid, nodes: np.ndarray, canvas: str = "fit",
                  values: dict | None = None, embeddings: dict | None = None):

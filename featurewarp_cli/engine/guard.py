@@ -402,11 +402,12 @@ def no_worse_than_plain(state, x: np.ndarray, warped: np.ndarray, record, proble
 
     if ok(x):
         return x
+    offending = np.unique(state.tri_component[_worse(state, x, plain)])
     fixed = _tapered_fix(state, x, warped, plain, ok)
     if fixed is not None:
         x, record.plain_blend = fixed
+        record.degraded_components = [int(c) for c in offending if c >= 0]
         return x
-    offending = np.unique(state.tri_component[_worse(state, x, plain)])
     if problem is not None:
         floor = UNTANGLE_FLOOR * signed_areas(warped, state.triangles)
         found = blend_search(problem, offending, floor, record,
@@ -440,9 +441,12 @@ def _tapered_fix(state, points: np.ndarray, warped: np.ndarray, plain: tuple, ok
     n_quads = state.features.weight.size
     local = np.zeros(n_quads, bool)
     local[np.flatnonzero(worse) % n_quads] = True
-    bad = np.isin(state.features.component, np.unique(state.tri_component[worse])) & state.features.is_constrained
+    offending = np.unique(state.tri_component[worse])
+    bad = np.isin(state.features.component, offending) & state.features.is_constrained
+    others = (state.node_component >= 0) & ~np.isin(state.node_component, offending)
     for region in (local, bad):
         weight = _taper(state, region)
+        weight[others] = 0.0                # the move leaves the other features as they are
 
         def move(t, weight=weight):
             return points + (1.0 - t) * weight * (warped - points)

@@ -214,6 +214,12 @@ def warnings_for(record: "SolveRecord", source, target, warped, warp) -> list[st
         lines.append(f"features relaxed towards the plain warp to avoid fold-overs "
                      f"(components {_listed(record.guard.released_components)}; "
                      f"blend {record.guard.feature_blend:.2f})")
+    relaxed = set(record.guard.released_components)
+    held = [k for k, c in enumerate(record.components) if not c.tied and k not in relaxed]
+    if held and record.formulation == "exact" and record.mode != "plain":
+        lines.append(f"feature{'s' if len(held) > 1 else ''} {_listed(held)} cut by a border that no similarity "
+                     f"of {'them' if len(held) > 1 else 'it'} can follow: held by soft constraints so that the "
+                     f"outline stays the warp's (--boundary release keeps the shape and lets the outline go)")
     lost = sorted((k for k, c in enumerate(record.components) if not c.kept),
                   key=lambda k: -record.components[k].quads)
     for k in sorted(lost[:MOST_LISTED]):

@@ -110,10 +110,14 @@ class FeatureWarper:
         paper: the paper's soft per-quad targets (lambda R_Q, weight w_F).
     injective : bool
         Guard against fold-overs (default True); see :meth:`solve`.
-    boundary : {'fixed', 'slide'} or None
+    boundary : {'fixed', 'slide', 'release'} or None
         fixed: border nodes stay where W puts them (the paper). slide: on a side
         that W maps onto an axis-parallel line, nodes may slide along it. None
-        (default): the preset's own choice (``warp.boundary``).
+        (default): the preset's own choice (``warp.boundary``); either way the output's
+        outline is W's, and a feature cut by a border that no similarity of it can
+        follow gives way (it is held by soft constraints, and a warning says so).
+        release: the preset's own, but such a feature lets go of the border to keep its
+        shape, and the outline leaves W's there.
     scale_prior : float
         Weight of the pull of each component's scale and rotation towards the
         preset's (similarity mode, exact formulation; default
@@ -216,6 +220,14 @@ class FeatureWarper:
         state.systems_by_ties[memo] = state.systems[key]
         return state.systems[key]
 
+    def _releases(self, warp) -> bool:
+        """Whether a feature cut by a border no similarity of it can follow lets go of it:
+        ``boundary='release'``, or by default where the warp asks (``cut_features='keep'``:
+        the handles' map); else it gives way and the outline stays W's."""
+        if self.boundary is not None:
+            return self.boundary == "release"
+        return getattr(warp, "cut_features", "give") == "keep"
+
     def _offsets(self, state: _GridState, ties: components.Ties, ab: np.ndarray, warped: np.ndarray):
         """q: fixed coordinates at W, tied nodes at their component's similarity."""
         offset = np.zeros_like(warped)
@@ -272,7 +284,7 @@ class FeatureWarper:
         else:
             cell = float(self.cell)
             error = fidelity.pl_error(grid_for(self.width, self.height, cell, getattr(warp, "lattice", None)), warp)
-        boundary = self.boundary or getattr(warp, "boundary", "fixed")
+        boundary = self.boundary if self.boundary in ("fixed", "slide") else getattr(warp, "boundary", "fixed")
         grid = grid_for(self.width, self.height, cell, getattr(warp, "lattice", None))
         warped = warp(grid.nodes())
         state = self._state(grid, warped, boundary)
@@ -285,7 +297,7 @@ class FeatureWarper:
             target = warped
             record.guard.flipped_before = int(np.count_nonzero(signed_areas(target, state.triangles) <= 0))
         else:
-            target, tied, unpinned = self._feature_aware(state, warped, mode, record, quick)
+            target, tied, unpinned = self._feature_aware(state, warped, mode, record, quick, self._releases(warp))
         t1 = time.perf_counter()
         assess(state, target, warped, tied, unpinned, warp, record, self.notes, quick)
         self.timings["quality"] = time.perf_counter() - t1
@@ -293,7 +305,7 @@ class FeatureWarper:
         return Mesh(state.nodes, target, state.triangles, tuple(warp.canvas), record, state.node_component)
 
     def _feature_aware(self, state: _GridState, warped: np.ndarray, mode: str, record: SolveRecord,
-                       quick: bool = False):
+                       quick: bool = False, unpin: bool = False):
         """Solve for the features' similarities and the nodes, then guard against folds.
 
         Returns the node positions, which components stayed tied, and which of those were
@@ -304,7 +316,7 @@ class FeatureWarper:
         prior = components.as_ab(prior_maps)
         ties = components.parametrize(state.nodes, state.fixed_x, state.fixed_y, warped, state.node_component,
                                       features.n_components, prior, solve_scale=mode == "similarity",
-                                      unpin=self.boundary is None)
+                                      unpin=unpin)
         if self.formulation == "paper":
             ties.tied[:] = False
         ab = np.where(ties.tied[:, None], ties.base, prior)
