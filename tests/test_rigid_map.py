@@ -82,3 +82,14 @@ def test_the_solve_grid_nests_in_the_rigid_grid_so_w_folds_no_fine_triangle():
         assert fine.nx - 1 == k * (rigid.grid.nx - 1) and fine.ny - 1 == k * (rigid.grid.ny - 1) and k >= 1
         assert k == max(1, round(coarse / cell))             # never coarser than the rigid grid
         assert np.all(signed_areas(warp(fine.nodes()), fine.triangles()) > 0)
+
+
+def test_two_handles_are_a_similarity_reached_at_once():
+    """Any two handles describe a similarity: the energy is 0 up to rounding, where only the
+    step floor can say converged (the relative test ran to the step cap on noise)."""
+    grid = Grid.for_image(W, H, 8)
+    sources = np.array([[131.66, 98.17], [122.33, 57.80]])
+    targets = np.array([[131.16, 131.76], [122.33, 57.80]])
+    rigid = RigidDeformer(grid, sources, radius=6)
+    rigid.deform(targets)
+    assert rigid.converged and rigid.newton_steps <= 1

@@ -39,6 +39,9 @@ BARRIER_WEIGHT = 100.0
 #: Stop when the Newton decrement (g.H^-1 g, twice the model's predicted decrease) is below
 #: this fraction of the energy.
 TOLERANCE = 1e-7
+#: Also converged when the Newton step moves no node by more than this (px): where the
+#: handles are one similarity the energy is 0 up to rounding and no relative test applies.
+STEP_FLOOR = 1e-9
 #: Newton steps at most.
 MAX_STEPS = 200
 _ARMIJO = 1e-4
@@ -204,14 +207,15 @@ def minimise(energy: RigidEnergy, x: np.ndarray, targets: np.ndarray,
     steps : int
         Newton steps taken.
     converged : bool
-        The Newton decrement ``g.H^-1 g`` fell below :data:`TOLERANCE` times the energy
-        (False: the step cap was reached, or no step lowered the energy)."""
+        The Newton decrement ``g.H^-1 g`` fell below :data:`TOLERANCE` times the energy, or
+        the step below :data:`STEP_FLOOR` (False: the step cap was reached, or no step
+        lowered the energy)."""
     value = energy.value(x, targets)
     for step in range(1, steps + 1):
         direction, decrement = energy.newton_step(x, targets)
         if not np.isfinite(decrement):
             return x, step - 1, False
-        if decrement <= TOLERANCE * value:
+        if decrement <= TOLERANCE * value or np.abs(direction).max() <= STEP_FLOOR:
             return x, step - 1, True
         bound = max_step(x, x + direction, energy.triangles)       # 1.0: the whole step folds nothing
         alpha = 1.0 if bound >= 1.0 else _FLIP_MARGIN * bound
