@@ -55,7 +55,7 @@ def about_given_way(line: str, features: set[int]) -> bool:
     match = re.search(r"feature (\d+) \(\d+ quads\) not kept", line)
     if match:
         return int(match.group(1)) in features
-    match = re.search(r"features degraded towards the plain warp \(components ([\d, ]+);", line)
+    match = re.search(r"features? ([\d, ]+) moved towards the plain warp", line)
     return bool(match) and {int(k) for k in match.group(1).split(",")} <= features
 
 

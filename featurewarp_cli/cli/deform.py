@@ -159,10 +159,11 @@ def deform_command() -> click.Command:
 
     The handles (points dragged from one place to another, pins, curves, the
     border's outline) define an as-rigid-as-possible map of the image
-    (Igarashi et al. 2005); the features marked in the mask then keep their
-    shape under it, as with warp. Handles that describe one similarity give
-    exactly that similarity. Coordinates are pixels, pixel centres at whole
-    numbers. Design a handles file live with 'featurewarp edit'.
+    (converged ARAP, kept fold-free); the features marked in the mask then
+    keep their shape under it, as with warp. Handles that describe one
+    similarity give exactly that similarity. Coordinates are pixels, pixel
+    centres at whole numbers. Design a handles file live with
+    'featurewarp edit'.
 
     \b
     Examples:

@@ -175,7 +175,7 @@ def canvas_warnings(record: "SolveRecord") -> list[str]:
     lines = []
     if record.background_stretch > STREAKS:
         x, y = record.background_stretch_at
-        lines.append(f"background stretched {record.background_stretch:.0f}x beyond the plain warp near "
+        lines.append(f"background stretched {record.background_stretch:.1f}x beyond the plain warp near "
                      f"({x:.0f}, {y:.0f}) of the output: texture there turns into streaks")
     if record.blank_share > record.plain_blank_share + BLANK:
         x0, y0, x1, y1 = record.blank_extra_box
@@ -201,25 +201,31 @@ def _listed(ids) -> str:
     return shown if len(ids) <= MOST_LISTED else f"{shown} and {len(ids) - MOST_LISTED} more"
 
 
+def _features(ids) -> str:
+    """``feature 3`` or ``features 3, 5`` (up to :data:`MOST_LISTED`, then a count)."""
+    ids = list(ids)
+    return f"feature{'s' if len(ids) > 1 else ''} {_listed(ids)}"
+
+
 def warnings_for(record: "SolveRecord", source, target, warped, warp) -> list[str]:
     """One line per thing the caller should know: features not kept or relaxed, a no-op (the
     :data:`MOST_LISTED` largest features not kept one by one, the others in one line)."""
     lines = []
     if record.guard.plain_blend < 1.0:
         which = record.guard.degraded_components
-        lines.append(f"features degraded towards the plain warp ("
-                     + (f"components {_listed(which)}; " if which else "")
-                     + f"blend {record.guard.plain_blend:.2f}) so that none is more distorted than under it")
+        lines.append((f"{_features(which)} moved" if which else "every feature moved evenly")
+                     + f" towards the plain warp (blend {record.guard.plain_blend:.2f}, 0 = the plain warp) "
+                       f"so that none is more distorted than under it")
     if record.guard.release_rounds:
-        lines.append(f"features relaxed towards the plain warp to avoid fold-overs "
-                     f"(components {_listed(record.guard.released_components)}; "
-                     f"blend {record.guard.feature_blend:.2f})")
+        lines.append(f"{_features(record.guard.released_components)} relaxed towards the plain warp to avoid "
+                     f"fold-overs (blend {record.guard.feature_blend:.2f}, 0 = the plain warp)")
     relaxed = set(record.guard.released_components)
     held = [k for k, c in enumerate(record.components) if not c.tied and k not in relaxed]
     if held and record.formulation == "exact" and record.mode != "plain":
-        lines.append(f"feature{'s' if len(held) > 1 else ''} {_listed(held)} cut by a border that no similarity "
-                     f"of {'them' if len(held) > 1 else 'it'} can follow: held by soft constraints so that the "
-                     f"outline stays the warp's (--boundary release keeps the shape and lets the outline go)")
+        lines.append(f"{_features(held)} cut by a border that no similarity of {'them' if len(held) > 1 else 'it'} "
+                     f"can follow: held by soft constraints so that the outline stays the warp's (--boundary "
+                     f"release lets {'them' if len(held) > 1 else 'it'} go of that border to keep the shape, where "
+                     f"that folds nothing, and the outline steps there)")
     lost = sorted((k for k, c in enumerate(record.components) if not c.kept),
                   key=lambda k: -record.components[k].quads)
     for k in sorted(lost[:MOST_LISTED]):

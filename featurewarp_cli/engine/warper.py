@@ -289,7 +289,7 @@ class FeatureWarper:
         warped = warp(grid.nodes())
         state = self._state(grid, warped, boundary)
         self.timings["grid"] = time.perf_counter() - t0
-        record = SolveRecord(mode, self.formulation, boundary,
+        record = SolveRecord(mode, self.formulation, "release" if self.boundary == "release" else boundary,
                              {"cell": cell, "spacing": list(grid.spacing), "nodes": grid.n_nodes,
                               "quads": int(state.features.weight.size), "pl_error_px": error})
         tied = unpinned = np.zeros(state.features.n_components, bool)
