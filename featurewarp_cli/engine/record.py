@@ -224,8 +224,8 @@ def warnings_for(record: "SolveRecord", source, target, warped, warp) -> list[st
     if held and record.formulation == "exact" and record.mode != "plain":
         lines.append(f"{_features(held)} cut by a border that no similarity of {'them' if len(held) > 1 else 'it'} "
                      f"can follow: held by soft constraints so that the outline stays the warp's (--boundary "
-                     f"release lets {'them' if len(held) > 1 else 'it'} go of that border to keep the shape, where "
-                     f"that folds nothing, and the outline steps there)")
+                     f"release keeps {'their' if len(held) > 1 else 'its'} shape instead where that folds nothing, "
+                     f"and the outline steps there)")
     lost = sorted((k for k, c in enumerate(record.components) if not c.kept),
                   key=lambda k: -record.components[k].quads)
     for k in sorted(lost[:MOST_LISTED]):
