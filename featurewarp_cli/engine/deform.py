@@ -126,8 +126,8 @@ class HandleWarp:
                             "fold but may differ slightly between machines")
         mesh.crossings = border_crossings(mesh.source, mesh.target)
         if mesh.crossings:
-            warnings.append(f"the handles lay the image over itself (its border crosses itself "
-                            f"{mesh.crossings} times)")
+            times = {1: "once", 2: "twice"}.get(mesh.crossings, f"{mesh.crossings} times")
+            warnings.append(f"the handles lay the image over itself (its border crosses itself {times})")
         ends = self.ends(mesh)
         if ends is not None:
             error = np.hypot(*(ends - self.handles.points_to).T)
