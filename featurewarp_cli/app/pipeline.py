@@ -359,11 +359,6 @@ def make_warper(settings: Settings, width: int, height: int, feature_mask):
     return warp, warper
 
 
-def _times(count: int) -> str:
-    """``once``, ``twice``, ``3 times``."""
-    return {1: "once", 2: "twice"}.get(count, f"{count} times")
-
-
 def solve_within_budget(warper, warp, mode: str):
     """``warper.solve(warp, mode)``, the warp's own ``review`` of the mesh (deform's: handles
     reached, an image laid over itself) joining its warnings; a grid above the memory budget
@@ -397,9 +392,8 @@ def check_solution(settings: Settings, mesh) -> None:
         raise WarpError(f"the result has {folded} folded triangles (the warp turns the image over itself "
                         f"there); nothing written (--allow-folds writes it anyway)")
     if crossings and not settings.allow_folds:
-        raise WarpError(f"the result lays the image over itself (its border crosses itself {_times(crossings)}): "
-                        f"nothing written (a handle dragged across a pin or another handle's path does that: "
-                        f"move them apart, or --allow-folds writes it anyway)")
+        raise WarpError(f"the result lays the image over itself (its border crosses itself {'once' if crossings == 1 else f'{crossings} times'}"
+                        f"; a handle dragged across a pin's path does that): nothing written (--allow-folds writes it)")
     if settings.strict and mesh.record.warnings:
         raise WarpError(f"--strict: {mesh.record.warnings[0]}; nothing written")
 
