@@ -31,6 +31,7 @@ import scipy.sparse as sp
 
 from . import cholmod
 from .injectivity import max_step
+from .targets import closest_rotations
 
 #: A triangle may shrink to this fraction of its rest area before the barrier acts.
 SAFE_AREA = 0.5
@@ -135,7 +136,7 @@ class RigidEnergy:
         det = f[:, 0, 0] * f[:, 1, 1] - f[:, 0, 1] * f[:, 1, 0]
         if not np.all(det > 0):
             return np.inf
-        rotation = _closest_rotations(f)
+        rotation = closest_rotations(f)
         held = self.penalty @ x - targets
         return float(np.sum(self.areas * (np.sum((f - rotation) ** 2, axis=(1, 2))
                                           + BARRIER_WEIGHT * barrier(det)[0])) + np.sum(held * held))
@@ -154,7 +155,7 @@ class RigidEnergy:
         flat = f.reshape(-1, 4)
         det = flat[:, 0] * flat[:, 3] - flat[:, 1] * flat[:, 2]
         cofactor = np.stack([flat[:, 3], -flat[:, 2], -flat[:, 1], flat[:, 0]], axis=1)
-        rotation = _closest_rotations(f).reshape(-1, 4)
+        rotation = closest_rotations(f).reshape(-1, 4)
         _, slope, curve = barrier(det)
         grad_f = 2.0 * (flat - rotation) + BARRIER_WEIGHT * slope[:, None] * cofactor
         hess_f = _arap_hessians(flat, rotation)
@@ -251,13 +252,6 @@ def _extend(energy: RigidEnergy, x, direction, targets, trial, trial_value):
 
 #: Hessian of det F in the flattened F = [F00, F01, F10, F11].
 _DET_HESSIAN = np.array([[0.0, 0, 0, 1], [0, 0, -1, 0], [0, -1, 0, 0], [1, 0, 0, 0]])
-
-
-def _closest_rotations(f: np.ndarray) -> np.ndarray:
-    """(M, 2, 2) closest rotation of each Jacobian (polar decomposition in 2-D)."""
-    angle = np.arctan2(f[:, 1, 0] - f[:, 0, 1], f[:, 0, 0] + f[:, 1, 1])
-    c, s = np.cos(angle), np.sin(angle)
-    return np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)
 
 
 def _arap_hessians(flat: np.ndarray, rotation: np.ndarray) -> np.ndarray:

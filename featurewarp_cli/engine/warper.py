@@ -276,16 +276,18 @@ class FeatureWarper:
         self.timings = {}
         stages.enter("grid")
         t0 = time.perf_counter()
+        lattice = getattr(warp, "lattice", None)           # a warp linear on a grid's triangles
         if quick:
             cell, error = (self.cell or fidelity.auto_cell(self.width, self.height, None)[0]), float("nan")
         elif self.cell is None:
             cell, error = fidelity.auto_cell(self.width, self.height, warp)
-            fidelity.check_budget(self.width, self.height, cell, self.max_nodes, getattr(warp, "lattice", None))
+            fidelity.check_budget(self.width, self.height, cell, self.max_nodes, lattice)
         else:
-            cell = float(self.cell)
-            error = fidelity.pl_error(grid_for(self.width, self.height, cell, getattr(warp, "lattice", None)), warp)
+            cell, error = float(self.cell), None
+        grid = grid_for(self.width, self.height, cell, lattice)
+        if error is None:
+            error = fidelity.pl_error(grid, warp)
         boundary = self.boundary if self.boundary in ("fixed", "slide") else getattr(warp, "boundary", "fixed")
-        grid = grid_for(self.width, self.height, cell, getattr(warp, "lattice", None))
         warped = warp(grid.nodes())
         state = self._state(grid, warped, boundary)
         self.timings["grid"] = time.perf_counter() - t0
