@@ -16,24 +16,24 @@ stretch_ARGS := --sx 1.6
 arc_ARGS     := --angle 120
 swirl_ARGS   := --angle 120
 bulge_ARGS   := --strength 0.8
-# SAMPLE-PRESET_ARGS replaces PRESET_ARGS for one sample: the demo shows settings each
-# sample keeps whole, with no warning line (issue 25 item 6; tests/test_demo.py checks it).
-# The coins fill 45 % of the frame: 24 features 2 to 5 grid cells apart. Under the strong
+# SAMPLE-PRESET_ARGS replaces PRESET_ARGS for one sample and SAMPLE_MASK the sample's mask:
+# the demo shows settings each sample keeps whole, with no warning line (issue 25 item 6;
+# tests/test_demo.py checks it). The demo's masks mark what lies whole in the frame: the
+# astronaut's head and mission patch (the shuttle model reaches the top edge) and the 22
+# coins the right edge does not cut. A feature cut by the frame cannot follow a curved
+# border as one similarity; it gives way so that the outline stays the warp's, and the
+# tool says so (the gallery's arc shows that case, and --boundary release beside it).
+# The coins fill 45 % of the frame: 22 features 2 to 5 grid cells apart. Under the strong
 # bends above (arc 120, swirl 120, cylinder 120, the styles' default bend 50) the thin
 # background between them cannot take the bend: the fold-over guard relaxes coins and the
 # tool rightly names each coin it could not keep (115 warning lines before). Gentler bends
 # keep every coin. Their stretch needs a narrow transition band: the default band of 2
 # cells fills the gaps between the coins, which then move as one piece, and the extra
 # width lands in the 15 px margin at the left (background stretched 15x; the report's
-# background_stretch says so); with half a cell the gaps take it (7x). The astronaut's
-# fish at bend 50 squeezes the shuttle against the top edge (the gallery shows that case
-# and its warning); at 30 it is kept. Warnings are left on purpose for one kind of feature:
-# the shuttle's tank reaches the top edge (and two coins the right edge); under the presets
-# that curve the outline (arc, arch, flag, fish, rise, inflate, squeeze, cylinder, sphere)
-# that feature cannot follow the curved edge as one similarity, so it gives way to keep the
-# warp's outline (issue 22 item 1) and the tool names it ("cut by a border that no
-# similarity of it can follow", and "not kept" where it bends visibly). --boundary release
-# keeps its shape instead and lets the outline step by 2-10 px there.
+# background_stretch says so); with half a cell the gaps take it (7x). At fish's bend 50
+# the narrowing tail squeezes the astronaut's head to the plain warp; at 30 it is kept.
+astronaut_MASK := samples/astronaut_portrait_mask.png
+coins_MASK     := samples/coins_whole_mask.png
 coins-stretch_ARGS  := --sx 1.6 --decay 0.5
 coins-arc_ARGS      := --angle 25
 coins-swirl_ARGS    := --angle 60
@@ -74,10 +74,11 @@ demo: $(DEMO)
 out:
 	mkdir -p out
 
-# out/SAMPLE-PRESET.png <- samples/SAMPLE.png with samples/SAMPLE_mask.png
+# out/SAMPLE-PRESET.png <- samples/SAMPLE.png with SAMPLE_MASK, else samples/SAMPLE_mask.png
 out/%.png: | out
 	$(BIN)/featurewarp warp $(word 2,$(subst -, ,$*)) samples/$(word 1,$(subst -, ,$*)).png $@ \
-	  --mask samples/$(word 1,$(subst -, ,$*))_mask.png $(or $($*_ARGS),$($(word 2,$(subst -, ,$*))_ARGS))
+	  --mask $(or $($(word 1,$(subst -, ,$*))_MASK),samples/$(word 1,$(subst -, ,$*))_mask.png) \
+	  $(or $($*_ARGS),$($(word 2,$(subst -, ,$*))_ARGS))
 
 bench:
 	$(BIN)/python benchmarks/run.py

@@ -174,10 +174,12 @@ def make_closeup(astronaut):
 def main():
     cv2.imwrite(str(HERE / "closeup.png"), make_closeup(cv2.imread(str(HERE / "astronaut.png"))))
     for name, polygons in (("astronaut", ASTRONAUT), ("astronaut_body", ASTRONAUT_BODY),
-                           ("astronaut_helmet", ASTRONAUT[:1] + HELMET), ("coins", COINS),
+                           ("astronaut_helmet", ASTRONAUT[:1] + HELMET),
+                           ("astronaut_portrait", ASTRONAUT[:2]), ("coins", COINS),
+                           ("coins_whole", [p for p in COINS if max(p[0::2]) < 383]),
                            ("closeup", CLOSEUP)):
         photo = cv2.imread(str(HERE / f"{name.split('_')[0]}.png"), cv2.IMREAD_UNCHANGED)
-        mask = separated(photo.shape, polygons, COIN_GAP) if name == "coins" else polygon_mask(photo.shape, polygons)
+        mask = separated(photo.shape, polygons, COIN_GAP) if name.startswith("coins") else polygon_mask(photo.shape, polygons)
         cv2.imwrite(str(HERE / f"{name}_mask.png"), mask)
     img, mask = sample_scene()
     cv2.imwrite(str(HERE / "shapes.png"), img)

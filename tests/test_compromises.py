@@ -135,3 +135,27 @@ def test_many_features_not_kept_are_named_ten_at_a_time():
     assert len(named) == MOST_LISTED and min(record.components[k].quads for k in shown) >= max(rest)
     assert lines[-1] == (f"{len(rest)} smaller features not kept either ({min(rest)} to {max(rest)} quads; "
                          f"the report lists each)")
+
+
+def test_one_line_per_feature_not_kept_with_every_cause_and_none_for_a_feature_still_kept():
+    """Issue 22 item 3: a feature that gave way prints one line naming its figure and why; one
+    that gave way but kept its shape (within KEPT) is no visible compromise and prints none."""
+    from types import SimpleNamespace
+
+    from featurewarp_cli.engine.record import KEPT, ComponentRecord, SolveRecord, warnings_for
+
+    def component(tied, worst):
+        return ComponentRecord(quads=40, tied=tied, unpinned=False, scale=1.0, rotation_deg=0.0, distortion=worst,
+                               anisotropy_worst=worst, anisotropy_mean=worst / 2, plain_distortion=0.5,
+                               plain_anisotropy_worst=0.5, area_ratio=1.0, kept=worst <= KEPT)
+
+    record = SolveRecord("similarity", "exact", "fixed", {})
+    record.components = [component(False, KEPT / 2), component(False, 0.3), component(True, 0.2)]
+    record.guard.plain_blend, record.guard.degraded_components = 0.4, [1]
+    nodes = np.zeros((4, 2))
+    lines = warnings_for(record, nodes, nodes, nodes, SimpleNamespace(canvas=(10, 10), width=20, height=20))
+    assert len(lines) == 2, lines
+    assert lines[0].startswith("feature 1 (40 quads) not kept: worst-triangle anisotropy 0.300 (plain warp: 0.500): "
+                               "cut by a border that no similarity of it can follow")
+    assert "; moved towards the plain warp (blend 0.40, 0 = the plain warp)" in lines[0]
+    assert lines[1] == "feature 2 (40 quads) not kept: worst-triangle anisotropy 0.200 (plain warp: 0.500)"

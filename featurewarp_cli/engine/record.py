@@ -201,37 +201,38 @@ def _listed(ids) -> str:
     return shown if len(ids) <= MOST_LISTED else f"{shown} and {len(ids) - MOST_LISTED} more"
 
 
-def _features(ids) -> str:
-    """``feature 3`` or ``features 3, 5`` (up to :data:`MOST_LISTED`, then a count)."""
-    ids = list(ids)
-    return f"feature{'s' if len(ids) > 1 else ''} {_listed(ids)}"
+def _why(record: "SolveRecord", k: int) -> str:
+    """What made feature ``k`` give way, for its "not kept" line ('' when nothing did)."""
+    guard, c = record.guard, record.components[k]
+    causes = []
+    if not c.tied and k not in guard.released_components and record.formulation == "exact":
+        causes.append("cut by a border that no similarity of it can follow, it gives way so that the outline "
+                      "stays the warp's (--boundary release keeps its shape instead where that folds nothing)")
+    if k in guard.released_components:
+        causes.append(f"relaxed towards the plain warp to avoid fold-overs (blend {guard.feature_blend:.2f}, "
+                      f"0 = the plain warp)")
+    if k in guard.degraded_components:
+        causes.append(f"moved towards the plain warp (blend {guard.plain_blend:.2f}, 0 = the plain warp) to be "
+                      f"no more distorted than under it")
+    return "".join(": " + cause if i == 0 else "; " + cause for i, cause in enumerate(causes))
 
 
 def warnings_for(record: "SolveRecord", source, target, warped, warp) -> list[str]:
-    """One line per thing the caller should know: features not kept or relaxed, a no-op (the
-    :data:`MOST_LISTED` largest features not kept one by one, the others in one line)."""
+    """One line per compromise the output shows: each feature not kept with its figure and
+    why it gave way (the :data:`MOST_LISTED` largest one by one, the others in one line),
+    every feature moved towards the plain warp, the canvas's compromises, a no-op. A feature
+    that gave way but still keeps its shape (within :data:`KEPT`) shows nothing: the report
+    records it."""
     lines = []
-    if record.guard.plain_blend < 1.0:
-        which = record.guard.degraded_components
-        lines.append((f"{_features(which)} moved" if which else "every feature moved evenly")
-                     + f" towards the plain warp (blend {record.guard.plain_blend:.2f}, 0 = the plain warp) "
-                       f"so that none is more distorted than under it")
-    if record.guard.release_rounds:
-        lines.append(f"{_features(record.guard.released_components)} relaxed towards the plain warp to avoid "
-                     f"fold-overs (blend {record.guard.feature_blend:.2f}, 0 = the plain warp)")
-    relaxed = set(record.guard.released_components)
-    held = [k for k, c in enumerate(record.components) if not c.tied and k not in relaxed]
-    if held and record.formulation == "exact" and record.mode != "plain":
-        lines.append(f"{_features(held)} cut by a border that no similarity of {'them' if len(held) > 1 else 'it'} "
-                     f"can follow: held by soft constraints so that the outline stays the warp's (--boundary "
-                     f"release keeps {'their' if len(held) > 1 else 'its'} shape instead where that folds nothing, "
-                     f"and the outline steps there)")
+    if record.guard.plain_blend < 1.0 and not record.guard.degraded_components:
+        lines.append(f"every feature moved evenly towards the plain warp (blend {record.guard.plain_blend:.2f}, "
+                     f"0 = the plain warp) so that none is more distorted than under it")
     lost = sorted((k for k, c in enumerate(record.components) if not c.kept),
                   key=lambda k: -record.components[k].quads)
     for k in sorted(lost[:MOST_LISTED]):
         c = record.components[k]
         lines.append(f"feature {k} ({c.quads} quads) not kept: worst-triangle anisotropy "
-                     f"{c.anisotropy_worst:.3f} (plain warp: {c.plain_anisotropy_worst:.3f})")
+                     f"{c.anisotropy_worst:.3f} (plain warp: {c.plain_anisotropy_worst:.3f})" + _why(record, k))
     if len(lost) > MOST_LISTED:
         rest = [record.components[k] for k in lost[MOST_LISTED:]]
         lines.append(f"{len(rest)} smaller features not kept either ({min(c.quads for c in rest)} to "
