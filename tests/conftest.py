@@ -81,8 +81,9 @@ def border_mask():
 
 
 @pytest.fixture(autouse=True)
-def every_report_validates(monkeypatch):
-    """Every report a test makes in this process is checked against the shipped JSON Schema."""
+def every_report_validates(monkeypatch, request):
+    """Every report a test makes is checked against the shipped JSON Schema: in this process as
+    it is built, and those other processes wrote into the test's ``tmp_path`` when it ends."""
     import json
 
     from featurewarp_cli import schema
@@ -97,3 +98,13 @@ def every_report_validates(monkeypatch):
         return made
 
     monkeypatch.setattr(report, "build_report", checked)
+    folder = request.getfixturevalue("tmp_path") if "tmp_path" in request.fixturenames else None
+    yield
+    if folder is not None and folder.is_dir():
+        for path in folder.rglob("*.json"):
+            try:
+                made = json.loads(path.read_text())
+            except (ValueError, UnicodeDecodeError, OSError):
+                continue
+            if isinstance(made, dict) and str(made.get("schema", "")).startswith("featurewarp-report/"):
+                validator.validate(made)
