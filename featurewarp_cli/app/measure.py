@@ -4,8 +4,12 @@ The mesh says how the tool meant to move each feature; this module checks what t
 written image shows. For every connected component of the input mask it matches SIFT
 keypoints found inside the component (input) with keypoints of the whole output,
 keeps the matches that pass Lowe's ratio test, and fits an affine map
-input -> output with RANSAC (``cv2.estimateAffine2D``). The linear part A of that map
-gives the component's
+input -> output with RANSAC (``cv2.estimateAffine2D``). The component's map is then the
+least-squares affine fit over all its locally consistent matches (below): for a component
+moved as one map that is the RANSAC map with less noise; for a bent one it is the best
+single map over the whole component, as the report's ``distortion`` is over the mesh's
+nodes, where RANSAC would speak for the largest part that moved as one. The linear part A
+of that map gives the component's
 
 * distortion  sigma_max / sigma_min - 1 of A: 0 for a similarity, 1 for 2x along one axis;
 * scale       sqrt(|det A|);
@@ -58,6 +62,9 @@ from .keypoints import FLAT_GRAY, RATIO, Keypoints, detect, local_fits, refine, 
 MIN_INLIERS = 10
 #: RANSAC's reprojection threshold in output pixels.
 REPROJECTION_PX = 3.0
+#: A match enters the component's least-squares map when its neighbourhood's map holds it
+#: this close (output pixels).
+FIT_PX = 1.0
 #: A fit whose inliers are fewer than this share of its matches, or whose inliers span
 #: less than this share of the component, is taken as bent: simulated views then add
 #: matches for the local figures.
@@ -218,7 +225,10 @@ def fit_component(gray_in, gray_out, component, src: Keypoints, dst: Keypoints, 
         # Bent or partly fitted: where SIFT's plain views miss, simulated tilts find matches.
         pairs.append(view_matches(gray_in, component, box, dst, opts["ratio"],
                                   [view for views in tilts() for view in views]))
-    return describe(linear) | local_figures(pairs, fit.matrix, len(xs), opts) | {
+    local = local_figures(pairs, fit.matrix, len(xs), opts)
+    matrix = local.pop("matrix")
+    linear, translation = matrix[:, :2], matrix[:, 2]
+    return describe(linear) | local | {
         "matches": len(fit.src), "inliers": int(keep.sum()), "linear": linear, "translation": translation,
         "rms_px": float(np.sqrt(np.mean(np.sum(residual**2, axis=1)))), "coverage": coverage,
     }
@@ -232,7 +242,9 @@ def local_figures(pairs, matrix: np.ndarray, pixels: int, opts: dict) -> dict:
     ``explained`` is the share of locally consistent matches that the global map
     ``matrix`` also fits; ``local_p90`` and ``local_median`` are the 90th percentile and
     the median of the local fits' distortion, ``local_scales`` the 10th, 50th and 90th
-    percentiles of their scale.
+    percentiles of their scale. ``matrix`` comes back as the least-squares affine fit
+    (2 x 3) over the locally consistent matches (unchanged when they are too few), and
+    ``explained`` is measured against it.
     """
     pooled = np.hstack([np.concatenate([p[0] for p in pairs]), np.concatenate([p[1] for p in pairs])])
     _, once = np.unique(np.round(pooled, 2), axis=0, return_index=True)
@@ -240,13 +252,20 @@ def local_figures(pairs, matrix: np.ndarray, pixels: int, opts: dict) -> dict:
     radius = max(24.0 * opts["scale"], 0.25 * np.sqrt(pixels))
     consistent, linear = local_fits(src, dst, radius, opts["threshold"])
     if consistent.sum() < opts["min_inliers"]:
-        return {"explained": None, "local_p90": None, "local_median": None, "local_scales": None}
+        return {"explained": None, "local_p90": None, "local_median": None, "local_scales": None,
+                "matrix": matrix}
+    # The map: least squares over the matches that their neighbourhood's map holds within
+    # FIT_PX (true matches, located to the precision the keypoints have, bent or not).
+    fitting, _ = local_fits(src, dst, radius, FIT_PX * opts["scale"])
+    if fitting.sum() >= opts["min_inliers"]:
+        design = np.column_stack([src[fitting], np.ones(int(fitting.sum()))])
+        matrix = np.linalg.lstsq(design, dst[fitting], rcond=None)[0].T
     sigma = np.linalg.svd(linear[consistent], compute_uv=False)
     local = sigma[:, 0] / sigma[:, 1] - 1.0
     scales = np.sqrt(sigma[:, 0] * sigma[:, 1])
     residual = src[consistent] @ matrix[:, :2].T + matrix[:, 2] - dst[consistent]
     explained = np.mean(np.hypot(residual[:, 0], residual[:, 1]) <= opts["threshold"])
-    return {"explained": float(explained), "local_p90": float(np.percentile(local, 90)),
+    return {"matrix": matrix, "explained": float(explained), "local_p90": float(np.percentile(local, 90)),
             "local_median": float(np.median(local)),
             "local_scales": tuple(float(v) for v in np.percentile(scales, [10, 50, 90]))}
 

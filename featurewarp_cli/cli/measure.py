@@ -34,13 +34,15 @@ def measure_command(input, output, mask, as_json):
     """Measure how each masked region of INPUT came out in OUTPUT.
 
     SIFT keypoints inside each connected component of the mask are matched with
-    the output's, and an affine map input -> output is fitted (RANSAC). Printed
-    per component: distortion = sigma_max/sigma_min - 1 of its linear part (0: the
+    the output's (RANSAC keeps the true matches), and the affine map input ->
+    output that fits all locally consistent matches best (least squares) is the
+    component's: the image's counterpart of the report's distortion. Printed per
+    component: distortion = sigma_max/sigma_min - 1 of its linear part (0: the
     shape is kept, 1: stretched 2x along one axis), scale, rotation (degrees,
-    clockwise), the matches behind the fit and the share of the component they
-    span; then the 90th percentile of the distortion of local fits (around each
-    match) and the share of locally consistent matches the global fit explains
-    (below 100 %: the region was bent, not moved as one map). A component with
+    clockwise), the RANSAC matches and the share of the component they span; then
+    the 90th percentile of the distortion of local fits (around each match) and
+    the share of locally consistent matches the component's map explains (below
+    100 %: the region was bent, not moved as one map). A component with
     too few matches is reported as not measured, with the reason. One of INPUT,
     OUTPUT and MASK may be '-' (stdin).
     """
