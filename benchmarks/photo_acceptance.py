@@ -81,7 +81,7 @@ BENT_EXPLAINED = 0.9
 #: Keypoint tolerances per figure, for components that moved as one map and for bent ones
 #: (:func:`kp_tolerance` gives the noise behind them).
 KP_TOL = {"one map": {"distortion": 0.002, "local_p90": 0.015},
-          "bent": {"distortion": 0.08, "local_p90": 0.045}}
+          "bent": {"distortion": 0.05, "local_p90": 0.045}}
 
 
 def kp_tolerance(fits: list[dict], key: str, spread: float | None = None) -> tuple[float, str]:
@@ -103,11 +103,11 @@ def kp_tolerance(fits: list[dict], key: str, spread: float | None = None) -> tup
         From ``--noise``: the same plain map rendered ``--interp cubic`` and ``linear``
         (85 component pairs over the four photos and seventeen settings). Where both fits
         explain >= 90 % of the matches (22 pairs) the renderings' distortions differ by at
-        most 0.0005 and their local_p90 by 0.0074; bent components (63 pairs) differ by up
-        to 0.15 in distortion (median 0.014, 95th percentile 0.062: RANSAC fits a different
-        near-affine part each time) and 0.041 in local_p90. The bent tolerances sit above
-        the 95th percentile (two pairs exceed 0.08: portrait arc, 20 % explained, and china
-        cylinder's trees; ``spread`` covers such cases when ``--noise`` ran).
+        most 0.0019 and their local_p90 by 0.0074; bent components (63 pairs) differ by up
+        to 0.047 in distortion (median 0.004, 95th percentile 0.031; ``measure``'s
+        least-squares map over the confirmed matches: its RANSAC map had differed by up to
+        0.15) and 0.041 in local_p90. The bent tolerances sit at the largest difference seen
+        (``spread`` raises them where one case's own noise is larger, when ``--noise`` ran).
     kind : str
         ``'one map'`` or ``'bent'`` (some fit explains less than :data:`BENT_EXPLAINED`).
     """
@@ -237,9 +237,12 @@ def violations(row: dict, plain: dict) -> list[dict]:
         flag("unsaid-outline", rep["outline_departure"], OUTLINE_PX)
     if rep["background_stretch"] > STREAKS and not said(warns, "streaks", "stretched"):
         flag("unsaid-streaks", rep["background_stretch"], STREAKS)
-    if rep["fold_guard"]["plain_blend"] < 1.0 and not said(warns, "towards the plain warp"):
+    # A feature that gave way but still keeps its shape (within KEPT) is no visible compromise.
+    moved = rep["fold_guard"]["degraded_components"]
+    lost = [k for k in moved if not items[k]["kept"]] if moved else [None]
+    if rep["fold_guard"]["plain_blend"] < 1.0 and lost and not said(warns, "towards the plain warp"):
         flag("unsaid-blend", 1.0 - rep["fold_guard"]["plain_blend"], 0.0)
-    loose = [k for k, c in enumerate(items, 1) if c["unpinned"] or not c["tied"]]
+    loose = [k for k, c in enumerate(items, 1) if (c["unpinned"] or not c["tied"]) and not c["kept"]]
     if loose and not said(warns, "border", "outline", "relaxed"):
         flag("unsaid-border", float(len(loose)), 0.0, loose[0])
     for k, a in enumerate(ours_kp, 1):

@@ -32,6 +32,10 @@ drag      Issue 23's recorded drags (benchmarks/editor_drag.py): three 1-second 
 stability Issue 21's one-ulp harness (benchmarks/stability.py): twelve hard cases on the
           512 px astronaut, W's output nudged by one ulp in two patterns; the largest node
           move and image RMSE against the un-nudged run (targets 0.01 px, RMSE 0.5).
+photos    Issue 22's photo acceptance (benchmarks/photo_acceptance.py): four photos whose masks
+          touch the frame (portrait, close-up, pagoda, dahlia), the 14 presets at their
+          defaults and three stretches, both modes, against the plain warp: blank share,
+          outline, each component by the report and by keypoints on the image, warnings.
 cluster   Issue 25 (benchmarks/cluster.py): 200 images of 1 MP on 2 local Dask workers
           (batch --scheduler local:2) against batch -j 2 and make -j 2, interleaved;
           the Dask batch's overhead over the fastest (target 15 %).
@@ -75,7 +79,8 @@ from benchmarks.hard_cases import bench_hard  # noqa: E402
 from benchmarks.inputs import make_photos  # noqa: E402
 from samples.scenes import disc_mask  # noqa: E402
 
-SECTIONS = ("table1", "render", "rewarp", "deform", "rigid", "drag", "commands", "magick", "hard", "stability", "cluster")
+SECTIONS = ("table1", "render", "rewarp", "deform", "rigid", "drag", "commands", "magick", "hard", "stability", "photos",
+            "cluster")
 
 #: The paper's Table 1 (Pentium 4, 3.2 GHz): setup, factor, rhs setup, solve in seconds.
 PAPER_TABLE1 = {
@@ -439,6 +444,15 @@ def main(argv=None) -> int:
             from benchmarks.stability import bench_stability
 
             report["stability"] = bench_stability(512)
+        if "photos" in sections:
+            from benchmarks.photo_acceptance import main as photo_acceptance
+
+            figures = tmp / "photo_acceptance.json"
+            photo_acceptance(["--noise", "--json", str(figures)])
+            rows = json.loads(figures.read_text())["rows"]
+            report["photos"] = {"runs": sum(r["mode"] != "plain" for r in rows),
+                                "violations": [{k: r[k] for k in ("case", "setting", "mode", "violations")}
+                                               for r in rows if r.get("violations")]}
         if "cluster" in sections:
             from benchmarks.cluster import bench_cluster
 

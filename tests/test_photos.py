@@ -186,3 +186,22 @@ def test_a_closeup_is_never_worse_than_plain_globally_nor_locally(closeup, prese
     for component in mesh.info["components"]:
         assert component["distortion"] <= component["plain_distortion"] + 1e-6, component
         assert component["anisotropy_worst"] <= component["plain_anisotropy_worst"] + 1e-6, component
+
+
+@pytest.mark.parametrize("name,preset", [("china", "arc"), ("china", "fish"), ("china", "cylinder"),
+                                         ("china", "perspective"), ("dahlia", "arc"), ("dahlia", "inflate"),
+                                         ("dahlia", "sphere"), ("dahlia", "squeeze")])
+@pytest.mark.parametrize("mode", ["similarity", "rigid"])
+def test_new_photos_keep_the_canvas_and_are_no_worse_than_plain(name, preset, mode):
+    """Issue 22's rules on two photos whose masks touch two edges (scikit-learn's pagoda with
+    the trees at the bottom right, 44 % of the frame; a dahlia cut by the top and right edges,
+    80 %): at the preset's defaults the outline is the plain warp's, the canvas covers what it
+    covers, and every component is no worse than under it by the report's two figures
+    (``benchmarks/photo_acceptance.py`` checks all presets and the keypoints too)."""
+    mask = sample(f"{name}_mask.png") >= 128
+    h, w = mask.shape
+    record = FeatureWarper(w, h, mask).solve(load_warp(preset)(w, h), mode).record
+    assert record.outline_departure <= 1.0 and record.blank_share <= record.plain_blank_share + 0.005
+    for component in record.components:
+        assert component.distortion <= component.plain_distortion + 1e-6, component
+        assert component.anisotropy_worst <= component.plain_anisotropy_worst + 1e-6, component

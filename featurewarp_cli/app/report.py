@@ -83,6 +83,7 @@ def build_report(input_path, output_path, image, result, warp, mesh, timings) ->
             "released_components": info.get("released_components", []),
             "feature_blend": info.get("feature_blend", 1.0),
             "plain_blend": info.get("plain_blend", 1.0),
+            "degraded_components": info.get("degraded_components", []),
         },
         "quality": info["quality"],
     }
