@@ -252,7 +252,7 @@ def main(argv=()):
     gaps = {"coins": COIN_GAP, "china": CHINA_GAP}
     for name, polygons in (("astronaut", ASTRONAUT), ("astronaut_body", ASTRONAUT_BODY),
                            ("astronaut_helmet", ASTRONAUT[:1] + HELMET),
-                           ("astronaut_portrait", ASTRONAUT[:2]), ("coins", COINS),
+                           ("coins", COINS),
                            ("coins_whole", [p for p in COINS if max(p[0::2]) < 383]),
                            ("closeup", CLOSEUP), ("china", CHINA), ("dahlia", DAHLIA)):
         photo = cv2.imread(str(HERE / f"{name.split('_')[0]}.png"), cv2.IMREAD_UNCHANGED)

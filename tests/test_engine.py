@@ -323,3 +323,29 @@ def test_plain_swirl_mesh_does_not_fold(angle):
     """The plain swirl is injective for every angle, so its mesh has no flipped triangle."""
     mesh = FeatureWarper(500, 360, None).solve(load_warp("swirl")(500, 360, angle=angle), "plain")
     assert flipped(mesh) == 0
+
+
+@pytest.mark.parametrize("top, cut", [(2, False), (0, True)])
+def test_a_mask_that_stops_short_of_the_frame_is_inside_it(top, cut):
+    """A lasso that ends 2 px under the top edge (inside the first row of 4 px cells) is read as
+    ending a cell short: under an arc, which curves the top edge, the feature stays one
+    similarity and is kept. One that reaches the edge is cut by it and gives way."""
+    mask = np.zeros((96, 128), bool)
+    mask[top:40, 70:100] = True
+    mesh = FeatureWarper(128, 96, mask, cell=4).solve(load_warp("arc")(128, 96, angle=120), "similarity")
+    component, = mesh.record.components
+    assert component.tied is not cut and component.kept is not cut
+    assert mesh.record.outline_departure <= 1.0
+
+
+def test_a_speck_in_the_outer_cells_is_kept_whole():
+    """A feature lying wholly in the frame's outer cells keeps them (it would vanish)."""
+    from featurewarp_cli.engine import features
+    from featurewarp_cli.engine.grid import grid_for
+
+    mask = np.zeros((96, 128), bool)
+    mask[1:3, 60:66] = True
+    grid = grid_for(128, 96, 4.0)
+    pooled = features._pooled(mask, grid)
+    same, again = features.short_of_frame(mask, grid, pooled)
+    assert same is mask and again is pooled and features.analyse(mask, grid).n_components == 1

@@ -70,16 +70,8 @@ def analyse(mask: np.ndarray, grid: Grid, feature_weight: float = FEATURE_WEIGHT
     cx = np.clip(np.round((np.arange(qx) + 0.5) * sx - 0.5).astype(int), 0, grid.width - 1)
     cy = np.clip(np.round((np.arange(qy) + 0.5) * sy - 0.5).astype(int), 0, grid.height - 1)
     if min(sx, sy) >= 1.0:
-        # A quad is a feature quad when any of its pixels is a feature pixel (max-pool).
-        rows, cols = grid.quad_of_pixel()
-        row_bounds = np.append(np.searchsorted(rows, np.arange(qy)), grid.height)
-        col_starts = np.searchsorted(cols, np.arange(qx))
-        # Rows of pixels -> rows of quads, one reduction per quad row (10x faster than
-        # np.maximum.reduceat along axis 0), then columns.
-        by_row = np.empty((qy, grid.width), np.uint8)
-        for j in range(qy):
-            np.maximum.reduce(mask[row_bounds[j] : row_bounds[j + 1]].view(np.uint8), axis=0, out=by_row[j])
-        pooled = np.maximum.reduceat(by_row, col_starts, axis=1)
+        pooled = _pooled(mask, grid)
+        mask, pooled = short_of_frame(mask, grid, pooled)
     else:  # sub-pixel cells: the pixel under the quad's centre decides
         pooled = np.ascontiguousarray(mask[np.ix_(cy, cx)]).view(np.uint8)
     is_feature = pooled.astype(bool)
@@ -106,3 +98,66 @@ def analyse(mask: np.ndarray, grid: Grid, feature_weight: float = FEATURE_WEIGHT
     weight = feature_weight * f + (1.0 - f)
     component = np.where(f > 0, nearest_component, -1)
     return Features(is_feature.ravel(), component.ravel(), weight.ravel(), n_labels - 1)
+
+
+def _pooled(mask: np.ndarray, grid: Grid) -> np.ndarray:
+    """(qy, qx) uint8: 1 for a quad any of whose pixels is a feature pixel (max-pool; cells of
+    at least a pixel)."""
+    qy, qx = grid.quad_shape
+    rows, cols = grid.quad_of_pixel()
+    row_bounds = np.append(np.searchsorted(rows, np.arange(qy)), grid.height)
+    col_starts = np.searchsorted(cols, np.arange(qx))
+    # Rows of pixels -> rows of quads, one reduction per quad row (10x faster than
+    # np.maximum.reduceat along axis 0), then columns.
+    by_row = np.empty((qy, grid.width), np.uint8)
+    for j in range(qy):
+        np.maximum.reduce(mask[row_bounds[j] : row_bounds[j + 1]].view(np.uint8), axis=0, out=by_row[j])
+    return np.maximum.reduceat(by_row, col_starts, axis=1)
+
+
+def short_of_frame(mask: np.ndarray, grid: Grid, pooled: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The mask, less the pixels a component holds in the frame's outer cells along a side that
+    its mask does not reach; and the quads pooled again (``pooled`` when nothing changed).
+
+    A lasso that stops a few pixels short of an edge puts the component in the outer cells,
+    whose nodes the border holds: the component would count as cut by the frame, and under a
+    preset that curves that edge no similarity could follow it. Read as stopping a cell short,
+    it stays inside the frame and keeps its shape; the band around it takes the rest. A
+    component the mask leads out of the frame (a pixel on the edge) stays cut; one that lies
+    wholly in a side's outer cells keeps them.
+
+    Parameters
+    ----------
+    mask : (h, w) bool ndarray
+    grid : Grid
+        Cells of at least a pixel.
+    pooled : (qy, qx) uint8 ndarray
+        The feature quads of ``mask`` (:func:`_pooled`).
+    """
+    n_labels, labels = cv2.connectedComponents(pooled, connectivity=8)
+    quads = labels - 1                                      # component per quad, -1 for none
+    rows, cols = grid.quad_of_pixel()
+    out = None
+    # Per side: the outer strip of pixels as rows from the edge inwards, the component of each
+    # outer quad along it, the quad of each pixel along it, and the components' inner quads.
+    sides = [(mask[rows == 0], quads[0], cols, quads[1:]),
+             (mask[rows == rows[-1]][::-1], quads[-1], cols, quads[:-1]),
+             (mask[:, cols == 0].T, quads[:, 0], rows, quads[:, 1:]),
+             (mask[:, cols == cols[-1]][:, ::-1].T, quads[:, -1], rows, quads[:, :-1])]
+    for side, (strip, outer, along, inner) in enumerate(sides):
+        reach = np.zeros(n_labels - 1, bool)                # a pixel on the edge itself
+        on_edge = strip[0] & (outer[along] >= 0)
+        reach[outer[along][on_edge]] = True
+        kept = np.bincount(inner[inner >= 0], minlength=n_labels - 1) > 0
+        drop = (outer >= 0) & ~reach[np.maximum(outer, 0)] & kept[np.maximum(outer, 0)]
+        if not drop.any():
+            continue
+        out = mask.copy() if out is None else out
+        lines = drop[along]                                 # pixel columns (rows) to clear
+        span = {0: np.flatnonzero(rows == 0), 1: np.flatnonzero(rows == rows[-1]),
+                2: np.flatnonzero(cols == 0), 3: np.flatnonzero(cols == cols[-1])}[side]
+        if side < 2:
+            out[np.ix_(span, np.flatnonzero(lines))] = False
+        else:
+            out[np.ix_(np.flatnonzero(lines), span)] = False
+    return (mask, pooled) if out is None else (out, _pooled(out, grid))
