@@ -188,3 +188,28 @@ def test_diff_is_a_metric_of_sorts(a, seed):
     assert (same.rmse, same.max_abs, same.pixels_off) == (0.0, 0.0, 0)
     assert (ab.rmse, ab.max_abs, ab.pixels_off) == (ba.rmse, ba.max_abs, ba.pixels_off)
     assert ab.max_abs >= ab.rmse >= 0 and np.isfinite(ab.rmse)
+
+
+def test_a_mask_short_of_the_frame_loses_no_edge_pixel_and_no_component():
+    """features.short_of_frame on random boxes, grids and cell sizes: it only drops pixels, never
+    one on the frame's edge (those features are cut by it), and every component keeps a quad."""
+    import cv2
+
+    from featurewarp_cli.engine import features
+    from featurewarp_cli.engine.grid import Grid
+
+    rng = np.random.default_rng(7)
+    for _ in range(400):
+        h, w = (int(v) for v in rng.integers(3, 90, 2))
+        mask = np.zeros((h, w), bool)
+        for _ in range(rng.integers(1, 6)):
+            y0, x0 = rng.integers(0, h), rng.integers(0, w)
+            mask[y0:y0 + rng.integers(1, 25), x0:x0 + rng.integers(1, 25)] = True
+        grid = Grid.for_image(w, h, float(rng.choice([1.0, 1.7, 3.0, 4.0, 7.3])))
+        pooled = features._pooled(mask, grid)
+        out, again = features.short_of_frame(mask, grid, pooled)
+        assert not (out & ~mask).any()
+        for edge in (np.s_[0], np.s_[-1], np.s_[:, 0], np.s_[:, -1]):
+            assert np.array_equal(out[edge], mask[edge])
+        count, labels = cv2.connectedComponents(pooled, connectivity=8)
+        assert all(again[labels == c].any() for c in range(1, count))

@@ -135,29 +135,21 @@ def short_of_frame(mask: np.ndarray, grid: Grid, pooled: np.ndarray) -> tuple[np
         The feature quads of ``mask`` (:func:`_pooled`).
     """
     n_labels, labels = cv2.connectedComponents(pooled, connectivity=8)
-    quads = labels - 1                                      # component per quad, -1 for none
+    quads, n = labels - 1, n_labels - 1                     # component per quad, -1 for none
     rows, cols = grid.quad_of_pixel()
-    out = None
-    # Per side: the outer strip of pixels as rows from the edge inwards, the component of each
-    # outer quad along it, the quad of each pixel along it, and the components' inner quads.
-    sides = [(mask[rows == 0], quads[0], cols, quads[1:]),
-             (mask[rows == rows[-1]][::-1], quads[-1], cols, quads[:-1]),
-             (mask[:, cols == 0].T, quads[:, 0], rows, quads[:, 1:]),
-             (mask[:, cols == cols[-1]][:, ::-1].T, quads[:, -1], rows, quads[:, :-1])]
-    for side, (strip, outer, along, inner) in enumerate(sides):
-        reach = np.zeros(n_labels - 1, bool)                # a pixel on the edge itself
-        on_edge = strip[0] & (outer[along] >= 0)
-        reach[outer[along][on_edge]] = True
-        kept = np.bincount(inner[inner >= 0], minlength=n_labels - 1) > 0
-        drop = (outer >= 0) & ~reach[np.maximum(outer, 0)] & kept[np.maximum(outer, 0)]
-        if not drop.any():
-            continue
-        out = mask.copy() if out is None else out
-        lines = drop[along]                                 # pixel columns (rows) to clear
-        span = {0: np.flatnonzero(rows == 0), 1: np.flatnonzero(rows == rows[-1]),
-                2: np.flatnonzero(cols == 0), 3: np.flatnonzero(cols == cols[-1])}[side]
-        if side < 2:
-            out[np.ix_(span, np.flatnonzero(lines))] = False
-        else:
-            out[np.ix_(np.flatnonzero(lines), span)] = False
-    return (mask, pooled) if out is None else (out, _pooled(out, grid))
+    strips = [(0, slice(None)), (-1, slice(None)), (slice(None), 0), (slice(None), -1)]   # top bottom left right
+    edges = [(mask[0], cols), (mask[-1], cols), (mask[:, 0], rows), (mask[:, -1], rows)]
+    reach = np.zeros((4, n + 1), bool)                      # column n: no component
+    for side, ((line, along), strip) in enumerate(zip(edges, strips)):
+        reach[side, quads[strip][along][line]] = True       # a mask pixel on the edge itself
+    drop = np.zeros(quads.shape, bool)
+    for side, strip in enumerate(strips):
+        drop[strip] |= (quads[strip] >= 0) & ~reach[side, quads[strip]]
+    for side, strip in enumerate(strips):                   # a corner cell of a side reached stays
+        drop[strip] &= ~reach[side, quads[strip]]
+    left = np.bincount(quads[(quads >= 0) & ~drop], minlength=n + 1) > 0
+    drop &= left[quads]                                     # a component would vanish: it keeps them
+    if not drop.any():
+        return mask, pooled
+    out = mask & ~drop[rows][:, cols]
+    return out, _pooled(out, grid)
