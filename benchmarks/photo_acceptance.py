@@ -193,6 +193,7 @@ def violations(row: dict, plain: dict) -> list[dict]:
     out = []
 
     def flag(rule, ours, limit, component=None, reference=None):
+        """Record that ``rule`` is broken: ``ours`` against ``limit`` (and plain's ``reference``)."""
         out.append({"rule": rule, "component": component, "ours": ours, "limit": limit,
                     "plain": limit if reference is None else reference, "excess": ours - limit})
 
@@ -340,6 +341,7 @@ def write_panel(row: dict, plain: dict, folder: Path) -> str:
 
 
 def main(argv=None) -> int:
+    """Run (or ``--recheck``) the sweep, print every run and the violations, write the JSON."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--only", choices=sorted(CASES), help="run one case")
     parser.add_argument("--preset", choices=PRESETS, help="run one preset's settings")

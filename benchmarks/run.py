@@ -385,6 +385,19 @@ def machine() -> dict:
     return info
 
 
+def bench_photos(tmp: Path) -> dict:
+    """Issue 22's photo acceptance (:mod:`benchmarks.photo_acceptance`, with its noise runs):
+    how many runs, and those that broke a rule with their violations."""
+    from benchmarks.photo_acceptance import main as photo_acceptance
+
+    figures = tmp / "photo_acceptance.json"
+    photo_acceptance(["--noise", "--json", str(figures)])
+    rows = json.loads(figures.read_text())["rows"]
+    return {"runs": sum(r["mode"] != "plain" for r in rows),
+            "violations": [{k: r[k] for k in ("case", "setting", "mode", "violations")}
+                           for r in rows if r.get("violations")]}
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true", help="3 runs, fewer sizes, 12 MP swirl only")
@@ -445,14 +458,7 @@ def main(argv=None) -> int:
 
             report["stability"] = bench_stability(512)
         if "photos" in sections:
-            from benchmarks.photo_acceptance import main as photo_acceptance
-
-            figures = tmp / "photo_acceptance.json"
-            photo_acceptance(["--noise", "--json", str(figures)])
-            rows = json.loads(figures.read_text())["rows"]
-            report["photos"] = {"runs": sum(r["mode"] != "plain" for r in rows),
-                                "violations": [{k: r[k] for k in ("case", "setting", "mode", "violations")}
-                                               for r in rows if r.get("violations")]}
+            report["photos"] = bench_photos(tmp)
         if "cluster" in sections:
             from benchmarks.cluster import bench_cluster
 

@@ -349,3 +349,16 @@ def test_a_speck_in_the_outer_cells_is_kept_whole():
     pooled = features._pooled(mask, grid)
     same, again = features.short_of_frame(mask, grid, pooled)
     assert same is mask and again is pooled and features.analyse(mask, grid).n_components == 1
+
+
+def test_a_lasso_joined_only_in_the_outer_cells_stays_one_feature():
+    """An arch whose legs meet 2 px under the top edge would fall apart without its outer cells:
+    it keeps them (one feature, as the mask draws it)."""
+    from featurewarp_cli.engine import features
+    from featurewarp_cli.engine.grid import grid_for
+
+    mask = np.zeros((60, 80), bool)
+    mask[2:4, 10:60] = True
+    mask[2:40, 10:16] = True
+    mask[2:40, 54:60] = True
+    assert features.analyse(mask, grid_for(80, 60, 4.0)).n_components == 1

@@ -106,13 +106,20 @@ def test_mask_of_another_size_is_refused(astronaut):
         measure(image, image, mask[:, :100])
 
 
-def test_downscaled_measure_reports_full_size_figures(astronaut):
+@pytest.mark.parametrize("share", [2, 6])
+def test_downscaled_measure_reports_full_size_figures(astronaut, share):
+    """Measured at about 0.71 and 0.41 of the size (what a 24 MP photo gets): the figures are
+    the full-size ones, and an affine map is not read as bent (at 0.41 the shuttle keeps 100
+    matches, a few of them stray: 88 % explained; the patch, 1 000 px there, gets 15 matches
+    and no trustworthy figure, as before, so only regions of 10 000 px and more count)."""
     image, mask = astronaut
     linear = anisotropic(1.5, 20.0)
     output, matrix = warp_affine(image, linear)
-    for fit in measure(image, output, mask, max_pixels=image.shape[0] * image.shape[1] // 2):
-        assert fit.distortion == pytest.approx(0.5, abs=0.01)
-        assert centre_error(fit, matrix) < 1.0
+    fits = measure(image, output, mask, max_pixels=image.shape[0] * image.shape[1] // share)
+    for fit in [f for f in fits if share == 2 or f.pixels >= 10_000]:
+        assert fit.distortion == pytest.approx(0.5, abs=0.02 if share > 2 else 0.01)
+        assert fit.explained >= (0.85 if share > 2 else 0.9)
+        assert centre_error(fit, matrix) < (4.0 if share > 2 else 1.0)     # 1.6 px where measured
 
 
 def test_transparent_canvas_and_16_bit(astronaut):

@@ -63,7 +63,7 @@ MIN_INLIERS = 10
 #: RANSAC's reprojection threshold in output pixels.
 REPROJECTION_PX = 3.0
 #: A match enters the component's least-squares map when its neighbourhood's map holds it
-#: this close (output pixels).
+#: this close (pixels of the images measured, as keypoints are located there).
 FIT_PX = 1.0
 #: A fit whose inliers are fewer than this share of its matches, or whose inliers span
 #: less than this share of the component, is taken as bent: simulated views then add
@@ -89,9 +89,10 @@ class ComponentFit:
     bbox : tuple of int
         (x, y, width, height) of the component in the input.
     matches : int
-        Keypoint matches that passed the ratio test.
+        Keypoint matches that passed the ratio test (over every matching pass).
     inliers : int
-        Matches consistent with the fitted map within :data:`REPROJECTION_PX`.
+        Matches the map was fitted to: those their neighbourhood's map holds within
+        :data:`FIT_PX` (RANSAC's inliers when too few are).
     linear : (2, 2) ndarray or None
         A, the linear part (output = A @ input + translation).
     translation : (2,) ndarray or None
@@ -106,15 +107,15 @@ class ComponentFit:
     reflected : bool
         det A < 0 (the output shows the component mirrored).
     rms_px : float or None
-        Root mean square distance, in output pixels, of the inliers from the map.
+        Root mean square distance, in output pixels, of those matches from the map (large
+        for a bent component: no one map fits it).
     coverage : float or None
-        Area of the inliers' convex hull over the component's area.
+        Area of the convex hull of RANSAC's inliers over the component's area.
     explained : float or None
         Share of the component's locally consistent matches (see ``local_p90``) that
         the fitted map puts within :data:`REPROJECTION_PX`: near 1 when the component
         moved as one affine map, lower when it was bent (a swirl leaves the rim of a
-        large component in place and turns its middle: the fit then speaks for the
-        rim only, and the hull may still cover it all).
+        large component in place and turns its middle: no one map then fits both).
     local_p90, local_median : float or None
         90th percentile and median, over the matches, of the distortion of an affine
         map fitted to each match's neighbourhood (radius max(24 px, sqrt(area) / 4)):
@@ -226,11 +227,13 @@ def fit_component(gray_in, gray_out, component, src: Keypoints, dst: Keypoints, 
         pairs.append(view_matches(gray_in, component, box, dst, opts["ratio"],
                                   [view for views in tilts() for view in views]))
     local = local_figures(pairs, fit.matrix, len(xs), opts)
-    matrix = local.pop("matrix")
+    matrix, fitted = local.pop("matrix"), local.pop("fitted")
     linear, translation = matrix[:, :2], matrix[:, 2]
+    ransac = (int(keep.sum()), len(fit.src), float(np.sqrt(np.mean(np.sum(residual**2, axis=1)))))
+    used, matches, rms = fitted or ransac
     return describe(linear) | local | {
-        "matches": len(fit.src), "inliers": int(keep.sum()), "linear": linear, "translation": translation,
-        "rms_px": float(np.sqrt(np.mean(np.sum(residual**2, axis=1)))), "coverage": coverage,
+        "matches": matches, "inliers": used, "linear": linear, "translation": translation,
+        "rms_px": rms, "coverage": coverage,
     }
 
 
@@ -250,22 +253,27 @@ def local_figures(pairs, matrix: np.ndarray, pixels: int, opts: dict) -> dict:
     _, once = np.unique(np.round(pooled, 2), axis=0, return_index=True)
     src, dst = pooled[np.sort(once), :2], pooled[np.sort(once), 2:]
     radius = max(24.0 * opts["scale"], 0.25 * np.sqrt(pixels))
-    consistent, linear = local_fits(src, dst, radius, opts["threshold"])
+    consistent, linear, near = local_fits(src, dst, radius, opts["threshold"])
     if consistent.sum() < opts["min_inliers"]:
         return {"explained": None, "local_p90": None, "local_median": None, "local_scales": None,
-                "matrix": matrix}
+                "matrix": matrix, "fitted": None}
     # The map: least squares over the matches that their neighbourhood's map holds within
     # FIT_PX (true matches, located to the precision the keypoints have, bent or not).
-    fitting, _ = local_fits(src, dst, radius, FIT_PX * opts["scale"])
+    fitting = near <= FIT_PX
     if fitting.sum() >= opts["min_inliers"]:
         design = np.column_stack([src[fitting], np.ones(int(fitting.sum()))])
         matrix = np.linalg.lstsq(design, dst[fitting], rcond=None)[0].T
+    else:
+        fitting = consistent
+    miss = src[fitting] @ matrix[:, :2].T + matrix[:, 2] - dst[fitting]
     sigma = np.linalg.svd(linear[consistent], compute_uv=False)
     local = sigma[:, 0] / sigma[:, 1] - 1.0
     scales = np.sqrt(sigma[:, 0] * sigma[:, 1])
     residual = src[consistent] @ matrix[:, :2].T + matrix[:, 2] - dst[consistent]
     explained = np.mean(np.hypot(residual[:, 0], residual[:, 1]) <= opts["threshold"])
-    return {"matrix": matrix, "explained": float(explained), "local_p90": float(np.percentile(local, 90)),
+    fitted = (int(fitting.sum()), len(src), float(np.sqrt(np.mean(np.sum(miss**2, axis=1)))))
+    return {"matrix": matrix, "fitted": fitted,
+            "explained": float(explained), "local_p90": float(np.percentile(local, 90)),
             "local_median": float(np.median(local)),
             "local_scales": tuple(float(v) for v in np.percentile(scales, [10, 50, 90]))}
 

@@ -120,9 +120,11 @@ def engine_options() -> list[click.Option]:
         param_option(defaults.SCALE_PRIOR_PARAM),
         click.Option(["--strict"], is_flag=True,
                      help="Exit 1 and write nothing when the run warns: a feature could not be "
-                          "kept, features were relaxed to avoid fold-overs, the mask keeps the "
-                          "output from following a warp that moves pixels, a handle could not "
-                          "follow (deform) (each is otherwise a warning)."),
+                          "kept (relaxed to avoid fold-overs or moved towards the plain warp), "
+                          "every feature moved towards it, streaks, blank canvas or an outline "
+                          "beyond the plain warp's, the mask keeps the output from following a "
+                          "warp that moves pixels, a handle could not follow (deform) (each is "
+                          "otherwise a warning)."),
         click.Option(["--background"], metavar="COLOR",
                      help="Fill where no source pixel lands: #rrggbb, a colour name, or transparent. "
                           "Default: transparent for PNG, WebP and TIFF output, white otherwise "

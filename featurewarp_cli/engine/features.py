@@ -124,7 +124,7 @@ def short_of_frame(mask: np.ndarray, grid: Grid, pooled: np.ndarray) -> tuple[np
     preset that curves that edge no similarity could follow it. Read as stopping a cell short,
     it stays inside the frame and keeps its shape; the band around it takes the rest. A
     component the mask leads out of the frame (a pixel on the edge) stays cut; one that lies
-    wholly in a side's outer cells keeps them.
+    wholly in the outer cells, or would fall apart without them, keeps them.
 
     Parameters
     ----------
@@ -133,6 +133,13 @@ def short_of_frame(mask: np.ndarray, grid: Grid, pooled: np.ndarray) -> tuple[np
         Cells of at least a pixel.
     pooled : (qy, qx) uint8 ndarray
         The feature quads of ``mask`` (:func:`_pooled`).
+
+    Returns
+    -------
+    mask : (h, w) bool ndarray
+        ``mask`` itself when nothing is dropped, else a copy without those pixels.
+    pooled : (qy, qx) uint8 ndarray
+        Its feature quads.
     """
     n_labels, labels = cv2.connectedComponents(pooled, connectivity=8)
     quads, n = labels - 1, n_labels - 1                     # component per quad, -1 for none
@@ -149,6 +156,10 @@ def short_of_frame(mask: np.ndarray, grid: Grid, pooled: np.ndarray) -> tuple[np
         drop[strip] &= ~reach[side, quads[strip]]
     left = np.bincount(quads[(quads >= 0) & ~drop], minlength=n + 1) > 0
     drop &= left[quads]                                     # a component would vanish: it keeps them
+    kept = (quads >= 0) & ~drop
+    _, parts = cv2.connectedComponents(kept.view(np.uint8), connectivity=8)
+    pairs = np.unique(np.stack([quads[kept], parts[kept]]), axis=1)
+    drop &= ~(np.bincount(pairs[0], minlength=n + 1) > 1)[quads]   # one that would split keeps them
     if not drop.any():
         return mask, pooled
     out = mask & ~drop[rows][:, cols]
