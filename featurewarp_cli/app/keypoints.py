@@ -220,11 +220,9 @@ def local_fits(src: np.ndarray, dst: np.ndarray, radius: float, threshold: float
     consistent : (M,) bool ndarray
     linear : (M, 2, 2) float ndarray
         Each consistent match's local linear map (NaN elsewhere).
-    residual : (M,) float ndarray
-        Each consistent match's distance (output pixels) from its local map (inf elsewhere).
     """
     m = len(src)
-    consistent, linear, residual = np.zeros(m, bool), np.full((m, 2, 2), np.nan), np.full(m, np.inf)
+    consistent, linear = np.zeros(m, bool), np.full((m, 2, 2), np.nan)
     examined = np.unique(np.linspace(0, m - 1, min(m, most)).astype(int)) if m else np.zeros(0, int)
     near = np.sum((src[examined, None, :] - src[None, :, :]) ** 2, axis=2) <= radius * radius
     for row, i in enumerate(examined):
@@ -236,5 +234,4 @@ def local_fits(src: np.ndarray, dst: np.ndarray, radius: float, threshold: float
         if matrix is None or flags.sum() < min_points or not flags[np.searchsorted(idx, i), 0]:
             continue
         consistent[i], linear[i] = True, matrix[:, :2]
-        residual[i] = float(np.hypot(*(matrix[:, :2] @ src[i] + matrix[:, 2] - dst[i])))
-    return consistent, linear, residual
+    return consistent, linear
