@@ -180,3 +180,21 @@ def test_a_bent_component_is_told_apart_from_a_kept_one():
     kept, _ = warp_affine(image, anisotropic(1.0, 90.0, 1.3))
     (fit,) = measure(image, kept, mask)
     assert fit.explained > 0.98 and fit.local_p90 < 0.05 and fit.distortion < 0.01
+
+
+def test_too_few_precise_matches_keep_the_ransac_map(monkeypatch):
+    """Where fewer than ``min_inliers`` matches are confirmed within FIT_PX (here a limit no
+    keypoint meets), the component keeps the RANSAC map it was given; otherwise the least
+    squares over the confirmed ones replaces it."""
+    from featurewarp_cli.app import measure as measuring
+
+    rng = np.random.default_rng(4)
+    src = rng.uniform(0, 200, (300, 2))
+    given = np.array([[1.2, 0.1, 5.0], [-0.1, 0.9, 3.0]])
+    dst = src @ given[:, :2].T + given[:, 2] + rng.uniform(-0.4, 0.4, (300, 2))
+    opts = {"scale": 1.0, "threshold": 3.0, "min_inliers": 10}
+    refitted = measuring.local_figures([(src, dst)], given + 0.01, 200 * 200, opts)
+    assert np.abs(refitted["matrix"] - given).max() < 0.05 and refitted["fitted"][0] > 250
+    monkeypatch.setattr(measuring, "FIT_PX", 1e-9)
+    kept = measuring.local_figures([(src, dst)], given + 0.01, 200 * 200, opts)
+    assert np.array_equal(kept["matrix"], given + 0.01) and kept["fitted"][1] == 300

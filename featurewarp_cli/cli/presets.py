@@ -21,7 +21,9 @@ from .options import (FPS, FRAMES, JOBS, PANEL_WIDTH, engine_options, input_outp
 from .progress import progress_line
 
 MASK_HELP = ("Feature mask: pixels with gray value >= 128 (transparent ones count as black) keep their "
-             "shape. Same width and height as INPUT. Without it the plain warp is produced.")
+             "shape. Same width and height as INPUT. A feature with a pixel on the image's edge is cut "
+             "by it; one that stops short of an edge stays inside the frame. Without it the plain "
+             "warp is produced.")
 
 
 def click_error(err) -> click.ClickException:
