@@ -351,21 +351,29 @@ def _anisotropy(state, points: np.ndarray) -> np.ndarray:
     return out
 
 
-def _fit_per_component(state, points: np.ndarray) -> np.ndarray:
-    """Anisotropy of each component's best-fitting affine map under ``points`` (what keypoints
-    matched in its region measure), over all its nodes and over its core, the nodes within
-    half its radius of its centre (keypoints gather where the texture is, often the middle:
-    a rim kept at the cost of the middle is worse there): (2, C)."""
-    on = np.flatnonzero(state.node_component >= 0)
-    comp, n = state.node_component[on], state.features.n_components
-    centre = np.stack([np.bincount(comp, state.nodes[on, k], minlength=n) for k in range(2)], 1)
+def middle_nodes(nodes: np.ndarray, node_component: np.ndarray, n: int) -> np.ndarray:
+    """(N,) bool: the feature nodes within half their component's radius of its centre (where a
+    photo's keypoints gather), for :func:`no_worse_than_plain`. Depends on the grid and mask only."""
+    on = np.flatnonzero(node_component >= 0)
+    comp = node_component[on]
+    centre = np.stack([np.bincount(comp, nodes[on, k], minlength=n) for k in range(2)], 1).astype(float)
     centre /= np.maximum(np.bincount(comp, minlength=n), 1)[:, None]
-    distance = np.hypot(*(state.nodes[on] - centre[comp]).T)
+    distance = np.hypot(*(nodes[on] - centre[comp]).T)
     radius = np.zeros(n)
     np.maximum.at(radius, comp, distance)
-    core = distance <= 0.5 * radius[comp]
-    fits = [quality.affine_fits(state.nodes[on[sel]], points[on[sel]], comp[sel], n)
-            for sel in (slice(None), core)]
+    middle = np.zeros(node_component.shape, bool)
+    middle[on] = distance <= 0.5 * radius[comp]
+    return middle
+
+
+def _fit_per_component(state, points: np.ndarray) -> np.ndarray:
+    """Anisotropy of each component's best-fitting affine map under ``points`` (what keypoints
+    matched in its region measure), over all its nodes and over its middle
+    (``state.node_middle``, :func:`middle_nodes`: a rim kept at the cost of the middle is
+    worse where the keypoints are): (2, C)."""
+    n = state.features.n_components
+    fits = [quality.affine_fits(state.nodes[on], points[on], state.node_component[on], n)
+            for on in (state.node_component >= 0, state.node_middle)]
     return np.stack([np.nan_to_num(quality.map_anisotropy(np.nan_to_num(f)), nan=1.0, posinf=1e9) for f in fits])
 
 

@@ -80,6 +80,7 @@ class _GridState:
     systems: dict = field(default_factory=dict)         # factored systems by unknown numbering
     systems_by_ties: dict = field(default_factory=dict) # the same, by Ties.key() (skips the numbering)
     scale_solvers: dict = field(default_factory=dict)   # components.ScaleSolver by ties
+    node_middle: np.ndarray | None = None  # nodes in their component's middle (guard.middle_nodes)
 
 
 class FeatureWarper:
@@ -192,9 +193,12 @@ class FeatureWarper:
             features = feat.analyse(self.mask, grid, self.feature_weight, self.decay)
             fixed_x, fixed_y = system.border_conditions(grid, sides)
             tri_component = np.tile(np.where(features.is_feature, features.component, -1), 2)
-            self._states[key] = _GridState(grid, grid.nodes(), grid.triangles(), fixed_x, fixed_y, features,
-                                           system.feature_nodes(grid, features), tri_component,
-                                           system.node_stiffness(grid, features.weight))
+            nodes, node_component = grid.nodes(), system.feature_nodes(grid, features)
+            self._states[key] = _GridState(grid, nodes, grid.triangles(), fixed_x, fixed_y, features,
+                                           node_component, tri_component,
+                                           system.node_stiffness(grid, features.weight),
+                                           node_middle=guard.middle_nodes(nodes, node_component,
+                                                                          features.n_components))
         return self._states[key]
 
     def _systems(self, state: _GridState, ties: components.Ties):
