@@ -43,9 +43,9 @@ def counted(session, monkeypatch):
     calls = []
     solve = session.deformer.solve
 
-    def counting(handles, mode=None):
-        calls.append(session.deformer.rigid.rigid_steps)
-        return solve(handles, mode)
+    def counting(handles, mode=None, drag=False):
+        calls.append((session.deformer.rigid.rigid_steps, drag))
+        return solve(handles, mode, drag)
 
     monkeypatch.setattr(session.deformer, "solve", counting)
     session.newest.clear()
@@ -94,11 +94,11 @@ def wait_until(condition, timeout=10.0):
         time.sleep(0.005)
 
 
-def test_a_drag_caps_the_fallback_and_the_release_does_not(counted):
+def test_a_drag_caps_the_rigid_map_and_skips_the_fold_guard_and_the_release_does_neither(counted):
     session, calls = counted
     session.solve(request(20, drag=True))
     session.solve(request(21, drag=False))
-    assert calls == [editor_session.DRAG_RIGID_STEPS, editor_session.EDITOR_RIGID_STEPS]
+    assert calls == [(editor_session.DRAG_RIGID_STEPS, True), (editor_session.EDITOR_RIGID_STEPS, False)]
 
 
 @pytest.mark.parametrize("body", [{"seq": -1}, {"seq": 1.5}, {"seq": True}, {"seq": 1, "client": 7},

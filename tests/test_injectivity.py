@@ -223,3 +223,23 @@ def test_slivers_left_by_an_unfolding_window_are_lifted(monkeypatch):
         assert mesh.flips() == 0 and small, preset
         assert bool(reruns) == (preset == "squeeze"), (preset, reruns)
     assert settled and min(settled) >= guard.SETTLED
+
+
+def test_eased_stops_short_of_the_folds_and_keeps_the_end_away_from_them():
+    """injectivity.eased: the end where it folds nothing; else fold-free, the nodes around the
+    folds a share of the way, the nodes beyond the reach at the end."""
+    grid = Grid.for_image(64, 64, 4)
+    triangles = grid.triangles()
+    start = grid.nodes()
+    end = start * 1.5                                         # a similarity: no fold
+    points, step = injectivity.eased(grid, start, end, triangles, 0.8, 4.0)
+    np.testing.assert_array_equal(points, end)
+    assert step == 1.0
+    folded = end.copy()
+    middle = (grid.ny // 2) * grid.nx + grid.nx // 2
+    folded[middle] += (12.0, 12.0)                            # pushed across its neighbours
+    assert (signed_areas(folded, triangles) <= 0).any()
+    points, step = injectivity.eased(grid, start, folded, triangles, 0.8, 4.0)
+    assert 0.0 < step < 1.0 and (signed_areas(points, triangles) > 0).all()
+    far = np.hypot(*(start - start[middle]).T) > 8 * 4.0     # beyond the reach (4 cells) of the fold
+    np.testing.assert_array_equal(points[far], folded[far])

@@ -5,9 +5,10 @@ Live updates follow a small protocol (issue 23): the page keeps at most one solv
 and numbers its requests (``client``, ``seq``); a request older than the newest one seen
 from its page, on arrival or after waiting for the solver, is answered ``stale`` at once
 without solving, so the newest pointer position always wins. A request marked ``drag``
-caps the rigid map's Newton steps at :data:`DRAG_RIGID_STEPS` (the page sends
-one unmarked request when the pointer is released, so what stays on screen is the full
-preview).
+caps the rigid map's Newton steps at :data:`DRAG_RIGID_STEPS` and, where the features'
+least-squares solution folds, eases it towards the rigid map instead of untangling it
+(``FeatureWarper.solve(drag=True)``); the page sends one unmarked request when the pointer is
+released, so what stays on screen is the full preview.
 """
 
 from __future__ import annotations
@@ -148,7 +149,7 @@ class EditorSession:
             self.deformer.rigid.rigid_steps = DRAG_RIGID_STEPS if body.get("drag") is True \
                 else EDITOR_RIGID_STEPS
             t0 = time.perf_counter()
-            mesh = self.deformer.solve(handles, mode)
+            mesh = self.deformer.solve(handles, mode, drag=body.get("drag") is True)
             seconds = time.perf_counter() - t0
             warp = self.deformer.warp
             offset = np.asarray(warp.offset)

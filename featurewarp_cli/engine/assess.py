@@ -39,6 +39,10 @@ def assess(state, target, warped, tied, unpinned, warp, record: SolveRecord, not
             target, warped, grid.nx, grid.ny, tuple(warp.canvas))
         record.outline_departure, record.outline_departure_at = canvas.outline_departure(
             target, warped, grid.nx, grid.ny)
+    if record.guard.drag_step < 1.0:        # a drag's update: the release solves the features in full
+        record.warnings.append(f"dragging: the features are eased to {record.guard.drag_step:.0%} of the way from "
+                               f"the handles' map to their shapes around the folds they would make; the release "
+                               f"solves them in full")
     if record.mode != "plain" and not quick:
         record.warnings.extend(warnings_for(record, state.nodes, target, warped, warp))
         coverage = float(np.mean(features.is_feature))

@@ -354,16 +354,17 @@ class Deformer:
         self.handles = None
         self.warp = None
 
-    def solve(self, handles: Handles, mode: str | None = None) -> Mesh:
+    def solve(self, handles: Handles, mode: str | None = None, drag: bool = False) -> Mesh:
         """The feature-aware mesh for ``handles`` (whose sources may differ from the last call's:
-        the rigid map is then factored anew)."""
+        the rigid map is then factored anew); ``drag``: an update while a handle is dragged
+        (with ``quick``: a fold is not untangled, see :meth:`FeatureWarper.solve`)."""
         if isinstance(handles, dict):
             handles = Handles.from_dict(handles, self.warper.width, self.warper.height)
         if not isinstance(handles, Handles):
             raise TypeError(f"handles must be Handles or a handles dict, not {type(handles).__name__}")
         self.handles = handles
         self.warp = self.rigid.deformation(handles)
-        mesh = self.warper.solve(self.warp, mode or self.mode, quick=self.quick)
+        mesh = self.warper.solve(self.warp, mode or self.mode, quick=self.quick, drag=drag)
         mesh.record.warnings.extend(self.warp.review(mesh, self.quick))
         return mesh
 

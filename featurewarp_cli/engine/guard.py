@@ -70,6 +70,9 @@ class GuardRecord:
         where that list is not empty, times the share of a tapered move after it; else the
         nodes near the offending triangles, or all).
     degraded_components : list of int
+    drag_step : float
+        1: guarded as above; below 1: a drag's update (``FeatureWarper.solve(drag=True)``),
+        moved this far from W towards the least-squares solution, unguarded.
     """
 
     flipped_before: int = 0
@@ -81,6 +84,7 @@ class GuardRecord:
     fallback: bool = False
     plain_blend: float = 1.0
     degraded_components: list = field(default_factory=list)
+    drag_step: float = 1.0
 
 
 @dataclass

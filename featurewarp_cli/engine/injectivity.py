@@ -56,6 +56,36 @@ def max_step(start: np.ndarray, end: np.ndarray, triangles: np.ndarray) -> float
     return 1.0 if first > 1.0 else first
 
 
+def eased(grid: Grid, start: np.ndarray, end: np.ndarray, triangles: np.ndarray, share: float,
+          reach: float) -> tuple[np.ndarray, float]:
+    """A fold-free point between ``start`` (injective) and ``end`` that stays at ``end`` away
+    from its folds.
+
+    Around the triangles ``end`` folds, nodes stop at ``share`` of the fold-free step
+    (:func:`max_step`); from there their share of the way rises smoothly (a half cosine) to
+    all of it over ``reach`` cells. Where that folds a triangle, every node stops at the
+    fold-free step's share (the straight segment, which cannot fold).
+
+    Returns
+    -------
+    points : (N, 2) ndarray
+    step : float
+        The share of the way the nodes around the folds went.
+    """
+    step = share * max_step(start, end, triangles)
+    near = np.zeros(grid.n_nodes, bool)
+    near[triangles[signed_areas(end, triangles) <= 0].ravel()] = True
+    if not near.any():
+        return end.copy(), 1.0
+    free = (~near).reshape(grid.ny, grid.nx).astype(np.uint8)
+    cells = cv2.distanceTransform(free, cv2.DIST_L2, cv2.DIST_MASK_PRECISE).ravel()
+    rise = 0.5 - 0.5 * np.cos(np.pi * np.clip(cells / reach, 0.0, 1.0))
+    points = start + (step + (1.0 - step) * rise)[:, None] * (end - start)
+    if np.all(signed_areas(points, triangles) > 0):
+        return points, step
+    return start + step * (end - start), step
+
+
 def grid_areas(grid: Grid, points: np.ndarray) -> np.ndarray:
     """Signed areas of ``grid.triangles()`` under node positions ``points``, by slicing
     the node array (several times faster than gathering corners by index): (2K,)."""

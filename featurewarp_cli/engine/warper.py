@@ -42,7 +42,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .. import stages
-from . import arrays, components, fidelity, guard, scale_search, system, targets
+from . import arrays, components, fidelity, guard, injectivity, scale_search, system, targets
 from . import features as feat
 from .defaults import (BOUNDARIES, DECAY, DECAY_PARAM, FEATURE_WEIGHT, FEATURE_WEIGHT_PARAM, FORMULATION,
                        FORMULATIONS, INTERPOLATION, MODE, MODES, SCALE_PRIOR, SCALE_PRIOR_PARAM)
@@ -54,6 +54,11 @@ from .record import SolveRecord
 
 #: Images thinner than this (px) are warped without features: one base cell cannot hold a shape.
 MIN_FEATURE_SIDE = 4
+#: A drag's update that folds stops, around its folds, this share of the way from W to where
+#: the first triangle would degenerate (below 1, so that none is a sliver), and goes all the
+#: way DRAG_REACH cells further out (:func:`injectivity.eased`).
+DRAG_STEP = 0.8
+DRAG_REACH = 16.0
 
 
 def load_warp(name: str):
@@ -245,7 +250,7 @@ class FeatureWarper:
             offset[free, axis] = placed[free, axis]
         return offset
 
-    def solve(self, warp, mode: str = MODE, quick: bool = False) -> Mesh:
+    def solve(self, warp, mode: str = MODE, quick: bool = False, drag: bool = False) -> Mesh:
         """Feature-aware mesh for ``warp`` (a :class:`featurewarp_cli.plugins.Warp` instance).
 
         The least-squares solution is returned when it has no fold-over. When it
@@ -267,6 +272,12 @@ class FeatureWarper:
             similarities without the scale search's safeguards, the guard runs only
             when the result folds, and the per-component figures are computed but
             not the other quality figures.
+        drag : bool
+            With ``quick``, an update while a handle is being dragged: a least-squares
+            solution that folds is not guarded; the result is the point on the segment
+            from W (injective) towards it at :data:`DRAG_STEP` of the way to where the
+            first triangle would degenerate (``record.guard.drag_step``), so an update costs
+            no untangling. The release is solved without it.
 
         Returns
         -------
@@ -303,7 +314,8 @@ class FeatureWarper:
             target = warped
             record.guard.flipped_before = int(np.count_nonzero(signed_areas(target, state.triangles) <= 0))
         else:
-            target, tied, unpinned = self._feature_aware(state, warped, mode, record, quick, self._releases(warp))
+            target, tied, unpinned = self._feature_aware(state, warped, mode, record, quick, self._releases(warp),
+                                                         drag and quick)
         t1 = time.perf_counter()
         assess(state, target, warped, tied, unpinned, warp, record, self.notes, quick)
         self.timings["quality"] = time.perf_counter() - t1
@@ -311,7 +323,7 @@ class FeatureWarper:
         return Mesh(state.nodes, target, state.triangles, tuple(warp.canvas), record, state.node_component)
 
     def _feature_aware(self, state: _GridState, warped: np.ndarray, mode: str, record: SolveRecord,
-                       quick: bool = False, unpin: bool = False):
+                       quick: bool = False, unpin: bool = False, drag: bool = False):
         """Solve for the features' similarities and the nodes, then guard against folds.
 
         Returns the node positions, which components stayed tied, and which of those were
@@ -353,6 +365,10 @@ class FeatureWarper:
         if edges is None:                       # quick: moved without a solve, and no fold
             return x, ties.tied, ties.unpinned & ties.tied
         if not self.injective or (quick and np.all(signed_areas(x, state.triangles) > 0)):
+            return x, ties.tied, ties.unpinned & ties.tied
+        if drag and np.all(signed_areas(warped, state.triangles) > 0):
+            record.guard.flipped_before = int(np.count_nonzero(signed_areas(x, state.triangles) <= 0))
+            x, record.guard.drag_step = injectivity.eased(grid, warped, x, state.triangles, DRAG_STEP, DRAG_REACH)
             return x, ties.tied, ties.unpinned & ties.tied
 
         def rebuild(new_edges, released):
