@@ -96,6 +96,7 @@ gallery:
 	$(BIN)/featurewarp compare swirl samples/shapes.png docs/gallery/shapes-swirl-grid.jpg -m samples/shapes_mask.png --angle 150 --grid --panel-width 1464
 	$(BIN)/featurewarp compare stretch samples/astronaut.png docs/gallery/portrait-wide.jpg -m samples/astronaut_body_mask.png --sx 2 --panel-width 1464
 	$(BIN)/featurewarp compare stretch samples/astronaut.png docs/gallery/portrait-narrow.jpg -m samples/astronaut_body_mask.png --sx 0.6 --panel-width 1464
+	$(BIN)/featurewarp compare stretch samples/astronaut.png docs/gallery/portrait-tall-grow.jpg -m samples/astronaut_body_mask.png --sy 2 --grow-past-edge --panel-width 1464
 	$(BIN)/featurewarp compare arc samples/astronaut.png docs/gallery/helmet-arc.jpg -m samples/astronaut_helmet_mask.png --angle 120 --background "#f0f0f0" --panel-width 1464
 	$(BIN)/featurewarp compare inflate samples/astronaut.png docs/gallery/helmet-inflate.jpg -m samples/astronaut_helmet_mask.png --background "#f0f0f0" --panel-width 1464
 	$(BIN)/featurewarp compare inflate samples/astronaut.png docs/gallery/helmet-inflate-release.jpg -m samples/astronaut_helmet_mask.png --background "#f0f0f0" --boundary release --panel-width 1464

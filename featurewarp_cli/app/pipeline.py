@@ -1,10 +1,7 @@
 """Running warp jobs: one file (``featurewarp warp``) or many, optionally in parallel processes
-(``featurewarp batch``).
-
-Both commands go through :func:`warp_file`; a batch only adds output naming, mask
-lookup and a process pool. Nothing here depends on click: errors are
-:class:`WarpError`, which the command line turns into exit codes.
-"""
+(``featurewarp batch``). Both go through :func:`warp_file`; a batch only adds output naming,
+mask lookup and a process pool. Nothing here depends on click: errors are :class:`WarpError`,
+which the command line turns into exit codes."""
 
 from __future__ import annotations
 
@@ -58,7 +55,7 @@ class Settings:
         Registered preset name.
     params : dict
         The preset's parameter values by name.
-    mode, cell, feature_weight, decay, formulation, boundary, scale_prior
+    mode, cell, feature_weight, decay, formulation, boundary, scale_prior, grow_past_edge
         See :class:`featurewarp_cli.engine.warper.FeatureWarper`.
     strict : bool
         Turn the solve's warnings (a feature not kept, features relaxed, an output
@@ -94,6 +91,7 @@ class Settings:
     formulation: str = FORMULATION
     boundary: str | None = None
     scale_prior: float = SCALE_PRIOR
+    grow_past_edge: bool = False
     strict: bool = False
     background: str | None = None
     interp: str = INTERPOLATION
@@ -353,7 +351,8 @@ def make_warper(settings: Settings, width: int, height: int, feature_mask):
         warper = FeatureWarper(width, height, feature_mask, cell=settings.cell,
                                feature_weight=settings.feature_weight, decay=settings.decay,
                                formulation=settings.formulation, boundary=settings.boundary,
-                               scale_prior=settings.scale_prior, max_nodes=max_nodes)
+                               scale_prior=settings.scale_prior, max_nodes=max_nodes,
+                               grow_past_edge=settings.grow_past_edge)
     except ValueError as err:
         raise WarpError(str(err), usage=True) from None
     return warp, warper

@@ -72,6 +72,7 @@ def build_report(input_path, output_path, image, result, warp, mesh, timings) ->
         "blank_extra_box": info["blank_extra_box"],
         "outline_departure": info["outline_departure"],
         "outline_departure_at": info["outline_departure_at"],
+        "grown": info["grown"],
         "warnings": info["warnings"],
         "flipped_triangles": info["flipped_triangles"],
         "fold_guard": {

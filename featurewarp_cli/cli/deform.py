@@ -134,7 +134,7 @@ def deform_command() -> click.Command:
         click.Option(["--save-grid"], type=click.Path(dir_okay=False), metavar="PATH.npz|PATH.obj",
                      help="Save the solved mesh (as for warp)."),
         click.Option(["--grid", "draw_grid"], is_flag=True, help="Draw the deformed grid over the result."),
-    ] + [o for o in engine_options() if o.name != "boundary"]
+    ] + [o for o in engine_options() if o.name not in ("boundary", "grow_past_edge")]
 
     def callback(input, output, mask, handles, move, pin, canvas, report, save_grid, draw_grid, **kwargs):
         from .options import settings_from
@@ -142,7 +142,7 @@ def deform_command() -> click.Command:
         if handles is None and not move and not pin:
             raise click.UsageError("give the handles: --handles H.json, or --move X,Y:X2,Y2 with --pin X,Y")
         data = load_handles(handles)
-        kwargs["boundary"] = None
+        kwargs.update(boundary=None, grow_past_edge=False)
         settings, quiet, verbose = settings_from(Deform, kwargs)
         from ..engine.deform import handles_factory
 

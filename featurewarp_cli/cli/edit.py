@@ -96,7 +96,7 @@ def edit_command() -> click.Command:
         if "-" in (input, handles, output, save_mask):
             raise click.UsageError("the editor reads INPUT again on Export and writes --handles, -o and "
                                    "--save-mask: give files, not '-'")
-        kwargs.update(formulation="exact", boundary=None, strict=False)
+        kwargs.update(formulation="exact", boundary=None, grow_past_edge=False, strict=False)
         settings, quiet, _ = settings_from(Deform, kwargs)
         try:
             check_files(settings, input, mask, handles, output, save_mask)

@@ -18,7 +18,8 @@ from ..io.formats import NAMES as FORMAT_NAMES
 from ..plugins import Param, ParamError, option_flag
 
 #: Keyword arguments of the commands that are engine or output settings, not preset parameters.
-SETTINGS = ("mode", "cell", "feature_weight", "decay", "formulation", "boundary", "scale_prior", "strict",
+SETTINGS = ("mode", "cell", "feature_weight", "decay", "formulation", "boundary", "scale_prior", "grow_past_edge",
+            "strict",
             "background", "interp", "fmt", "max_pixels", "max_memory", "allow_folds", "quality", "strip")
 
 MAX_PIXELS_PARAM = Param("max_pixels", int, limits.MAX_PIXELS,
@@ -118,6 +119,13 @@ def engine_options() -> list[click.Option]:
                           "own, but such a feature keeps its shape and lets go of that border "
                           "(the outline leaves the warp's there)."),
         param_option(defaults.SCALE_PRIOR_PARAM),
+        click.Option(["--grow-past-edge"], is_flag=True,
+                     help="Similarity mode: where the background would streak (stretched over "
+                          "8x beyond the warp, as the strip above a bust cut by the bottom edge "
+                          "under stretch --sy 2), let features cut by the frame grow past the "
+                          "edges that cut them, cropped there, just enough that it does not; "
+                          "background the warp does not stretch is not squeezed. Where that "
+                          "cannot be done without folds, nothing grows and a warning says so."),
         click.Option(["--strict"], is_flag=True,
                      help="Exit 1 and write nothing when the run warns: a feature could not be "
                           "kept (relaxed to avoid fold-overs or moved towards the plain warp), "

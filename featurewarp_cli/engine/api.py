@@ -11,7 +11,8 @@ from .warper import FeatureWarper, load_warp
 def warp(image: np.ndarray, mask: np.ndarray | None, preset: str, *, mode: str = MODE,
          cell: int | None = None, feature_weight: float = FEATURE_WEIGHT, decay: float = DECAY,
          formulation: str = FORMULATION, boundary: str | None = None, interp: str = INTERPOLATION,
-         background=None, scale_prior: float = SCALE_PRIOR, strict: bool = False, **params) -> np.ndarray:
+         background=None, scale_prior: float = SCALE_PRIOR, grow_past_edge: bool = False, strict: bool = False,
+         **params) -> np.ndarray:
     """Warp ``image`` with a preset while the features in ``mask`` keep their shape.
 
     Parameters
@@ -23,7 +24,7 @@ def warp(image: np.ndarray, mask: np.ndarray | None, preset: str, *, mode: str =
         Feature pixels: bool as is; integers at or above 128/255 of their maximum; floats >= 0.5.
     preset : str
         Registered preset name ('stretch', 'arc', 'swirl', 'bulge', or a plugin's).
-    mode, cell, feature_weight, decay, formulation, boundary, scale_prior
+    mode, cell, feature_weight, decay, formulation, boundary, scale_prior, grow_past_edge
         See :class:`FeatureWarper`.
     interp : {'nearest', 'linear', 'cubic', 'lanczos'}
     background : (r, g, b) of 0..255, colour text such as ``"white"``, or None
@@ -58,7 +59,8 @@ def warp(image: np.ndarray, mask: np.ndarray | None, preset: str, *, mode: str =
     height, width = image.shape[:2]
     w = load_warp(preset)(width, height, **params)
     warper = FeatureWarper(width, height, mask, cell=cell, feature_weight=feature_weight, decay=decay,
-                           formulation=formulation, boundary=boundary, scale_prior=scale_prior)
+                           formulation=formulation, boundary=boundary, scale_prior=scale_prior,
+                           grow_past_edge=grow_past_edge)
     mesh = warper.solve(w, mode)
     if strict and mesh.record.warnings:
         raise FeatureWarpWarning(mesh.record.warnings[0])

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import canvas, quality
+from . import canvas, grow, quality
 from .record import KEPT, ComponentRecord, SolveRecord, warnings_for
 
 #: Features (quads holding a mask pixel) covering more than this share of the grid get a warning.
@@ -37,8 +37,15 @@ def assess(state, target, warped, tied, unpinned, warp, record: SolveRecord, not
         grid = state.grid
         record.blank_share, record.plain_blank_share, record.blank_extra_box = canvas.blank_shares(
             target, warped, grid.nx, grid.ny, tuple(warp.canvas))
+        past = None
+        if record.grown:
+            beyond = grow.beyond(target, grid.nx, grid.ny, record.grown["sides"])
+            record.grown["past_px"] = {side: float(np.max(np.abs(target[nodes, 1 if side in ("top", "bottom") else 0]
+                                                                 - record.grown["sides"][side]), initial=0.0))
+                                       for side, nodes in beyond.items()}
+            past = np.any(list(beyond.values()), axis=0) if beyond else None
         record.outline_departure, record.outline_departure_at = canvas.outline_departure(
-            target, warped, grid.nx, grid.ny)
+            target, warped, grid.nx, grid.ny, past)
     if record.guard.drag_step < 1.0:        # a drag's update: the release solves the features in full
         record.warnings.append(f"dragging: the features are eased to {record.guard.drag_step:.0%} of the way from "
                                f"the handles' map to their shapes around the folds they would make; the release "

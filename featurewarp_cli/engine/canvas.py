@@ -97,11 +97,12 @@ def _edges(points: np.ndarray, triangles: np.ndarray):
     return (x[second] - x[first], y[second] - y[first]), (x[third] - x[first], y[third] - y[first])
 
 
-def outline_departure(target: np.ndarray, warped: np.ndarray, nx: int, ny: int):
+def outline_departure(target: np.ndarray, warped: np.ndarray, nx: int, ny: int, past=None):
     """How far the result's outline leaves W's: the largest distance of a border node of the
     result from W's outline (a polyline through W's border nodes), and where.
 
-    A border that slides along W's outline does not count; one let go of it does.
+    A border that slides along W's outline does not count; one let go of it does, except the
+    nodes ``past`` ((N,) bool: beyond a side that ``--grow-past-edge`` lets features grow past).
 
     Returns
     -------
@@ -111,7 +112,10 @@ def outline_departure(target: np.ndarray, warped: np.ndarray, nx: int, ny: int):
         The canvas position of that node.
     """
     ring = outline(nx, ny)
-    moved = ring[np.hypot(*(target[ring] - warped[ring]).T) > 1e-9]
+    moved = np.hypot(*(target[ring] - warped[ring]).T) > 1e-9
+    if past is not None:                      # beyond a side a grown feature was let past: a crop
+        moved &= ~past[ring]
+    moved = ring[moved]
     if not moved.size:
         return 0.0, None
     starts = warped[ring]

@@ -72,6 +72,10 @@ class Ties:
     unpinned : (n_components,) bool ndarray
         Components held by pins that no similarity satisfies (an arc's curved sides) whose
         nodes were let go of their border conditions, so that they keep their shape.
+    grown : (n_components,) bool ndarray or None
+        Components scaled past the edges that cut them (``FeatureWarper(grow_past_edge=True)``,
+        :mod:`featurewarp_cli.engine.grow`): their nodes are let go of the border and their
+        pins hold the translation where the grown similarity puts them.
     """
 
     node_component: np.ndarray
@@ -81,13 +85,17 @@ class Ties:
     basis: np.ndarray
     free: np.ndarray
     unpinned: np.ndarray
+    grown: np.ndarray | None = None
 
-    def let_go(self) -> np.ndarray:
-        """(N,) bool: nodes whose border condition no longer holds (of unpinned components)."""
+    def let_go(self, axis: int) -> np.ndarray:
+        """(N,) bool: nodes whose border condition along ``axis`` no longer holds: those of
+        unpinned components (their translation along it is free) and of grown ones (placed
+        past their cut edges)."""
         comp = self.node_component
         on = comp >= 0
         out = np.zeros(on.shape, bool)
-        out[on] = self.unpinned[comp[on]] & self.tied[comp[on]]
+        c = comp[on]
+        out[on] = self.tied[c] & ((self.pin[c, axis] < 0) | (self.grown is not None and self.grown[c]))
         return out
 
     def unknown_ties(self, axis: int) -> np.ndarray:
@@ -127,8 +135,7 @@ class Ties:
     def border_fixed(self, fixed_x: np.ndarray, fixed_y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The border conditions in force: the grid's (``fixed_x``, ``fixed_y``), less those of
         unpinned components' nodes."""
-        let_go = self.let_go()
-        return fixed_x & ~let_go, fixed_y & ~let_go
+        return fixed_x & ~self.let_go(0), fixed_y & ~self.let_go(1)
 
     def window_ties(self) -> np.ndarray:
         """Component whose shared translation a node takes in both axes, or -1 (for window passes)."""
@@ -143,7 +150,8 @@ class Ties:
 
     def key(self) -> bytes:
         """What the Hessian of eta depends on besides the grid and weights."""
-        return b"".join(np.ascontiguousarray(a).tobytes() for a in (self.tied, self.pin, self.basis, self.unpinned))
+        arrays = (self.tied, self.pin, self.basis, self.unpinned) + (() if self.grown is None else (self.grown,))
+        return b"".join(np.ascontiguousarray(a).tobytes() for a in arrays)
 
 
 def as_ab(maps: np.ndarray) -> np.ndarray:

@@ -106,6 +106,9 @@ class SolveRecord:
         an output that equals the input.
     timings : dict
         Seconds per stage.
+    grown : dict or None
+        ``--grow-past-edge``: ``k`` (how many times the features grew) and ``components``
+        (which); None when nothing grew.
     """
 
     mode: str
@@ -125,6 +128,7 @@ class SolveRecord:
     outline_departure_at: tuple | None = None
     warnings: list = field(default_factory=list)
     timings: dict = field(default_factory=dict)
+    grown: dict | None = None
 
     @property
     def features_kept(self) -> bool:
@@ -150,6 +154,7 @@ class SolveRecord:
             "blank_extra_box": None if self.blank_extra_box is None else list(self.blank_extra_box),
             "outline_departure": self.outline_departure,
             "outline_departure_at": _rounded(self.outline_departure_at),
+            "grown": self.grown,
             "flipped_before_guard": guard.flipped_before,
             "untangle_iterations": guard.untangle_iterations,
             "untangle_window_quads": guard.window_quads,
@@ -182,6 +187,8 @@ def canvas_warnings(record: "SolveRecord") -> list[str]:
         lines.append(f"{100 * record.blank_share:.1f} % of the output is blank where the plain warp leaves "
                      f"{100 * record.plain_blank_share:.1f} % (between ({x0}, {y0}) and ({x1}, {y1})): "
                      f"the features' shapes pull the image off the canvas there")
+    if record.grown and record.grown.get("declined"):
+        lines.append(f"--grow-past-edge grew nothing: {record.grown['declined']}")
     if record.outline_departure > OUTLINE_PX:
         x, y = record.outline_departure_at
         lines.append(f"the output's outline leaves the plain warp's by up to {record.outline_departure:.0f} px "

@@ -42,7 +42,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .. import stages
-from . import arrays, components, fidelity, guard, injectivity, scale_search, system, targets
+from . import arrays, attempts, components, fidelity, guard, injectivity, scale_search, system, targets
 from . import features as feat
 from .defaults import (BOUNDARIES, DECAY, DECAY_PARAM, FEATURE_WEIGHT, FEATURE_WEIGHT_PARAM, FORMULATION,
                        FORMULATIONS, INTERPOLATION, MODE, MODES, SCALE_PRIOR, SCALE_PRIOR_PARAM)
@@ -135,6 +135,11 @@ class FeatureWarper:
         grid beyond it a :class:`fidelity.GridBudgetError` from :meth:`solve`. It never changes the
         grid, so a result does not depend on the machine's memory. Default: no limit (the
         automatic cell stops at :data:`fidelity.MAX_NODES`).
+    grow_past_edge : bool
+        Similarity mode, exact formulation: where the background is stretched beyond W by
+        more than :data:`record.STREAKS`, a feature cut by the frame grows past the edges that
+        cut it (cropped there) until it is not, as far as the background it stretches allows
+        (:mod:`featurewarp_cli.engine.grow`; ``record.grown`` says how much). Default False.
 
     Attributes
     ----------
@@ -148,7 +153,7 @@ class FeatureWarper:
     def __init__(self, width: int, height: int, mask: np.ndarray | None = None, *,
                  cell: float | None = None, feature_weight: float = FEATURE_WEIGHT, decay: float = DECAY,
                  formulation: str = FORMULATION, injective: bool = True, boundary: str | None = None,
-                 scale_prior: float = SCALE_PRIOR, max_nodes: int | None = None):
+                 scale_prior: float = SCALE_PRIOR, max_nodes: int | None = None, grow_past_edge: bool = False):
         if boundary not in (None,) + BOUNDARIES:
             raise ValueError(f"boundary must be one of {', '.join(BOUNDARIES)}, not {boundary!r}")
         if mask is not None and mask.shape != (height, width):
@@ -183,6 +188,7 @@ class FeatureWarper:
         self.scale_prior = float(scale_prior)
         self.cell = cell
         self.max_nodes = max_nodes
+        self.grow_past_edge = bool(grow_past_edge)
         self.factorizations = 0
         self.timings: dict[str, float] = {}
         self._states: dict[tuple, _GridState] = {}
@@ -206,19 +212,20 @@ class FeatureWarper:
                                                                           features.n_components))
         return self._states[key]
 
-    def _systems(self, state: _GridState, ties: components.Ties):
-        """The factored :class:`solver.AxisSystems` for these ties (cached per numbering).
+    def _systems(self, state: _GridState, ties: components.Ties, border=None):
+        """The factored :class:`solver.AxisSystems` for these ties (cached per numbering);
+        ``border``: (fixed_x, fixed_y) in place of the grid's border conditions.
 
         SciPy and scikit-sparse are imported here, by warps that factor (not by plain mode)."""
         from .solver import AxisSystems
 
         if state.normal is None:
             state.normal = system.normal_matrix(state.grid, state.features.weight)
-        memo = ties.key()
+        memo = ties.key() + (b"" if border is None else np.packbits(border).tobytes())
         if memo in state.systems_by_ties:
             return state.systems_by_ties[memo]
         unknowns = [system.number_unknowns(fixed | ties.held(axis), ties.unknown_ties(axis))
-                    for axis, fixed in enumerate(ties.border_fixed(state.fixed_x, state.fixed_y))]
+                    for axis, fixed in enumerate(ties.border_fixed(*(border or (state.fixed_x, state.fixed_y))))]
         key = b"".join(u.astype(np.int32).tobytes() for u in unknowns)
         if key not in state.systems:
             stages.enter("factor")
@@ -237,13 +244,15 @@ class FeatureWarper:
             return self.boundary == "release"
         return getattr(warp, "cut_features", "give") == "keep"
 
-    def _offsets(self, state: _GridState, ties: components.Ties, ab: np.ndarray, warped: np.ndarray):
-        """q: fixed coordinates at W, tied nodes at their component's similarity."""
+    def _offsets(self, state: _GridState, ties: components.Ties, ab: np.ndarray, warped: np.ndarray,
+                 border=None, pins=None):
+        """q: fixed coordinates at W, tied nodes at their component's similarity (``border``:
+        (fixed_x, fixed_y) in place of the grid's; ``pins``: where pinned nodes go, W's default)."""
         offset = np.zeros_like(warped)
-        fixed_x, fixed_y = ties.border_fixed(state.fixed_x, state.fixed_y)
+        fixed_x, fixed_y = ties.border_fixed(*(border or (state.fixed_x, state.fixed_y)))
         offset[fixed_x, 0] = warped[fixed_x, 0]
         offset[fixed_y, 1] = warped[fixed_y, 1]
-        placed = components.placement(ties, state.nodes, warped, ab)
+        placed = components.placement(ties, state.nodes, warped if pins is None else pins, ab)
         on = ties.placed(0)
         for axis, fixed in enumerate((fixed_x, fixed_y)):
             free = on & ~fixed                          # border coordinates stay exactly at W
@@ -343,25 +352,20 @@ class FeatureWarper:
         warp_edges = system.warp_edge_vectors(grid, warped)
         index = np.maximum(features.component, 0)
 
-        def constants(ab, ties, edges=None):
+        def constants(ab, ties, edges=None, border=None, pins=None):
             if edges is None:
                 maps = quad_maps if self.formulation == "paper" else components.as_maps(ab)[index]
                 edges = np.where(features.is_constrained[:, None, None], system.edge_vectors(grid, maps), warp_edges)
             t0 = time.perf_counter()
             rhs = system.right_hand_side(grid, features.weight, edges)
-            offset = self._offsets(state, ties, ab, warped)
+            offset = self._offsets(state, ties, ab, warped, border, pins)
             self.timings["rhs"] = self.timings.get("rhs", 0.0) + time.perf_counter() - t0
             return edges, rhs, offset
 
-        def solve(ab):
-            edges, rhs, offset = constants(ab, ties)
-            t0 = time.perf_counter()
-            x = systems.solve(rhs, offset)
-            self.timings["solve"] = self.timings.get("solve", 0.0) + time.perf_counter() - t0
-            return x, edges, rhs, offset
-
-        ab, (x, edges, rhs, offset), scale_solver = self._similarities(state, ties, systems, solve, ab, solve(ab),
-                                                                       prior, warped, quick)
+        attempt = attempts.Attempt(self, state, constants, ties)
+        ab, solved, scale_solver = self._similarities(state, ties, systems, attempt.solve, ab, attempt.solve(ab),
+                                                      prior, warped, quick)
+        x, edges = solved[:2]
         if edges is None:                       # quick: moved without a solve, and no fold
             return x, ties.tied, ties.unpinned & ties.tied
         if not self.injective or (quick and np.all(signed_areas(x, state.triangles) > 0)):
@@ -370,36 +374,12 @@ class FeatureWarper:
             record.guard.flipped_before = int(np.count_nonzero(signed_areas(x, state.triangles) <= 0))
             x, record.guard.drag_step = injectivity.eased(grid, warped, x, state.triangles, DRAG_STEP, DRAG_REACH)
             return x, ties.tied, ties.unpinned & ties.tied
-
-        def rebuild(new_edges, released):
-            loose = components.Ties(**{**ties.__dict__, "tied": ties.tied & ~np.isin(np.arange(ties.tied.size),
-                                                                                      released)})
-            _, new_rhs, new_offset = constants(ab, loose, new_edges)
-            return self._systems(state, loose), new_rhs, new_offset, loose.window_ties()
-
-        problem = guard.Problem(grid, features, state.triangles, warped, state.normal, state.stiffness,
-                                ties.window_fixed(state.fixed_x, state.fixed_y), ties.window_ties(), systems,
-                                rhs, offset, edges, warp_edges, rebuild, self.timings)
-        counted = sum(self.timings.get(k, 0.0) for k in ("solve", "factor", "rhs"))
-        stages.enter("guard")
-        t0 = time.perf_counter()
-        solved = (x, edges, rhs, offset)
-        x = guard.guard(problem, x, record.guard)
-        if record.guard.release_rounds and scale_solver is not None and scale_solver.n_columns:
-            # The features could not keep their shape at this scale: smaller, do they?
-            low = np.where(ties.tied[:, None], ties.project(prior * _smallest_scale(jac, features, prior)), prior)
-            shrunk = scale_search.shrink_to_fit(solve, low, ab, solved, state.triangles, warped)
-            if shrunk is not None:
-                ab, (x, edges, rhs, offset) = shrunk
-                record.guard = guard.GuardRecord()
-                problem.rhs, problem.offset, problem.edges = rhs, offset, edges
-                x = guard.guard(problem, x, record.guard)
-        if self.formulation == "exact":            # the paper's soft targets are kept as published
-            x = guard.no_worse_than_plain(state, x, warped, record.guard, problem)
-        inner = sum(self.timings.get(k, 0.0) for k in ("solve", "factor", "rhs")) - counted
-        self.timings["guard"] = time.perf_counter() - t0 - inner      # what the solves inside it did not take
-        released = np.isin(np.arange(ties.tied.size), record.guard.released_components)
-        return x, ties.tied & ~released, ties.unpinned & ties.tied & ~released
+        attempt.ab, attempt.solved = ab, solved
+        low = np.where(ties.tied[:, None], ties.project(prior * _smallest_scale(jac, features, prior)), prior)
+        result = attempts.guarded(self, state, warped, record, attempt, scale_solver, low)
+        if self.grow_past_edge:
+            result = attempts.grown(self, state, warped, record, attempt, result, mode)
+        return result
 
     def _similarities(self, state: _GridState, ties, systems, solve, ab, solved, prior, warped, quick):
         """The features' scales and rotations where they are unknowns (similarity mode): the

@@ -1,0 +1,107 @@
+"""One solve's least-squares problem and what the warper does with it after the scale search:
+the fold guard (:mod:`guard`) and, with ``--grow-past-edge``, features grown past the edges
+that cut them (:mod:`grow`). ``state`` is the warper's grid state."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from .. import stages
+from . import canvas, components, grow, guard, scale_search, system
+from .grid import signed_areas
+from .record import STREAKS, SolveRecord
+
+#: Grown solutions guarded at most (``--grow-past-edge``), the preferred first.
+GROW_TRIES = 4
+
+
+class Attempt:
+    """One least-squares problem of a solve: ties, border and pins (None: the grid's, W), with
+    ``solve(ab)`` -> (x, edges, rhs, offset) on its factored systems; ``ab`` and ``solved``
+    once solved."""
+
+    def __init__(self, warper, state, constants, ties, border=None, pins=None):
+        self.constants, self.ties, self.border, self.pins = constants, ties, border, pins
+        self.systems = warper._systems(state, ties, border)
+        self.timings = warper.timings
+        self.ab = self.solved = None
+
+    def solve(self, ab):
+        edges, rhs, offset = self.constants(ab, self.ties, None, self.border, self.pins)
+        t0 = time.perf_counter()
+        x = self.systems.solve(rhs, offset)
+        self.timings["solve"] = self.timings.get("solve", 0.0) + time.perf_counter() - t0
+        return x, edges, rhs, offset
+
+
+
+def guarded(warper, state, warped, record: SolveRecord, attempt: Attempt, scale_solver, low):
+    """The least-squares solution ``attempt.solved`` guarded against folds and kept no worse
+    than plain (:mod:`guard`); where features were relaxed, smaller similarities (towards
+    ``low``) are tried first. Returns (x, tied, unpinned)."""
+    ties, ab, (x, edges, rhs, offset) = attempt.ties, attempt.ab, attempt.solved
+    grid, features = state.grid, state.features
+
+    def rebuild(new_edges, released):
+        loose = components.Ties(**{**ties.__dict__, "tied": ties.tied & ~np.isin(np.arange(ties.tied.size),
+                                                                                  released)})
+        _, new_rhs, new_offset = attempt.constants(ab, loose, new_edges, attempt.border, attempt.pins)
+        return warper._systems(state, loose, attempt.border), new_rhs, new_offset, loose.window_ties()
+
+    problem = guard.Problem(grid, features, state.triangles, warped, state.normal, state.stiffness,
+                            ties.window_fixed(*(attempt.border or (state.fixed_x, state.fixed_y))),
+                            ties.window_ties(), attempt.systems, rhs, offset, edges,
+                            system.warp_edge_vectors(grid, warped), rebuild, warper.timings)
+    counted = sum(warper.timings.get(k, 0.0) for k in ("solve", "factor", "rhs"))
+    stages.enter("guard")
+    t0 = time.perf_counter()
+    x = guard.guard(problem, x, record.guard)
+    if record.guard.release_rounds and scale_solver is not None and scale_solver.n_columns:
+        # The features could not keep their shape at this scale: smaller, do they?
+        shrunk = scale_search.shrink_to_fit(attempt.solve, low, ab, attempt.solved, state.triangles, warped)
+        if shrunk is not None:
+            ab, (x, edges, rhs, offset) = shrunk
+            record.guard = guard.GuardRecord()
+            problem.rhs, problem.offset, problem.edges = rhs, offset, edges
+            x = guard.guard(problem, x, record.guard)
+    if warper.formulation == "exact":            # the paper's soft targets are kept as published
+        x = guard.no_worse_than_plain(state, x, warped, record.guard, problem)
+    inner = sum(warper.timings.get(k, 0.0) for k in ("solve", "factor", "rhs")) - counted
+    warper.timings["guard"] = warper.timings.get("guard", 0.0) + time.perf_counter() - t0 - inner
+    released = np.isin(np.arange(ties.tied.size), record.guard.released_components)
+    return x, ties.tied & ~released, ties.unpinned & ties.tied & ~released
+
+def grown(warper, state, warped, record: SolveRecord, attempt: Attempt, result, mode: str):
+    """``--grow-past-edge``: where ``result`` streaks, the frame-cut features grown past
+    their cut edges (:func:`grow.grow`), guarded; kept only where the guard relaxed nothing
+    and the streaks are gone (else ``record.grown`` says why not, and ``result`` stays)."""
+    background = state.triangles[state.tri_component < 0]
+
+    def stretch(points):
+        return canvas.largest_stretch(points, warped, background)[0]
+
+    if stretch(result[0]) <= STREAKS:
+        return result
+    if mode != "similarity" or warper.formulation != "exact":
+        record.grown = grow.declined(f"features keep their size in {mode} mode" if mode != "similarity" else
+                                     "the paper's formulation has no similarity to grow")
+        return result
+    candidates = grow.grow(lambda t, ab, border, pins: Attempt(warper, state, attempt.constants, t, border, pins)
+                           .solve(ab), stretch, attempt.solved[0], attempt.ab, attempt.ties, state.grid.nx,
+                           state.grid.ny, (state.fixed_x, state.fixed_y), warped, STREAKS)
+    kept_record = record.guard
+    for growth in candidates[:GROW_TRIES]:
+        record.guard = guard.GuardRecord()
+        grown = Attempt(warper, state, attempt.constants, growth.ties, growth.border, growth.pins)
+        grown.ab, grown.solved = growth.ab, growth.solved
+        trial = guarded(warper, state, warped, record, grown, None, None)
+        if not record.guard.release_rounds and record.guard.plain_blend == 1.0 and stretch(trial[0]) <= STREAKS:
+            record.grown = growth.summary()
+            return trial
+    record.guard = kept_record
+    record.grown = grow.declined("the features that could grow past the edges cutting them would fold "
+                                 "into their surroundings" if candidates else "no feature cut by straight edges "
+                                 "can grow enough without squeezing the background the warp does not stretch")
+    return result
