@@ -362,3 +362,18 @@ def test_a_lasso_joined_only_in_the_outer_cells_stays_one_feature():
     mask[2:40, 10:16] = True
     mask[2:40, 54:60] = True
     assert features.analyse(mask, grid_for(80, 60, 4.0)).n_components == 1
+
+
+def test_rigid_mode_keeps_a_feature_cut_by_a_border_the_warp_leaves_in_place():
+    """A swirl keeps its border where it is: a feature cut by it can stay put as one rigid map
+    (the identity), which rigid mode now takes instead of the warp's rotation there (which no
+    pin allowed, so the feature gave way, 0.18 worst-triangle anisotropy, with a warning)."""
+    h, w = 120, 160
+    y, x = np.mgrid[0:h, 0:w]
+    mask = (x - 110) ** 2 + (y - 119) ** 2 < 22 ** 2             # a half disc on the bottom edge
+    for mode in ("rigid", "similarity"):
+        mesh = FeatureWarper(w, h, mask).solve(load_warp("swirl")(w, h, angle=120), mode)
+        feature = mesh.record.components[0]
+        assert feature.tied and feature.kept and feature.anisotropy_worst < 1e-9, mode
+        assert abs(feature.rotation_deg) < 1e-6 and abs(feature.scale - 1.0) < 1e-9
+        assert mesh.record.warnings == [] and mesh.flips() == 0

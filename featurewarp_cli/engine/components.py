@@ -203,7 +203,9 @@ def parametrize(nodes, fixed_x, fixed_y, target, node_component, n_components, p
     prior : (n_components, 2) ndarray
         The preset's (a, b) per component (lambda R).
     solve_scale : bool
-        Similarity mode: (a, b) are unknowns. False: (a, b) stay at ``prior`` (rigid).
+        Similarity mode: (a, b) are unknowns. False (rigid): (a, b) are the prior's, turned
+        to the rotation nearest it that the pins allow (a feature cut by a border that W
+        leaves in place keeps that border's rotation), at the prior's size.
     unpin : bool
         A component whose pins no similarity satisfies is let go of them and tied like an
         interior one (its cut edge leaves W's border a little); False: it is left untied,
@@ -226,8 +228,11 @@ def parametrize(nodes, fixed_x, fixed_y, target, node_component, n_components, p
         basis = np.where(stiff[:, None, :], 0.0, vectors)
         order = np.argsort(stiff, axis=1, kind="stable")     # free directions first
         basis = np.take_along_axis(basis, order[:, None, :], axis=2)
-    else:
-        base, free, basis = prior.copy(), np.zeros(n, int), np.zeros((n, 2, 2))
+    else:        # rigid: the rotation the pins allow nearest the prior's, at the prior's size
+        nearest = determined + np.einsum("cij,ckj,ck->ci", loose, loose, prior - determined)
+        size, wanted = np.hypot(*nearest.T), np.hypot(*prior.T)
+        base = np.where((size > 0)[:, None], nearest * (wanted / np.where(size > 0, size, 1.0))[:, None], prior)
+        free, basis = np.zeros(n, int), np.zeros((n, 2, 2))
     residual = squares - 2.0 * (base * moment).sum(1) + np.einsum("ci,cij,cj->c", base, gram, base)
     consistent = np.sqrt(np.maximum(residual, 0.0) / count) <= PIN_TOLERANCE
     pin = np.stack([first_x, first_y], 1)
