@@ -9,8 +9,7 @@ import time
 import numpy as np
 
 from .. import stages
-from . import canvas, components, grow, guard, scale_search, system
-from .grid import signed_areas
+from . import canvas, components, grow, guard, scale_search
 from .record import STREAKS, SolveRecord
 
 #: Grown solutions guarded at most (``--grow-past-edge``), the preferred first.
@@ -18,12 +17,13 @@ GROW_TRIES = 4
 
 
 class Attempt:
-    """One least-squares problem of a solve: ties, border and pins (None: the grid's, W), with
-    ``solve(ab)`` -> (x, edges, rhs, offset) on its factored systems; ``ab`` and ``solved``
-    once solved."""
+    """One least-squares problem of a solve: ties, border and pins (None: the grid's, W) and
+    W's edge vectors, with ``solve(ab)`` -> (x, edges, rhs, offset) on its factored systems;
+    ``ab`` and ``solved`` once solved."""
 
-    def __init__(self, warper, state, constants, ties, border=None, pins=None):
+    def __init__(self, warper, state, constants, ties, border=None, pins=None, warp_edges=None):
         self.constants, self.ties, self.border, self.pins = constants, ties, border, pins
+        self.warp_edges = warp_edges
         self.systems = warper._systems(state, ties, border)
         self.timings = warper.timings
         self.ab = self.solved = None
@@ -36,11 +36,10 @@ class Attempt:
         return x, edges, rhs, offset
 
 
-
 def guarded(warper, state, warped, record: SolveRecord, attempt: Attempt, scale_solver, low):
     """The least-squares solution ``attempt.solved`` guarded against folds and kept no worse
     than plain (:mod:`guard`); where features were relaxed, smaller similarities (towards
-    ``low``) are tried first. Returns (x, tied, unpinned)."""
+    ``low()``) are tried first. Returns (x, tied, unpinned)."""
     ties, ab, (x, edges, rhs, offset) = attempt.ties, attempt.ab, attempt.solved
     grid, features = state.grid, state.features
 
@@ -53,14 +52,14 @@ def guarded(warper, state, warped, record: SolveRecord, attempt: Attempt, scale_
     problem = guard.Problem(grid, features, state.triangles, warped, state.normal, state.stiffness,
                             ties.window_fixed(*(attempt.border or (state.fixed_x, state.fixed_y))),
                             ties.window_ties(), attempt.systems, rhs, offset, edges,
-                            system.warp_edge_vectors(grid, warped), rebuild, warper.timings)
+                            attempt.warp_edges, rebuild, warper.timings)
     counted = sum(warper.timings.get(k, 0.0) for k in ("solve", "factor", "rhs"))
     stages.enter("guard")
     t0 = time.perf_counter()
     x = guard.guard(problem, x, record.guard)
     if record.guard.release_rounds and scale_solver is not None and scale_solver.n_columns:
         # The features could not keep their shape at this scale: smaller, do they?
-        shrunk = scale_search.shrink_to_fit(attempt.solve, low, ab, attempt.solved, state.triangles, warped)
+        shrunk = scale_search.shrink_to_fit(attempt.solve, low(), ab, attempt.solved, state.triangles, warped)
         if shrunk is not None:
             ab, (x, edges, rhs, offset) = shrunk
             record.guard = guard.GuardRecord()
@@ -72,6 +71,7 @@ def guarded(warper, state, warped, record: SolveRecord, attempt: Attempt, scale_
     warper.timings["guard"] = warper.timings.get("guard", 0.0) + time.perf_counter() - t0 - inner
     released = np.isin(np.arange(ties.tied.size), record.guard.released_components)
     return x, ties.tied & ~released, ties.unpinned & ties.tied & ~released
+
 
 def grown(warper, state, warped, record: SolveRecord, attempt: Attempt, result, mode: str):
     """``--grow-past-edge``: where ``result`` streaks, the frame-cut features grown past
@@ -94,7 +94,8 @@ def grown(warper, state, warped, record: SolveRecord, attempt: Attempt, result, 
     kept_record = record.guard
     for growth in candidates[:GROW_TRIES]:
         record.guard = guard.GuardRecord()
-        grown = Attempt(warper, state, attempt.constants, growth.ties, growth.border, growth.pins)
+        grown = Attempt(warper, state, attempt.constants, growth.ties, growth.border, growth.pins,
+                        attempt.warp_edges)
         grown.ab, grown.solved = growth.ab, growth.solved
         trial = guarded(warper, state, warped, record, grown, None, None)
         if not record.guard.release_rounds and record.guard.plain_blend == 1.0 and stretch(trial[0]) <= STREAKS:

@@ -362,7 +362,7 @@ class FeatureWarper:
             self.timings["rhs"] = self.timings.get("rhs", 0.0) + time.perf_counter() - t0
             return edges, rhs, offset
 
-        attempt = attempts.Attempt(self, state, constants, ties)
+        attempt = attempts.Attempt(self, state, constants, ties, warp_edges=warp_edges)
         ab, solved, scale_solver = self._similarities(state, ties, systems, attempt.solve, ab, attempt.solve(ab),
                                                       prior, warped, quick)
         x, edges = solved[:2]
@@ -375,7 +375,9 @@ class FeatureWarper:
             x, record.guard.drag_step = injectivity.eased(grid, warped, x, state.triangles, DRAG_STEP, DRAG_REACH)
             return x, ties.tied, ties.unpinned & ties.tied
         attempt.ab, attempt.solved = ab, solved
-        low = np.where(ties.tied[:, None], ties.project(prior * _smallest_scale(jac, features, prior)), prior)
+        def low():                              # the similarities the features shrink towards
+            return np.where(ties.tied[:, None], ties.project(prior * _smallest_scale(jac, features, prior)), prior)
+
         result = attempts.guarded(self, state, warped, record, attempt, scale_solver, low)
         if self.grow_past_edge:
             result = attempts.grown(self, state, warped, record, attempt, result, mode)
