@@ -125,7 +125,8 @@ def engine_options() -> list[click.Option]:
                           "under stretch --sy 2), let features cut by the frame grow past the "
                           "edges that cut them, cropped there, just enough that it does not; "
                           "background the warp does not stretch is not squeezed. Where that "
-                          "cannot be done without folds, nothing grows and a warning says so."),
+                          "cannot be done (no room, folds, rigid mode), nothing grows and a "
+                          "warning says why."),
         click.Option(["--strict"], is_flag=True,
                      help="Exit 1 and write nothing when the run warns: a feature could not be "
                           "kept (relaxed to avoid fold-overs or moved towards the plain warp), "

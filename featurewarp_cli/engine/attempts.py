@@ -12,7 +12,8 @@ from .. import stages
 from . import canvas, components, grow, guard, scale_search
 from .record import STREAKS, SolveRecord
 
-#: Grown solutions guarded at most (``--grow-past-edge``), the preferred first.
+#: Grown solutions guarded at most (``--grow-past-edge``), the preferred first; the first the
+#: guard has to relax ends the tries.
 GROW_TRIES = 4
 
 
@@ -22,6 +23,8 @@ class Attempt:
     ``ab`` and ``solved`` once solved."""
 
     def __init__(self, warper, state, constants, ties, border=None, pins=None, warp_edges=None):
+        """``warper``: the :class:`FeatureWarper` (its factored systems and timings); ``state``: its
+        grid state; ``constants(ab, ties, edges, border, pins)`` -> (edges, rhs, offset)."""
         self.constants, self.ties, self.border, self.pins = constants, ties, border, pins
         self.warp_edges = warp_edges
         self.systems = warper._systems(state, ties, border)
@@ -29,6 +32,7 @@ class Attempt:
         self.ab = self.solved = None
 
     def solve(self, ab):
+        """(x, edges, rhs, offset): the nodes for the features' similarities ``ab``."""
         edges, rhs, offset = self.constants(ab, self.ties, None, self.border, self.pins)
         t0 = time.perf_counter()
         x = self.systems.solve(rhs, offset)
@@ -98,9 +102,12 @@ def grown(warper, state, warped, record: SolveRecord, attempt: Attempt, result, 
                         attempt.warp_edges)
         grown.ab, grown.solved = growth.ab, growth.solved
         trial = guarded(warper, state, warped, record, grown, None, None)
-        if not record.guard.release_rounds and record.guard.plain_blend == 1.0 and stretch(trial[0]) <= STREAKS:
+        relaxed = record.guard.release_rounds or record.guard.plain_blend < 1.0
+        if not relaxed and stretch(trial[0]) <= STREAKS:
             record.grown = growth.summary()
             return trial
+        if relaxed:                 # a larger growth folds no less: no use guarding the next ones
+            break
     record.guard = kept_record
     record.grown = grow.declined("the features that could grow past the edges cutting them would fold "
                                  "into their surroundings" if candidates else "no feature cut by straight edges "

@@ -14,9 +14,10 @@ an anchor ``P``: ``S_k = P + k (S - P)``. Along each axis the anchor keeps
   shrink to g_W, no further: background the solution does not stretch is not squeezed),
 
 and among such anchors takes the one that crops least. ``k`` is the smallest in [1, k_max]
-whose solution folds nothing and stretches the background beyond W by at most ``limit``
+whose least-squares solution stretches the background beyond W by at most ``limit``
 (:data:`SCAN` growths evenly over the range, then a bisection between the last two around
-the limit), where ``k_max`` closes the widest stretched gap. The background is re-solved for
+the limit), where ``k_max`` closes the widest stretched gap; the caller guards it against
+folds like any solution and keeps it only if the guard relaxes nothing. The background is re-solved for
 each ``k`` with the component placed, the border nodes of the cut sides free to go outward
 with it (an active set: those that would go inward are held at W again).
 """
@@ -71,6 +72,7 @@ class Growth:
 
     @property
     def components(self) -> list[int]:
+        """The grown components' indices."""
         return [int(c) for c in np.flatnonzero(self.grown)]
 
     def summary(self) -> dict:
@@ -155,11 +157,10 @@ def declined(reason: str) -> dict:
 
 @dataclass
 class _Plan:
-    """One component's growth: its nodes, extremes (left, top, right, bottom) under the
-    solution, which sides cut it, how far each other side may move out, and k_max."""
+    """One component's growth: its extremes (left, top, right, bottom) under the solution,
+    which sides cut it, how far each other side may move out, and k_max."""
 
     component: int
-    nodes: np.ndarray
     low: np.ndarray            # (left, top)
     high: np.ndarray           # (right, bottom)
     cut_low: np.ndarray        # (left, top) cut
@@ -187,7 +188,7 @@ def _plan(c: int, x, warped, comp, cut, lines, straight) -> _Plan:
     free = np.where(cut_low, 0.0, spare_low) + np.where(cut_high, 0.0, spare_high)
     useful = np.where(cut_low & cut_high, 1.0, 1.0 + free / extent)      # all stretched gaps closed
     feasible = np.where(cut_low | cut_high, np.inf, 1.0 + free / extent)  # nothing squeezed
-    return _Plan(c, nodes, low, high, cut_low, cut_high, spare_low, spare_high,
+    return _Plan(c, low, high, cut_low, cut_high, spare_low, spare_high,
                  float(min(useful.max(), feasible.min())))
 
 

@@ -72,7 +72,8 @@ class GuardRecord:
     degraded_components : list of int
     drag_step : float
         1: guarded as above; below 1: a drag's update (``FeatureWarper.solve(drag=True)``),
-        moved this far from W towards the least-squares solution, unguarded.
+        unguarded: the nodes around its folds moved this far from W towards the least-squares
+        solution, those further out further (all the way beyond ``DRAG_REACH`` cells).
     """
 
     flipped_before: int = 0

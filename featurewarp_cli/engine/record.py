@@ -107,8 +107,9 @@ class SolveRecord:
     timings : dict
         Seconds per stage.
     grown : dict or None
-        ``--grow-past-edge``: ``k`` (how many times the features grew) and ``components``
-        (which); None when nothing grew.
+        ``--grow-past-edge``: ``k`` (how many times the features grew), ``components``
+        (which), ``sides`` and ``past_px``; or, when it was due (the background streaked)
+        but nothing grew, ``k`` 1 and ``declined`` (why). None: the option was off or not due.
     """
 
     mode: str

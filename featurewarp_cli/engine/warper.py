@@ -283,10 +283,11 @@ class FeatureWarper:
             not the other quality figures.
         drag : bool
             With ``quick``, an update while a handle is being dragged: a least-squares
-            solution that folds is not guarded; the result is the point on the segment
-            from W (injective) towards it at :data:`DRAG_STEP` of the way to where the
-            first triangle would degenerate (``record.guard.drag_step``), so an update costs
-            no untangling. The release is solved without it.
+            solution that folds is not guarded; around its folds the nodes stop at
+            :data:`DRAG_STEP` of the way from W (injective) to where the first triangle
+            would degenerate (``record.guard.drag_step``) and go all the way
+            :data:`DRAG_REACH` cells further out (:func:`injectivity.eased`), so an update
+            costs no untangling. The release is solved without it.
 
         Returns
         -------
@@ -375,6 +376,7 @@ class FeatureWarper:
             x, record.guard.drag_step = injectivity.eased(grid, warped, x, state.triangles, DRAG_STEP, DRAG_REACH)
             return x, ties.tied, ties.unpinned & ties.tied
         attempt.ab, attempt.solved = ab, solved
+
         def low():                              # the similarities the features shrink towards
             return np.where(ties.tied[:, None], ties.project(prior * _smallest_scale(jac, features, prior)), prior)
 
