@@ -28,6 +28,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import canvas
+
 #: Growths tried evenly over (1, k_max], then bisection steps between the last two around the limit.
 SCAN = 8
 GROW_BISECTIONS = 8
@@ -212,7 +214,7 @@ _OUTWARD = (-1.0, 1.0, -1.0, 1.0)
 
 def beyond(target: np.ndarray, nx: int, ny: int, sides: dict) -> dict:
     """Per side of ``sides`` (name -> W's line): the border nodes of ``target`` past it, (N,) bool."""
-    ring = np.unique(np.concatenate(side_nodes(nx, ny)))
+    ring = canvas.outline(nx, ny)
     out = {}
     for i, name in enumerate(SIDES):
         if name in sides:
