@@ -5,7 +5,7 @@ page does: pointer positions arrive at 60 Hz along a straight line for one secon
 one solve is in flight, and each answer is followed by one request for the newest position
 (``drag: true``), then one unmarked request at the release. Per drag it records every
 update's wall time (request to answer, over HTTP on 127.0.0.1; p50/p95/max over the updates
-while dragging, the release's full solve apart), the server's solve time,
+while dragging, the release's guarded solve apart), the server's solve time,
 the pointer's step between successive updates, and the settle time: from the last pointer
 event to the answer for the released handle. The first solve of each handle set (both
 factorizations) is timed apart.
@@ -95,7 +95,7 @@ def replay(client: Client, pins, start, end, drag_flag: bool = True) -> dict:
         if released:
             settle = time.perf_counter() - (t0 + SECONDS)
             break
-    dragging = times[:-1] or times                  # the last update is the release's full solve
+    dragging = times[:-1] or times                  # the last update is the release's guarded solve
     return {"first_s": first, "update_s": times, "server_s": server, "step_px": steps, "settle_s": settle,
             "p50_s": float(np.percentile(dragging, 50)), "p95_s": float(np.percentile(dragging, 95)),
             "max_s": float(np.max(dragging)), "release_s": times[-1], "updates": len(times),

@@ -40,10 +40,11 @@ class Attempt:
         return x, edges, rhs, offset
 
 
-def guarded(warper, state, warped, record: SolveRecord, attempt: Attempt, scale_solver, low):
+def guarded(warper, state, warped, record: SolveRecord, attempt: Attempt, scale_solver, low, preview=False):
     """The least-squares solution ``attempt.solved`` guarded against folds and kept no worse
-    than plain (:mod:`guard`); where features were relaxed, smaller similarities (towards
-    ``low()``) are tried first. Returns (x, tied, unpinned)."""
+    than plain (:mod:`guard`; ``preview``: an interactive update's, see ``guard.Problem``); where
+    features were relaxed, smaller similarities (towards ``low()``) are tried first. Returns
+    (x, tied, unpinned)."""
     ties, ab, (x, edges, rhs, offset) = attempt.ties, attempt.ab, attempt.solved
     grid, features = state.grid, state.features
 
@@ -56,7 +57,7 @@ def guarded(warper, state, warped, record: SolveRecord, attempt: Attempt, scale_
     problem = guard.Problem(grid, features, state.triangles, warped, state.normal, state.stiffness,
                             ties.window_fixed(*(attempt.border or (state.fixed_x, state.fixed_y))),
                             ties.window_ties(), attempt.systems, rhs, offset, edges,
-                            attempt.warp_edges, rebuild, warper.timings)
+                            attempt.warp_edges, rebuild, warper.timings, preview)
     counted = sum(warper.timings.get(k, 0.0) for k in ("solve", "factor", "rhs"))
     stages.enter("guard")
     t0 = time.perf_counter()

@@ -106,6 +106,9 @@ class Problem:
         ``rebuild(edges, released)`` -> (systems, rhs, offset, tied) for other edge
         targets with the components ``released`` untied.
     timings : dict
+    preview : bool
+        An interactive update (``FeatureWarper.solve(quick=True)``): slivers the small settling
+        window leaves are not lifted by a second wide pass (:func:`_settled`).
     """
 
     grid: object
@@ -123,6 +126,7 @@ class Problem:
     warp_edges: np.ndarray
     rebuild: object
     timings: dict
+    preview: bool = False
 
     def solver(self, systems, rhs, offset):
         """``solve(force)``: positions for these constants plus a force per node."""
@@ -185,7 +189,9 @@ def _settled(problem, rhs, offset, tied, start, x, floor, margin, record):
     held, by steps that never make the thinnest triangle thinner (150 cheap steps on 1 500
     nodes there). Where slivers below :data:`SETTLED` of their floor are left (wedged
     against a feature), the wide window runs again from ``start`` until they are lifted too,
-    as it did before (a fresh pass from ``x`` either folds again or stalls)."""
+    as it did before (a fresh pass from ``x`` either folds again or stalls), except in a
+    preview: the editor's release towards a pin (1 MP, 2 134 folds) took 0.53 s with that
+    pass and 0.32 s without, the two renderings 0.005 grey levels apart on average."""
     thinnest = lambda points: float((injectivity.grid_areas(problem.grid, points) / floor).min())  # noqa: E731
     if thinnest(x) >= 0.5:
         return x
@@ -195,7 +201,7 @@ def _settled(problem, rhs, offset, tied, start, x, floor, margin, record):
     if settled is not None and not injectivity.flipped(settled, problem.triangles).any():
         x = settled
     worst = thinnest(x)
-    if worst >= SETTLED:
+    if worst >= SETTLED or problem.preview:
         return x
     again, iterations, _ = _untangle_window(problem, rhs, offset, tied, start, floor, margin)
     record.untangle_iterations += iterations

@@ -279,8 +279,9 @@ class FeatureWarper:
             For interactive updates: the cell is not refined to follow the warp (the
             given cell, or the base cell), the features take the least-squares
             similarities without the scale search's safeguards, the guard runs only
-            when the result folds, and the per-component figures are computed but
-            not the other quality figures.
+            when the result folds (and leaves the slivers its small settling window
+            cannot lift), and the per-component figures are computed but not the
+            other quality figures.
         drag : bool
             With ``quick``, an update while a handle is being dragged: a least-squares
             solution that folds is not guarded; around its folds the nodes stop at
@@ -380,7 +381,7 @@ class FeatureWarper:
         def low():                              # the similarities the features shrink towards
             return np.where(ties.tied[:, None], ties.project(prior * _smallest_scale(jac, features, prior)), prior)
 
-        result = attempts.guarded(self, state, warped, record, attempt, scale_solver, low)
+        result = attempts.guarded(self, state, warped, record, attempt, scale_solver, low, quick)
         if self.grow_past_edge:
             result = attempts.grown(self, state, warped, record, attempt, result, mode)
         return result
