@@ -12,10 +12,11 @@ factorizations) is timed apart.
 
 Usage::
 
-    .venv/bin/python -m benchmarks.editor_drag [--no-drag-flag] [--browser]
+    .venv/bin/python -m benchmarks.editor_drag [--no-drag-flag] [--browser] [--all]
 
 ``--browser`` also replays one drag in headless Chromium (as the browser tests run it) and
-times how long after the release the page settles.
+times how long after the release the page settles; ``--all`` replays the drags on the other
+sample photos too (:data:`OTHER_PHOTOS`, each scaled to about 1 MP).
 """
 
 from __future__ import annotations
@@ -207,6 +208,32 @@ def _wait(driver, script, timeout=120.0):
         time.sleep(0.02)
 
 
+#: The other sample photos the drags are replayed on (``--all``; ``make bench``): a close-up
+#: whose mask covers 81 % of it, a street scene, a flower cut by two edges, 24 coins.
+OTHER_PHOTOS = ("closeup", "china", "dahlia", "coins")
+
+
+def one_megapixel(name: str, folder: Path) -> tuple[Path, Path]:
+    """samples/NAME.png and its mask scaled to about 1 MP (aspect kept) in ``folder``."""
+    import cv2
+
+    from benchmarks.inputs import upscale_mask
+
+    image = cv2.imread(str(ROOT / "samples" / f"{name}.png"))
+    h, w = image.shape[:2]
+    scale = (1_000_000 / (w * h)) ** 0.5
+    size = (int(round(w * scale)), int(round(h * scale)))
+    photo = Path(folder) / f"{name}-1MP.png"
+    cv2.imwrite(str(photo), cv2.resize(image, size, interpolation=cv2.INTER_CUBIC))
+    return photo, upscale_mask(ROOT / "samples" / f"{name}_mask.png", size, Path(folder) / f"{name}-mask-1MP.png")
+
+
+def bench_other_photos(drag_flag: bool = True) -> dict:
+    """:func:`bench_drag` on each of :data:`OTHER_PHOTOS` at 1 MP: {name: results}."""
+    with tempfile.TemporaryDirectory(prefix="featurewarp-drag-") as folder:
+        return {name: bench_drag(*one_megapixel(name, Path(folder)), drag_flag) for name in OTHER_PHOTOS}
+
+
 def main() -> None:
     import cv2
 
@@ -215,6 +242,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--no-drag-flag", action="store_true", help="send every update unmarked (full fallback)")
     parser.add_argument("--browser", action="store_true", help="also replay a drag in headless Chromium")
+    parser.add_argument("--all", action="store_true", help="also replay the drags on the other sample photos")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory(prefix="featurewarp-drag-") as folder:
         photo, mask = Path(folder) / "photo-1MP.png", Path(folder) / "mask-1MP.png"
@@ -222,6 +250,8 @@ def main() -> None:
         cv2.imwrite(str(photo), cv2.resize(image, (1024, 1024), interpolation=cv2.INTER_CUBIC))
         upscale_mask(ROOT / "samples" / "astronaut_mask.png", (1024, 1024), mask)
         bench_drag(photo, mask, not args.no_drag_flag)
+        if args.all:
+            bench_other_photos(not args.no_drag_flag)
         if args.browser:
             browser_drag(photo, mask)
 

@@ -443,9 +443,10 @@ def main(argv=None) -> int:
 
             report["rigid"] = bench_rigid()
         if "drag" in sections:
-            from benchmarks.editor_drag import bench_drag
+            from benchmarks.editor_drag import bench_drag, bench_other_photos
 
             report["drag"] = bench_drag(*photos["1MP"])
+            report["drag_photos"] = bench_other_photos()
         if "commands" in sections:
             commands, magick = bench_commands(runs, exe, photos, tmp, args.quick, "magick" in sections)
             report["commands"], report["magick"] = commands, magick

@@ -51,12 +51,15 @@ def evaluate(report: dict) -> list[dict]:
                              r["ours"]["rigidity"] / r["libigl"]["rigidity"], RIGIDITY_RATIO, "x"))
             rows.append(_row(f"rigid map '{name}': area off libigl's",
                              abs(r["ours"]["area_ratio"] / r["libigl"]["area_ratio"] - 1), AREA_DEVIATION, ""))
-    for name, r in report.get("drag", {}).items():
-        if isinstance(r, dict) and "p95_s" in r:
-            rows.append(_row(f"drag '{name}' at 1 MP: update p95 while dragging", r["p95_s"], DRAG_P95_S))
-            rows.append(_row(f"drag '{name}' at 1 MP: slowest update while dragging", r["max_s"], DRAG_MAX_S))
-            if "release_s" in r:
-                rows.append(_row(f"drag '{name}' at 1 MP: the release (guarded, no easing)", r["release_s"], DRAG_MAX_S))
+    drags = [("", report.get("drag", {}))] + [(f"{photo}: ", r) for photo, r in report.get("drag_photos", {}).items()]
+    for photo, results in drags:
+        for name, r in results.items():
+            if isinstance(r, dict) and "p95_s" in r:
+                rows.append(_row(f"drag {photo}'{name}' at 1 MP: update p95 while dragging", r["p95_s"], DRAG_P95_S))
+                rows.append(_row(f"drag {photo}'{name}' at 1 MP: slowest update while dragging", r["max_s"],
+                                 DRAG_MAX_S))
+                if "release_s" in r:
+                    rows.append(_row(f"drag {photo}'{name}' at 1 MP: the release", r["release_s"], DRAG_MAX_S))
     commands = report.get("commands", {})
     for name, r in commands.get("startup", {}).items():
         rows.append(_row(f"featurewarp {name} start-up", r["median_s"], STARTUP_S))

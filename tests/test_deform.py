@@ -213,7 +213,7 @@ def test_a_preview_release_keeps_the_small_settling_window_and_does_not_rerun_th
         deformer.rigid.rigid_steps = 8
         with monkeypatch.context() as patch:
             guarded = attempts.guarded
-            patch.setattr(attempts, "guarded", lambda *a: guarded(*a[:7], preview))
+            patch.setattr(attempts, "guarded", lambda *a: guarded(*a[:7], a[7] if preview else None))
             mesh = deformer.solve(handles([174.1, 901.1]))
         return mesh, [keep for keep, _ in windows]
 
@@ -223,6 +223,54 @@ def test_a_preview_release_keeps_the_small_settling_window_and_does_not_rerun_th
     assert True in full_windows and full_windows[-1] is False     # the wide window ran again after the small one
     assert preview_windows[-1] is True                             # the small one had the last word
     assert preview.record.guard.untangle_iterations < full.record.guard.untangle_iterations
+
+
+def _coins_drag():
+    """issue 23's 'onto a feature' drag on the coins sample: (deformer after the drag, handles)."""
+    mask = cv2.imread("samples/coins_mask.png", cv2.IMREAD_GRAYSCALE) >= 128
+    h, w = mask.shape
+    scale = np.array([(w - 1) / 999, (h - 1) / 999])
+    pins = [{"from": list(p * scale), "to": list(p * scale)} for p in np.array([(120, 940), (900, 940), (120, 120)])]
+    start, end = np.array([850, 300]) * scale, np.array([560, 260]) * scale
+
+    def handles(to):
+        return {"version": 1, "points": pins + [{"from": list(start), "to": [float(v) for v in to]}]}
+
+    deformer = Deformer(w, h, mask, quick=True, rigid_steps=1)
+    deformer.solve(handles(start))
+    factored = deformer.warper.factorizations
+    for k in range(1, 16):
+        deformer.solve(handles(start + (end - start) * k / 15), drag=True)
+    return deformer, handles(end), factored
+
+
+def test_the_editor_keeps_its_tie_decisions_per_handle_set_so_no_update_is_factored_anew():
+    """Issue 23: on the coins photo a coin near the border stopped fitting its border pins
+    half-way through a drag; the update untied it and factored the systems anew (a 250 ms
+    update at 1 MP, and 140 ms more in the release). A quick Deformer decides the ties once
+    per handle set; a full solve decides them from its own W."""
+    deformer, handles, factored = _coins_drag()
+    assert deformer.warper.factorizations == factored
+    deformer.solve(handles)                                  # the release
+    assert deformer.warper.factorizations == factored
+    full = Deformer(deformer.warper.width, deformer.warper.height, deformer.warper.mask)
+    full.solve(handles)
+    assert full.warper._decided[1][1].any() and not deformer.warper._decided[1][1].any()   # a coin let go
+
+
+def test_a_preview_whose_windows_cannot_open_the_folds_is_eased_and_says_so():
+    """Issue 23: the release of a drag onto the coins ran the whole-grid pass, the release
+    rounds and the shrink retry: up to 3 s at 1 MP. A preview stops after the windows and
+    eases the rest, as a drag's update does, and says so; Export's full solve goes on."""
+    deformer, handles, _ = _coins_drag()
+    deformer.rigid.rigid_steps = 8
+    released = deformer.solve(handles)
+    guard = released.record.guard
+    assert guard.preview_eased and 0.0 <= guard.drag_step < 1.0 and guard.release_rounds == 0
+    assert released.flips() == 0
+    assert any(w.startswith("preview: the features are eased") for w in released.record.warnings)
+    full = Deformer(deformer.warper.width, deformer.warper.height, deformer.warper.mask).solve(handles)
+    assert not full.record.guard.preview_eased and full.record.guard.drag_step == 1.0 and full.flips() == 0
 
 
 def test_embedding_reproduces_points():

@@ -46,10 +46,12 @@ def assess(state, target, warped, tied, unpinned, warp, record: SolveRecord, not
             past = np.any(list(beyond.values()), axis=0) if beyond else None
         record.outline_departure, record.outline_departure_at = canvas.outline_departure(
             target, warped, grid.nx, grid.ny, past)
-    if record.guard.drag_step < 1.0:        # a drag's update: the release solves the features in full
-        record.warnings.append(f"dragging: the features are eased to {record.guard.drag_step:.0%} of the way from "
-                               f"the handles' map to their shapes around the folds they would make; the release "
-                               f"solves them in full")
+    if record.guard.drag_step < 1.0:        # a drag's update or a preview: solved in full later
+        where, later = (("folds the fold guard's windows could not open", "Export solves") if record.guard.preview_eased
+                        else ("the folds they would make", "the release solves"))
+        record.warnings.append(f"{'preview' if record.guard.preview_eased else 'dragging'}: the features are eased to "
+                               f"{record.guard.drag_step:.0%} of the way from the handles' map to their shapes around "
+                               f"{where}; {later} them in full")
     if record.mode != "plain" and not quick:
         record.warnings.extend(warnings_for(record, state.nodes, target, warped, warp))
         coverage = float(np.mean(features.is_feature))

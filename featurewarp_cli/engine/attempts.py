@@ -40,11 +40,12 @@ class Attempt:
         return x, edges, rhs, offset
 
 
-def guarded(warper, state, warped, record: SolveRecord, attempt: Attempt, scale_solver, low, preview=False):
+def guarded(warper, state, warped, record: SolveRecord, attempt: Attempt, scale_solver, low, ease=None):
     """The least-squares solution ``attempt.solved`` guarded against folds and kept no worse
-    than plain (:mod:`guard`; ``preview``: an interactive update's, see ``guard.Problem``); where
-    features were relaxed, smaller similarities (towards ``low()``) are tried first. Returns
-    (x, tied, unpinned)."""
+    than plain (:mod:`guard`); where features were relaxed, smaller similarities (towards
+    ``low()``) are tried first. With ``ease`` (x -> (eased x, share)), an interactive update's
+    preview (see ``guard.Problem``): where its windows do not open the folds, the solution
+    is eased instead. Returns (x, tied, unpinned)."""
     ties, ab, (x, edges, rhs, offset) = attempt.ties, attempt.ab, attempt.solved
     grid, features = state.grid, state.features
 
@@ -57,11 +58,16 @@ def guarded(warper, state, warped, record: SolveRecord, attempt: Attempt, scale_
     problem = guard.Problem(grid, features, state.triangles, warped, state.normal, state.stiffness,
                             ties.window_fixed(*(attempt.border or (state.fixed_x, state.fixed_y))),
                             ties.window_ties(), attempt.systems, rhs, offset, edges,
-                            attempt.warp_edges, rebuild, warper.timings, preview)
+                            attempt.warp_edges, rebuild, warper.timings, ease is not None)
     counted = sum(warper.timings.get(k, 0.0) for k in ("solve", "factor", "rhs"))
     stages.enter("guard")
     t0 = time.perf_counter()
     x = guard.guard(problem, x, record.guard)
+    if x is None:                                # a preview: eased, as a drag's update is
+        x, record.guard.drag_step = ease(attempt.solved[0])
+        record.guard.preview_eased = True
+        warper.timings["guard"] = warper.timings.get("guard", 0.0) + time.perf_counter() - t0
+        return x, ties.tied, ties.unpinned & ties.tied
     if record.guard.release_rounds and scale_solver is not None and scale_solver.n_columns:
         # The features could not keep their shape at this scale: smaller, do they?
         shrunk = scale_search.shrink_to_fit(attempt.solve, low(), ab, attempt.solved, state.triangles, warped)

@@ -357,14 +357,17 @@ class Deformer:
     def solve(self, handles: Handles, mode: str | None = None, drag: bool = False) -> Mesh:
         """The feature-aware mesh for ``handles`` (whose sources may differ from the last call's:
         the rigid map is then factored anew); ``drag``: an update while a handle is dragged
-        (with ``quick``: a fold is not untangled, see :meth:`FeatureWarper.solve`)."""
+        (with ``quick``: a fold is not untangled, see :meth:`FeatureWarper.solve`). With
+        ``quick``, the features' tie decisions are made once per handle set (``keep_ties``)."""
         if isinstance(handles, dict):
             handles = Handles.from_dict(handles, self.warper.width, self.warper.height)
         if not isinstance(handles, Handles):
             raise TypeError(f"handles must be Handles or a handles dict, not {type(handles).__name__}")
         self.handles = handles
+        factored = self.rigid.rigid
         self.warp = self.rigid.deformation(handles)
-        mesh = self.warper.solve(self.warp, mode or self.mode, quick=self.quick, drag=drag)
+        same_set = factored is not None and self.rigid.rigid is factored     # the handles' sources unchanged
+        mesh = self.warper.solve(self.warp, mode or self.mode, quick=self.quick, drag=drag, keep_ties=same_set)
         mesh.record.warnings.extend(self.warp.review(mesh, self.quick))
         return mesh
 

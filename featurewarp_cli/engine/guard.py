@@ -25,11 +25,9 @@ UNTANGLED_BISECTIONS = 3
 UNTANGLE_FLOOR = 0.05
 #: The guard first untangles a window around the folds, reaching these many times the
 #: largest fold's extent beyond it (at least WINDOW_MIN_MARGIN quads), in at most
-#: WINDOW_ITERATIONS steps each (a hopeless window stops early for lack of progress);
-#: where both fail, the whole grid. 12 MP swirl 180 with a small mask: 43 window steps on
-#: 15 % of the triangles instead of 36 on all of them. With a head + helmet mask (22 %) the
-#: first window stalls at 60 steps (5 900 folds down to 2 200); the wider one, started
-#: there, opens the rest in 27 steps, and the crushed slivers left are lifted in a small
+#: WINDOW_ITERATIONS steps each (a hopeless window stops early); where both fail, the whole
+#: grid. 12 MP swirl 180, head + helmet mask: the first window stalls at 60 steps (5 900
+#: folds down to 2 200), the wider one opens the rest in 27, slivers are lifted in a small
 #: window (:func:`_settled`): 0.45 s on 160 000 nodes, where the global pass took 3.4 s.
 WINDOW_MARGINS = (0.5, 1.0)
 WINDOW_MIN_MARGIN = 8
@@ -39,8 +37,8 @@ WINDOW_ITERATIONS = 150
 TAPER_CELLS = 3
 PLAIN_BISECTIONS = 6
 #: Slivers the small settling window leaves at or above this fraction of their floor are
-#: kept (it lifts them to half; a few stall just short of it, as 2 of 1 500 triangles on the
-#: 12 MP hard swirl at 0.496); thinner ones send the wide window back to lift them as before.
+#: kept (it lifts them to half; 2 of 1 500 stall at 0.496 on the 12 MP hard swirl); thinner
+#: ones send the wide window back to lift them as before.
 SETTLED = 0.45
 #: Windows larger than this fraction of the grid are left to the global pass.
 WINDOW_MAX_FRACTION = 0.5
@@ -70,10 +68,10 @@ class GuardRecord:
         where that list is not empty, times the share of a tapered move after it; else the
         nodes near the offending triangles, or all).
     degraded_components : list of int
-    drag_step : float
-        1: guarded as above; below 1: a drag's update (``FeatureWarper.solve(drag=True)``),
-        unguarded: the nodes around its folds moved this far from W towards the least-squares
-        solution, those further out further (all the way beyond ``DRAG_REACH`` cells).
+    drag_step, preview_eased : float, bool
+        Below 1: a drag's update (``FeatureWarper.solve(drag=True)``), or a preview whose windows
+        could not open its folds (``preview_eased``), eased: the nodes around the folds moved this
+        far from W towards the least-squares solution, all the way ``DRAG_REACH`` cells out.
     """
 
     flipped_before: int = 0
@@ -86,6 +84,7 @@ class GuardRecord:
     plain_blend: float = 1.0
     degraded_components: list = field(default_factory=list)
     drag_step: float = 1.0
+    preview_eased: bool = False
 
 
 @dataclass
@@ -107,8 +106,8 @@ class Problem:
         targets with the components ``released`` untied.
     timings : dict
     preview : bool
-        An interactive update (``FeatureWarper.solve(quick=True)``): slivers the small settling
-        window leaves are not lifted by a second wide pass (:func:`_settled`).
+        An interactive update (``FeatureWarper.solve(quick=True)``): windows only, and
+        :func:`guard` returns None where they fail (see :func:`_untangled`, :func:`_settled`).
     """
 
     grid: object
@@ -138,8 +137,9 @@ class Problem:
         return solve
 
 
-def guard(problem: Problem, x: np.ndarray, record: GuardRecord) -> np.ndarray:
-    """Positions with no folded triangle, as close to ``x`` (the least-squares solution) as found."""
+def guard(problem: Problem, x: np.ndarray, record: GuardRecord) -> np.ndarray | None:
+    """Positions with no folded triangle, as close to ``x`` (the least-squares solution) as found;
+    None for a preview whose folds the windows do not open (the caller eases it instead)."""
     tris = problem.triangles
     record.flipped_before = int(np.count_nonzero(injectivity.flipped(x, tris)))
     if record.flipped_before == 0:
@@ -151,12 +151,13 @@ def guard(problem: Problem, x: np.ndarray, record: GuardRecord) -> np.ndarray:
     x, ok = _untangled(problem, problem.systems, problem.rhs, problem.offset, problem.tied, x, floor, record)
     if ok:
         return x
-    return _release(problem, x, floor, record)
+    return None if problem.preview else _release(problem, x, floor, record)
 
 
 def _untangled(problem, systems, rhs, offset, tied, start, floor, record):
     """Untangle in a window around the folds (wider windows next, each from where the last one
-    left off), else on the whole grid; (x, no folds left)."""
+    left off), else on the whole grid; a preview stops after a window that gave up, or after
+    the windows; (x, no folds left)."""
     tris = problem.triangles
     folds = int(np.count_nonzero(injectivity.flipped(start, tris)))
     for margin in WINDOW_MARGINS:
@@ -171,6 +172,10 @@ def _untangled(problem, systems, rhs, offset, tied, start, floor, record):
             return _settled(problem, rhs, offset, tied, start, x, floor, margin, record), True
         if left < folds:
             start, folds = x, left
+        if problem.preview and iterations < WINDOW_ITERATIONS:      # it gave up: a preview eases instead
+            break
+    if problem.preview:
+        return start, False
     grid = problem.grid
     x, iterations = injectivity.untangle(problem.solver(systems, rhs, offset), problem.normal.dot, start, tris,
                                          floor, problem.stiffness,
@@ -184,14 +189,11 @@ def _settled(problem, rhs, offset, tied, start, x, floor, margin, record):
     triangles (below half their floor) lifted.
 
     The wide window stops as soon as nothing is folded, since lifting a few dozen slivers
-    there took as many steps as opening thousands of folds (12 MP swirl 180, head + helmet
-    mask: 20 of 50 steps on 86 000 nodes). So first a small window around them, features
-    held, by steps that never make the thinnest triangle thinner (150 cheap steps on 1 500
-    nodes there). Where slivers below :data:`SETTLED` of their floor are left (wedged
-    against a feature), the wide window runs again from ``start`` until they are lifted too,
-    as it did before (a fresh pass from ``x`` either folds again or stalls), except in a
-    preview: the editor's release towards a pin (1 MP, 2 134 folds) took 0.53 s with that
-    pass and 0.32 s without, the two renderings 0.005 grey levels apart on average."""
+    there took as many steps as opening thousands of folds (12 MP swirl 180: 20 of 50 steps
+    on 86 000 nodes). So first a small window around them, features held, by steps that
+    never make the thinnest triangle thinner. Where slivers below :data:`SETTLED` of their
+    floor are left (wedged against a feature), the wide window runs again from ``start``
+    until they are lifted too (a fresh pass from ``x`` folds again or stalls); not in a preview."""
     thinnest = lambda points: float((injectivity.grid_areas(problem.grid, points) / floor).min())  # noqa: E731
     if thinnest(x) >= 0.5:
         return x
@@ -379,9 +381,8 @@ def middle_nodes(nodes: np.ndarray, node_component: np.ndarray, n: int) -> np.nd
 
 def _fit_per_component(state, points: np.ndarray) -> np.ndarray:
     """Anisotropy of each component's best-fitting affine map under ``points`` (what keypoints
-    matched in its region measure), over all its nodes and over its middle
-    (``state.node_middle``, :func:`middle_nodes`: a rim kept at the cost of the middle is
-    worse where the keypoints are): (2, C)."""
+    measure), over all its nodes and over its middle (``state.node_middle``,
+    :func:`middle_nodes`: a rim kept at the middle's cost is worse for keypoints): (2, C)."""
     n = state.features.n_components
     fits = [quality.affine_fits(state.nodes[on], points[on], state.node_component[on], n)
             for on in (state.node_component >= 0, state.node_middle)]

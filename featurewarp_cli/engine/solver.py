@@ -388,16 +388,23 @@ class ReducedSystem:
             A^T b for the k coordinates (x and y: k = 2).
         offset : (N, k) ndarray
             q: the position of fixed nodes, the offset of tied nodes, 0 for free ones.
+            Both may be SciPy sparse matrices (many columns that are mostly zero: L q is then
+            a sparse product, a third of :class:`components.ScaleSolver`'s set-up on 46).
 
         Returns
         -------
         (N, k) ndarray
             All node positions.
         """
+        sparse = hasattr(offset, "toarray")
         if self.n_unknowns == 0:
-            return offset.copy()
+            return offset.toarray() if sparse else offset.copy()
         n = self.n_unknowns
-        residual = rhs.T - (self.matrix @ offset).T                   # (k, N), rows contiguous
+        if sparse:
+            residual = np.ascontiguousarray((rhs - self.matrix @ offset).toarray().T)
+            offset = offset.toarray()
+        else:
+            residual = rhs.T - (self.matrix @ offset).T                   # (k, N), rows contiguous
         gathered = np.take(residual, self._gather, axis=1)
         if self._shared is not None:
             nodes, position, shared = self._shared

@@ -192,6 +192,7 @@ class FeatureWarper:
         self.factorizations = 0
         self.timings: dict[str, float] = {}
         self._states: dict[tuple, _GridState] = {}
+        self._decided = None            # the last solve's tie decisions, which a drag's update keeps
 
     def _state(self, grid: Grid, warped: np.ndarray, boundary: str) -> _GridState:
         """Features and border conditions on ``grid`` (built once per grid and border);
@@ -259,7 +260,7 @@ class FeatureWarper:
             offset[free, axis] = placed[free, axis]
         return offset
 
-    def solve(self, warp, mode: str = MODE, quick: bool = False, drag: bool = False) -> Mesh:
+    def solve(self, warp, mode: str = MODE, quick: bool = False, drag: bool = False, keep_ties: bool = False) -> Mesh:
         """Feature-aware mesh for ``warp`` (a :class:`featurewarp_cli.plugins.Warp` instance).
 
         The least-squares solution is returned when it has no fold-over. When it
@@ -288,7 +289,13 @@ class FeatureWarper:
             :data:`DRAG_STEP` of the way from W (injective) to where the first triangle
             would degenerate (``record.guard.drag_step``) and go all the way
             :data:`DRAG_REACH` cells further out (:func:`injectivity.eased`), so an update
-            costs no untangling. The release is solved without it.
+            costs no untangling. The release is solved without it. A drag's update also keeps
+            the tie decisions of the solve before it (see ``keep_ties``).
+        keep_ties : bool
+            With ``quick``: the features' tie decisions (pinned to the border, let go of it,
+            or untied: :func:`components.parametrize`) are the last solve's rather than
+            decided anew from W, so the systems are not factored anew (the editor keeps them
+            per handle set).
 
         Returns
         -------
@@ -326,7 +333,7 @@ class FeatureWarper:
             record.guard.flipped_before = int(np.count_nonzero(signed_areas(target, state.triangles) <= 0))
         else:
             target, tied, unpinned = self._feature_aware(state, warped, mode, record, quick, self._releases(warp),
-                                                         drag and quick)
+                                                         drag and quick, (drag or keep_ties) and quick)
         t1 = time.perf_counter()
         assess(state, target, warped, tied, unpinned, warp, record, self.notes, quick)
         self.timings["quality"] = time.perf_counter() - t1
@@ -334,7 +341,7 @@ class FeatureWarper:
         return Mesh(state.nodes, target, state.triangles, tuple(warp.canvas), record, state.node_component)
 
     def _feature_aware(self, state: _GridState, warped: np.ndarray, mode: str, record: SolveRecord,
-                       quick: bool = False, unpin: bool = False, drag: bool = False):
+                       quick: bool = False, unpin: bool = False, drag: bool = False, keep_ties: bool = False):
         """Solve for the features' similarities and the nodes, then guard against folds.
 
         Returns the node positions, which components stayed tied, and which of those were
@@ -343,9 +350,12 @@ class FeatureWarper:
         jac = targets.quad_jacobians(grid, warped)
         quad_maps, prior_maps = targets.quad_targets(jac, features, mode, self.formulation)
         prior = components.as_ab(prior_maps)
+        key = (grid.n_nodes, features.n_components, mode, unpin)
+        decided = self._decided[1] if keep_ties and self._decided is not None and self._decided[0] == key else None
         ties = components.parametrize(state.nodes, state.fixed_x, state.fixed_y, warped, state.node_component,
                                       features.n_components, prior, solve_scale=mode == "similarity",
-                                      unpin=unpin)
+                                      unpin=unpin, decided=decided)
+        self._decided = (key, ties.decisions())
         if self.formulation == "paper":
             ties.tied[:] = False
         ab = np.where(ties.tied[:, None], ties.base, prior)
@@ -381,7 +391,12 @@ class FeatureWarper:
         def low():                              # the similarities the features shrink towards
             return np.where(ties.tied[:, None], ties.project(prior * _smallest_scale(jac, features, prior)), prior)
 
-        result = attempts.guarded(self, state, warped, record, attempt, scale_solver, low, quick)
+        def ease(x):                            # a preview's fallback (quick): as a drag's update
+            return injectivity.eased(grid, warped, x, state.triangles, DRAG_STEP, DRAG_REACH)
+
+        injective_w = quick and np.all(signed_areas(warped, state.triangles) > 0)
+        result = attempts.guarded(self, state, warped, record, attempt, scale_solver, low,
+                                  ease if injective_w else None)
         if self.grow_past_edge:
             result = attempts.grown(self, state, warped, record, attempt, result, mode)
         return result
