@@ -116,8 +116,8 @@ def bench_drag(photo, mask, drag_flag: bool = True) -> dict:
         client = Client(process.stdout.readline().strip())
         pins = [tuple(np.round(np.array(p) * scale, 1)) for p in PINS]
         results = {"size": [w, h], "loadavg_start": os.getloadavg(), "drag_flag": drag_flag}
-        print(f"\nRecorded drags through the editor's server, {w}x{h}, {RATE} pointer events/s for "
-              f"{SECONDS:g} s, one solve in flight (drag flag {'on' if drag_flag else 'off'})")
+        print(f"\nRecorded drags through the editor's server, {Path(photo).name} {w}x{h}, {RATE} pointer events/s "
+              f"for {SECONDS:g} s, one solve in flight (drag flag {'on' if drag_flag else 'off'})")
         for name, (a, b) in DRAGS.items():
             start, end = tuple(np.round(np.array(a) * scale, 1)), tuple(np.round(np.array(b) * scale, 1))
             r = replay(client, pins, start, end, drag_flag)

@@ -256,6 +256,9 @@ def test_the_editor_keeps_its_tie_decisions_per_handle_set_so_no_update_is_facto
     full = Deformer(deformer.warper.width, deformer.warper.height, deformer.warper.mask)
     full.solve(handles)
     assert full.warper._decided[1][1].any() and not deformer.warper._decided[1][1].any()   # a coin let go
+    more = {**handles, "points": handles["points"] + [{"from": [20.0, 150.0], "to": [22.0, 150.0]}]}
+    deformer.solve(more, drag=True)                 # a new handle set, dragged at once: decided anew
+    assert deformer.warper._decided[1][1].any()
 
 
 def test_a_preview_whose_windows_cannot_open_the_folds_is_eased_and_says_so():

@@ -8,7 +8,8 @@ without solving, so the newest pointer position always wins. A request marked ``
 caps the rigid map's Newton steps at :data:`DRAG_RIGID_STEPS` and, where the features'
 least-squares solution folds, eases it towards the rigid map instead of untangling it
 (``FeatureWarper.solve(drag=True)``); the page sends one unmarked request when the pointer is
-released, so what stays on screen is the full preview.
+released, so what stays on screen is the guarded preview (every answer is a bounded preview:
+see ``FeatureWarper.solve(quick=True)``; Export runs the full pipeline).
 """
 
 from __future__ import annotations

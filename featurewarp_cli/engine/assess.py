@@ -48,7 +48,8 @@ def assess(state, target, warped, tied, unpinned, warp, record: SolveRecord, not
             target, warped, grid.nx, grid.ny, past)
     if record.guard.drag_step < 1.0:        # a drag's update or a preview: solved in full later
         where, later = (("folds the fold guard's windows could not open", "Export solves") if record.guard.preview_eased
-                        else ("the folds they would make", "the release solves"))
+                        else ("the folds they would make", "the release untangles them where it can and Export "
+                              "solves"))
         record.warnings.append(f"{'preview' if record.guard.preview_eased else 'dragging'}: the features are eased to "
                                f"{record.guard.drag_step:.0%} of the way from the handles' map to their shapes around "
                                f"{where}; {later} them in full")

@@ -66,7 +66,8 @@ def guarded(warper, state, warped, record: SolveRecord, attempt: Attempt, scale_
     if x is None:                                # a preview: eased, as a drag's update is
         x, record.guard.drag_step = ease(attempt.solved[0])
         record.guard.preview_eased = True
-        warper.timings["guard"] = warper.timings.get("guard", 0.0) + time.perf_counter() - t0
+        inner = sum(warper.timings.get(k, 0.0) for k in ("solve", "factor", "rhs")) - counted
+        warper.timings["guard"] = warper.timings.get("guard", 0.0) + time.perf_counter() - t0 - inner
         return x, ties.tied, ties.unpinned & ties.tied
     if record.guard.release_rounds and scale_solver is not None and scale_solver.n_columns:
         # The features could not keep their shape at this scale: smaller, do they?

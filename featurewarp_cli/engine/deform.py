@@ -358,7 +358,8 @@ class Deformer:
         """The feature-aware mesh for ``handles`` (whose sources may differ from the last call's:
         the rigid map is then factored anew); ``drag``: an update while a handle is dragged
         (with ``quick``: a fold is not untangled, see :meth:`FeatureWarper.solve`). With
-        ``quick``, the features' tie decisions are made once per handle set (``keep_ties``)."""
+        ``quick``, the features' tie decisions are those of the first solve of this handle set
+        (the same sources), a drag's or not, so no later solve of the set factors anew."""
         if isinstance(handles, dict):
             handles = Handles.from_dict(handles, self.warper.width, self.warper.height)
         if not isinstance(handles, Handles):

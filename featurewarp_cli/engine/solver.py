@@ -388,8 +388,8 @@ class ReducedSystem:
             A^T b for the k coordinates (x and y: k = 2).
         offset : (N, k) ndarray
             q: the position of fixed nodes, the offset of tied nodes, 0 for free ones.
-            Both may be SciPy sparse matrices (many columns that are mostly zero: L q is then
-            a sparse product, a third of :class:`components.ScaleSolver`'s set-up on 46).
+            Or both SciPy sparse matrices (many columns that are mostly zero: L q is then a
+            sparse product, a third of :class:`components.ScaleSolver`'s set-up on 46).
 
         Returns
         -------

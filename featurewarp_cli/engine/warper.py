@@ -260,7 +260,8 @@ class FeatureWarper:
             offset[free, axis] = placed[free, axis]
         return offset
 
-    def solve(self, warp, mode: str = MODE, quick: bool = False, drag: bool = False, keep_ties: bool = False) -> Mesh:
+    def solve(self, warp, mode: str = MODE, quick: bool = False, drag: bool = False,
+              keep_ties: bool | None = None) -> Mesh:
         """Feature-aware mesh for ``warp`` (a :class:`featurewarp_cli.plugins.Warp` instance).
 
         The least-squares solution is returned when it has no fold-over. When it
@@ -277,25 +278,21 @@ class FeatureWarper:
             similarity: features rotate and scale uniformly; rigid: they keep
             their size; plain: the warp itself, mask ignored.
         quick : bool
-            For interactive updates: the cell is not refined to follow the warp (the
-            given cell, or the base cell), the features take the least-squares
-            similarities without the scale search's safeguards, the guard runs only
-            when the result folds (and leaves the slivers its small settling window
-            cannot lift), and the per-component figures are computed but not the
-            other quality figures.
+            For interactive updates: the given or base cell, the least-squares similarities
+            without the scale search's safeguards, the guard only where the result folds
+            and as a preview (windows only; where they fail the features are eased as for
+            ``drag``, with a warning), and only the per-component quality figures.
         drag : bool
-            With ``quick``, an update while a handle is being dragged: a least-squares
-            solution that folds is not guarded; around its folds the nodes stop at
-            :data:`DRAG_STEP` of the way from W (injective) to where the first triangle
-            would degenerate (``record.guard.drag_step``) and go all the way
-            :data:`DRAG_REACH` cells further out (:func:`injectivity.eased`), so an update
-            costs no untangling. The release is solved without it. A drag's update also keeps
-            the tie decisions of the solve before it (see ``keep_ties``).
-        keep_ties : bool
+            With ``quick``, an update while a handle is dragged: a least-squares solution
+            that folds is not guarded; around its folds the nodes stop at :data:`DRAG_STEP`
+            of the way from W (injective) to where the first triangle would degenerate
+            (``record.guard.drag_step``) and go all the way :data:`DRAG_REACH` cells further
+            out (:func:`injectivity.eased`): no untangling. The release is a quick solve.
+        keep_ties : bool, optional
             With ``quick``: the features' tie decisions (pinned to the border, let go of it,
-            or untied: :func:`components.parametrize`) are the last solve's rather than
-            decided anew from W, so the systems are not factored anew (the editor keeps them
-            per handle set).
+            or untied: :func:`components.parametrize`) are the last solve's, not decided
+            anew from W, so nothing is factored anew (the editor keeps them per handle set).
+            Default: as ``drag``.
 
         Returns
         -------
@@ -332,8 +329,9 @@ class FeatureWarper:
             target = warped
             record.guard.flipped_before = int(np.count_nonzero(signed_areas(target, state.triangles) <= 0))
         else:
+            keep = quick and bool(drag if keep_ties is None else keep_ties)
             target, tied, unpinned = self._feature_aware(state, warped, mode, record, quick, self._releases(warp),
-                                                         drag and quick, (drag or keep_ties) and quick)
+                                                         drag and quick, keep)
         t1 = time.perf_counter()
         assess(state, target, warped, tied, unpinned, warp, record, self.notes, quick)
         self.timings["quality"] = time.perf_counter() - t1
@@ -350,7 +348,7 @@ class FeatureWarper:
         jac = targets.quad_jacobians(grid, warped)
         quad_maps, prior_maps = targets.quad_targets(jac, features, mode, self.formulation)
         prior = components.as_ab(prior_maps)
-        key = (grid.n_nodes, features.n_components, mode, unpin)
+        key = (grid.n_nodes, features.n_components, mode, unpin, state.fixed_x.tobytes(), state.fixed_y.tobytes())
         decided = self._decided[1] if keep_ties and self._decided is not None and self._decided[0] == key else None
         ties = components.parametrize(state.nodes, state.fixed_x, state.fixed_y, warped, state.node_component,
                                       features.n_components, prior, solve_scale=mode == "similarity",
