@@ -380,21 +380,20 @@ class FeatureWarper:
             return x, ties.tied, ties.unpinned & ties.tied
         if not self.injective or (quick and np.all(signed_areas(x, state.triangles) > 0)):
             return x, ties.tied, ties.unpinned & ties.tied
+        def ease(x):                            # a drag's update, or a preview its guard's windows left folded
+            return injectivity.eased(grid, warped, x, state.triangles, DRAG_STEP, DRAG_REACH)
+
         if drag and np.all(signed_areas(warped, state.triangles) > 0):
             record.guard.flipped_before = int(np.count_nonzero(signed_areas(x, state.triangles) <= 0))
-            x, record.guard.drag_step = injectivity.eased(grid, warped, x, state.triangles, DRAG_STEP, DRAG_REACH)
+            x, record.guard.drag_step = ease(x)
             return x, ties.tied, ties.unpinned & ties.tied
         attempt.ab, attempt.solved = ab, solved
 
         def low():                              # the similarities the features shrink towards
             return np.where(ties.tied[:, None], ties.project(prior * _smallest_scale(jac, features, prior)), prior)
 
-        def ease(x):                            # a preview's fallback (quick): as a drag's update
-            return injectivity.eased(grid, warped, x, state.triangles, DRAG_STEP, DRAG_REACH)
-
-        injective_w = quick and np.all(signed_areas(warped, state.triangles) > 0)
-        result = attempts.guarded(self, state, warped, record, attempt, scale_solver, low,
-                                  ease if injective_w else None)
+        # A preview's guard eases only where W is injective: it leaves a folding W's solution as it is.
+        result = attempts.guarded(self, state, warped, record, attempt, scale_solver, low, ease if quick else None)
         if self.grow_past_edge:
             result = attempts.grown(self, state, warped, record, attempt, result, mode)
         return result
