@@ -181,11 +181,10 @@ def test_a_drag_update_that_would_fold_is_eased_not_untangled_and_the_release_so
     assert not any(w.startswith("dragging") for w in released.record.warnings)
 
 
-def test_a_preview_release_keeps_the_small_settling_window_and_does_not_rerun_the_wide_one(monkeypatch):
-    """Issue 23: the editor's release towards a pin (1 MP) took 0.53 s, 0.2 s of it a second
-    wide untangling pass to lift slivers the small settling window had left; a preview
-    skips that pass (0.32 s; the renderings 0.005 grey levels apart on average). A full
-    solve still runs it; neither folds."""
+def test_a_preview_release_takes_a_few_newton_steps_where_export_converges(monkeypatch):
+    """Issue 23's hard release (towards a pin, 1 MP): its window opens the folds, and the barrier's
+    energy is converged there (issue 21): 35 Newton steps, 0.6 s. A preview (the editor's
+    answer) takes guard.PREVIEW_STEPS of them (its release 0.4 s); Export converges. Neither folds."""
     from featurewarp_cli.engine import attempts, guard
 
     mask = cv2.resize(cv2.imread("samples/astronaut_mask.png", cv2.IMREAD_GRAYSCALE), (1024, 1024)) >= 128
@@ -196,33 +195,21 @@ def test_a_preview_release_keeps_the_small_settling_window_and_does_not_rerun_th
     def handles(to):
         return {"version": 1, "points": pins + [{"from": start, "to": list(to)}]}
 
-    windows = []
-    untangle_window = guard._untangle_window
-
-    def recorded(problem, *args, **kwargs):
-        windows.append((kwargs.get("keep_thinnest", False), problem.preview))
-        return untangle_window(problem, *args, **kwargs)
-
-    monkeypatch.setattr(guard, "_untangle_window", recorded)
-
     def release(preview):
         deformer = Deformer(1024, 1024, mask, quick=True, cell=4.0, rigid_steps=1)
         deformer.solve(handles([342.9, 611.0]), drag=True)
         deformer.solve(handles([174.1, 901.1]), drag=True)
-        windows.clear()
         deformer.rigid.rigid_steps = 8
         with monkeypatch.context() as patch:
             guarded = attempts.guarded
             patch.setattr(attempts, "guarded", lambda *a: guarded(*a[:7], a[7] if preview else None))
-            mesh = deformer.solve(handles([174.1, 901.1]))
-        return mesh, [keep for keep, _ in windows]
+            return deformer.solve(handles([174.1, 901.1]))
 
-    preview, preview_windows = release(True)
-    full, full_windows = release(False)
+    preview, full = release(True), release(False)
     assert preview.flips() == 0 and full.flips() == 0
-    assert True in full_windows and full_windows[-1] is False     # the wide window ran again after the small one
-    assert preview_windows[-1] is True                             # the small one had the last word
-    assert preview.record.guard.untangle_iterations < full.record.guard.untangle_iterations
+    assert preview.record.guard.window_quads > 0 and full.record.guard.window_quads > 0
+    assert preview.record.guard.newton_steps == guard.PREVIEW_STEPS and not preview.record.guard.converged
+    assert full.record.guard.newton_steps > guard.PREVIEW_STEPS and full.record.guard.converged
 
 
 def _coins_drag():

@@ -1,6 +1,5 @@
 """No fold-overs: the final grid has no triangle of non-positive area anywhere in the presets' ranges."""
 
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -151,78 +150,6 @@ def test_auto_cell_follows_the_warp():
         mesh = warper.solve(load_warp("swirl")(W, H, angle=angle), "plain")
         assert mesh.info["grid"]["pl_error_px"] <= 0.5
         assert mesh.flips() == 0
-
-
-@pytest.mark.parametrize("seed", range(8))
-def test_untangle_that_keeps_the_thinnest_never_folds_or_thins_a_sliver(seed):
-    """From a fold-free start whose least-squares optimum folds (random node targets on a
-    pinned 9 x 9 grid), the first untangle steps fold triangles unless ``keep_thinnest``
-    holds every triangle at or above the thinnest relative area of the start."""
-    grid = Grid.for_image(64, 64, 8.0)
-    nodes, tris = grid.nodes(), grid.triangles()
-    border = np.zeros((grid.ny, grid.nx), bool)
-    border[[0, -1], :] = border[:, [0, -1]] = True
-    border = border.ravel()
-    floor = 0.05 * signed_areas(nodes, tris)
-    target = nodes + np.where(border[:, None], 0.0, np.random.default_rng(seed).normal(0.0, 12.0, nodes.shape))
-    start = nodes
-    for t in np.linspace(0.0, 1.0, 200):           # the furthest fold-free point towards the optimum
-        if signed_areas(nodes + t * (target - nodes), tris).min() <= 0:
-            break
-        start = nodes + t * (target - nodes)
-    thinnest = (signed_areas(start, tris) / floor).min()
-
-    def solve(force):
-        return np.where(border[:, None], nodes, target + force)
-
-    def hessian(d):
-        return np.where(border[:, None], 0.0, d)
-
-    results = {}
-    for keep in (False, True):
-        x, _ = injectivity.untangle(solve, hessian, start, tris, floor, np.ones(len(nodes)), max_iterations=3,
-                                    keep_thinnest=keep)
-        results[keep] = (signed_areas(x, tris) / floor).min()
-    assert results[True] >= thinnest - 1e-12 and results[True] > 0
-    if seed == 0:
-        assert results[False] < thinnest            # the case is one where the wall matters
-
-
-def test_slivers_left_by_an_unfolding_window_are_lifted(monkeypatch):
-    """A window stops once nothing is folded; the slivers it leaves are lifted, in a small
-    window (swirl 240) or, where that falls short, by the wide window run again as it used to
-    (squeeze --bend 100): every settled result keeps each triangle at SETTLED of its floor."""
-    import cv2
-
-    from featurewarp_cli.engine import guard
-
-    settled, small, reruns = [], [], []
-    real_settled, real_window = guard._settled, guard._untangle_window
-
-    def window(*args, **kwargs):
-        if kwargs.get("keep_thinnest"):
-            small.append(1)
-        elif kwargs.get("settle", True):              # unfolding passes stop at no fold
-            reruns.append(1)
-        return real_window(*args, **kwargs)
-
-    def spy(*args):
-        out = real_settled(*args)
-        problem, floor = args[0], args[6]
-        settled.append(float((injectivity.grid_areas(problem.grid, out) / floor).min()))
-        return out
-
-    monkeypatch.setattr(guard, "_untangle_window", window)
-    monkeypatch.setattr(guard, "_settled", spy)
-    samples = Path(__file__).resolve().parent.parent / "samples"
-    mask = cv2.imread(str(samples / "astronaut_mask.png"), cv2.IMREAD_GRAYSCALE) >= 128
-    h, w = mask.shape
-    for preset, params in (("swirl", {"angle": 240}), ("squeeze", {"bend": 100})):
-        small.clear(), reruns.clear()
-        mesh = FeatureWarper(w, h, mask, boundary="release").solve(load_warp(preset)(w, h, **params), "similarity")
-        assert mesh.flips() == 0 and small, preset
-        assert bool(reruns) == (preset == "squeeze"), (preset, reruns)
-    assert settled and min(settled) >= guard.SETTLED
 
 
 def test_eased_stops_short_of_the_folds_and_keeps_the_end_away_from_them():

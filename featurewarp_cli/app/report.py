@@ -9,6 +9,7 @@ import time
 import numpy as np
 
 from .. import __version__
+from ..engine import barrier
 
 
 #: The report's own format version (``featurewarp schema report`` prints its JSON Schema).
@@ -85,6 +86,10 @@ def build_report(input_path, output_path, image, result, warp, mesh, timings) ->
             "feature_blend": info.get("feature_blend", 1.0),
             "plain_blend": info.get("plain_blend", 1.0),
             "degraded_components": info.get("degraded_components", []),
+            "barrier": {"safe_fraction": barrier.SAFE_FRACTION, "stiffness": barrier.STIFFNESS,
+                        "tolerance": barrier.TOLERANCE, "max_steps": barrier.MAX_STEPS,
+                        "newton_steps": info.get("newton_steps", 0),
+                        "converged": info.get("barrier_converged", True)},
         },
         "quality": info["quality"],
     }

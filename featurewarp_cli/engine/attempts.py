@@ -9,7 +9,7 @@ import time
 import numpy as np
 
 from .. import stages
-from . import canvas, components, grow, guard, scale_search
+from . import canvas, components, grow, guard, plain_bound, scale_search
 from .record import STREAKS, SolveRecord
 
 #: Grown solutions guarded at most (``--grow-past-edge``), the preferred first; the first the
@@ -78,7 +78,7 @@ def guarded(warper, state, warped, record: SolveRecord, attempt: Attempt, scale_
             problem.rhs, problem.offset, problem.edges = rhs, offset, edges
             x = guard.guard(problem, x, record.guard)
     if warper.formulation == "exact":            # the paper's soft targets are kept as published
-        x = guard.no_worse_than_plain(state, x, warped, record.guard, problem)
+        x = plain_bound.no_worse_than_plain(state, x, warped, record.guard, problem)
     inner = sum(warper.timings.get(k, 0.0) for k in ("solve", "factor", "rhs")) - counted
     warper.timings["guard"] = warper.timings.get("guard", 0.0) + time.perf_counter() - t0 - inner
     released = np.isin(np.arange(ties.tied.size), record.guard.released_components)

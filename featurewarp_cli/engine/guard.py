@@ -12,34 +12,28 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 
-import cv2
 import numpy as np
 
-from . import injectivity, quality, system
+from . import barrier, injectivity, system
 from .grid import signed_areas
 
 #: Bisection steps on how far released features go from the warp's shape to their own.
 BLEND_BISECTIONS = 8
 UNTANGLED_BISECTIONS = 3
-#: Fraction of its area under the warp that the guard asks each triangle to keep.
-UNTANGLE_FLOOR = 0.05
 #: The guard first untangles a window around the folds, reaching these many times the
 #: largest fold's extent beyond it (at least WINDOW_MIN_MARGIN quads), in at most
 #: WINDOW_ITERATIONS steps each (a hopeless window stops early); where both fail, the whole
 #: grid. 12 MP swirl 180, head + helmet mask: the first window stalls at 60 steps (5 900
-#: folds down to 2 200), the wider one opens the rest in 27, slivers are lifted in a small
-#: window (:func:`_settled`): 0.45 s on 160 000 nodes, where the global pass took 3.4 s.
+#: folds down to 2 200), the wider one opens the rest in 27: 0.45 s on 160 000 nodes, where
+#: the global pass took 3.4 s. Each window that opens its folds converges the barrier's
+#: energy there (:mod:`barrier`); WINDOW_MIN_MARGIN quads around the crushed triangles after
+#: a global pass.
 WINDOW_MARGINS = (0.5, 1.0)
 WINDOW_MIN_MARGIN = 8
 WINDOW_ITERATIONS = 150
-#: Cells over which the move towards W tapers off around offending triangles, and the
-#: bisection steps of that move (:func:`no_worse_than_plain`).
-TAPER_CELLS = 3
-PLAIN_BISECTIONS = 6
-#: Slivers the small settling window leaves at or above this fraction of their floor are
-#: kept (it lifts them to half; 2 of 1 500 stall at 0.496 on the 12 MP hard swirl); thinner
-#: ones send the wide window back to lift them as before.
-SETTLED = 0.45
+#: Newton steps of a preview's convergence (``Problem.preview``): slivers lifted part of the way,
+#: in bounded time (the editor's hard release: 35 steps, 0.6 s, to converge).
+PREVIEW_STEPS = 4
 #: Windows larger than this fraction of the grid are left to the global pass.
 WINDOW_MAX_FRACTION = 0.5
 
@@ -68,6 +62,9 @@ class GuardRecord:
         where that list is not empty, times the share of a tapered move after it; else the
         nodes near the offending triangles, or all).
     degraded_components : list of int
+    newton_steps, converged : int, bool
+        Newton steps of :func:`barrier.converge` (all its runs), and whether every run met
+        its tolerance.
     drag_step, preview_eased : float, bool
         Below 1: a drag's update (``FeatureWarper.solve(drag=True)``), or a preview whose windows
         could not open its folds (``preview_eased``), eased: the nodes around the folds moved this
@@ -83,6 +80,8 @@ class GuardRecord:
     fallback: bool = False
     plain_blend: float = 1.0
     degraded_components: list = field(default_factory=list)
+    newton_steps: int = 0
+    converged: bool = True
     drag_step: float = 1.0
     preview_eased: bool = False
 
@@ -107,7 +106,7 @@ class Problem:
     timings : dict
     preview : bool
         An interactive update (``FeatureWarper.solve(quick=True)``): windows only, and
-        :func:`guard` returns None where they fail (see :func:`_untangled`, :func:`_settled`).
+        :func:`guard` returns None where they fail (see :func:`_untangled`).
     """
 
     grid: object
@@ -142,12 +141,12 @@ def guard(problem: Problem, x: np.ndarray, record: GuardRecord) -> np.ndarray | 
     None for a preview whose folds the windows do not open (the caller eases it instead)."""
     tris = problem.triangles
     record.flipped_before = int(np.count_nonzero(injectivity.flipped(x, tris)))
-    if record.flipped_before == 0:
-        return x
     warp_areas = signed_areas(problem.warped, tris)
     if warp_areas.min() <= 0:
         return x                          # the grid cannot follow the warp: nothing injective to keep
-    floor = UNTANGLE_FLOOR * warp_areas
+    floor = barrier.SAFE_FRACTION * warp_areas
+    if record.flipped_before == 0:        # crushed but not folded: the barrier's minimum all the same
+        return _converged(problem, problem.rhs, problem.offset, problem.tied, x, floor, record)
     x, ok = _untangled(problem, problem.systems, problem.rhs, problem.offset, problem.tied, x, floor, record)
     if ok:
         return x
@@ -156,20 +155,21 @@ def guard(problem: Problem, x: np.ndarray, record: GuardRecord) -> np.ndarray | 
 
 def _untangled(problem, systems, rhs, offset, tied, start, floor, record):
     """Untangle in a window around the folds (wider windows next, each from where the last one
-    left off), else on the whole grid; a preview stops after a window that gave up, or after
-    the windows; (x, no folds left)."""
+    left off; a window that opens its folds converges the barrier's energy there, see
+    :func:`_untangle_window`), else on the whole grid (its slivers lifted to half their floor,
+    not converged: a converged pass over the whole grid took 1-3.5 s more at 1 MP); a preview
+    stops after a window that gave up, or after the windows; (x, no folds left)."""
     tris = problem.triangles
     folds = int(np.count_nonzero(injectivity.flipped(start, tris)))
     for margin in WINDOW_MARGINS:
-        x, iterations, window_quads = _untangle_window(problem, rhs, offset, tied, start, floor, margin,
-                                                       settle=False)
+        x, iterations, window_quads = _untangle_window(problem, rhs, offset, tied, start, floor, margin, record)
         record.untangle_iterations += iterations
         if x is None:
             break
         left = int(np.count_nonzero(injectivity.flipped(x, tris)))
         if left == 0:
             record.window_quads = window_quads
-            return _settled(problem, rhs, offset, tied, start, x, floor, margin, record), True
+            return x, True
         if left < folds:
             start, folds = x, left
         if problem.preview and iterations < WINDOW_ITERATIONS:      # it gave up: a preview eases instead
@@ -184,31 +184,25 @@ def _untangled(problem, systems, rhs, offset, tied, start, floor, record):
     return x, not injectivity.flipped(x, tris).any()
 
 
-def _settled(problem, rhs, offset, tied, start, x, floor, margin, record):
-    """``x`` (no folds, unfolded by the window ``margin`` from ``start``) with its crushed
-    triangles (below half their floor) lifted.
-
-    The wide window stops as soon as nothing is folded, since lifting a few dozen slivers
-    there took as many steps as opening thousands of folds (12 MP swirl 180: 20 of 50 steps
-    on 86 000 nodes). So first a small window around them, features held, by steps that
-    never make the thinnest triangle thinner. Where slivers below :data:`SETTLED` of their
-    floor are left (wedged against a feature), the wide window runs again from ``start``
-    until they are lifted too (a fresh pass from ``x`` folds again or stalls); not in a preview."""
-    thinnest = lambda points: float((injectivity.grid_areas(problem.grid, points) / floor).min())  # noqa: E731
-    if thinnest(x) >= 0.5:
+def _converged(problem, rhs, offset, tied, x, floor, record):
+    """``x`` (no folds) moved to the barrier energy's minimum (:func:`barrier.converge`) in a
+    window around its crushed triangles (on the whole grid where that window is not much
+    smaller)."""
+    crushed = injectivity.grid_areas(problem.grid, x) < floor
+    if not crushed.any():
         return x
-    settled, iterations, _ = _untangle_window(problem, rhs, offset, tied, x, floor, WINDOW_MARGINS[0],
-                                              carry_features=False, keep_thinnest=True)
-    record.untangle_iterations += iterations
-    if settled is not None and not injectivity.flipped(settled, problem.triangles).any():
-        x = settled
-    worst = thinnest(x)
-    if worst >= SETTLED or problem.preview:
+    window = _window(problem, rhs, offset, tied, x, crushed, WINDOW_MIN_MARGIN)
+    if window is not None:
+        moved = window.converge(x, floor, record)
+        x = x.copy()
+        x[window.nodes] = moved
         return x
-    again, iterations, _ = _untangle_window(problem, rhs, offset, tied, start, floor, margin)
-    record.untangle_iterations += iterations
-    if again is not None and not injectivity.flipped(again, problem.triangles).any() and thinnest(again) > worst:
-        return again
+    movable = ~problem.fixed & (tied < 0)
+    kappa = barrier.weights(problem.warped, problem.triangles, problem.stiffness)
+    x, how = barrier.converge(problem.solver(problem.systems, rhs, offset), problem.normal, movable, x,
+                              problem.triangles, floor, kappa,
+                              areas=lambda points: injectivity.grid_areas(problem.grid, points))
+    record.newton_steps, record.converged = record.newton_steps + how.steps, record.converged and how.converged
     return x
 
 
@@ -284,15 +278,12 @@ def _untangled_blend(problem, constants, solve_at, floor, record, accept, lo, be
     return best, lo
 
 
-def _untangle_window(problem: Problem, rhs, offset, tied, x, floor, margin_factor: float, settle: bool = True,
-                     carry_features: bool = True, keep_thinnest: bool = False):
-    """:func:`injectivity.untangle` on a window around the folded or crushed triangles.
+def _untangle_window(problem: Problem, rhs, offset, tied, x, floor, margin_factor: float, record):
+    """:func:`injectivity.untangle` on a window around the folded or crushed triangles (below
+    half their floor), converged there (:meth:`Window.converge`) once nothing is folded.
 
-    A fold is a local defect, so the guard first works on the nodes within
-    ``margin_factor`` times the largest fold's extent of the folded and
-    crushed triangles, everything else held where it is, except that a tied
-    feature reaching into the window keeps its shared unknown (it may shift as a
-    whole). The window's system is the normal matrix's rows for its unknowns.
+    A fold is a local defect, so the guard first works on the nodes within ``margin_factor``
+    times the largest fold's extent of them, everything else held where it is.
 
     Returns
     -------
@@ -302,35 +293,92 @@ def _untangle_window(problem: Problem, rhs, offset, tied, x, floor, margin_facto
     quads : int
         Quads whose shape the window may change.
     """
-    grid, weights = problem.grid, problem.features.weight
-    n_quads = weights.size
-    crushed = np.flatnonzero(injectivity.grid_areas(grid, x) < 0.5 * floor) % n_quads
+    crushed = injectivity.grid_areas(problem.grid, x) < 0.5 * floor
+    margin = max(WINDOW_MIN_MARGIN, int(margin_factor * injectivity.extent(problem.grid, np.flatnonzero(crushed)
+                                                                           % problem.features.weight.size)))
+    window = _window(problem, rhs, offset, tied, x, crushed, margin)
+    if window is None:
+        return None, 0, 0
+    moved, iterations = injectivity.untangle(window.solve, window.matrix.dot, x[window.nodes], window.triangles,
+                                             window.floor(floor), problem.stiffness[window.nodes],
+                                             max_iterations=WINDOW_ITERATIONS, settle=False)
+    x = x.copy()
+    x[window.nodes] = moved
+    if not injectivity.flipped(moved, window.triangles).any():
+        x[window.nodes] = window.converge(x, floor, record)
+    return x, iterations, int(window.quads.size)
+
+
+@dataclass
+class Window:
+    """The nodes around some quads, everything else held, and their least-squares system.
+
+    Attributes
+    ----------
+    nodes : (n,) int ndarray
+        The window's nodes (its moving ones and the held ones around them).
+    quads : (q,) int ndarray
+        Quads whose shape the window may change; ``triangles`` are theirs, in window indices.
+    matrix, solve
+        The normal matrix's rows for the nodes, and ``solve(force)`` -> (n, 2) positions.
+    movable : (n,) bool ndarray
+        Nodes moved one by one (not held, not tied to a feature).
+    warped, stiffness : (n, 2), (n,) ndarray
+    """
+
+    nodes: np.ndarray
+    quads: np.ndarray
+    triangles: np.ndarray
+    matrix: object
+    solve: object
+    movable: np.ndarray
+    warped: np.ndarray
+    stiffness: np.ndarray
+    max_steps: int = barrier.MAX_STEPS
+
+    def floor(self, floor: np.ndarray) -> np.ndarray:
+        """The window's triangles' entries of a per-triangle array of the grid."""
+        n_quads = floor.size // 2
+        return np.concatenate([floor[self.quads], floor[self.quads + n_quads]])
+
+    def converge(self, x: np.ndarray, floor: np.ndarray, record: GuardRecord) -> np.ndarray:
+        """The window's nodes at the barrier energy's minimum from ``x`` (grid positions, no fold)."""
+        kappa = barrier.weights(self.warped, self.triangles, self.stiffness)
+        moved, how = barrier.converge(self.solve, self.matrix, self.movable, x[self.nodes], self.triangles,
+                                      self.floor(floor), kappa, max_steps=self.max_steps)
+        record.newton_steps, record.converged = record.newton_steps + how.steps, record.converged and how.converged
+        return moved
+
+
+def _window(problem: Problem, rhs, offset, tied, x, crushed: np.ndarray, margin: int) -> Window | None:
+    """The :class:`Window` of the quads within ``margin`` quads of those with a ``crushed``
+    triangle ((M,) bool), holding every other node at ``x``, except that a tied feature
+    reaching into it keeps its shared unknown (it may shift as a whole); None when nothing
+    could move or the window would be about as large as the grid."""
+    grid, n_quads = problem.grid, problem.features.weight.size
     quads = np.zeros(n_quads, bool)
-    quads[crushed] = True
-    margin = max(WINDOW_MIN_MARGIN, int(margin_factor * injectivity.extent(grid, crushed)))
+    quads[np.flatnonzero(crushed) % n_quads] = True
     _, near, inner = injectivity.window(grid, quads, margin)
-    moving = inner & ~problem.fixed & (tied < 0)
-    if carry_features:
-        moving |= np.isin(tied, np.unique(tied[near & (tied >= 0)])) & (tied >= 0)
+    moving = (inner & ~problem.fixed & (tied < 0)) | (np.isin(tied, np.unique(tied[near & (tied >= 0)]))
+                                                       & (tied >= 0))
     corners = grid.quads()
     touched = moving[corners].any(axis=1)
     ties = tied[corners]
     rigid = (ties[:, 0] >= 0) & (ties == ties[:, :1]).all(axis=1)    # inside one tied feature
     changing = np.flatnonzero(touched & ~rigid)
     if changing.size == 0 or changing.size > WINDOW_MAX_FRACTION * n_quads:
-        return None, 0, 0                 # nothing the window could move, or not worth a window
+        return None
     in_system = np.zeros(grid.n_nodes, bool)
     in_system[corners[touched].ravel()] = True
     nodes = np.flatnonzero(in_system)
     local_moving = moving[nodes]
     unknown = system.number_unknowns(~local_moving, np.where(local_moving, tied[nodes], -1))
-    from .solver import ReducedSystem
+    from .solver import ReducedSystem         # SciPy: imported by the solves that need it
 
     matrix = problem.normal[nodes][:, nodes]
     reduced = ReducedSystem(matrix, unknown)
     held = np.where(local_moving[:, None], offset[nodes], x[nodes])
-    local_rhs = rhs[nodes]
-    timings = problem.timings
+    local_rhs, timings = rhs[nodes], problem.timings
 
     def solve(force):
         t0 = time.perf_counter()
@@ -342,158 +390,5 @@ def _untangle_window(problem: Problem, rhs, offset, tied, x, floor, margin_facto
     local[nodes] = np.arange(nodes.size)
     quad_corners = local[corners[changing]]
     triangles = np.concatenate([quad_corners[:, [0, 1, 2]], quad_corners[:, [0, 2, 3]]])
-    window_floor = np.concatenate([floor[changing], floor[changing + n_quads]])
-    moved, iterations = injectivity.untangle(solve, matrix.dot, x[nodes], triangles, window_floor,
-                                             problem.stiffness[nodes], max_iterations=WINDOW_ITERATIONS,
-                                             settle=settle, keep_thinnest=keep_thinnest)
-    x = x.copy()
-    x[nodes] = moved
-    return x, iterations, int(changing.size)
-
-
-# --- never worse than plain -----------------------------------------------------------------
-# ``state`` below is the warper's grid state: ``nodes``, ``triangles``, ``grid``, ``features``
-# and ``tri_component`` (the component of each triangle of a feature quad, -1 elsewhere).
-
-
-def _anisotropy(state, points: np.ndarray) -> np.ndarray:
-    """Anisotropy of every triangle of a feature quad under ``points`` (inf elsewhere unused): (M,)."""
-    on = state.tri_component >= 0
-    out = np.ones(state.triangles.shape[0])
-    out[on] = quality.triangle_anisotropy(state.nodes, points, state.triangles[on])
-    return out
-
-
-def middle_nodes(nodes: np.ndarray, node_component: np.ndarray, n: int) -> np.ndarray:
-    """(N,) bool: the feature nodes within half their component's radius of its centre (where a
-    photo's keypoints gather), for :func:`no_worse_than_plain`. Depends on the grid and mask only."""
-    on = np.flatnonzero(node_component >= 0)
-    comp = node_component[on]
-    centre = np.stack([np.bincount(comp, nodes[on, k], minlength=n) for k in range(2)], 1).astype(float)
-    centre /= np.maximum(np.bincount(comp, minlength=n), 1)[:, None]
-    distance = np.hypot(*(nodes[on] - centre[comp]).T)
-    radius = np.zeros(n)
-    np.maximum.at(radius, comp, distance)
-    middle = np.zeros(node_component.shape, bool)
-    middle[on] = distance <= 0.5 * radius[comp]
-    return middle
-
-
-def _fit_per_component(state, points: np.ndarray) -> np.ndarray:
-    """Anisotropy of each component's best-fitting affine map under ``points`` (what keypoints
-    measure), over all its nodes and over its middle (``state.node_middle``,
-    :func:`middle_nodes`: a rim kept at the middle's cost is worse for keypoints): (2, C)."""
-    n = state.features.n_components
-    fits = [quality.affine_fits(state.nodes[on], points[on], state.node_component[on], n)
-            for on in (state.node_component >= 0, state.node_middle)]
-    return np.stack([np.nan_to_num(quality.map_anisotropy(np.nan_to_num(f)), nan=1.0, posinf=1e9) for f in fits])
-
-
-def _worst_per_component(state, anisotropy: np.ndarray) -> np.ndarray:
-    """Worst of ``anisotropy`` over each component's triangles: (C,)."""
-    on = state.tri_component >= 0
-    worst = np.zeros(state.features.n_components)
-    np.maximum.at(worst, state.tri_component[on], anisotropy[on])
-    return worst
-
-
-def _taper(state, quads: np.ndarray) -> np.ndarray:
-    """(N, 1) weights: 1 on the corners of ``quads`` (grown by one cell), tapering to 0 over
-    :data:`TAPER_CELLS` cells."""
-    grid = state.grid
-    nodes = np.zeros(grid.n_nodes)
-    nodes[grid.quads()[quads].ravel()] = 1.0
-    size = 2 * TAPER_CELLS + 1
-    grown = cv2.dilate(nodes.reshape(grid.ny, grid.nx), np.ones((3, 3)))
-    return np.maximum(grown, cv2.GaussianBlur(grown, (size, size), 0)).ravel()[:, None]
-
-
-def no_worse_than_plain(state, x: np.ndarray, warped: np.ndarray, record, problem: Problem | None = None) -> np.ndarray:
-    """``x``, or ``x`` moved towards W where components came out more anisotropic than under
-    W, as little as makes every component no worse than W, without folds. A component is
-    worse when its worst triangle is, or its best-fitting affine map (its overall
-    proportions) is.
-
-    Tried in turn, each with its blend bisected: the move ``(1 - t) w (W - x)`` with ``w``
-    1 around the offending triangles, tapering to 0 over :data:`TAPER_CELLS` cells (then
-    around the offending components); a new solve (``problem``) with only the offending
-    components untied and their targets blended towards W's, so the other features stay
-    as they are, finished by the tapered move where needed; last, every node moved evenly
-    towards W."""
-    if np.any(signed_areas(warped, state.triangles) <= 0):
-        return x
-    plain = (_worst_per_component(state, _anisotropy(state, warped)) * (1.0 + 1e-9) + 1e-9,
-             _fit_per_component(state, warped) * (1.0 + 1e-9) + 1e-9)
-
-    def ok(points):
-        return (bool(np.all(_worst_per_component(state, _anisotropy(state, points)) <= plain[0]))
-                and bool(np.all(_fit_per_component(state, points) <= plain[1]))
-                and not np.any(signed_areas(points, state.triangles) <= 0))
-
-    if ok(x):
-        return x
-    offending = np.unique(state.tri_component[_worse(state, x, plain)])
-    fixed = _tapered_fix(state, x, warped, plain, ok)
-    if fixed is not None:
-        x, record.plain_blend = fixed
-        record.degraded_components = [int(c) for c in offending if c >= 0]
-        return x
-    if problem is not None:
-        floor = UNTANGLE_FLOOR * signed_areas(warped, state.triangles)
-        found = blend_search(problem, offending, floor, record,
-                             accept=lambda p: ok(p) or _tapered_fix(state, p, warped, plain, ok) is not None)
-        if found is not None:
-            best, blend = found
-            best, taper = (best, 1.0) if ok(best) else _tapered_fix(state, best, warped, plain, ok)
-            record.degraded_components = [int(c) for c in offending]
-            record.plain_blend = blend * taper
-            return best
-    if ok(warped):
-        x, record.plain_blend = _bisect_move(lambda t: warped + t * (x - warped), ok)
-        return x
-    record.plain_blend = 0.0
-    return warped
-
-
-def _worse(state, points: np.ndarray, plain: tuple) -> np.ndarray:
-    """Feature triangles more anisotropic under ``points`` than their component's worst under W,
-    and every triangle of a component whose affine fit is (``plain``: both figures under W)."""
-    component = np.maximum(state.tri_component, 0)
-    fit_worse = np.any(_fit_per_component(state, points) > plain[1], axis=0)
-    return (state.tri_component >= 0) & ((_anisotropy(state, points) > plain[0][component]) | fit_worse[component])
-
-
-def _tapered_fix(state, points: np.ndarray, warped: np.ndarray, plain: tuple, ok):
-    """``points`` moved towards W around the offending triangles (then components), tapered,
-    as little as passes ``ok``: (positions, t) as :func:`_bisect_move`, or None where even
-    the whole move does not pass."""
-    worse = _worse(state, points, plain)
-    n_quads = state.features.weight.size
-    local = np.zeros(n_quads, bool)
-    local[np.flatnonzero(worse) % n_quads] = True
-    offending = np.unique(state.tri_component[worse])
-    bad = np.isin(state.features.component, offending) & state.features.is_constrained
-    others = (state.node_component >= 0) & ~np.isin(state.node_component, offending)
-    for region in (local, bad):
-        weight = _taper(state, region)
-        weight[others] = 0.0                # the move leaves the other features as they are
-
-        def move(t, weight=weight):
-            return points + (1.0 - t) * weight * (warped - points)
-
-        if ok(move(0.0)):
-            return _bisect_move(move, ok)
-    return None
-
-
-def _bisect_move(move, ok) -> tuple[np.ndarray, float]:
-    """(``move(t)``, t) at the largest t in [0, 1] (bisection) that passes ``ok``, given t = 0 does."""
-    lo, hi, best = 0.0, 1.0, move(0.0)
-    for _ in range(PLAIN_BISECTIONS):
-        mid = 0.5 * (lo + hi)
-        points = move(mid)
-        if ok(points):
-            lo, best = mid, points
-        else:
-            hi = mid
-    return best, lo
+    return Window(nodes, changing, triangles, matrix, solve, local_moving & (tied[nodes] < 0),
+                  problem.warped[nodes], problem.stiffness[nodes], PREVIEW_STEPS if problem.preview else barrier.MAX_STEPS)

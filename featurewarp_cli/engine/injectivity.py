@@ -209,12 +209,9 @@ def penalty_stiffness(x: np.ndarray, triangles: np.ndarray, stiffness: np.ndarra
     return stiffness[triangles].mean(axis=1) / np.maximum(2.0 * (grads * grads).sum(axis=(1, 2)), 1e-12)
 
 
-def area_penalty(current: np.ndarray, floor: np.ndarray, kappa: np.ndarray, wall):
-    """(sum_t kappa_t max(0, floor_t - area_t)^2, the deficits) for the areas ``current``;
-    the sum is infinite where a triangle is below its ``wall`` (an (M,) array, or None)."""
+def area_penalty(current: np.ndarray, floor: np.ndarray, kappa: np.ndarray):
+    """(sum_t kappa_t max(0, floor_t - area_t)^2, the deficits) for the areas ``current``."""
     deficit = np.maximum(0.0, floor - current)
-    if wall is not None and np.any(current < wall):
-        return np.inf, deficit
     return float((kappa * deficit * deficit).sum()), deficit
 
 
@@ -227,7 +224,7 @@ def line_search(phi, below: float, alpha: float) -> float:
 
 def untangle(solve, hessian, x: np.ndarray, triangles: np.ndarray, floor: np.ndarray,
              stiffness: np.ndarray, max_iterations: int = 80, areas=None,
-             settle: bool = True, keep_thinnest: bool = False) -> tuple[np.ndarray, int]:
+             settle: bool = True) -> tuple[np.ndarray, int]:
     """Open folded or crushed triangles while staying near the least-squares optimum.
 
     Minimises phi(x) = E(x) + sum_t kappa_t max(0, floor_t - area_t(x))^2, where E(x) =
@@ -260,10 +257,6 @@ def untangle(solve, hessian, x: np.ndarray, triangles: np.ndarray, floor: np.nda
         ``areas(x)`` -> signed area per triangle (default :func:`grid.signed_areas`).
     settle : bool
         Also lift the triangles crushed below half their floor once none is folded.
-    keep_thinnest : bool
-        From a start with no fold, phi is infinite where a triangle is thinner, relative to
-        its floor, than the thinnest one at the start: nothing folds, no sliver worsens.
-
     Returns
     -------
     x, iterations : (N, 2) ndarray and int
@@ -272,9 +265,7 @@ def untangle(solve, hessian, x: np.ndarray, triangles: np.ndarray, floor: np.nda
     areas = areas or (lambda points: signed_areas(points, triangles))
     kappa = penalty_stiffness(x, triangles, stiffness)
 
-    thinnest = float((areas(x) / floor).min()) if keep_thinnest else 0.0
-    wall = min(thinnest, 0.5) * floor if thinnest > 0 else None
-    penalty = lambda points: area_penalty(areas(points), floor, kappa, wall)  # noqa: E731
+    penalty = lambda points: area_penalty(areas(points), floor, kappa)  # noqa: E731
     stalled, boosts, alpha, checkpoint, reference = 0, 0, 0.5, None, None
     optimum = solve(np.zeros_like(x))
     gradient = hessian(x - optimum)                 # grad E(x) along admissible directions
@@ -282,12 +273,12 @@ def untangle(solve, hessian, x: np.ndarray, triangles: np.ndarray, floor: np.nda
         current = areas(x)
         if current.min() > 0 and (not settle or np.all(current >= 0.5 * floor)):
             return x, iteration
-        if iteration % PROGRESS_EVERY == 0:       # with keep_thinnest nothing folds: count slivers
-            folds = int(np.count_nonzero(current <= (0.5 * floor if wall is not None else 0)))
+        if iteration % PROGRESS_EVERY == 0:
+            folds = int(np.count_nonzero(current <= 0))
             if checkpoint is not None and folds > PROGRESS_RATIO * checkpoint:
                 return x, iteration          # not converging: let the caller relax the features
             checkpoint = folds
-        pen, deficit = area_penalty(current, floor, kappa, wall)
+        pen, deficit = area_penalty(current, floor, kappa)
         active = np.flatnonzero(deficit > 0)
         if reference is None or active.size < STALL_RATIO * reference:
             reference, stalled = active.size, 0

@@ -165,6 +165,8 @@ class SolveRecord:
             "fallback": guard.fallback,
             "plain_blend": guard.plain_blend,
             "degraded_components": list(guard.degraded_components),
+            "newton_steps": guard.newton_steps,
+            "barrier_converged": guard.converged,
             "quality": self.quality,
             "flipped_triangles": self.flipped_triangles,
             "warnings": list(self.warnings),

@@ -42,7 +42,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .. import stages
-from . import arrays, attempts, components, fidelity, guard, injectivity, scale_search, system, targets
+from . import arrays, attempts, components, fidelity, injectivity, plain_bound, scale_search, system, targets
 from . import features as feat
 from .defaults import (BOUNDARIES, DECAY, DECAY_PARAM, FEATURE_WEIGHT, FEATURE_WEIGHT_PARAM, FORMULATION,
                        FORMULATIONS, INTERPOLATION, MODE, MODES, SCALE_PRIOR, SCALE_PRIOR_PARAM)
@@ -85,7 +85,7 @@ class _GridState:
     systems: dict = field(default_factory=dict)         # factored systems by unknown numbering
     systems_by_ties: dict = field(default_factory=dict) # the same, by Ties.key() (skips the numbering)
     scale_solvers: dict = field(default_factory=dict)   # components.ScaleSolver by ties
-    node_middle: np.ndarray | None = None  # nodes in their component's middle (guard.middle_nodes)
+    node_middle: np.ndarray | None = None  # nodes in their component's middle (plain_bound.middle_nodes)
 
 
 class FeatureWarper:
@@ -209,7 +209,7 @@ class FeatureWarper:
             self._states[key] = _GridState(grid, nodes, grid.triangles(), fixed_x, fixed_y, features,
                                            node_component, tri_component,
                                            system.node_stiffness(grid, features.weight),
-                                           node_middle=guard.middle_nodes(nodes, node_component,
+                                           node_middle=plain_bound.middle_nodes(nodes, node_component,
                                                                           features.n_components))
         return self._states[key]
 

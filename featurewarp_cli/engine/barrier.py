@@ -1,0 +1,250 @@
+"""The area barrier and the Newton solver that converges the fold guard's results.
+
+Where the least-squares solution x* of a solve folds or crushes triangles, the guard's result
+is a local minimum of one energy, the solve's least-squares energy plus a barrier on the
+triangles' areas::
+
+    Phi(x) = 1/2 (x - x*)' H (x - x*)  +  sum_t kappa_t b(a_t(x) / f_t)
+
+- ``H``: the solve's normal matrix (the paper's terms, the ties, the border rules), x* its
+  minimiser, so the first term is the least-squares energy up to a constant;
+- ``a_t``: the signed area of triangle t; ``f_t = SAFE_FRACTION`` times its area under W;
+- ``b``: the clamped log barrier of Incremental Potential Contact (Li et al. 2020, eq. 6),
+  ``b(r) = -(r - 1)^2 ln r`` for r < 1 and 0 above: exactly zero where a triangle keeps its
+  safe fraction (twice differentiable there), unbounded as its area goes to zero;
+- ``kappa_t = STIFFNESS`` times the least-squares stiffness at t's corners over
+  ``|grad a_t|^2`` under W: a function of the grid, the weights and W alone.
+
+Where x* keeps every triangle above its safe fraction, Phi's minimum is x* itself. The
+solver (:func:`converge`) takes Newton steps from an injective start, each step no longer
+than the first fold along it allows (:func:`injectivity.max_step`), and stops when the
+Newton decrement is below ``TOLERANCE`` times Phi: the result no longer depends on the start
+or on the path, so a one-ulp change of the input moves it by rounding only. The Newton
+systems are solved by conjugate gradients preconditioned with the factorization the solve
+already has (one back-substitution per iteration) and a small factorization of the barrier's
+active nodes (a symmetric two-level preconditioner); the barrier's Hessian is projected to
+positive semi-definite blocks (Teran et al. 2005) until the steps reach full length.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import injectivity
+from .grid import signed_areas
+
+#: Fraction of its area under W below which the barrier pushes a triangle open (f_t above).
+#: Lower lets features push the background thinner before it resists.
+SAFE_FRACTION = 0.05
+#: The barrier's weight against the least-squares energy (kappa_t above). At 100 the thinnest
+#: triangle of the hard cases keeps about 70 % of its safe fraction; lower lets triangles be
+#: crushed towards zero (creases), higher makes the Newton steps shorter (slower).
+STIFFNESS = 100.0
+#: Converged when the Newton decrement is below this fraction of Phi. Looser is faster and
+#: lets a one-ulp change of the input move the result by more.
+TOLERANCE = 1e-12
+#: Newton steps at most (the report says when a solve stopped there).
+MAX_STEPS = 100
+
+#: Exact barrier Hessians (not projected) once a full step was taken and the decrement fell
+#: below this fraction of Phi: quadratic convergence near the minimum.
+_EXACT_BELOW = 1e-5
+#: Conjugate-gradient tolerance (on r.z, relative) far from and near the minimum.
+_CG_FAR, _CG_NEAR, _CG_STEPS = 1e-2, 1e-6, 100
+#: Second derivatives of a triangle's signed area in its corners' coordinates
+#: (x0, y0, x1, y1, x2, y2): constant, indefinite.
+_AREA_HESSIAN = np.zeros((6, 6))
+for _i in range(3):
+    for _sign, _j in ((0.5, (_i + 1) % 3), (-0.5, (_i + 2) % 3)):
+        _AREA_HESSIAN[2 * _i, 2 * _j + 1] += _sign
+        _AREA_HESSIAN[2 * _j + 1, 2 * _i] += _sign
+
+
+@dataclass
+class Convergence:
+    """How :func:`converge` ended: Newton ``steps`` taken and whether it ``converged``."""
+
+    steps: int = 0
+    converged: bool = True
+
+
+def clamped_log(ratio: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """IPC's clamped log barrier b(r) = -(r - 1)^2 ln r (0 for r >= 1) and its first two
+    derivatives, elementwise. ``ratio`` must be positive.
+
+    >>> [float(v[0]) for v in clamped_log(np.array([1.0]))]
+    [0.0, 0.0, 0.0]
+    """
+    ratio = np.asarray(ratio, dtype=np.float64)
+    value, first, second = (np.zeros_like(ratio) for _ in range(3))
+    on = ratio < 1.0
+    r = ratio[on]
+    log, gap = np.log(r), r - 1.0
+    value[on] = -gap * gap * log
+    first[on] = -2.0 * gap * log - gap * gap / r
+    second[on] = -2.0 * log - 4.0 * gap / r + gap * gap / (r * r)
+    return value, first, second
+
+
+def weights(warped: np.ndarray, triangles: np.ndarray, stiffness: np.ndarray) -> np.ndarray:
+    """kappa_t per triangle: :data:`STIFFNESS` times the least-squares stiffness at its corners
+    (``stiffness``: the normal matrix's diagonal per node) over ``|grad a_t|^2`` under W."""
+    return STIFFNESS * injectivity.penalty_stiffness(warped, triangles, stiffness)
+
+
+def _hessians(points, triangles, ratio, floor, kappa, exact: bool) -> np.ndarray:
+    """(K, 6, 6) Hessians of the barrier terms of ``triangles`` (corner coordinates
+    interleaved); projected to positive semi-definite unless ``exact``."""
+    _, first, second = clamped_log(ratio)
+    grads = injectivity.area_gradients(points, triangles).reshape(-1, 6)
+    blocks = ((kappa * second / floor ** 2)[:, None, None] * grads[:, :, None] * grads[:, None, :]
+              + (kappa * first / floor)[:, None, None] * _AREA_HESSIAN)
+    if exact:
+        return blocks
+    values, vectors = np.linalg.eigh(blocks)
+    return np.einsum("kij,kj,klj->kil", vectors, np.maximum(values, 0.0), vectors)
+
+
+def _local_solver(normal, movable: np.ndarray, triangles: np.ndarray, blocks: np.ndarray):
+    """``r -> z``: the Newton system restricted to the movable corners of ``triangles`` (the
+    barrier's active ones), everything else held, solved exactly (one small factorization)."""
+    import scipy.sparse as sp                 # SciPy: imported by the solves that need it
+
+    from .solver import spd_solver
+
+    n = movable.size
+    on = np.zeros(n, bool)
+    on[triangles.ravel()] = True
+    nodes = np.flatnonzero(on & movable)
+    if nodes.size == 0:
+        return lambda r: np.zeros_like(r)
+    index = np.full(n, -1)
+    index[nodes] = np.arange(nodes.size)
+    block = normal[nodes][:, nodes].tocoo()
+    dof = np.where(index[triangles][:, :, None] >= 0, 2 * index[triangles][:, :, None] + np.arange(2), -1)
+    dof = dof.reshape(-1, 6)
+    rows, cols = np.broadcast_to(dof[:, :, None], blocks.shape), np.broadcast_to(dof[:, None, :], blocks.shape)
+    keep = (rows >= 0) & (cols >= 0)
+    matrix = sp.csc_matrix((np.concatenate([block.data, block.data, blocks[keep]]),
+                            (np.concatenate([2 * block.row, 2 * block.row + 1, rows[keep]]),
+                             np.concatenate([2 * block.col, 2 * block.col + 1, cols[keep]]))),
+                           shape=(2 * nodes.size, 2 * nodes.size))
+    solve = spd_solver(matrix)
+
+    def local(r):
+        z = np.zeros_like(r)
+        z[nodes] = np.asarray(solve(r[nodes].reshape(-1))).reshape(-1, 2)
+        return z
+    return local
+
+
+def _newton_direction(solve, optimum, normal, movable, points, triangles, blocks, gradient, near: bool):
+    """Conjugate gradients on (H + barrier Hessian) d = -gradient, preconditioned by a local
+    solve, a back-substitution of the factored H and the local solve again; (d, ok), ok False
+    where the system is not positive definite."""
+    n = points.shape[0]
+    corners = triangles.ravel()
+
+    def product(d):
+        out = normal.dot(d)
+        part = np.einsum("kij,kj->ki", blocks, d[triangles].reshape(-1, 6)).reshape(-1, 2)
+        for k in range(2):
+            out[:, k] += np.bincount(corners, part[:, k], minlength=n)
+        return out
+
+    from . import cholmod                     # scikit-sparse: imported by the solves that need it
+
+    try:
+        local = _local_solver(normal, movable, triangles, blocks)
+    except cholmod.NotPositiveDefinite:
+        return None, False
+
+    def precondition(r):
+        z = local(r)
+        z = z + solve(r - product(z)) - optimum
+        return z + local(r - product(z))
+
+    residual = -gradient
+    z = precondition(residual)
+    direction, step = np.zeros_like(points), z.copy()
+    rz = first = float((residual * z).sum())
+    if not first > 0:                         # at a stationary point already
+        return direction, True
+    for _ in range(_CG_STEPS):
+        product_step = product(step)
+        curvature = float((step * product_step).sum())
+        if not curvature > 0:
+            return None, False
+        alpha = rz / curvature
+        direction += alpha * step
+        residual -= alpha * product_step
+        z = precondition(residual)
+        rz_next = float((residual * z).sum())
+        if rz_next <= (_CG_NEAR if near else _CG_FAR) * first:
+            break
+        step, rz = z + (rz_next / rz) * step, rz_next
+    return direction, True
+
+
+def converge(solve, normal, movable: np.ndarray, x: np.ndarray, triangles: np.ndarray, floor: np.ndarray,
+             kappa: np.ndarray, areas=None, max_steps: int = MAX_STEPS) -> tuple[np.ndarray, Convergence]:
+    """Minimise Phi (module docstring) from the injective positions ``x``.
+
+    Parameters
+    ----------
+    solve : callable
+        ``solve(force)`` -> (N, 2) minimiser of the least-squares energy minus ``force . x``
+        over the admissible positions (a back-substitution of the factored system).
+    normal : scipy.sparse matrix
+        The least-squares energy's Hessian per axis (N x N; exact on the rows ``solve`` moves).
+    movable : (N,) bool ndarray
+        Nodes ``solve`` moves one by one (not held, not tied to a feature).
+    x : (N, 2) ndarray
+        Start: no triangle folded.
+    triangles : (M, 3) ndarray of int
+    floor, kappa : (M,) ndarray
+        f_t and kappa_t (:func:`weights`).
+    areas : callable, optional
+        ``areas(points)`` -> signed area per triangle (default :func:`grid.signed_areas`).
+    max_steps : int
+        Newton steps at most (an interactive preview takes a few: not converged, bounded).
+
+    Returns
+    -------
+    x : (N, 2) ndarray
+    Convergence
+    """
+    areas = areas or (lambda points: signed_areas(points, triangles))
+    optimum = solve(np.zeros_like(x))
+
+    def energy(points):
+        current = areas(points)
+        if current.min() <= 0:
+            return np.inf
+        offset = points - optimum
+        return 0.5 * float((normal.dot(offset) * offset).sum()) + float((kappa * clamped_log(current / floor)[0]).sum())
+
+    near = False
+    for step in range(max_steps):
+        ratio = areas(x) / floor
+        active = np.flatnonzero(ratio < 1.0)
+        tris, scale = triangles[active], kappa[active] / floor[active]
+        gradient = normal.dot(x - optimum) + injectivity.penalty_force(x, tris, scale * clamped_log(ratio[active])[1])
+        blocks = _hessians(x, tris, ratio[active], floor[active], kappa[active], exact=near)
+        direction, ok = _newton_direction(solve, optimum, normal, movable, x, tris, blocks, gradient, near)
+        if not ok:
+            if not near:
+                return x, Convergence(step, False)     # the least-squares Hessian is singular: stay
+            near = False
+            continue
+        decrement, value = -float((gradient * direction).sum()), energy(x)
+        if decrement <= TOLERANCE * value or decrement < 1e-18:
+            return x, Convergence(step, True)
+        length = min(1.0, 1.8 * injectivity.max_step(x, x + 2.0 * direction, triangles))
+        while length > 1e-12 and not energy(x + length * direction) <= value - 1e-4 * length * decrement:
+            length *= 0.5
+        x = x + length * direction
+        near = length == 1.0 and decrement < _EXACT_BELOW * value
+    return x, Convergence(max_steps, False)

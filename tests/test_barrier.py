@@ -1,0 +1,125 @@
+"""The area barrier and its Newton solver (engine/barrier.py): the energy's invariants, and the
+guard's results being its converged minimum (issue 21)."""
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from featurewarp_cli import FeatureWarper, load_warp
+from featurewarp_cli.engine import barrier, injectivity
+from featurewarp_cli.engine.grid import Grid, signed_areas
+
+SAMPLES = Path(__file__).resolve().parent.parent / "samples"
+
+
+def test_the_clamped_log_is_zero_above_one_smooth_there_and_unbounded_at_zero():
+    ratio = np.array([2.0, 1.0, 1.0 - 1e-6, 0.5, 1e-9])
+    value, first, second = barrier.clamped_log(ratio)
+    assert value[0] == value[1] == first[1] == second[1] == 0.0
+    assert abs(value[2]) < 1e-15 and abs(first[2]) < 1e-10 and abs(second[2]) < 1e-5   # C2 at r = 1
+    assert value[4] > 10 and np.all(first[2:] <= 0) and np.all(second[2:] >= 0)
+    h = 1e-6
+    for r in (0.2, 0.5, 0.9):
+        b = lambda t: barrier.clamped_log(np.array([t]))[0][0]            # noqa: E731
+        d1, d2 = (v[0] for v in barrier.clamped_log(np.array([r]))[1:])
+        assert d1 == pytest.approx((b(r + h) - b(r - h)) / (2 * h), rel=1e-5)
+        assert d2 == pytest.approx((b(r + h) - 2 * b(r) + b(r - h)) / h ** 2, rel=1e-3)
+
+
+def _pinned_problem(seed: int, spread: float):
+    """A 9 x 9 grid, border pinned, whose least-squares optimum is random node targets:
+    (nodes, triangles, floor, kappa, solve, normal, movable, target)."""
+    import scipy.sparse as sp
+
+    grid = Grid.for_image(64, 64, 8.0)
+    nodes, tris = grid.nodes(), grid.triangles()
+    border = np.zeros((grid.ny, grid.nx), bool)
+    border[[0, -1], :] = border[:, [0, -1]] = True
+    border = border.ravel()
+    target = nodes + np.where(border[:, None], 0.0, np.random.default_rng(seed).normal(0.0, spread, nodes.shape))
+    normal = sp.diags(np.where(border, 0.0, 1.0)).tocsr()
+
+    def solve(force):
+        return np.where(border[:, None], nodes, target + force)
+
+    floor = barrier.SAFE_FRACTION * signed_areas(nodes, tris)
+    kappa = barrier.weights(nodes, tris, np.ones(len(nodes)))
+    return nodes, tris, floor, kappa, solve, normal, ~border, target
+
+
+def _furthest_fold_free(nodes, tris, target, share):
+    """``share`` of the way from ``nodes`` to the first fold towards ``target``."""
+    return nodes + share * injectivity.max_step(nodes, target, tris) * (target - nodes)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_converge_reaches_one_minimum_whatever_the_injective_start(seed):
+    """The result is the energy's minimum, not a point on the way: from two different fold-free
+    starts it is the same to 1e-6 px, nothing folds, and the energy's gradient vanishes there."""
+    nodes, tris, floor, kappa, solve, normal, movable, target = _pinned_problem(seed, spread=6.0)
+    assert injectivity.flipped(target, tris).any()
+    results = []
+    for share in (0.3, 0.9):
+        x, how = barrier.converge(solve, normal, movable, _furthest_fold_free(nodes, tris, target, share),
+                                  tris, floor, kappa)
+        assert how.converged and signed_areas(x, tris).min() > 0
+        results.append(x)
+    assert np.abs(results[0] - results[1]).max() < 1e-6
+    x = results[0]
+    ratio = signed_areas(x, tris) / floor
+    assert ratio.min() < 1.0                         # the barrier is at work in this case
+    slopes = kappa * barrier.clamped_log(ratio)[1] / floor
+    gradient = normal.dot(x - target) + injectivity.penalty_force(x, tris, slopes)
+    assert np.abs(gradient[movable]).max() < 1e-5 * np.abs(normal.dot(x - target)[movable]).max()
+
+
+def test_converge_leaves_an_optimum_above_the_safe_fraction_exactly_as_it_is():
+    """Where the least-squares optimum keeps every triangle above its safe fraction, the barrier is
+    zero around it: the result is the optimum, to rounding."""
+    nodes, tris, floor, kappa, solve, normal, movable, target = _pinned_problem(1, spread=0.5)
+    assert (signed_areas(target, tris) / floor).min() > 1.0
+    x, how = barrier.converge(solve, normal, movable, nodes, tris, floor, kappa)
+    assert how.converged and np.abs(x - target).max() < 1e-9
+
+
+def _astronaut(size: int, mask_name: str):
+    mask = cv2.imread(str(SAMPLES / mask_name), cv2.IMREAD_GRAYSCALE)
+    return cv2.resize(mask, (size, size), interpolation=cv2.INTER_NEAREST) >= 128
+
+
+def test_a_window_that_opens_the_folds_leaves_the_barriers_minimum_which_one_ulp_does_not_move():
+    """Issue 21, item 3: swirl 180 (similarity, 512 px astronaut) is opened by a window; it used to
+    stop at the first fold-free iterate, and a one-ulp nudge of W moved nodes by 0.018 px. The
+    window's result is now the barrier energy's converged minimum: the nudge moves it by rounding."""
+    mask = _astronaut(512, "astronaut_mask.png")
+    warp = load_warp("swirl")(512, 512, angle=180)
+
+    class Nudged:
+        def __getattr__(self, name):
+            return getattr(warp, name)
+
+        def __call__(self, points):
+            return np.nextafter(np.asarray(warp(points), dtype=np.float64), np.inf)
+
+    base = FeatureWarper(512, 512, mask).solve(warp, "similarity")
+    nudged = FeatureWarper(512, 512, mask).solve(Nudged(), "similarity")
+    guard = base.record.guard
+    assert guard.flipped_before > 0 and guard.window_quads > 0 and guard.newton_steps > 0 and guard.converged
+    assert base.flips() == 0
+    assert np.abs(nudged.target - base.target).max() < 1e-4
+
+
+def test_crushed_but_unfolded_triangles_are_converged_too():
+    """A least-squares solution with no fold but triangles below their safe fraction (sphere, 256 px
+    astronaut) is moved to the barrier's minimum as a folded one is: no jump where a triangle's area
+    crosses zero. They end above the thinnest the solution had."""
+    mask = _astronaut(256, "astronaut_mask.png")
+    warper = FeatureWarper(256, 256, mask)
+    warp = load_warp("sphere")(256, 256)
+    mesh = warper.solve(warp, "similarity")
+    guard = mesh.record.guard
+    assert guard.flipped_before == 0 and guard.newton_steps > 0 and guard.converged
+    floor = barrier.SAFE_FRACTION * signed_areas(warp(mesh.source), mesh.triangles)
+    assert (signed_areas(mesh.target, mesh.triangles) / floor).min() > 0.3
