@@ -32,6 +32,10 @@ drag      Issue 23's recorded drags (benchmarks/editor_drag.py): three 1-second 
 stability Issue 21's one-ulp harness (benchmarks/stability.py): twelve hard cases on the
           512 px astronaut, W's output nudged by one ulp in two patterns; the largest node
           move and image RMSE against the un-nudged run (targets 0.01 px, RMSE 0.5).
+machines  Issue 21's emulated machines (benchmarks/machines.py): the gallery and six stability
+          cases run again with other BLAS kernels (OPENBLAS_CORETYPE, one thread), numpy's
+          AVX2-only and SSE-only kernels (NPY_DISABLE_CPU_FEATURES) and OpenCV without AVX,
+          each compared with this machine's run (RMSE per picture, node moves).
 photos    Issue 22's photo acceptance (benchmarks/photo_acceptance.py): four photos whose masks
           touch the frame (portrait, close-up, pagoda, dahlia), the 14 presets at their
           defaults and three stretches, both modes, against the plain warp: blank share,
@@ -79,7 +83,7 @@ from benchmarks.hard_cases import bench_hard  # noqa: E402
 from benchmarks.inputs import make_photos  # noqa: E402
 from samples.scenes import disc_mask  # noqa: E402
 
-SECTIONS = ("table1", "render", "rewarp", "deform", "rigid", "drag", "commands", "magick", "hard", "stability", "photos",
+SECTIONS = ("table1", "render", "rewarp", "deform", "rigid", "drag", "commands", "magick", "hard", "stability", "machines", "photos",
             "cluster")
 
 #: The paper's Table 1 (Pentium 4, 3.2 GHz): setup, factor, rhs setup, solve in seconds.
@@ -458,6 +462,10 @@ def main(argv=None) -> int:
             from benchmarks.stability import bench_stability
 
             report["stability"] = bench_stability(512)
+        if "machines" in sections:
+            from benchmarks.machines import bench_machines
+
+            report["machines"] = bench_machines(args.quick)
         if "photos" in sections:
             report["photos"] = bench_photos(tmp)
         if "cluster" in sections:

@@ -15,6 +15,7 @@ STARTUP_S = 0.25                 # featurewarp --help, featurewarp warps
 REWARP_1MP_S = 0.15              # API: re-solve + re-render 1 MP with new parameters, factorization reused
 CLUSTER_OVERHEAD = 0.15         # issue 25: 2 local Dask workers against the fastest of batch -j 2 / make -j 2
 STABLE_NODE_PX = 0.01           # issue 21: largest node move under a one-ulp nudge of W
+GALLERY_RMSE = 2.0              # the committed gallery's test: every picture within this on any machine
 DEFORM_1MP_S = 0.05              # API: one of 10 handles moved on 1 MP (quick Deformer), both factorizations reused
 RIGIDITY_RATIO = 1.2             # issue 23: rigid map's rigidity error / libigl's ARAP, where libigl folds nothing
 AREA_DEVIATION = 0.05            # issue 23: |area ratio / libigl's - 1|, the same cases
@@ -90,6 +91,10 @@ def evaluate(report: dict) -> list[dict]:
         worst = max(r["node_move_px"] for r in stability)
         rows.append(_row(f"one-ulp nudge: worst node move ({sum(r['ok'] for r in stability)} of "
                          f"{len(stability)} cases within)", worst, STABLE_NODE_PX, "px"))
+    for result in report.get("machines", {}).get("results", [])[1:]:
+        worst = max((r["rmse_committed"] for r in result["gallery"]), default=0.0)
+        rows.append(_row(f"gallery on an emulated {result['machine']} machine: worst RMSE to the committed",
+                         worst, GALLERY_RMSE, "grey levels"))
     return rows
 
 
