@@ -189,7 +189,7 @@ def _newton_direction(solve, optimum, normal, movable, points, triangles, blocks
 
 
 def converge(solve, normal, movable: np.ndarray, x: np.ndarray, triangles: np.ndarray, floor: np.ndarray,
-             kappa: np.ndarray, areas=None, max_steps: int = MAX_STEPS) -> tuple[np.ndarray, Convergence]:
+             kappa: np.ndarray, areas=None, max_steps: int | None = None) -> tuple[np.ndarray, Convergence]:
     """Minimise Phi (module docstring) from the injective positions ``x``.
 
     Parameters
@@ -208,8 +208,9 @@ def converge(solve, normal, movable: np.ndarray, x: np.ndarray, triangles: np.nd
         f_t and kappa_t (:func:`weights`).
     areas : callable, optional
         ``areas(points)`` -> signed area per triangle (default :func:`grid.signed_areas`).
-    max_steps : int
-        Newton steps at most (an interactive preview takes a few: not converged, bounded).
+    max_steps : int, optional
+        Newton steps at most (default :data:`MAX_STEPS`; an interactive preview takes a few:
+        not converged, bounded).
 
     Returns
     -------
@@ -217,6 +218,7 @@ def converge(solve, normal, movable: np.ndarray, x: np.ndarray, triangles: np.nd
     Convergence
     """
     areas = areas or (lambda points: signed_areas(points, triangles))
+    max_steps = MAX_STEPS if max_steps is None else max_steps
     optimum = solve(np.zeros_like(x))
 
     def energy(points):

@@ -153,7 +153,7 @@ def guard(problem: Problem, x: np.ndarray, record: GuardRecord) -> np.ndarray | 
     return None if problem.preview else _release(problem, x, floor, record)
 
 
-def _untangled(problem, systems, rhs, offset, tied, start, floor, record):
+def _untangled(problem, systems, rhs, offset, tied, start, floor, record, whole_grid=True):
     """Untangle in a window around the folds (wider windows next, each from where the last one
     left off; a window that opens its folds converges the barrier's energy there, see
     :func:`_untangle_window`), else on the whole grid (its slivers lifted to half their floor,
@@ -174,7 +174,7 @@ def _untangled(problem, systems, rhs, offset, tied, start, floor, record):
             start, folds = x, left
         if problem.preview and iterations < WINDOW_ITERATIONS:      # it gave up: a preview eases instead
             break
-    if problem.preview:
+    if problem.preview or not whole_grid:
         return start, False
     grid = problem.grid
     x, iterations = injectivity.untangle(problem.solver(systems, rhs, offset), problem.normal.dot, start, tris,
@@ -265,12 +265,15 @@ def blend_search(problem: Problem, released: np.ndarray, floor, record: GuardRec
 
 
 def _untangled_blend(problem, constants, solve_at, floor, record, accept, lo, best):
-    """Bisect the blend beyond ``lo`` (whose positions are ``best``), untangling each trial."""
+    """Bisect the blend beyond ``lo`` (whose positions are ``best``), untangling each trial in
+    windows only: whether the whole-grid pass opens a trial's folds turned on when its fold count
+    stopped falling, which one ulp of W could flip (the gallery's rigid sphere: blend 0.86 on
+    one machine, 0.79 on another, 3 px apart); a window's result is a converged minimum."""
     hi = 1.0
     for _ in range(UNTANGLED_BISECTIONS):
         mid = 0.5 * (lo + hi)
         systems, rhs, offset, tied = constants(mid)
-        x, ok = _untangled(problem, systems, rhs, offset, tied, solve_at(mid), floor, record)
+        x, ok = _untangled(problem, systems, rhs, offset, tied, solve_at(mid), floor, record, whole_grid=False)
         if ok and accept(x):
             lo, best = mid, x
         else:
@@ -334,7 +337,7 @@ class Window:
     movable: np.ndarray
     warped: np.ndarray
     stiffness: np.ndarray
-    max_steps: int = barrier.MAX_STEPS
+    max_steps: int | None = None
 
     def floor(self, floor: np.ndarray) -> np.ndarray:
         """The window's triangles' entries of a per-triangle array of the grid."""
@@ -391,4 +394,4 @@ def _window(problem: Problem, rhs, offset, tied, x, crushed: np.ndarray, margin:
     quad_corners = local[corners[changing]]
     triangles = np.concatenate([quad_corners[:, [0, 1, 2]], quad_corners[:, [0, 2, 3]]])
     return Window(nodes, changing, triangles, matrix, solve, local_moving & (tied[nodes] < 0),
-                  problem.warped[nodes], problem.stiffness[nodes], PREVIEW_STEPS if problem.preview else barrier.MAX_STEPS)
+                  problem.warped[nodes], problem.stiffness[nodes], PREVIEW_STEPS if problem.preview else None)
