@@ -29,7 +29,7 @@ sys.path.insert(0, str(ROOT))
 from featurewarp_cli import FeatureWarper, load_warp  # noqa: E402
 
 #: (preset, parameters, mode, mask): strong swirls and arcs in both modes, cylinder,
-#: perspective, frame-cut masks.
+#: perspective, frame-cut masks, a release of the features (the gallery's sphere).
 CASES = [
     ("swirl", {"angle": 180}, "rigid", "astronaut_mask.png"),
     ("swirl", {"angle": 180}, "similarity", "astronaut_mask.png"),
@@ -44,6 +44,7 @@ CASES = [
     ("stretch", {"sx": 0.6}, "rigid", "astronaut_body_mask.png"),
     ("inflate", {}, "similarity", "astronaut_body_mask.png"),
     ("bulge", {"strength": 2.5}, "similarity", "astronaut_helmet_mask.png"),
+    ("sphere", {"angle": 110}, "rigid", "astronaut_mask.png"),      # the gallery's: the release's blend
 ]
 PATTERNS = ("up", "alternate")
 MESH_TARGET_PX = 0.01

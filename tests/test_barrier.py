@@ -57,7 +57,8 @@ def _furthest_fold_free(nodes, tris, target, share):
 @pytest.mark.parametrize("seed", range(4))
 def test_converge_reaches_one_minimum_whatever_the_injective_start(seed):
     """The result is the energy's minimum, not a point on the way: from two different fold-free
-    starts it is the same to 1e-6 px, nothing folds, and the energy's gradient vanishes there."""
+    starts it is the same to 1e-4 px (the issue asks 0.01), nothing folds, and the energy's
+    gradient vanishes there."""
     nodes, tris, floor, kappa, solve, normal, movable, target = _pinned_problem(seed, spread=6.0)
     assert injectivity.flipped(target, tris).any()
     results = []
@@ -66,7 +67,7 @@ def test_converge_reaches_one_minimum_whatever_the_injective_start(seed):
                                   tris, floor, kappa)
         assert how.converged and signed_areas(x, tris).min() > 0
         results.append(x)
-    assert np.abs(results[0] - results[1]).max() < 1e-6
+    assert np.abs(results[0] - results[1]).max() < 1e-4
     x = results[0]
     ratio = signed_areas(x, tris) / floor
     assert ratio.min() < 1.0                         # the barrier is at work in this case
@@ -123,3 +124,20 @@ def test_crushed_but_unfolded_triangles_are_converged_too():
     assert guard.flipped_before == 0 and guard.newton_steps > 0 and guard.converged
     floor = barrier.SAFE_FRACTION * signed_areas(warp(mesh.source), mesh.triangles)
     assert (signed_areas(mesh.target, mesh.triangles) / floor).min() > 0.3
+
+
+def test_the_releases_blend_is_not_moved_by_one_ulp():
+    """The gallery's rigid sphere releases its features; the blend bisection's trials were
+    untangled on the whole grid where windows failed, and whether that pass succeeded turned on a
+    fold count: one ulp of W moved nodes by 0.019 px here, and numpy's other exp/log kernels
+    (a CPU without AVX-512) by 3 px. Trials are now untangled in windows (converged)."""
+    from benchmarks.stability import Nudged
+
+    mask = cv2.imread(str(SAMPLES / "astronaut_mask.png"), cv2.IMREAD_GRAYSCALE) >= 128
+    h, w = mask.shape
+    warp = load_warp("sphere")(w, h, angle=110)
+    base = FeatureWarper(w, h, mask).solve(warp, "rigid")
+    assert base.record.guard.release_rounds and base.flips() == 0
+    for pattern in ("up", "alternate"):
+        nudged = FeatureWarper(w, h, mask).solve(Nudged(warp, pattern), "rigid")
+        assert np.abs(nudged.target - base.target).max() < 1e-4, pattern

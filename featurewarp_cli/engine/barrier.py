@@ -62,6 +62,12 @@ for _i in range(3):
         _AREA_HESSIAN[2 * _j + 1, 2 * _i] += _sign
 
 
+_values, _vectors = np.linalg.eigh(_AREA_HESSIAN)
+#: -(its negative part): the area Hessian's term in b's Hessian is b' times it, b' < 0, so
+#: b' * _AREA_HESSIAN's positive semi-definite part is -b' * this (a constant).
+_AREA_HESSIAN_NEGATIVE = (_vectors * np.maximum(-_values, 0.0)) @ _vectors.T
+
+
 @dataclass
 class Convergence:
     """How :func:`converge` ended: Newton ``steps`` taken and whether it ``converged``."""
@@ -103,8 +109,8 @@ def _hessians(points, triangles, ratio, floor, kappa, exact: bool) -> np.ndarray
               + (kappa * first / floor)[:, None, None] * _AREA_HESSIAN)
     if exact:
         return blocks
-    values, vectors = np.linalg.eigh(blocks)
-    return np.einsum("kij,kj,klj->kil", vectors, np.maximum(values, 0.0), vectors)
+    return ((kappa * second / floor ** 2)[:, None, None] * grads[:, :, None] * grads[:, None, :]
+            + (-kappa * first / floor)[:, None, None] * _AREA_HESSIAN_NEGATIVE)
 
 
 def _local_solver(normal, movable: np.ndarray, triangles: np.ndarray, blocks: np.ndarray):
