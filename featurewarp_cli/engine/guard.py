@@ -153,7 +153,7 @@ def guard(problem: Problem, x: np.ndarray, record: GuardRecord) -> np.ndarray | 
     return None if problem.preview else _release(problem, x, floor, record)
 
 
-def _untangled(problem, systems, rhs, offset, tied, start, floor, record, whole_grid=True):
+def _untangled(problem, systems, rhs, offset, tied, start, floor, record, patient=False):
     """Untangle in a window around the folds (wider windows next, each from where the last one
     left off; a window that opens its folds converges the barrier's energy there, see
     :func:`_untangle_window`), else on the whole grid (its slivers lifted to half their floor,
@@ -174,11 +174,11 @@ def _untangled(problem, systems, rhs, offset, tied, start, floor, record, whole_
             start, folds = x, left
         if problem.preview and iterations < WINDOW_ITERATIONS:      # it gave up: a preview eases instead
             break
-    if problem.preview or not whole_grid:
+    if problem.preview:
         return start, False
     grid = problem.grid
     x, iterations = injectivity.untangle(problem.solver(systems, rhs, offset), problem.normal.dot, start, tris,
-                                         floor, problem.stiffness,
+                                         floor, problem.stiffness, patient=patient,
                                          areas=lambda points: injectivity.grid_areas(grid, points))
     record.untangle_iterations += iterations
     return x, not injectivity.flipped(x, tris).any()
@@ -197,13 +197,7 @@ def _converged(problem, rhs, offset, tied, x, floor, record):
         x = x.copy()
         x[window.nodes] = moved
         return x
-    movable = ~problem.fixed & (tied < 0)
-    kappa = barrier.weights(problem.warped, problem.triangles, problem.stiffness)
-    x, how = barrier.converge(problem.solver(problem.systems, rhs, offset), problem.normal, movable, x,
-                              problem.triangles, floor, kappa,
-                              areas=lambda points: injectivity.grid_areas(problem.grid, points))
-    record.newton_steps, record.converged = record.newton_steps + how.steps, record.converged and how.converged
-    return x
+    return _converge_grid(problem, problem.systems, rhs, offset, tied, x, floor, record)
 
 
 def _release(problem: Problem, x, floor, record: GuardRecord):
@@ -265,20 +259,35 @@ def blend_search(problem: Problem, released: np.ndarray, floor, record: GuardRec
 
 
 def _untangled_blend(problem, constants, solve_at, floor, record, accept, lo, best):
-    """Bisect the blend beyond ``lo`` (whose positions are ``best``), untangling each trial in
-    windows only: whether the whole-grid pass opens a trial's folds turned on when its fold count
-    stopped falling, which one ulp of W could flip (the gallery's rigid sphere: blend 0.86 on
-    one machine, 0.79 on another, 3 px apart); a window's result is a converged minimum."""
-    hi = 1.0
+    """Bisect the blend beyond ``lo`` (whose positions are ``best``), untangling each trial, the
+    whole-grid pass without giving up on a fold count (whether it gave up turned on one ulp: the
+    gallery's rigid sphere kept blend 0.86 on one CPU and 0.79 on another, 3 px apart), then
+    converge the barrier's energy on the whole grid at the blend kept (:func:`_converge_grid`):
+    the result is that minimum, not the first fold-free point of the trial that reached it."""
+    hi, kept = 1.0, None
     for _ in range(UNTANGLED_BISECTIONS):
         mid = 0.5 * (lo + hi)
         systems, rhs, offset, tied = constants(mid)
-        x, ok = _untangled(problem, systems, rhs, offset, tied, solve_at(mid), floor, record, whole_grid=False)
+        x, ok = _untangled(problem, systems, rhs, offset, tied, solve_at(mid), floor, record, patient=True)
         if ok and accept(x):
-            lo, best = mid, x
+            lo, best, kept = mid, x, (systems, rhs, offset, tied)
         else:
             hi = mid
+    if kept is not None:
+        converged = _converge_grid(problem, *kept, best, floor, record)
+        best = converged if accept(converged) else best
     return best, lo
+
+
+def _converge_grid(problem, systems, rhs, offset, tied, x, floor, record):
+    """``x`` (no folds) moved to the barrier energy's minimum on the whole grid."""
+    kappa = barrier.weights(problem.warped, problem.triangles, problem.stiffness, floor)
+    x, how = barrier.converge(problem.solver(systems, rhs, offset), problem.normal, ~problem.fixed & (tied < 0), x,
+                              problem.triangles, floor, kappa,
+                              areas=lambda points: injectivity.grid_areas(problem.grid, points),
+                              max_steps=PREVIEW_STEPS if problem.preview else None)
+    record.newton_steps, record.converged = record.newton_steps + how.steps, record.converged and how.converged
+    return x
 
 
 def _untangle_window(problem: Problem, rhs, offset, tied, x, floor, margin_factor: float, record):
@@ -346,9 +355,10 @@ class Window:
 
     def converge(self, x: np.ndarray, floor: np.ndarray, record: GuardRecord) -> np.ndarray:
         """The window's nodes at the barrier energy's minimum from ``x`` (grid positions, no fold)."""
-        kappa = barrier.weights(self.warped, self.triangles, self.stiffness)
+        local_floor = self.floor(floor)
+        kappa = barrier.weights(self.warped, self.triangles, self.stiffness, local_floor)
         moved, how = barrier.converge(self.solve, self.matrix, self.movable, x[self.nodes], self.triangles,
-                                      self.floor(floor), kappa, max_steps=self.max_steps)
+                                      local_floor, kappa, max_steps=self.max_steps)
         record.newton_steps, record.converged = record.newton_steps + how.steps, record.converged and how.converged
         return moved
 

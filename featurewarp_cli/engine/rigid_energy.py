@@ -30,6 +30,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from . import cholmod
+from .barrier import clamped_log
 from .injectivity import max_step
 from .targets import closest_rotations
 
@@ -48,28 +49,6 @@ MAX_STEPS = 200
 _ARMIJO = 1e-4
 _FLIP_MARGIN = 0.9
 _LONGEST = 16.0
-
-
-def barrier(r: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The clamped log barrier of area ratios and its first two derivatives.
-
-    Parameters
-    ----------
-    r : (M,) ndarray
-        Area ratios, positive.
-
-    Returns
-    -------
-    value, slope, curvature : (M,) ndarray
-        ``-(r - s)^2 log(r / s)`` and its derivatives below ``s`` = :data:`SAFE_AREA`, 0 above."""
-    s = SAFE_AREA
-    low = r < s
-    q = np.where(low, r, s)
-    log = np.log(q / s)
-    value = np.where(low, -(q - s) ** 2 * log, 0.0)
-    slope = np.where(low, -2.0 * (q - s) * log - (q - s) ** 2 / q, 0.0)
-    curve = np.where(low, -2.0 * log - 4.0 * (q - s) / q + (q - s) ** 2 / (q * q), 0.0)
-    return value, slope, curve
 
 
 class RigidEnergy:
@@ -139,7 +118,7 @@ class RigidEnergy:
         rotation = closest_rotations(f)
         held = self.penalty @ x - targets
         return float(np.sum(self.areas * (np.sum((f - rotation) ** 2, axis=(1, 2))
-                                          + BARRIER_WEIGHT * barrier(det)[0])) + np.sum(held * held))
+                                          + BARRIER_WEIGHT * clamped_log(det, SAFE_AREA)[0])) + np.sum(held * held))
 
     def newton_step(self, x: np.ndarray, targets: np.ndarray) -> tuple[np.ndarray, float]:
         """The projected Newton step at the injective ``x``.
@@ -156,7 +135,7 @@ class RigidEnergy:
         det = flat[:, 0] * flat[:, 3] - flat[:, 1] * flat[:, 2]
         cofactor = np.stack([flat[:, 3], -flat[:, 2], -flat[:, 1], flat[:, 0]], axis=1)
         rotation = closest_rotations(f).reshape(-1, 4)
-        _, slope, curve = barrier(det)
+        _, slope, curve = clamped_log(det, SAFE_AREA)
         grad_f = 2.0 * (flat - rotation) + BARRIER_WEIGHT * slope[:, None] * cofactor
         hess_f = _arap_hessians(flat, rotation)
         active = np.flatnonzero(slope != 0)
