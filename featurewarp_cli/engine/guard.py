@@ -153,12 +153,13 @@ def guard(problem: Problem, x: np.ndarray, record: GuardRecord) -> np.ndarray | 
     return None if problem.preview else _release(problem, x, floor, record)
 
 
-def _untangled(problem, systems, rhs, offset, tied, start, floor, record, patient=False):
+def _untangled(problem, systems, rhs, offset, tied, start, floor, record, patient=False, whole_grid=True):
     """Untangle in a window around the folds (wider windows next, each from where the last one
     left off; a window that opens its folds converges the barrier's energy there, see
     :func:`_untangle_window`), else on the whole grid (its slivers lifted to half their floor,
-    not converged: a converged pass over the whole grid took 1-3.5 s more at 1 MP); a preview
-    stops after a window that gave up, or after the windows; (x, no folds left)."""
+    not converged: a converged pass over the whole grid took 1-3.5 s more at 1 MP; ``patient``:
+    it does not give up when its fold count stops falling; without ``whole_grid``, none); a
+    preview stops after a window that gave up, or after the windows; (x, no folds left)."""
     tris = problem.triangles
     folds = int(np.count_nonzero(injectivity.flipped(start, tris)))
     for margin in WINDOW_MARGINS:
@@ -174,7 +175,7 @@ def _untangled(problem, systems, rhs, offset, tied, start, floor, record, patien
             start, folds = x, left
         if problem.preview and iterations < WINDOW_ITERATIONS:      # it gave up: a preview eases instead
             break
-    if problem.preview:
+    if problem.preview or not whole_grid:
         return start, False
     grid = problem.grid
     x, iterations = injectivity.untangle(problem.solver(systems, rhs, offset), problem.normal.dot, start, tris,
@@ -259,20 +260,27 @@ def blend_search(problem: Problem, released: np.ndarray, floor, record: GuardRec
 
 
 def _untangled_blend(problem, constants, solve_at, floor, record, accept, lo, best):
-    """Bisect the blend beyond ``lo`` (whose positions are ``best``), untangling each trial, the
-    whole-grid pass without giving up on a fold count (whether it gave up turned on one ulp: the
-    gallery's rigid sphere kept blend 0.86 on one CPU and 0.79 on another, 3 px apart), then
-    converge the barrier's energy on the whole grid at the blend kept (:func:`_converge_grid`):
-    the result is that minimum, not the first fold-free point of the trial that reached it."""
-    hi, kept = 1.0, None
-    for _ in range(UNTANGLED_BISECTIONS):
-        mid = 0.5 * (lo + hi)
-        systems, rhs, offset, tied = constants(mid)
-        x, ok = _untangled(problem, systems, rhs, offset, tied, solve_at(mid), floor, record, patient=True)
-        if ok and accept(x):
-            lo, best, kept = mid, x, (systems, rhs, offset, tied)
-        else:
-            hi = mid
+    """Bisect the blend beyond ``lo`` (whose positions are ``best``), untangling each trial in
+    windows (converged there); only where no window trial opens its folds, bisect again with
+    the whole-grid pass, which then does not give up when its fold count stops falling. The
+    blend kept is converged on the whole grid (:func:`_converge_grid`). Whether a whole-grid
+    pass gave up turned on one ulp (the gallery's rigid sphere kept blend 0.86 on one CPU and
+    0.79 on another, 3 px apart); windows alone lost the features on larger images (the same
+    sphere at 1024 px: blend 0, the plain warp)."""
+    start, kept = lo, None
+    for whole_grid in (False, True):
+        lo, hi = start, 1.0
+        for _ in range(UNTANGLED_BISECTIONS):
+            mid = 0.5 * (lo + hi)
+            systems, rhs, offset, tied = constants(mid)
+            x, ok = _untangled(problem, systems, rhs, offset, tied, solve_at(mid), floor, record,
+                               patient=True, whole_grid=whole_grid)
+            if ok and accept(x):
+                lo, best, kept = mid, x, (systems, rhs, offset, tied)
+            else:
+                hi = mid
+        if kept is not None:
+            break
     if kept is not None:
         converged = _converge_grid(problem, *kept, best, floor, record)
         best = converged if accept(converged) else best
