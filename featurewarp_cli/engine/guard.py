@@ -63,8 +63,8 @@ class GuardRecord:
         nodes near the offending triangles, or all).
     degraded_components : list of int
     newton_steps, converged : int, bool
-        Newton steps of :func:`barrier.converge` (all its runs), and whether every run met
-        its tolerance.
+        Newton steps of :func:`barrier.converge` (all its runs), and whether the runs behind
+        the result (not the release's trials it did not keep) met its tolerance.
     drag_step, preview_eased : float, bool
         Below 1: a drag's update (``FeatureWarper.solve(drag=True)``), or a preview whose windows
         could not open its folds (``preview_eased``), eased: the nodes around the folds moved this
@@ -273,12 +273,13 @@ def _untangled_blend(problem, constants, solve_at, floor, record, accept, lo, be
         for _ in range(UNTANGLED_BISECTIONS):
             mid = 0.5 * (lo + hi)
             systems, rhs, offset, tied = constants(mid)
+            converged = record.converged
             x, ok = _untangled(problem, systems, rhs, offset, tied, solve_at(mid), floor, record,
                                patient=True, whole_grid=whole_grid)
             if ok and accept(x):
                 lo, best, kept = mid, x, (systems, rhs, offset, tied)
             else:
-                hi = mid
+                hi, record.converged = mid, converged       # a trial not kept says nothing of the result
         if kept is not None:
             break
     if kept is not None:
