@@ -1,10 +1,12 @@
 """The fold-over guard's policy: untangle near the folds, then globally, then relax features.
 
 The primitives (step limits, areas, the penalty descent, windows) are in
-:mod:`featurewarp_cli.engine.injectivity`; this module decides how to use them for
-one solve. A :class:`Problem` is everything the guard needs to re-solve: the
-factored systems, the right-hand side, the offsets and a way to rebuild them for
-other edge targets or ties.
+:mod:`featurewarp_cli.engine.injectivity`; the energy a window's result, a crushed solution
+and a release's blend are converged to is in :mod:`featurewarp_cli.engine.barrier`; this
+module decides how to use them for one solve (the never-worse-than-plain step after it is
+:mod:`featurewarp_cli.engine.plain_bound`). A :class:`Problem` is everything the guard needs
+to re-solve: the factored systems, the right-hand side, the offsets and a way to rebuild
+them for other edge targets or ties.
 """
 
 from __future__ import annotations
