@@ -246,7 +246,7 @@ def converge(solve, normal, movable: np.ndarray, x: np.ndarray, triangles: np.nd
         offset = points - optimum
         return 0.5 * float((normal.dot(offset) * offset).sum()) + float((kappa * clamped_log(current / floor)[0]).sum())
 
-    near = False
+    near, value = False, energy(x)
     for step in range(max_steps):
         ratio = areas(x) / floor
         active = np.flatnonzero(ratio < 1.0)
@@ -259,17 +259,19 @@ def converge(solve, normal, movable: np.ndarray, x: np.ndarray, triangles: np.nd
                 return x, Convergence(step, False)     # even with the bound: stay
             near = False
             continue
-        decrement, value = -float((gradient * direction).sum()), energy(x)
+        decrement = -float((gradient * direction).sum())
         if decrement <= TOLERANCE * value or decrement < 1e-18:
             return x, Convergence(step, True)
         length = min(1.0, 1.8 * injectivity.max_step(x, x + 2.0 * direction, triangles))
-        while length > 1e-12 and not energy(x + length * direction) <= value - 1e-4 * length * decrement:
+        trial = energy(x + length * direction)
+        while length > 1e-12 and not trial <= value - 1e-4 * length * decrement:
             length *= 0.5
+            trial = energy(x + length * direction)
         if length <= 1e-12:
             if near:
                 near = False
                 continue
             return x, Convergence(step, False)     # no descent along the bound's direction: stay
-        x = x + length * direction
         near = length == 1.0 and decrement < _EXACT_BELOW * value
+        x, value = x + length * direction, trial
     return x, Convergence(max_steps, False)

@@ -28,8 +28,8 @@ UNTANGLED_BISECTIONS = 3
 #: grid. 12 MP swirl 180, head + helmet mask: the first window stalls at 60 steps (5 900
 #: folds down to 2 200), the wider one opens the rest in 27: 0.45 s on 160 000 nodes, where
 #: the global pass took 3.4 s. Each window that opens its folds converges the barrier's
-#: energy there (:mod:`barrier`); WINDOW_MIN_MARGIN quads around the crushed triangles after
-#: a global pass.
+#: energy there (:mod:`barrier`); a least-squares solution with crushed but unfolded
+#: triangles is converged WINDOW_MIN_MARGIN quads around them.
 WINDOW_MARGINS = (0.5, 1.0)
 WINDOW_MIN_MARGIN = 8
 WINDOW_ITERATIONS = 150
@@ -86,6 +86,10 @@ class GuardRecord:
     converged: bool = True
     drag_step: float = 1.0
     preview_eased: bool = False
+
+    def count(self, how: barrier.Convergence) -> None:
+        """Add one :func:`barrier.converge` run's Newton steps and convergence."""
+        self.newton_steps, self.converged = self.newton_steps + how.steps, self.converged and how.converged
 
 
 @dataclass
@@ -297,7 +301,7 @@ def _converge_grid(problem, systems, rhs, offset, tied, x, floor, record):
                               problem.triangles, floor, kappa,
                               areas=lambda points: injectivity.grid_areas(problem.grid, points),
                               max_steps=PREVIEW_STEPS if problem.preview else None)
-    record.newton_steps, record.converged = record.newton_steps + how.steps, record.converged and how.converged
+    record.count(how)
     return x
 
 
@@ -370,7 +374,7 @@ class Window:
         kappa = barrier.weights(self.warped, self.triangles, self.stiffness, local_floor)
         moved, how = barrier.converge(self.solve, self.matrix, self.movable, x[self.nodes], self.triangles,
                                       local_floor, kappa, max_steps=self.max_steps)
-        record.newton_steps, record.converged = record.newton_steps + how.steps, record.converged and how.converged
+        record.count(how)
         return moved
 
 
