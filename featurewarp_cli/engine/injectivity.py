@@ -14,23 +14,28 @@ import numpy as np
 from .grid import Grid, grid_shape, signed_areas
 
 
-def max_step(start: np.ndarray, end: np.ndarray, triangles: np.ndarray) -> float:
-    """Largest t in [0, 1] such that no triangle degenerates on start -> start + t (end - start).
+def max_step(start: np.ndarray, end: np.ndarray, triangles: np.ndarray, floor: np.ndarray | None = None) -> float:
+    """Largest t in [0, 1] such that no triangle's area falls below ``floor`` (default: no
+    triangle degenerates) anywhere on start -> start + t (end - start).
 
-    Each triangle's signed area along the segment is a quadratic in t; the step
-    stops at the first root in (0, 1] of any of them. ``start`` must have every
-    triangle positively oriented.
+    Each triangle's signed area along the segment is a quadratic in t; the step stops at the
+    first root in [0, 1] of any of them minus its floor: an exact function of the inputs, so a
+    one-ulp change of them moves it by rounding only (no bisection). ``start`` must keep every
+    triangle's area above (or at) its floor; one at its floor whose area falls at once stops
+    the step at 0.
 
     Parameters
     ----------
     start, end : (N, 2) ndarray
         Node positions.
     triangles : (M, 3) ndarray of int
+    floor : (M,) ndarray, optional
+        Least area per triangle.
 
     Returns
     -------
     float
-        1.0 when the whole segment is fold-over free.
+        1.0 when the whole segment keeps every floor.
     """
     a0, b0, c0 = (start[triangles[:, k]] for k in range(3))
     d = end - start
@@ -41,13 +46,15 @@ def max_step(start: np.ndarray, end: np.ndarray, triangles: np.ndarray) -> float
         return p[:, 0] * q[:, 1] - p[:, 1] * q[:, 0]
 
     c = cross(u0, v0)                       # area * 2 at t = 0 (> 0)
+    if floor is not None:
+        c = np.maximum(c - 2.0 * floor, 0.0)
     b = cross(u0, dv) + cross(du, v0)
     a = cross(du, dv)
-    roots = np.full(c.shape, np.inf)
+    roots = np.where((c <= 0) & ((b < 0) | ((b == 0) & (a < 0))), 0.0, np.inf)
     linear = np.abs(a) <= 1e-12 * (np.abs(b) + np.abs(c))
     with np.errstate(divide="ignore", invalid="ignore"):
         r = -c / b
-        roots = np.where(linear & (r > 0), r, roots)
+        roots = np.where(linear & (r > 0) & (r < roots), r, roots)
         disc = b * b - 4.0 * a * c
         sq = np.sqrt(np.where(disc >= 0, disc, np.nan))
         for root in ((-b - sq) / (2.0 * a), (-b + sq) / (2.0 * a)):

@@ -13,11 +13,11 @@ import numpy as np
 from . import barrier, quality
 from .grid import signed_areas
 from .guard import Problem, blend_search
+from .injectivity import max_step
 
-#: Cells over which the move towards W tapers off around offending triangles, and the
-#: bisection steps of that move (:func:`no_worse_than_plain`).
+#: Cells over which the move towards W tapers off around offending triangles
+#: (:func:`no_worse_than_plain`).
 TAPER_CELLS = 3
-PLAIN_BISECTIONS = 6
 
 
 def _anisotropy(state, points: np.ndarray) -> np.ndarray:
@@ -78,7 +78,7 @@ def no_worse_than_plain(state, x: np.ndarray, warped: np.ndarray, record, proble
     worse when its worst triangle is, or its best-fitting affine map (its overall
     proportions) is.
 
-    Tried in turn, each with its blend bisected: the move ``(1 - t) w (W - x)`` with ``w``
+    Tried in turn, each as far as it passes (:func:`_furthest_move`): the move ``(1 - t) w (W - x)`` with ``w``
     1 around the offending triangles, tapering to 0 over :data:`TAPER_CELLS` cells (then
     around the offending components); a new solve (``problem``) with only the offending
     components untied and their targets blended towards W's, so the other features stay
@@ -88,32 +88,37 @@ def no_worse_than_plain(state, x: np.ndarray, warped: np.ndarray, record, proble
         return x
     plain = (_worst_per_component(state, _anisotropy(state, warped)) * (1.0 + 1e-9) + 1e-9,
              _fit_per_component(state, warped) * (1.0 + 1e-9) + 1e-9)
+    floor = barrier.SAFE_FRACTION * signed_areas(warped, state.triangles)
+
+    def margin(points):
+        """How much worse than W the worst component is (relative; <= 0: no worse), inf with a fold."""
+        if np.any(signed_areas(points, state.triangles) <= 0):
+            return np.inf
+        return max(float(np.max(_worst_per_component(state, _anisotropy(state, points)) / plain[0], initial=0.0)),
+                   float(np.max(_fit_per_component(state, points) / plain[1], initial=0.0))) - 1.0
 
     def ok(points):
-        return (bool(np.all(_worst_per_component(state, _anisotropy(state, points)) <= plain[0]))
-                and bool(np.all(_fit_per_component(state, points) <= plain[1]))
-                and not np.any(signed_areas(points, state.triangles) <= 0))
+        return margin(points) <= 0
 
     if ok(x):
         return x
     offending = np.unique(state.tri_component[_worse(state, x, plain)])
-    fixed = _tapered_fix(state, x, warped, plain, ok)
+    fixed = _tapered_fix(state, x, warped, plain, margin, floor)
     if fixed is not None:
         x, record.plain_blend = fixed
         record.degraded_components = [int(c) for c in offending if c >= 0]
         return x
     if problem is not None:
-        floor = barrier.SAFE_FRACTION * signed_areas(warped, state.triangles)
         found = blend_search(problem, offending, floor, record,
-                             accept=lambda p: ok(p) or _tapered_fix(state, p, warped, plain, ok) is not None)
+                             accept=lambda p: ok(p) or _tapered_fix(state, p, warped, plain, margin, floor) is not None)
         if found is not None:
             best, blend = found
-            best, taper = (best, 1.0) if ok(best) else _tapered_fix(state, best, warped, plain, ok)
+            best, taper = (best, 1.0) if ok(best) else _tapered_fix(state, best, warped, plain, margin, floor)
             record.degraded_components = [int(c) for c in offending]
             record.plain_blend = blend * taper
             return best
     if ok(warped):
-        x, record.plain_blend = _bisect_move(lambda t: warped + t * (x - warped), ok)
+        x, record.plain_blend = _furthest_move(lambda t: warped + t * (x - warped), margin, state.triangles, floor)
         return x
     record.plain_blend = 0.0
     return warped
@@ -127,10 +132,10 @@ def _worse(state, points: np.ndarray, plain: tuple) -> np.ndarray:
     return (state.tri_component >= 0) & ((_anisotropy(state, points) > plain[0][component]) | fit_worse[component])
 
 
-def _tapered_fix(state, points: np.ndarray, warped: np.ndarray, plain: tuple, ok):
+def _tapered_fix(state, points: np.ndarray, warped: np.ndarray, plain: tuple, margin, floor):
     """``points`` moved towards W around the offending triangles (then components), tapered,
-    as little as passes ``ok``: (positions, t) as :func:`_bisect_move`, or None where even
-    the whole move does not pass."""
+    as little as passes (``margin`` <= 0): (positions, t) as :func:`_furthest_move`, or None
+    where even the whole move does not pass."""
     worse = _worse(state, points, plain)
     n_quads = state.features.weight.size
     local = np.zeros(n_quads, bool)
@@ -145,19 +150,25 @@ def _tapered_fix(state, points: np.ndarray, warped: np.ndarray, plain: tuple, ok
         def move(t, weight=weight):
             return points + (1.0 - t) * weight * (warped - points)
 
-        if ok(move(0.0)):
-            return _bisect_move(move, ok)
+        if margin(move(0.0)) <= 0:
+            return _furthest_move(move, margin, state.triangles, floor)
     return None
 
 
-def _bisect_move(move, ok) -> tuple[np.ndarray, float]:
-    """(``move(t)``, t) at the largest t in [0, 1] (bisection) that passes ``ok``, given t = 0 does."""
-    lo, hi, best = 0.0, 1.0, move(0.0)
-    for _ in range(PLAIN_BISECTIONS):
-        mid = 0.5 * (lo + hi)
-        points = move(mid)
-        if ok(points):
-            lo, best = mid, points
-        else:
-            hi = mid
-    return best, lo
+def _furthest_move(move, margin, triangles: np.ndarray, floor: np.ndarray) -> tuple[np.ndarray, float]:
+    """(``move(t)``, t) at the largest t in [0, 1] that passes (``margin(move(t)) <= 0``), given
+    t = 0 does; ``move`` is affine in t.
+
+    Up to where a triangle falls to half its floor (or to half its area at t = 0 where that is
+    smaller: the first root of quadratics, :func:`injectivity.max_step`) and, where the margin
+    turns positive before that, at its root, found to convergence (SciPy's ``brentq``): both
+    exact functions of the inputs, so a one-ulp change of them moves t by rounding only."""
+    start = move(0.0)
+    reach = max_step(start, move(1.0), triangles, 0.5 * np.minimum(floor, signed_areas(start, triangles)))
+    if reach > 0 and margin(move(reach)) > 0:
+        from scipy.optimize import brentq     # SciPy: imported where a move is searched
+
+        reach = max(0.0, brentq(lambda t: margin(move(t)), 0.0, reach, xtol=1e-12) - 4e-12)
+        if margin(move(reach)) > 0:           # a margin that is not monotone there: stay
+            reach = 0.0
+    return move(reach), reach

@@ -13,7 +13,11 @@ features' shape equations against the background's. Three things it does not see
   the features uniformly until the largest stretch of a background triangle matches the
   largest compression, as the scale-and-stretch idea of Wang et al. 2008 asks.
 
-Each is a bisection over a segment of (a, b) values, one back-substitution per step.
+Each searches a segment of (a, b) values, along which the solution is affine: the first
+point where a triangle reaches its floor is the first root of quadratics
+(:func:`injectivity.max_step`), the spread's balance a converged root of a continuous
+function. Neither is a bisection to a threshold, so a one-ulp change of the inputs moves the
+result by rounding only.
 """
 
 from __future__ import annotations
@@ -21,11 +25,10 @@ from __future__ import annotations
 import numpy as np
 
 from .grid import signed_areas
+from .injectivity import max_step
 
 #: Smallest area, relative to W's, that the scale search lets a triangle keep.
 SCALE_FLOOR = 0.05
-#: Bisection steps of the scale search (and of the move towards W).
-SCALE_BISECTIONS = 6
 
 
 def _between(start_result, end_result, t: float):
@@ -38,25 +41,19 @@ def _between(start_result, end_result, t: float):
 
 def _furthest_fitting(start: np.ndarray, end: np.ndarray, start_result, end_result, floor: np.ndarray,
                       triangles):
-    """The furthest point of the segment start -> end (bisection) whose solution keeps every
-    triangle's area at or above ``floor``, given that ``start``'s (``start_result``) does.
+    """The furthest point of the segment start -> end up to which the solution keeps every
+    triangle's area at or above ``floor``, given that ``start``'s (``start_result``) does: the
+    first root of the areas' quadratics (:func:`injectivity.max_step`).
 
     Returns (ab, solution)."""
-    lo, hi, best_ab, best = 0.0, 1.0, start, start_result
-    for _ in range(SCALE_BISECTIONS):
-        mid = 0.5 * (lo + hi)
-        result = _between(start_result, end_result, mid)
-        if np.all(signed_areas(result[0], triangles) >= floor):
-            lo, best, best_ab = mid, result, start + mid * (end - start)
-        else:
-            hi = mid
-    return best_ab, best
+    t = max_step(start_result[0], end_result[0], triangles, floor)
+    return start + t * (end - start), _between(start_result, end_result, t)
 
 
 def fitting_scales(solve, prior: np.ndarray, optimum: np.ndarray, triangles, warped):
     """The features' similarities: the least-squares ``optimum`` unless its solution crushes a
     triangle that the ``prior``'s solution does not; then the furthest point from the prior
-    towards the optimum that crushes none (bisection).
+    towards the optimum that crushes none.
 
     A triangle counts as crushed below :data:`SCALE_FLOOR` of its area under W, or below its
     area in the prior's solution where that is smaller already (folds there are the fold-over
@@ -78,7 +75,7 @@ def fitting_scales(solve, prior: np.ndarray, optimum: np.ndarray, triangles, war
 def shrink_to_fit(solve, low: np.ndarray, high: np.ndarray, high_result, triangles, warped):
     """The largest similarities between ``low`` and ``high`` ((C, 2) each; ``high_result`` is
     ``solve(high)``) whose solution crushes no triangle below :data:`SCALE_FLOOR` of its
-    area under W (bisection), or None when even ``low`` does. For features that cannot keep
+    area under W, or None when even ``low`` does. For features that cannot keep
     their shape at the size least squares picked (densely packed coins squeezed to 0.6 of
     their width): smaller but exact.
 
@@ -95,8 +92,6 @@ def shrink_to_fit(solve, low: np.ndarray, high: np.ndarray, high_result, triangl
 SPREAD_ABOVE = 4.0
 #: How far :func:`spread_stretch` may grow the features: up to this factor.
 SPREAD_RANGE = 2.0
-#: Bisection steps of :func:`spread_stretch` (the factor to within 2^-8 of its log range).
-SPREAD_BISECTIONS = 8
 #: Fraction of background triangles at each end that the spread's balance leaves out.
 SPREAD_OUTLIERS = 0.002
 
@@ -116,10 +111,12 @@ def spread_stretch(solve, ab: np.ndarray, result, scalable: np.ndarray, triangle
 
     When the largest background area ratio against W exceeds :data:`SPREAD_ABOVE` and
     outweighs the largest compression, the ``scalable`` components' (a, b) are multiplied
-    by one factor m, searched by bisection on [1, SPREAD_RANGE] for the point where the
-    largest stretch equals the largest compression (log max + log min changes sign).
-    Shrinking is not searched here: squeezed features are :func:`shrink_to_fit`'s. No step may crush a triangle below half of :data:`SCALE_FLOOR` of its
-    area under W, or below half its area in ``result`` where that is smaller already.
+    by one factor m in [1, SPREAD_RANGE]: the point where the largest stretch equals the
+    largest compression (log max + log min changes sign; a root found to convergence by
+    Brent's method, SciPy's ``brentq``), unless a triangle reaches its floor before (half of
+    :data:`SCALE_FLOOR` of its area under W, or half its area in ``result`` where that is
+    smaller already; the first root of quadratics, :func:`injectivity.max_step`). Shrinking is
+    not searched here: squeezed features are :func:`shrink_to_fit`'s.
 
     Growing a feature stretches the strip over it sideways too, so the area ratio there
     falls more slowly than the strip's height: a subject that fills the height and most of
@@ -153,15 +150,17 @@ def spread_stretch(solve, ab: np.ndarray, result, scalable: np.ndarray, triangle
     if high <= np.log(SPREAD_ABOVE) or high + low <= 0:
         return ab, result
     floor = 0.5 * np.minimum(SCALE_FLOOR * signed_areas(warped, triangles), signed_areas(result[0], triangles))
+    if not np.all(signed_areas(result[0], triangles) >= floor):      # folded: the guard's to open
+        return ab, result
     grown = solve(np.where(scalable[:, None], ab * SPREAD_RANGE, ab))
-    lo, hi, best_ab, best = 0.0, 1.0, ab, result
-    for _ in range(SPREAD_BISECTIONS):        # in log m; the solution is affine in m
-        mid = 0.5 * (lo + hi)
-        factor = SPREAD_RANGE ** mid
-        outcome = _between(result, grown, (factor - 1.0) / (SPREAD_RANGE - 1.0))
-        high, low = _log_extremes(outcome[0], reference, tris)
-        if np.all(signed_areas(outcome[0], triangles) >= floor) and high + low > 0:
-            lo, best, best_ab = mid, outcome, np.where(scalable[:, None], ab * factor, ab)
-        else:
-            hi = mid
-    return best_ab, best
+    reach = max_step(result[0], grown[0], triangles, floor)       # the solution is affine in m
+
+    def balance(t):
+        high, low = _log_extremes(result[0] + t * (grown[0] - result[0]), reference, tris)
+        return high + low
+
+    if reach > 0 and balance(reach) <= 0:
+        from scipy.optimize import brentq     # SciPy: imported where a spread is searched
+
+        reach = brentq(balance, 0.0, reach, xtol=1e-12)
+    return np.where(scalable[:, None], ab * (1.0 + reach * (SPREAD_RANGE - 1.0)), ab), _between(result, grown, reach)
