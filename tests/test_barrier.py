@@ -76,6 +76,25 @@ def test_converge_reaches_one_minimum_whatever_the_injective_start(seed):
     assert np.abs(gradient[movable]).max() < 1e-5 * np.abs(normal.dot(x - target)[movable]).max()
 
 
+@pytest.mark.parametrize("seed", range(4))
+def test_direct_newton_systems_reach_the_minimum_conjugate_gradients_reach(seed, monkeypatch):
+    """The Woodbury solve of the Newton systems (``converge(inverse=...)``: back-substitutions of
+    unit forces, the exact Hessian where the system is positive definite) lands on the same
+    minimum as conjugate gradients."""
+    nodes, tris, floor, kappa, solve, normal, movable, target = _pinned_problem(seed, spread=6.0)
+
+    def inverse(rows, columns):                  # S = I on the movable nodes, 0 on the pinned
+        entries = ((rows[:, None] == columns[None, :]) & movable[rows][:, None]).astype(float)
+        return np.broadcast_to(entries, (2,) + entries.shape)
+
+    monkeypatch.setattr(barrier, "_DIRECT_WORK", 1e12)       # direct at this small size too
+    start = _furthest_fold_free(nodes, tris, target, 0.5)
+    by_cg, how_cg = barrier.converge(solve, normal, movable, start, tris, floor, kappa)
+    direct, how = barrier.converge(solve, normal, movable, start, tris, floor, kappa, inverse=inverse)
+    assert how.converged and how_cg.converged and signed_areas(direct, tris).min() > 0
+    assert np.abs(direct - by_cg).max() < 1e-4
+
+
 def test_converge_leaves_an_optimum_above_the_safe_fraction_exactly_as_it_is():
     """Where the least-squares optimum keeps every triangle above its safe fraction, the barrier is
     zero around it: the result is the optimum, to rounding."""

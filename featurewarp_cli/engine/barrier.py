@@ -24,7 +24,10 @@ Newton decrement is below ``TOLERANCE`` times Phi: the result no longer depends 
 or on the path, so a one-ulp change of the input moves it by rounding only. The Newton
 systems are solved by conjugate gradients preconditioned with the factorization the solve
 already has (one back-substitution per iteration) and a small factorization of the barrier's
-active nodes (a symmetric two-level preconditioner). Far from the minimum each triangle's
+active nodes (a symmetric two-level preconditioner); where the barrier touches few nodes, they
+are solved exactly instead, by the Woodbury identity on those nodes (back-substitutions of unit
+forces, kept for the run, and a dense system of their size), with the exact Hessian wherever
+the system is positive definite. Far from the minimum each triangle's
 barrier Hessian is bounded by a positive semi-definite one (the area Hessian's negative part
 dropped); once a full step is taken with a decrement below ``_EXACT_BELOW`` of Phi, the exact
 Hessian (quadratic convergence), back to the bound wherever the exact system is not positive
@@ -57,6 +60,11 @@ MAX_STEPS = 100
 #: Exact barrier Hessians (not projected) once a full step was taken and the decrement fell
 #: below this fraction of Phi: quadratic convergence near the minimum.
 _EXACT_BELOW = 1e-5
+#: Newton systems whose barrier touches at most _DIRECT_NODES nodes, and whose dense work
+#: ((2 nodes)^3) is at most _DIRECT_WORK times the nodes of the grid or window, are solved
+#: exactly (Woodbury, :func:`_direct_direction`; beyond, conjugate gradients cost less); the
+#: unit forces' back-substitutions go in chunks of _DIRECT_CHUNK.
+_DIRECT_NODES, _DIRECT_WORK, _DIRECT_CHUNK = 600, 2000, 256
 #: Conjugate-gradient tolerance (on r.z, relative) far from and near the minimum.
 _CG_FAR, _CG_NEAR, _CG_STEPS = 1e-2, 1e-6, 100
 #: Second derivatives of a triangle's signed area in its corners' coordinates
@@ -206,8 +214,85 @@ def _newton_direction(solve, optimum, normal, movable, points, triangles, blocks
     return direction, True
 
 
+class _InverseRows:
+    """The least-squares inverse S between some nodes (G = P' S P per axis), from
+    back-substitutions of unit forces (``inverse(rows, columns)`` -> (2, r, c) entries), kept
+    as the barrier's active set grows: S does not change within a :func:`converge` run."""
+
+    def __init__(self, inverse, n: int):
+        self.inverse = inverse
+        self.index = np.full(n, -1)
+        self.known = np.zeros(0, dtype=np.int64)
+        self.block = np.zeros((2, 0, 0))
+        self.last = None
+
+    def rows(self, nodes: np.ndarray) -> np.ndarray:
+        """(2, u, u): S's entries between ``nodes`` (sorted, unique) for x and for y."""
+        new = nodes[self.index[nodes] < 0]
+        for start in range(0, new.size, _DIRECT_CHUNK):
+            chunk = new[start:start + _DIRECT_CHUNK]
+            known, old = np.concatenate([self.known, chunk]), self.known.size
+            columns = self.inverse(known, chunk)                     # (2, k, c)
+            grown = np.zeros((2, known.size, known.size))
+            grown[:, :old, :old] = self.block
+            grown[:, :, old:] = columns
+            grown[:, old:, :old] = np.transpose(columns[:, :old], (0, 2, 1))
+            self.block, self.known = grown, known
+            self.index[chunk] = np.arange(old, known.size)
+        at = self.index[nodes]
+        return self.block[:, at][:, :, at]
+
+    def factor(self, nodes: np.ndarray) -> np.ndarray:
+        """(2u, r) C with C C' = G (interleaved x, y coordinates of ``nodes``), by LAPACK's
+        pivoted Cholesky of each axis's block; the last one is kept for the same nodes."""
+        key = nodes.tobytes()
+        if self.last is None or self.last[0] != key:
+            from scipy.linalg.lapack import dpstrf  # SciPy: imported by the solves that need it
+
+            parts = []
+            for block in self.rows(nodes):
+                lower, pivots, rank, _ = dpstrf(block, lower=1)
+                part = np.zeros((nodes.size, rank))
+                part[pivots - 1] = np.tril(lower)[:, :rank]
+                parts.append(part)
+            factor = np.zeros((2 * nodes.size, parts[0].shape[1] + parts[1].shape[1]))
+            factor[0::2, :parts[0].shape[1]], factor[1::2, parts[0].shape[1]:] = parts
+            self.last = (key, factor)
+        return self.last[1]
+
+
+def _direct_direction(rows: _InverseRows, solve, optimum, points, triangles, blocks, gradient):
+    """The Newton direction -(H + B)^-1 g exactly, by the Woodbury identity on the barrier's
+    active nodes, or None where H + B is not positive definite.
+
+    With S = H^-1 (back-substitutions of the factored system, admissible positions only), P
+    the active nodes' coordinates, B = P D P' and G = P' S P = C C' (pivoted Cholesky; G is
+    singular where nodes are held or share a feature's unknown):
+    (H + B)^-1 = S - S P (D - D C M^-1 C' D) P' S with M = I + C' D C, which is positive
+    definite exactly when H + B is. Two back-substitutions and dense work of the active
+    nodes' size; S's entries grow with the active set (:class:`_InverseRows`)."""
+    nodes, local = np.unique(triangles, return_inverse=True)
+    u = nodes.size
+    dof = (2 * local.reshape(-1, 3)[:, :, None] + np.arange(2)).reshape(-1, 6)
+    coupling = np.zeros((2 * u, 2 * u))
+    np.add.at(coupling, (dof[:, :, None], dof[:, None, :]), blocks)
+    factor = rows.factor(nodes)                                     # (2u, r): G = C C'
+    reduced = factor.T @ coupling                                   # C' D
+    try:
+        lower = np.linalg.cholesky(np.eye(factor.shape[1]) + reduced @ factor)
+    except np.linalg.LinAlgError:
+        return None
+    moved = solve(gradient) - optimum                               # S g
+    v = moved[nodes].reshape(-1)
+    inner = np.linalg.solve(lower.T, np.linalg.solve(lower, reduced @ v))
+    force = np.zeros_like(points)
+    force[nodes] = (coupling @ v - reduced.T @ inner).reshape(u, 2)
+    return solve(force) - optimum - moved
+
+
 def converge(solve, normal, movable: np.ndarray, x: np.ndarray, triangles: np.ndarray, floor: np.ndarray,
-             kappa: np.ndarray, areas=None, max_steps: int | None = None) -> tuple[np.ndarray, Convergence]:
+             kappa: np.ndarray, areas=None, max_steps: int | None = None,
+             inverse=None) -> tuple[np.ndarray, Convergence]:
     """Minimise Phi (module docstring) from the injective positions ``x``.
 
     Parameters
@@ -229,6 +314,13 @@ def converge(solve, normal, movable: np.ndarray, x: np.ndarray, triangles: np.nd
     max_steps : int, optional
         Newton steps at most (default :data:`MAX_STEPS`; an interactive preview takes a few:
         not converged, bounded).
+    inverse : callable, optional
+        ``inverse(rows, columns)`` -> (2, r, c): the moves of the nodes ``rows`` in x and in y
+        under a unit force on each node of ``columns`` (``solve``'s linear part). With it, a
+        Newton system whose barrier touches few nodes (:data:`_DIRECT_NODES`,
+        :data:`_DIRECT_WORK`) is solved exactly with the exact Hessian wherever that is positive
+        definite (:func:`_direct_direction`), else with the bound; other systems by conjugate
+        gradients.
 
     Returns
     -------
@@ -247,13 +339,14 @@ def converge(solve, normal, movable: np.ndarray, x: np.ndarray, triangles: np.nd
         return 0.5 * float((normal.dot(offset) * offset).sum()) + float((kappa * clamped_log(current / floor)[0]).sum())
 
     near, value = False, energy(x)
+    rows = None if inverse is None else _InverseRows(inverse, x.shape[0])
     for step in range(max_steps):
         ratio = areas(x) / floor
         active = np.flatnonzero(ratio < 1.0)
         tris, scale = triangles[active], kappa[active] / floor[active]
         gradient = normal.dot(x - optimum) + injectivity.penalty_force(x, tris, scale * clamped_log(ratio[active])[1])
-        blocks = _hessians(x, tris, ratio[active], floor[active], kappa[active], exact=near)
-        direction, ok = _newton_direction(solve, optimum, normal, movable, x, tris, blocks, gradient, near)
+        direction, ok, direct = _direction(rows, solve, optimum, normal, movable, x, tris, ratio[active],
+                                           floor[active], kappa[active], gradient, near)
         if not ok:                             # not positive definite
             if not near:
                 return x, Convergence(step, False)     # even with the bound: stay
@@ -262,16 +355,33 @@ def converge(solve, normal, movable: np.ndarray, x: np.ndarray, triangles: np.nd
         decrement = -float((gradient * direction).sum())
         if decrement <= TOLERANCE * value or decrement < 1e-18:
             return x, Convergence(step, True)
-        length = min(1.0, 1.8 * injectivity.max_step(x, x + 2.0 * direction, triangles))
+        length = min(1.0, 1.8 * injectivity.max_step_of(areas, x, x + 2.0 * direction))
         trial = energy(x + length * direction)
         while length > 1e-12 and not trial <= value - 1e-4 * length * decrement:
             length *= 0.5
             trial = energy(x + length * direction)
         if length <= 1e-12:
-            if near:
+            if near and not direct:
                 near = False
                 continue
             return x, Convergence(step, False)     # no descent along the bound's direction: stay
         near = length == 1.0 and decrement < _EXACT_BELOW * value
         x, value = x + length * direction, trial
     return x, Convergence(max_steps, False)
+
+
+def _direction(rows, solve, optimum, normal, movable, x, triangles, ratio, floor, kappa, gradient, near):
+    """(direction, ok, direct): the Newton direction by :func:`_direct_direction` where ``rows``
+    is given and the barrier touches few nodes (the exact Hessian where the system is positive
+    definite with it, else the bound), else by :func:`_newton_direction` (the exact Hessian
+    when ``near``)."""
+    nodes = np.unique(triangles).size
+    if rows is not None and nodes <= _DIRECT_NODES and (2 * nodes) ** 3 <= _DIRECT_WORK * x.shape[0]:
+        for exact in (True, False):
+            direction = _direct_direction(rows, solve, optimum, x, triangles,
+                                          _hessians(x, triangles, ratio, floor, kappa, exact=exact), gradient)
+            if direction is not None:
+                return direction, True, True
+        return None, False, True
+    blocks = _hessians(x, triangles, ratio, floor, kappa, exact=near)
+    return (*_newton_direction(solve, optimum, normal, movable, x, triangles, blocks, gradient, near), False)

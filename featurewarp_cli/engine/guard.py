@@ -132,6 +132,16 @@ class Problem:
     timings: dict
     preview: bool = False
 
+    def inverse(self, systems):
+        """``inverse(rows, columns)``: (2, r, c) entries of ``systems``' inverse
+        (:meth:`AxisSystems.entries`), for :func:`barrier.converge`."""
+        def inverse(rows, columns):
+            t0 = time.perf_counter()
+            result = systems.entries(rows, columns)
+            self.timings["solve"] = self.timings.get("solve", 0.0) + time.perf_counter() - t0
+            return result
+        return inverse
+
     def solver(self, systems, rhs, offset):
         """``solve(force)``: positions for these constants plus a force per node."""
         def solve(force=None):
@@ -154,6 +164,8 @@ def guard(problem: Problem, x: np.ndarray, record: GuardRecord) -> np.ndarray | 
     if record.flipped_before == 0:        # crushed but not folded: the barrier's minimum all the same
         return _converged(problem, problem.rhs, problem.offset, problem.tied, x, floor, record)
     x, ok = _untangled(problem, problem.systems, problem.rhs, problem.offset, problem.tied, x, floor, record)
+    if ok and not record.window_quads:    # the whole-grid pass: its first fold-free iterate, converged
+        return _converge_grid(problem, problem.systems, problem.rhs, problem.offset, problem.tied, x, floor, record)
     if ok:
         return x
     return None if problem.preview else _release(problem, x, floor, record)
@@ -162,8 +174,9 @@ def guard(problem: Problem, x: np.ndarray, record: GuardRecord) -> np.ndarray | 
 def _untangled(problem, systems, rhs, offset, tied, start, floor, record, patient=False, whole_grid=True):
     """Untangle in a window around the folds (wider windows next, each from where the last one
     left off; a window that opens its folds converges the barrier's energy there, see
-    :func:`_untangle_window`), else on the whole grid (its slivers lifted to half their floor,
-    not converged: a converged pass over the whole grid took 1-3.5 s more at 1 MP; ``patient``:
+    :func:`_untangle_window`), else on the whole grid (its slivers lifted to half their floor;
+    not converged here: :func:`guard` converges the whole grid after it, a release its blend
+    kept; ``patient``:
     it does not give up when its fold count stops falling; without ``whole_grid``, none); a
     preview stops after a window that gave up, or after the windows; (x, no folds left)."""
     tris = problem.triangles
@@ -300,7 +313,7 @@ def _converge_grid(problem, systems, rhs, offset, tied, x, floor, record):
     x, how = barrier.converge(problem.solver(systems, rhs, offset), problem.normal, ~problem.fixed & (tied < 0), x,
                               problem.triangles, floor, kappa,
                               areas=lambda points: injectivity.grid_areas(problem.grid, points),
-                              max_steps=PREVIEW_STEPS if problem.preview else None)
+                              max_steps=PREVIEW_STEPS if problem.preview else None, inverse=problem.inverse(systems))
     record.count(how)
     return x
 
@@ -362,6 +375,7 @@ class Window:
     warped: np.ndarray
     stiffness: np.ndarray
     max_steps: int | None = None
+    inverse: object = None
 
     def floor(self, floor: np.ndarray) -> np.ndarray:
         """The window's triangles' entries of a per-triangle array of the grid."""
@@ -373,7 +387,7 @@ class Window:
         local_floor = self.floor(floor)
         kappa = barrier.weights(self.warped, self.triangles, self.stiffness, local_floor)
         moved, how = barrier.converge(self.solve, self.matrix, self.movable, x[self.nodes], self.triangles,
-                                      local_floor, kappa, max_steps=self.max_steps)
+                                      local_floor, kappa, max_steps=self.max_steps, inverse=self.inverse)
         record.count(how)
         return moved
 
@@ -414,9 +428,15 @@ def _window(problem: Problem, rhs, offset, tied, x, crushed: np.ndarray, margin:
         timings["solve"] = timings.get("solve", 0.0) + time.perf_counter() - t0
         return result
 
+    def inverse(rows, columns):
+        t0 = time.perf_counter()
+        result = np.broadcast_to(reduced.entries(rows, columns), (2, rows.size, columns.size))
+        timings["solve"] = timings.get("solve", 0.0) + time.perf_counter() - t0
+        return result
+
     local = np.full(grid.n_nodes, -1)
     local[nodes] = np.arange(nodes.size)
     quad_corners = local[corners[changing]]
     triangles = np.concatenate([quad_corners[:, [0, 1, 2]], quad_corners[:, [0, 2, 3]]])
     return Window(nodes, changing, triangles, matrix, solve, local_moving & (tied[nodes] < 0),
-                  problem.warped[nodes], problem.stiffness[nodes], PREVIEW_STEPS if problem.preview else None)
+                  problem.warped[nodes], problem.stiffness[nodes], PREVIEW_STEPS if problem.preview else None, inverse)

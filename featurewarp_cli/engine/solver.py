@@ -414,6 +414,18 @@ class ReducedSystem:
         z[:n] = self._solve(gathered.T)                               # (n, k), F-ordered: no copy
         return offset + np.take(z, self._scatter, axis=0)
 
+    def entries(self, rows: np.ndarray, columns: np.ndarray) -> np.ndarray:
+        """(r, c): the moves of the nodes ``rows`` under a unit force on each node of ``columns``
+        (the solve's linear part, the inverse's entries; one back-substitution for all columns;
+        fixed nodes neither move nor pass a force on)."""
+        n = self.n_unknowns
+        out = np.zeros((n + 1, columns.size))
+        if n:
+            forces = np.zeros((n + 1, columns.size), order="F")
+            forces[self._scatter[columns], np.arange(columns.size)] = 1.0
+            out[:n] = self._solve(np.asfortranarray(forces[:n]))
+        return out[self._scatter[rows]]
+
 
 class AxisSystems:
     """The factored system for x and for y: one shared factorization when both
@@ -447,6 +459,11 @@ class AxisSystems:
             return self.x.solve(rhs, offset)
         return np.concatenate([self.x.solve(rhs[:, :1], offset[:, :1]),
                                self.y.solve(rhs[:, 1:], offset[:, 1:])], axis=1)
+
+    def entries(self, rows: np.ndarray, columns: np.ndarray) -> np.ndarray:
+        """(2, r, c): :meth:`ReducedSystem.entries` for x and for y."""
+        x = self.x.entries(rows, columns)
+        return np.stack([x, x if self.y is self.x else self.y.entries(rows, columns)])
 
 
 def spd_solver(matrix):
