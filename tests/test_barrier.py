@@ -90,9 +90,47 @@ def test_direct_newton_systems_reach_the_minimum_conjugate_gradients_reach(seed,
     monkeypatch.setattr(barrier, "_DIRECT_WORK", 1e12)       # direct at this small size too
     start = _furthest_fold_free(nodes, tris, target, 0.5)
     by_cg, how_cg = barrier.converge(solve, normal, movable, start, tris, floor, kappa)
+    calls = []
+    direct_direction = barrier._direct_direction
+    monkeypatch.setattr(barrier, "_direct_direction", lambda *a: calls.append(1) or direct_direction(*a))
     direct, how = barrier.converge(solve, normal, movable, start, tris, floor, kappa, inverse=inverse)
+    assert calls                                  # the Woodbury path did run
     assert how.converged and how_cg.converged and signed_areas(direct, tris).min() > 0
     assert np.abs(direct - by_cg).max() < 1e-4
+
+
+def test_max_step_with_a_floor_is_the_first_root_and_one_ulp_moves_it_by_rounding():
+    """A triangle shrinking to a point along the segment keeps (1 - t)^2 of its area: a quarter
+    of it at t = 1/2 exactly, nudged start or not (a bisection put such steps on a lattice)."""
+    triangle = np.array([[0, 1, 2]])
+    start = np.array([[0.0, 0.0], [10.0, 0.0], [0.0, 10.0]])
+    floor = 0.25 * signed_areas(start, triangle)
+    for points in (start, np.nextafter(start, np.inf)):
+        assert injectivity.max_step(points, np.zeros_like(points), triangle, floor) == pytest.approx(0.5, abs=1e-12)
+    assert injectivity.max_step(start, np.zeros_like(start), triangle) == 1.0      # degenerate only at t = 1
+    assert injectivity.max_step(start, start * [[1.0], [1.0], [1.0]], triangle, floor) == 1.0
+    rng = np.random.default_rng(0)
+    for _ in range(200):                          # from the areas sampled at t = 0, 1, -1: the same step
+        end = start + rng.normal(0.0, 8.0, start.shape)
+        assert injectivity.max_step_of(lambda p: signed_areas(p, triangle), start, end) == pytest.approx(
+            injectivity.max_step(start, end, triangle), rel=1e-9, abs=1e-12)
+
+
+def test_the_move_towards_plain_stops_at_the_first_root_of_a_margin_that_turns_back():
+    """never-worse-than-plain's move: a margin failing between 0.2 and 0.5 and again after 0.8
+    stops at 0.2 (not at 0 because a root finder landed on another crossing)."""
+    from featurewarp_cli.engine.plain_bound import _furthest_move
+
+    triangle = np.array([[0, 1, 2]])
+    warped = np.array([[0.0, 0.0], [10.0, 0.0], [0.0, 10.0]])
+    target = warped + [[0.0, 0.0], [1.0, 0.0], [0.0, 0.0]]
+    floor = barrier.SAFE_FRACTION * signed_areas(warped, triangle)
+
+    def margin(points):
+        return (points[1, 0] - 10.2) * (points[1, 0] - 10.5) * (points[1, 0] - 10.8)
+
+    _, t = _furthest_move(lambda t: warped + t * (target - warped), margin, triangle, floor)
+    assert t == pytest.approx(0.2, abs=1e-9) and t <= 0.2
 
 
 def test_converge_leaves_an_optimum_above_the_safe_fraction_exactly_as_it_is():

@@ -60,11 +60,13 @@ MAX_STEPS = 100
 #: Exact barrier Hessians (not projected) once a full step was taken and the decrement fell
 #: below this fraction of Phi: quadratic convergence near the minimum.
 _EXACT_BELOW = 1e-5
-#: Newton systems whose barrier touches at most _DIRECT_NODES nodes, and whose dense work
-#: ((2 nodes)^3) is at most _DIRECT_WORK times the nodes of the grid or window, are solved
-#: exactly (Woodbury, :func:`_direct_direction`; beyond, conjugate gradients cost less); the
-#: unit forces' back-substitutions go in chunks of _DIRECT_CHUNK.
-_DIRECT_NODES, _DIRECT_WORK, _DIRECT_CHUNK = 600, 2000, 256
+#: Newton systems whose barrier touches at most _DIRECT_NODES nodes, whose dense work ((2
+#: nodes)^3) is at most _DIRECT_WORK times the nodes of the grid or window and whose unit-force
+#: back-substitutions (one a node) take at most _DIRECT_SOLVES node-columns, are solved exactly
+#: (Woodbury, :func:`_direct_direction`); beyond, conjugate gradients cost less. The
+#: back-substitutions go in chunks of at most _DIRECT_BYTES of right-hand sides (a 1 MP grid:
+#: 20 columns), so they stay within the memory limit's share per node.
+_DIRECT_NODES, _DIRECT_WORK, _DIRECT_SOLVES, _DIRECT_BYTES = 600, 2000, 2e7, 2 ** 23
 #: Conjugate-gradient tolerance (on r.z, relative) far from and near the minimum.
 _CG_FAR, _CG_NEAR, _CG_STEPS = 1e-2, 1e-6, 100
 #: Second derivatives of a triangle's signed area in its corners' coordinates
@@ -229,8 +231,12 @@ class _InverseRows:
     def rows(self, nodes: np.ndarray) -> np.ndarray:
         """(2, u, u): S's entries between ``nodes`` (sorted, unique) for x and for y."""
         new = nodes[self.index[nodes] < 0]
-        for start in range(0, new.size, _DIRECT_CHUNK):
-            chunk = new[start:start + _DIRECT_CHUNK]
+        if self.known.size + new.size > 2 * _DIRECT_NODES:       # the active set moved on: start over
+            self.index[self.known] = -1
+            self.known, self.block, new = np.zeros(0, dtype=np.int64), np.zeros((2, 0, 0)), nodes
+        size = int(np.clip(_DIRECT_BYTES // (8 * self.index.size), 1, 256))
+        for start in range(0, new.size, size):
+            chunk = new[start:start + size]
             known, old = np.concatenate([self.known, chunk]), self.known.size
             columns = self.inverse(known, chunk)                     # (2, k, c)
             grown = np.zeros((2, known.size, known.size))
@@ -338,7 +344,7 @@ def converge(solve, normal, movable: np.ndarray, x: np.ndarray, triangles: np.nd
         offset = points - optimum
         return 0.5 * float((normal.dot(offset) * offset).sum()) + float((kappa * clamped_log(current / floor)[0]).sum())
 
-    near, value = False, energy(x)
+    near, bound, value = False, False, energy(x)
     rows = None if inverse is None else _InverseRows(inverse, x.shape[0])
     for step in range(max_steps):
         ratio = areas(x) / floor
@@ -346,7 +352,7 @@ def converge(solve, normal, movable: np.ndarray, x: np.ndarray, triangles: np.nd
         tris, scale = triangles[active], kappa[active] / floor[active]
         gradient = normal.dot(x - optimum) + injectivity.penalty_force(x, tris, scale * clamped_log(ratio[active])[1])
         direction, ok, direct = _direction(rows, solve, optimum, normal, movable, x, tris, ratio[active],
-                                           floor[active], kappa[active], gradient, near)
+                                           floor[active], kappa[active], gradient, near, not bound)
         if not ok:                             # not positive definite
             if not near:
                 return x, Convergence(step, False)     # even with the bound: stay
@@ -361,23 +367,25 @@ def converge(solve, normal, movable: np.ndarray, x: np.ndarray, triangles: np.nd
             length *= 0.5
             trial = energy(x + length * direction)
         if length <= 1e-12:
-            if near and not direct:
-                near = False
+            if (near and not direct) or (direct and not bound):       # again with the bound
+                near, bound = False, True
                 continue
             return x, Convergence(step, False)     # no descent along the bound's direction: stay
-        near = length == 1.0 and decrement < _EXACT_BELOW * value
+        near, bound = length == 1.0 and decrement < _EXACT_BELOW * value, False
         x, value = x + length * direction, trial
     return x, Convergence(max_steps, False)
 
 
-def _direction(rows, solve, optimum, normal, movable, x, triangles, ratio, floor, kappa, gradient, near):
+def _direction(rows, solve, optimum, normal, movable, x, triangles, ratio, floor, kappa, gradient, near,
+               exact_first=True):
     """(direction, ok, direct): the Newton direction by :func:`_direct_direction` where ``rows``
     is given and the barrier touches few nodes (the exact Hessian where the system is positive
-    definite with it, else the bound), else by :func:`_newton_direction` (the exact Hessian
+    definite with it and ``exact_first``, else the bound), else by :func:`_newton_direction` (the exact Hessian
     when ``near``)."""
-    nodes = np.unique(triangles).size
-    if rows is not None and nodes <= _DIRECT_NODES and (2 * nodes) ** 3 <= _DIRECT_WORK * x.shape[0]:
-        for exact in (True, False):
+    nodes, n = np.unique(triangles).size, x.shape[0]
+    if (rows is not None and nodes <= _DIRECT_NODES and (2 * nodes) ** 3 <= _DIRECT_WORK * n
+            and nodes * n <= _DIRECT_SOLVES):
+        for exact in ((True, False) if exact_first else (False,)):
             direction = _direct_direction(rows, solve, optimum, x, triangles,
                                           _hessians(x, triangles, ratio, floor, kappa, exact=exact), gradient)
             if direction is not None:

@@ -61,16 +61,15 @@ def max_step_of(areas, start: np.ndarray, end: np.ndarray) -> float:
 
 def first_root(c: np.ndarray, b: np.ndarray, a: np.ndarray) -> float:
     """The first t in [0, 1] where any of the quadratics c + b t + a t^2 (c >= 0) reaches
-    zero (one at zero that falls at once: 0), 1.0 where none does."""
+    zero (one at zero that falls at once: 0), 1.0 where none does. The roots are q / a and
+    c / q with q = -(b + sign(b) sqrt(b^2 - 4 a c)) / 2, the form that does not cancel (a
+    linear one, a = 0, has the second only)."""
     roots = np.where((c <= 0) & ((b < 0) | ((b == 0) & (a < 0))), 0.0, np.inf)
-    linear = np.abs(a) <= 1e-12 * (np.abs(b) + np.abs(c))
+    disc = b * b - 4.0 * a * c
     with np.errstate(divide="ignore", invalid="ignore"):
-        r = -c / b
-        roots = np.where(linear & (r > 0) & (r < roots), r, roots)
-        disc = b * b - 4.0 * a * c
-        sq = np.sqrt(np.where(disc >= 0, disc, np.nan))
-        for root in ((-b - sq) / (2.0 * a), (-b + sq) / (2.0 * a)):
-            roots = np.where(~linear & (disc >= 0) & (root > 0) & (root < roots), root, roots)
+        q = -0.5 * (b + np.copysign(np.sqrt(np.where(disc >= 0, disc, 0.0)), b))
+        for root in (q / a, c / q):
+            roots = np.where((disc >= 0) & (root > 0) & (root < roots), root, roots)
     first = float(roots.min(initial=np.inf))
     return 1.0 if first > 1.0 else first
 

@@ -18,6 +18,9 @@ from .injectivity import max_step
 #: Cells over which the move towards W tapers off around offending triangles
 #: (:func:`no_worse_than_plain`).
 TAPER_CELLS = 3
+#: Evenly spaced points at which :func:`_furthest_move` looks for the first where the margin
+#: fails (its first root lies before it).
+MOVE_SAMPLES = 8
 
 
 def _anisotropy(state, points: np.ndarray) -> np.ndarray:
@@ -161,14 +164,19 @@ def _furthest_move(move, margin, triangles: np.ndarray, floor: np.ndarray) -> tu
 
     Up to where a triangle falls to half its floor (or to half its area at t = 0 where that is
     smaller: the first root of quadratics, :func:`injectivity.max_step`) and, where the margin
-    turns positive before that, at its root, found to convergence (SciPy's ``brentq``): both
-    exact functions of the inputs, so a one-ulp change of them moves t by rounding only."""
+    turns positive before that, at its first root: the first of :data:`MOVE_SAMPLES` evenly
+    spaced points where it fails brackets it, and SciPy's ``brentq`` finds it to convergence.
+    Both are functions of the inputs with no threshold to flip, so a one-ulp change of them
+    moves t by rounding only."""
     start = move(0.0)
     reach = max_step(start, move(1.0), triangles, 0.5 * np.minimum(floor, signed_areas(start, triangles)))
     if reach > 0 and margin(move(reach)) > 0:
         from scipy.optimize import brentq     # SciPy: imported where a move is searched
 
-        reach = max(0.0, brentq(lambda t: margin(move(t)), 0.0, reach, xtol=1e-12) - 4e-12)
-        if margin(move(reach)) > 0:           # a margin that is not monotone there: stay
-            reach = 0.0
+        samples = reach * np.arange(1, MOVE_SAMPLES + 1) / MOVE_SAMPLES
+        failing = next(k for k, t in enumerate(samples) if margin(move(t)) > 0)
+        low = samples[failing - 1] if failing else 0.0
+        reach = max(low, brentq(lambda t: margin(move(t)), low, samples[failing], xtol=1e-12) - 4e-12)
+        if margin(move(reach)) > 0:           # rounding at the root: the last point that passed
+            reach = low
     return move(reach), reach

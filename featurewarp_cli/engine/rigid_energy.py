@@ -150,7 +150,10 @@ class RigidEnergy:
         values = np.concatenate([local.ravel(), self._penalty_values])[self._lower]
         lower = sp.csc_matrix((np.bincount(self._slot, values, minlength=self._indices.size),
                                self._indices, self._indptr), shape=(2 * self.n,) * 2)
-        step = -self._solve(lower, gradient)
+        try:
+            step = -self._solve(lower, gradient)
+        except cholmod.NotPositiveDefinite:      # rounding next to a degenerate triangle: no step
+            return np.zeros((self.n, 2)), float("nan")
         return step.reshape(-1, 2), float(-gradient @ step)
 
     def _solve(self, lower, gradient: np.ndarray) -> np.ndarray:

@@ -418,13 +418,14 @@ class ReducedSystem:
         """(r, c): the moves of the nodes ``rows`` under a unit force on each node of ``columns``
         (the solve's linear part, the inverse's entries; one back-substitution for all columns;
         fixed nodes neither move nor pass a force on)."""
-        n = self.n_unknowns
-        out = np.zeros((n + 1, columns.size))
+        n, at = self.n_unknowns, self._scatter[rows]
+        out = np.zeros((rows.size, columns.size))
         if n:
             forces = np.zeros((n + 1, columns.size), order="F")
             forces[self._scatter[columns], np.arange(columns.size)] = 1.0
-            out[:n] = self._solve(np.asfortranarray(forces[:n]))
-        return out[self._scatter[rows]]
+            moved = self._solve(forces[:n])                       # F-ordered slice: no copy
+            out[at < n] = moved[at[at < n]]
+        return out
 
 
 class AxisSystems:
