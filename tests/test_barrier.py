@@ -199,3 +199,33 @@ def test_the_releases_blend_is_not_moved_by_one_ulp():
     for pattern in ("up", "alternate"):
         nudged = FeatureWarper(w, h, mask).solve(Nudged(warp, pattern), "rigid")
         assert np.abs(nudged.target - base.target).max() < 1e-4, pattern
+
+
+def test_the_inverse_entries_match_a_dense_inverse_with_held_and_tied_nodes():
+    """``ReducedSystem.entries`` (the Woodbury path's S between nodes): a node held reads and
+    passes nothing, the nodes of one tied feature share one unknown; equal to P (P' L P)^-1 P'
+    computed densely, for columns in any order."""
+    import scipy.sparse as sp
+
+    from featurewarp_cli.engine import system
+    from featurewarp_cli.engine.solver import ReducedSystem
+
+    grid = Grid.for_image(48, 40, 8.0)
+    matrix = system.normal_matrix(grid, np.ones((grid.ny - 1) * (grid.nx - 1)))
+    n = grid.n_nodes
+    held = np.zeros(n, bool)
+    held[[0, grid.nx - 1, n - 1]] = True
+    tied = np.zeros(n, bool)
+    tied[[grid.nx + 2, grid.nx + 3, 2 * grid.nx + 2]] = True
+    unknown = np.full(n, -1)
+    free = ~held & ~tied
+    unknown[free] = np.arange(free.sum())
+    unknown[tied] = free.sum()
+    reduced = ReducedSystem(matrix, unknown)
+    projection = sp.csr_matrix((np.ones((unknown >= 0).sum()), (np.flatnonzero(unknown >= 0), unknown[unknown >= 0])),
+                               shape=(n, unknown.max() + 1)).toarray()
+    dense = projection @ np.linalg.inv(projection.T @ matrix.toarray() @ projection) @ projection.T
+    rows = np.array([0, 5, grid.nx + 2, grid.nx + 3, n - 1, 17])
+    columns = np.array([grid.nx + 3, 0, 9, 17])
+    assert np.allclose(reduced.entries(rows, columns), dense[np.ix_(rows, columns)], atol=1e-10)
+    assert np.allclose(reduced.entries(rows, columns)[[0, 4]], 0.0)            # held nodes do not move
