@@ -380,8 +380,8 @@ def _direction(rows, solve, optimum, normal, movable, x, triangles, ratio, floor
                exact_first=True):
     """(direction, ok, direct): the Newton direction by :func:`_direct_direction` where ``rows``
     is given and the barrier touches few nodes (the exact Hessian where the system is positive
-    definite with it and ``exact_first``, else the bound), else by :func:`_newton_direction` (the exact Hessian
-    when ``near``)."""
+    definite with it and ``exact_first``, else the bound), else by :func:`_newton_direction`
+    (the exact Hessian when ``near``)."""
     nodes, n = np.unique(triangles).size, x.shape[0]
     if (rows is not None and nodes <= _DIRECT_NODES and (2 * nodes) ** 3 <= _DIRECT_WORK * n
             and nodes * n <= _DIRECT_SOLVES):

@@ -135,21 +135,21 @@ class Problem:
     def inverse(self, systems):
         """``inverse(rows, columns)``: (2, r, c) entries of ``systems``' inverse
         (:meth:`AxisSystems.entries`), for :func:`barrier.converge`."""
-        def inverse(rows, columns):
-            t0 = time.perf_counter()
-            result = systems.entries(rows, columns)
-            self.timings["solve"] = self.timings.get("solve", 0.0) + time.perf_counter() - t0
-            return result
-        return inverse
+        return _timed(self.timings, systems.entries)
 
     def solver(self, systems, rhs, offset):
         """``solve(force)``: positions for these constants plus a force per node."""
-        def solve(force=None):
-            t0 = time.perf_counter()
-            result = systems.solve(rhs if force is None else rhs + force, offset)
-            self.timings["solve"] = self.timings.get("solve", 0.0) + time.perf_counter() - t0
-            return result
-        return solve
+        return _timed(self.timings, lambda force=None: systems.solve(rhs if force is None else rhs + force, offset))
+
+
+def _timed(timings: dict, function):
+    """``function``, adding its wall time to ``timings["solve"]`` (the report's solve stage)."""
+    def timed(*args):
+        t0 = time.perf_counter()
+        result = function(*args)
+        timings["solve"] = timings.get("solve", 0.0) + time.perf_counter() - t0
+        return result
+    return timed
 
 
 def guard(problem: Problem, x: np.ndarray, record: GuardRecord) -> np.ndarray | None:
@@ -422,17 +422,9 @@ def _window(problem: Problem, rhs, offset, tied, x, crushed: np.ndarray, margin:
     held = np.where(local_moving[:, None], offset[nodes], x[nodes])
     local_rhs, timings = rhs[nodes], problem.timings
 
-    def solve(force):
-        t0 = time.perf_counter()
-        result = reduced.solve(local_rhs + force, held)
-        timings["solve"] = timings.get("solve", 0.0) + time.perf_counter() - t0
-        return result
-
-    def inverse(rows, columns):
-        t0 = time.perf_counter()
-        result = np.broadcast_to(reduced.entries(rows, columns), (2, rows.size, columns.size))
-        timings["solve"] = timings.get("solve", 0.0) + time.perf_counter() - t0
-        return result
+    solve = _timed(timings, lambda force: reduced.solve(local_rhs + force, held))
+    inverse = _timed(timings, lambda rows, columns: np.broadcast_to(reduced.entries(rows, columns),
+                                                                    (2, rows.size, columns.size)))
 
     local = np.full(grid.n_nodes, -1)
     local[nodes] = np.arange(nodes.size)

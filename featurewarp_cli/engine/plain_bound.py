@@ -81,8 +81,8 @@ def no_worse_than_plain(state, x: np.ndarray, warped: np.ndarray, record, proble
     worse when its worst triangle is, or its best-fitting affine map (its overall
     proportions) is.
 
-    Tried in turn, each as far as it passes (:func:`_furthest_move`): the move ``(1 - t) w (W - x)`` with ``w``
-    1 around the offending triangles, tapering to 0 over :data:`TAPER_CELLS` cells (then
+    Tried in turn, each as far as it passes (:func:`_furthest_move`): the move
+    ``(1 - t) w (W - x)`` with ``w`` 1 around the offending triangles, tapering to 0 over :data:`TAPER_CELLS` cells (then
     around the offending components); a new solve (``problem``) with only the offending
     components untied and their targets blended towards W's, so the other features stay
     as they are, finished by the tapered move where needed; last, every node moved evenly

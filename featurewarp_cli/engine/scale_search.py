@@ -149,8 +149,9 @@ def spread_stretch(solve, ab: np.ndarray, result, scalable: np.ndarray, triangle
     high, low = _log_extremes(result[0], reference, tris)
     if high <= np.log(SPREAD_ABOVE) or high + low <= 0:
         return ab, result
-    floor = 0.5 * np.minimum(SCALE_FLOOR * signed_areas(warped, triangles), signed_areas(result[0], triangles))
-    if not np.all(signed_areas(result[0], triangles) >= floor):      # folded: the guard's to open
+    areas = signed_areas(result[0], triangles)
+    floor = 0.5 * np.minimum(SCALE_FLOOR * signed_areas(warped, triangles), areas)
+    if not np.all(areas >= floor):            # folded: the guard's to open
         return ab, result
     grown = solve(np.where(scalable[:, None], ab * SPREAD_RANGE, ab))
     reach = max_step(result[0], grown[0], triangles, floor)       # the solution is affine in m
