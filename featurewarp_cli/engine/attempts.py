@@ -58,7 +58,8 @@ def guarded(warper, state, warped, record: SolveRecord, attempt: Attempt, scale_
     problem = guard.Problem(grid, features, state.triangles, warped, state.normal, state.stiffness,
                             ties.window_fixed(*(attempt.border or (state.fixed_x, state.fixed_y))),
                             ties.window_ties(), attempt.systems, rhs, offset, edges,
-                            attempt.warp_edges, rebuild, warper.timings, ease is not None)
+                            attempt.warp_edges, rebuild, warper.timings, ease is not None,
+                            plain_bound.release_margin(state, warped) if warper.formulation == "exact" else None)
     counted = sum(warper.timings.get(k, 0.0) for k in ("solve", "factor", "rhs"))
     stages.enter("guard")
     t0 = time.perf_counter()

@@ -19,9 +19,6 @@ import numpy as np
 from . import barrier, injectivity, system
 from .grid import signed_areas
 
-#: Bisection steps on how far released features go from the warp's shape to their own.
-BLEND_BISECTIONS = 8
-UNTANGLED_BISECTIONS = 3
 #: The guard first untangles a window around the folds, reaching these many times the
 #: largest fold's extent beyond it (at least WINDOW_MIN_MARGIN quads), in at most
 #: WINDOW_ITERATIONS steps each (a hopeless window stops early); where both fail, the whole
@@ -36,6 +33,12 @@ WINDOW_ITERATIONS = 150
 #: Newton steps of a preview's convergence (``Problem.preview``): slivers lifted part of the way,
 #: in bounded time (the editor's hard release: 35 steps, 0.6 s, to converge).
 PREVIEW_STEPS = 4
+#: Even steps of the blend from the last least-squares solution that keeps its triangles
+#: above half their floor up to the released features' own targets (:func:`blend_search`),
+BLEND_STEPS = 8
+#: The thinnest a release lets a triangle be, as a fraction of its floor: beyond, the
+#: released features give way (their targets blend towards W's) instead of the background.
+RELEASE_THINNEST = 0.5
 #: Windows larger than this fraction of the grid are left to the global pass.
 WINDOW_MAX_FRACTION = 0.5
 
@@ -110,6 +113,9 @@ class Problem:
         ``rebuild(edges, released)`` -> (systems, rhs, offset, tied) for other edge
         targets with the components ``released`` untied.
     timings : dict
+    margin : callable or None
+        ``margin(positions)`` <= 0 where a released feature's blend is acceptable
+        (:func:`blend_search`; the warper's never-worse-than-plain test).
     preview : bool
         An interactive update (``FeatureWarper.solve(quick=True)``): windows only, and
         :func:`guard` returns None where they fail (see :func:`_untangled`).
@@ -131,6 +137,7 @@ class Problem:
     rebuild: object
     timings: dict
     preview: bool = False
+    margin: object = None
 
     def inverse(self, systems):
         """``inverse(rows, columns)``: (2, r, c) entries of ``systems``' inverse
@@ -163,7 +170,7 @@ def guard(problem: Problem, x: np.ndarray, record: GuardRecord) -> np.ndarray | 
     floor = barrier.SAFE_FRACTION * warp_areas
     if record.flipped_before == 0:        # crushed but not folded: the barrier's minimum all the same
         return _converged(problem, problem.rhs, problem.offset, problem.tied, x, floor, record)
-    x, ok = _untangled(problem, problem.systems, problem.rhs, problem.offset, problem.tied, x, floor, record)
+    x, ok = _untangled(problem, x, floor, record)
     if ok and not record.window_quads:    # the whole-grid pass: its first fold-free iterate, converged
         return _converge_grid(problem, problem.systems, problem.rhs, problem.offset, problem.tied, x, floor, record)
     if ok:
@@ -171,15 +178,13 @@ def guard(problem: Problem, x: np.ndarray, record: GuardRecord) -> np.ndarray | 
     return None if problem.preview else _release(problem, x, floor, record)
 
 
-def _untangled(problem, systems, rhs, offset, tied, start, floor, record, patient=False, whole_grid=True):
+def _untangled(problem, start, floor, record):
     """Untangle in a window around the folds (wider windows next, each from where the last one
     left off; a window that opens its folds converges the barrier's energy there, see
     :func:`_untangle_window`), else on the whole grid (its slivers lifted to half their floor;
-    not converged here: :func:`guard` converges the whole grid after it, a release its blend
-    kept; ``patient``:
-    it does not give up when its fold count stops falling; without ``whole_grid``, none); a
-    preview stops after a window that gave up, or after the windows; (x, no folds left)."""
-    tris = problem.triangles
+    :func:`guard` converges the whole grid after it); a preview stops after a window that gave
+    up, or after the windows; (x, no folds left)."""
+    tris, rhs, offset, tied = problem.triangles, problem.rhs, problem.offset, problem.tied
     folds = int(np.count_nonzero(injectivity.flipped(start, tris)))
     for margin in WINDOW_MARGINS:
         x, iterations, window_quads = _untangle_window(problem, rhs, offset, tied, start, floor, margin, record)
@@ -194,11 +199,11 @@ def _untangled(problem, systems, rhs, offset, tied, start, floor, record, patien
             start, folds = x, left
         if problem.preview and iterations < WINDOW_ITERATIONS:      # it gave up: a preview eases instead
             break
-    if problem.preview or not whole_grid:
+    if problem.preview:
         return start, False
     grid = problem.grid
-    x, iterations = injectivity.untangle(problem.solver(systems, rhs, offset), problem.normal.dot, start, tris,
-                                         floor, problem.stiffness, patient=patient,
+    x, iterations = injectivity.untangle(problem.solver(problem.systems, rhs, offset), problem.normal.dot, start,
+                                         tris, floor, problem.stiffness,
                                          areas=lambda points: injectivity.grid_areas(grid, points))
     record.untangle_iterations += iterations
     return x, not injectivity.flipped(x, tris).any()
@@ -240,71 +245,75 @@ def _release(problem: Problem, x, floor, record: GuardRecord):
     return warped + injectivity.max_step(warped, x, tris) * 0.95 * (x - warped)
 
 
-def blend_search(problem: Problem, released: np.ndarray, floor, record: GuardRecord, accept=None):
-    """Untie the components ``released`` and solve with their targets blended ``s`` of their own
-    and ``1 - s`` of W's: the largest s (bisection) whose solution, untangled where needed,
-    has no fold and passes ``accept`` (positions -> bool; default: anything).
+def blend_search(problem: Problem, released: np.ndarray, floor, record: GuardRecord, margin=None, origin=None,
+                 steps: int = BLEND_STEPS):
+    """Untie the components ``released`` and converge the barrier's energy with their targets
+    blended ``s`` of their own and ``1 - s`` of W's, for the largest s whose minimum passes
+    ``margin`` (positions -> float, <= 0 passes; default ``problem.margin``, else anything).
 
-    Returns (positions, s), or None when even s = 0 (W's targets) does not pass."""
-    tris = problem.triangles
+    A path of minima, each converged from the one before, so every point is injective:
+    - the least-squares solution is affine in s (the targets enter the right-hand side
+      only): it is followed up to the first root of the areas' quadratics at half the
+      floor, or of the margin (:func:`plain_bound.furthest_move`); where it fails the margin
+      at s = 0 already, the path starts at the minimum for s = 0 converged from ``origin``
+      (positions with no fold that tie ``released``: the guard's result);
+    - from there, ``steps`` even steps of s up to 1, each converged from the last point.
+      Where one fails ``margin``, the furthest point between it and the last point that
+      passed, converged at its blend where that still passes. Without steps, the start
+      converged at its blend where that passes.
+    Each is a function of the inputs with no threshold to flip.
+
+    Returns (positions, s), or None when the start at s = 0 (W's targets) fails ``margin``
+    (it folds, or is too thin, and no ``origin`` is given)."""
+    from .plain_bound import furthest_move      # it imports this module
+
     blend = np.isin(problem.features.component, released) & problem.features.is_constrained
-    accept = accept or (lambda points: True)
+    shape_margin = margin or problem.margin or (lambda points: -1.0)
+
+    def margin(points):
+        """How far the thinnest triangle is below :data:`RELEASE_THINNEST` of its floor (relative),
+        where it is; else the larger of that and the shape margin (the same sign either way)."""
+        thinnest = float(np.min(injectivity.grid_areas(problem.grid, points) / floor))
+        crushed = 1.0 - thinnest / RELEASE_THINNEST
+        return crushed if crushed > 0 else max(shape_margin(points), crushed)
 
     def constants(s):
         edges = np.where(blend[:, None, None], s * problem.edges + (1.0 - s) * problem.warp_edges, problem.edges)
         return problem.rebuild(edges, released)
 
-    def solve_at(s):
-        systems, rhs, offset, _ = constants(s)
-        return problem.solver(systems, rhs, offset)()
+    systems, rhs, offset, tied = constants(0.0)
+    _, rhs_own, offset_own, _ = constants(1.0)
 
-    lo, hi = 0.0, 1.0
-    best = solve_at(0.0)
-    if injectivity.flipped(best, tris).any():
-        systems, rhs, offset, tied = constants(0.0)
-        best, ok = _untangled(problem, systems, rhs, offset, tied, best, floor, record)
-        if not ok or not accept(best):
+    def at(t, start):
+        """The barrier energy's minimum at blend ``t``, converged from ``start``."""
+        return _converge_grid(problem, systems, rhs + t * (rhs_own - rhs), offset + t * (offset_own - offset),
+                              tied, start, floor, record)
+
+    best, s = problem.solver(systems, rhs, offset)(), 0.0
+    along = problem.solver(systems, rhs_own, offset_own)() - best     # d(solution)/ds
+    if margin(best) <= 0:
+        start = best
+        x, s = furthest_move(lambda t: start + t * along, margin, problem.triangles, floor)
+        if not steps:
+            converged = at(s, x)
+            return (converged if margin(converged) <= 0 else x), s
+    elif origin is not None:                  # admissible here too: untying only frees nodes
+        x = at(0.0, origin)
+        if margin(x) > 0:
             return None
-        return _untangled_blend(problem, constants, solve_at, floor, record, accept, 0.0, best)
-    if not accept(best):
+    else:
         return None
-    for _ in range(BLEND_BISECTIONS):        # cheap: plain solves
-        mid = 0.5 * (lo + hi)
-        x = solve_at(mid)
-        if injectivity.flipped(x, tris).any() or not accept(x):
-            hi = mid
-        else:
-            lo, best = mid, x
-    return _untangled_blend(problem, constants, solve_at, floor, record, accept, lo, best)
-
-
-def _untangled_blend(problem, constants, solve_at, floor, record, accept, lo, best):
-    """Bisect the blend beyond ``lo`` (whose positions are ``best``), untangling each trial in
-    windows (converged there); only where no window trial opens its folds, bisect again with
-    the whole-grid pass, which then does not give up when its fold count stops falling. The
-    blend kept is converged on the whole grid (:func:`_converge_grid`). Whether a whole-grid
-    pass gave up turned on one ulp (the gallery's rigid sphere kept blend 0.86 on one CPU and
-    0.79 on another, 3 px apart); windows alone lost the features on larger images (the same
-    sphere at 1024 px: blend 0, the plain warp)."""
-    start, kept = lo, None
-    for whole_grid in (False, True):
-        lo, hi = start, 1.0
-        for _ in range(UNTANGLED_BISECTIONS):
-            mid = 0.5 * (lo + hi)
-            systems, rhs, offset, tied = constants(mid)
-            converged = record.converged
-            x, ok = _untangled(problem, systems, rhs, offset, tied, solve_at(mid), floor, record,
-                               patient=True, whole_grid=whole_grid)
-            if ok and accept(x):
-                lo, best, kept = mid, x, (systems, rhs, offset, tied)
-            else:
-                hi, record.converged = mid, converged       # a trial not kept says nothing of the result
-        if kept is not None:
-            break
-    if kept is not None:
-        converged = _converge_grid(problem, *kept, best, floor, record)
-        best = converged if accept(converged) else best
-    return best, lo
+    first, count = s, steps if s < 1.0 else min(steps, 1)
+    for step in range(1, count + 1):
+        t = first + (1.0 - first) * step / count
+        trial = at(t, x)
+        if margin(trial) > 0:                   # between the two points, as far as passes
+            between, share = furthest_move(lambda u: x + u * (trial - x), margin, problem.triangles, floor)
+            s = s + share * (t - s)
+            converged = at(s, between)
+            return (converged if margin(converged) <= 0 else between), s
+        x, s = trial, t
+    return x, s
 
 
 def _converge_grid(problem, systems, rhs, offset, tied, x, floor, record):

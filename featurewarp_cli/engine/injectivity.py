@@ -242,7 +242,7 @@ def line_search(phi, below: float, alpha: float) -> float:
 
 def untangle(solve, hessian, x: np.ndarray, triangles: np.ndarray, floor: np.ndarray,
              stiffness: np.ndarray, max_iterations: int = 80, areas=None,
-             settle: bool = True, patient: bool = False) -> tuple[np.ndarray, int]:
+             settle: bool = True) -> tuple[np.ndarray, int]:
     """Open folded or crushed triangles while staying near the least-squares optimum.
 
     Minimises phi(x) = E(x) + sum_t kappa_t max(0, floor_t - area_t(x))^2, where E(x) =
@@ -293,7 +293,7 @@ def untangle(solve, hessian, x: np.ndarray, triangles: np.ndarray, floor: np.nda
             return x, iteration
         if iteration % PROGRESS_EVERY == 0:
             folds = int(np.count_nonzero(current <= 0))
-            if not patient and checkpoint is not None and folds > PROGRESS_RATIO * checkpoint:
+            if checkpoint is not None and folds > PROGRESS_RATIO * checkpoint:
                 return x, iteration          # not converging: let the caller relax the features
             checkpoint = folds
         pen, deficit = area_penalty(current, floor, kappa)

@@ -18,7 +18,7 @@ from .injectivity import max_step
 #: Cells over which the move towards W tapers off around offending triangles
 #: (:func:`no_worse_than_plain`).
 TAPER_CELLS = 3
-#: Evenly spaced points at which :func:`_furthest_move` looks for the first where the margin
+#: Evenly spaced points at which :func:`furthest_move` looks for the first where the margin
 #: fails (its first root lies before it).
 MOVE_SAMPLES = 8
 
@@ -81,24 +81,17 @@ def no_worse_than_plain(state, x: np.ndarray, warped: np.ndarray, record, proble
     worse when its worst triangle is, or its best-fitting affine map (its overall
     proportions) is.
 
-    Tried in turn, each as far as it passes (:func:`_furthest_move`): the move
+    Tried in turn, each as far as it passes (:func:`furthest_move`): the move
     ``(1 - t) w (W - x)`` with ``w`` 1 around the offending triangles, tapering to 0 over :data:`TAPER_CELLS` cells (then
     around the offending components); a new solve (``problem``) with only the offending
     components untied and their targets blended towards W's, so the other features stay
     as they are, finished by the tapered move where needed; last, every node moved evenly
     towards W."""
-    if np.any(signed_areas(warped, state.triangles) <= 0):
+    margin = plain_margin(state, warped)
+    if margin is None:
         return x
-    plain = (_worst_per_component(state, _anisotropy(state, warped)) * (1.0 + 1e-9) + 1e-9,
-             _fit_per_component(state, warped) * (1.0 + 1e-9) + 1e-9)
+    plain = margin.plain
     floor = barrier.SAFE_FRACTION * signed_areas(warped, state.triangles)
-
-    def margin(points):
-        """How much worse than W the worst component is (relative; <= 0: no worse), inf with a fold."""
-        if np.any(signed_areas(points, state.triangles) <= 0):
-            return np.inf
-        return max(float(np.max(_worst_per_component(state, _anisotropy(state, points)) / plain[0], initial=0.0)),
-                   float(np.max(_fit_per_component(state, points) / plain[1], initial=0.0))) - 1.0
 
     def ok(points):
         return margin(points) <= 0
@@ -113,7 +106,7 @@ def no_worse_than_plain(state, x: np.ndarray, warped: np.ndarray, record, proble
         return x
     if problem is not None:
         found = blend_search(problem, offending, floor, record,
-                             accept=lambda p: ok(p) or _tapered_fix(state, p, warped, plain, margin, floor) is not None)
+                             margin=lambda p: _fixable_margin(state, p, warped, plain, margin), origin=x, steps=0)
         if found is not None:
             best, blend = found
             best, taper = (best, 1.0) if ok(best) else _tapered_fix(state, best, warped, plain, margin, floor)
@@ -121,10 +114,30 @@ def no_worse_than_plain(state, x: np.ndarray, warped: np.ndarray, record, proble
             record.plain_blend = blend * taper
             return best
     if ok(warped):
-        x, record.plain_blend = _furthest_move(lambda t: warped + t * (x - warped), margin, state.triangles, floor)
+        x, record.plain_blend = furthest_move(lambda t: warped + t * (x - warped), margin, state.triangles, floor)
         return x
     record.plain_blend = 0.0
     return warped
+
+
+def plain_margin(state, warped: np.ndarray):
+    """``margin(points)``: how much more distorted than under W the worst component comes out
+    under ``points`` (relative; <= 0: no worse; inf with a fold), as its worst triangle or as
+    its best-fitting affine map; None where W itself folds a triangle. ``margin.plain`` holds
+    W's figures (per component: worst triangle, and affine fits)."""
+    if np.any(signed_areas(warped, state.triangles) <= 0):
+        return None
+    plain = (_worst_per_component(state, _anisotropy(state, warped)) * (1.0 + 1e-9) + 1e-9,
+             _fit_per_component(state, warped) * (1.0 + 1e-9) + 1e-9)
+
+    def margin(points):
+        if np.any(signed_areas(points, state.triangles) <= 0):
+            return np.inf
+        return max(float(np.max(_worst_per_component(state, _anisotropy(state, points)) / plain[0], initial=0.0)),
+                   float(np.max(_fit_per_component(state, points) / plain[1], initial=0.0))) - 1.0
+
+    margin.plain = plain
+    return margin
 
 
 def _worse(state, points: np.ndarray, plain: tuple) -> np.ndarray:
@@ -135,10 +148,9 @@ def _worse(state, points: np.ndarray, plain: tuple) -> np.ndarray:
     return (state.tri_component >= 0) & ((_anisotropy(state, points) > plain[0][component]) | fit_worse[component])
 
 
-def _tapered_fix(state, points: np.ndarray, warped: np.ndarray, plain: tuple, margin, floor):
-    """``points`` moved towards W around the offending triangles (then components), tapered,
-    as little as passes (``margin`` <= 0): (positions, t) as :func:`_furthest_move`, or None
-    where even the whole move does not pass."""
+def _moves_towards_plain(state, points: np.ndarray, warped: np.ndarray, plain: tuple):
+    """The moves of :func:`_tapered_fix`: ``move(t)`` from ``points`` (t = 1) towards W (t = 0)
+    around the offending triangles, then around the offending components, tapered."""
     worse = _worse(state, points, plain)
     n_quads = state.features.weight.size
     local = np.zeros(n_quads, bool)
@@ -146,19 +158,44 @@ def _tapered_fix(state, points: np.ndarray, warped: np.ndarray, plain: tuple, ma
     offending = np.unique(state.tri_component[worse])
     bad = np.isin(state.features.component, offending) & state.features.is_constrained
     others = (state.node_component >= 0) & ~np.isin(state.node_component, offending)
+    moves = []
     for region in (local, bad):
         weight = _taper(state, region)
         weight[others] = 0.0                # the move leaves the other features as they are
+        moves.append(lambda t, weight=weight: points + (1.0 - t) * weight * (warped - points))
+    return moves
 
-        def move(t, weight=weight):
-            return points + (1.0 - t) * weight * (warped - points)
 
+def release_margin(state, warped: np.ndarray):
+    """The margin a release's blend must pass (:func:`guard.blend_search`): no component
+    worse than under W, or a tapered move towards W fixes it (:func:`_fixable_margin`);
+    None where W folds."""
+    margin = plain_margin(state, warped)
+    if margin is None:
+        return None
+    return lambda points: _fixable_margin(state, points, warped, margin.plain, margin)
+
+
+def _fixable_margin(state, points: np.ndarray, warped: np.ndarray, plain: tuple, margin) -> float:
+    """``margin(points)``, or where that fails the best margin of the tapered moves' full
+    step (<= 0: :func:`_tapered_fix` finds a fix)."""
+    value = margin(points)
+    if value <= 0:
+        return value
+    return min(margin(move(0.0)) for move in _moves_towards_plain(state, points, warped, plain))
+
+
+def _tapered_fix(state, points: np.ndarray, warped: np.ndarray, plain: tuple, margin, floor):
+    """``points`` moved towards W around the offending triangles (then components), tapered,
+    as little as passes (``margin`` <= 0): (positions, t) as :func:`furthest_move`, or None
+    where even the whole move does not pass."""
+    for move in _moves_towards_plain(state, points, warped, plain):
         if margin(move(0.0)) <= 0:
-            return _furthest_move(move, margin, state.triangles, floor)
+            return furthest_move(move, margin, state.triangles, floor)
     return None
 
 
-def _furthest_move(move, margin, triangles: np.ndarray, floor: np.ndarray) -> tuple[np.ndarray, float]:
+def furthest_move(move, margin, triangles: np.ndarray, floor: np.ndarray) -> tuple[np.ndarray, float]:
     """(``move(t)``, t) at the largest t in [0, 1] that passes (``margin(move(t)) <= 0``), given
     t = 0 does; ``move`` is affine in t.
 

@@ -219,8 +219,8 @@ def _why(record: "SolveRecord", k: int) -> str:
         causes.append("cut by a border that no similarity of it can follow, it gives way so that the outline "
                       "stays the warp's (--boundary release keeps its shape instead where that folds nothing)")
     if k in guard.released_components:
-        causes.append(f"relaxed towards the plain warp to avoid fold-overs (blend {guard.feature_blend:.2f}, "
-                      f"0 = the plain warp)")
+        causes.append(f"relaxed to avoid fold-overs: it gives way where the background can thin no further "
+                      f"(its targets {guard.feature_blend:.2f} of the way from the plain warp's shape to its own)")
     if k in guard.degraded_components:
         causes.append(f"moved towards the plain warp (blend {guard.plain_blend:.2f}, 0 = the plain warp) to be "
                       f"no more distorted than under it")
