@@ -134,6 +134,26 @@ def test_the_move_towards_plain_stops_at_the_first_root_of_a_margin_that_turns_b
     assert t == pytest.approx(0.2, abs=1e-9) and t <= 0.2
 
 
+def test_the_move_stops_just_before_a_noisy_root_not_at_the_last_sample():
+    """A margin that rounding makes noisy at its root (areas of crushed triangles lose digits:
+    about 1e-13) used to send the move back to the last sample that passed (0.25 instead of
+    0.3 here; the rigid sphere at 256 px moved 0.06 px on a one-ulp nudge). It now steps back
+    from the root only as far as the margin passes."""
+    from featurewarp_cli.engine.plain_bound import furthest_move
+
+    triangle = np.array([[0, 1, 2]])
+    warped = np.array([[0.0, 0.0], [10.0, 0.0], [0.0, 10.0]])
+    target = warped + [[0.0, 0.0], [1.0, 0.0], [0.0, 0.0]]
+    floor = barrier.SAFE_FRACTION * signed_areas(warped, triangle)
+
+    def margin(points):
+        t = points[1, 0] - 10.0
+        return (t - 0.3) + 3e-12 * np.cos(1e13 * t)       # noise ten times the slope's xtol
+
+    _, t = furthest_move(lambda t: warped + t * (target - warped), margin, triangle, floor)
+    assert 0.3 - 1e-6 <= t <= 0.3 and margin(warped + t * (target - warped)) <= 0
+
+
 def test_converge_leaves_an_optimum_above_the_safe_fraction_exactly_as_it_is():
     """Where the least-squares optimum keeps every triangle above its safe fraction, the barrier is
     zero around it: the result is the optimum, to rounding."""

@@ -114,8 +114,9 @@ class Problem:
         targets with the components ``released`` untied.
     timings : dict
     margin : callable or None
-        ``margin(positions)`` <= 0 where a released feature's blend is acceptable
-        (:func:`blend_search`; the warper's never-worse-than-plain test).
+        ``margin(positions)`` <= 0 where a release's blend is acceptable: no component worse
+        than under W, or fixable by a tapered move (:func:`blend_search`,
+        :func:`plain_bound.release_margin`).
     preview : bool
         An interactive update (``FeatureWarper.solve(quick=True)``): windows only, and
         :func:`guard` returns None where they fail (see :func:`_untangled`).
@@ -249,7 +250,8 @@ def blend_search(problem: Problem, released: np.ndarray, floor, record: GuardRec
                  steps: int = BLEND_STEPS):
     """Untie the components ``released`` and converge the barrier's energy with their targets
     blended ``s`` of their own and ``1 - s`` of W's, for the largest s whose minimum passes
-    ``margin`` (positions -> float, <= 0 passes; default ``problem.margin``, else anything).
+    ``margin`` (positions -> float, <= 0 passes; default ``problem.margin``, else anything),
+    combined with a triangle thinner than :data:`RELEASE_THINNEST` of its floor failing.
 
     A path of minima, each converged from the one before, so every point is injective:
     - the least-squares solution is affine in s (the targets enter the right-hand side

@@ -21,6 +21,9 @@ TAPER_CELLS = 3
 #: Evenly spaced points at which :func:`furthest_move` looks for the first where the margin
 #: fails (its first root lies before it).
 MOVE_SAMPLES = 8
+#: How far :func:`furthest_move` steps back from the margin's root, in turn, until the margin
+#: passes there (its rounding noise is about 1e-13 of the move).
+ROOT_BACKOFF = (4e-12, 1e-9, 1e-6)
 
 
 def _anisotropy(state, points: np.ndarray) -> np.ndarray:
@@ -167,9 +170,9 @@ def _moves_towards_plain(state, points: np.ndarray, warped: np.ndarray, plain: t
 
 
 def release_margin(state, warped: np.ndarray):
-    """The margin a release's blend must pass (:func:`guard.blend_search`): no component
-    worse than under W, or a tapered move towards W fixes it (:func:`_fixable_margin`);
-    None where W folds."""
+    """The margin a release's blend must pass (:func:`guard.blend_search`): no component worse
+    than under W, or a tapered move towards W fixes it (:func:`_fixable_margin`); None where
+    W folds."""
     margin = plain_margin(state, warped)
     if margin is None:
         return None
@@ -213,7 +216,8 @@ def furthest_move(move, margin, triangles: np.ndarray, floor: np.ndarray) -> tup
         samples = reach * np.arange(1, MOVE_SAMPLES + 1) / MOVE_SAMPLES
         failing = next(k for k, t in enumerate(samples) if margin(move(t)) > 0)
         low = samples[failing - 1] if failing else 0.0
-        reach = max(low, brentq(lambda t: margin(move(t)), low, samples[failing], xtol=1e-12) - 4e-12)
-        if margin(move(reach)) > 0:           # rounding at the root: the last point that passed
-            reach = low
+        root = brentq(lambda t: margin(move(t)), low, samples[failing], xtol=1e-12)
+        # The margin is noisy at the root (areas of crushed triangles lose digits): back off a
+        # little, then a little more, rather than all the way to the last sample that passed.
+        reach = next((t for t in (max(low, root - back) for back in ROOT_BACKOFF) if margin(move(t)) <= 0), low)
     return move(reach), reach
