@@ -33,8 +33,9 @@ WINDOW_ITERATIONS = 150
 #: Newton steps of a preview's convergence (``Problem.preview``): slivers lifted part of the way,
 #: in bounded time (the editor's hard release: 35 steps, 0.6 s, to converge).
 PREVIEW_STEPS = 4
-#: Even steps of the blend from the last least-squares solution that keeps its triangles
-#: above half their floor up to the released features' own targets (:func:`blend_search`),
+#: Even steps of the blend from where the least-squares solution stops passing the margin up
+#: to the released features' own targets (:func:`blend_search`); more follow the path of
+#: minima more closely (the stop is interpolated between two of them) at more Newton steps.
 BLEND_STEPS = 8
 #: The thinnest a release lets a triangle be, as a fraction of its floor: beyond, the
 #: released features give way (their targets blend towards W's) instead of the background.
@@ -261,23 +262,18 @@ def blend_search(problem: Problem, released: np.ndarray, floor, record: GuardRec
       (positions with no fold that tie ``released``: the guard's result);
     - from there, ``steps`` even steps of s up to 1, each converged from the last point.
       Where one fails ``margin``, the furthest point between it and the last point that
-      passed, converged at its blend where that still passes. Without steps, the start
-      converged at its blend where that passes.
-    Each is a function of the inputs with no threshold to flip.
+      passed, converged at its blend (:func:`settle` below). Without steps, the start
+      converged at its blend the same way.
+    Each point is a continuous function of the inputs: roots, and a converged minimum that,
+    where it fails the margin, gives way to the chord towards it.
 
     Returns (positions, s), or None when the start at s = 0 (W's targets) fails ``margin``
-    (it folds, or is too thin, and no ``origin`` is given)."""
+    (it folds, or is too thin, and no ``origin`` is given, or the minimum from ``origin``
+    fails it too)."""
     from .plain_bound import furthest_move      # it imports this module
 
     blend = np.isin(problem.features.component, released) & problem.features.is_constrained
-    shape_margin = margin or problem.margin or (lambda points: -1.0)
-
-    def margin(points):
-        """How far the thinnest triangle is below :data:`RELEASE_THINNEST` of its floor (relative),
-        where it is; else the larger of that and the shape margin (the same sign either way)."""
-        thinnest = float(np.min(injectivity.grid_areas(problem.grid, points) / floor))
-        crushed = 1.0 - thinnest / RELEASE_THINNEST
-        return crushed if crushed > 0 else max(shape_margin(points), crushed)
+    margin = _thinnest_margin(problem, floor, margin or problem.margin or (lambda points: -1.0))
 
     def constants(s):
         edges = np.where(blend[:, None, None], s * problem.edges + (1.0 - s) * problem.warp_edges, problem.edges)
@@ -287,9 +283,22 @@ def blend_search(problem: Problem, released: np.ndarray, floor, record: GuardRec
     _, rhs_own, offset_own, _ = constants(1.0)
 
     def at(t, start):
-        """The barrier energy's minimum at blend ``t``, converged from ``start``."""
-        return _converge_grid(problem, systems, rhs + t * (rhs_own - rhs), offset + t * (offset_own - offset),
-                              tied, start, floor, record)
+        """(the barrier energy's minimum at blend ``t`` converged from ``start``, its margin);
+        a minimum that fails the margin is not kept: its convergence does not count."""
+        converged = record.converged
+        point = _converge_grid(problem, systems, rhs + t * (rhs_own - rhs), offset + t * (offset_own - offset),
+                               tied, start, floor, record)
+        value = margin(point)
+        if value > 0:
+            record.converged = converged
+        return point, value
+
+    def settle(t, start):
+        """The minimum at ``t`` from ``start`` (which passes) where it passes, else the chord
+        from ``start`` towards it as far as passes: no jump where its margin crosses 0."""
+        point, value = at(t, start)
+        return point if value <= 0 else furthest_move(lambda u: start + u * (point - start), margin,
+                                                      problem.triangles, floor)[0]
 
     best, s = problem.solver(systems, rhs, offset)(), 0.0
     along = problem.solver(systems, rhs_own, offset_own)() - best     # d(solution)/ds
@@ -297,25 +306,34 @@ def blend_search(problem: Problem, released: np.ndarray, floor, record: GuardRec
         start = best
         x, s = furthest_move(lambda t: start + t * along, margin, problem.triangles, floor)
         if not steps:
-            converged = at(s, x)
-            return (converged if margin(converged) <= 0 else x), s
+            return settle(s, x), s
     elif origin is not None:                  # admissible here too: untying only frees nodes
-        x = at(0.0, origin)
-        if margin(x) > 0:
+        x, value = at(0.0, origin)
+        if value > 0:
             return None
     else:
         return None
     first, count = s, steps if s < 1.0 else min(steps, 1)
     for step in range(1, count + 1):
         t = first + (1.0 - first) * step / count
-        trial = at(t, x)
-        if margin(trial) > 0:                   # between the two points, as far as passes
+        trial, value = at(t, x)
+        if value > 0:                           # between the two points, as far as passes
             between, share = furthest_move(lambda u: x + u * (trial - x), margin, problem.triangles, floor)
             s = s + share * (t - s)
-            converged = at(s, between)
-            return (converged if margin(converged) <= 0 else between), s
+            return settle(s, between), s
         x, s = trial, t
     return x, s
+
+
+def _thinnest_margin(problem, floor, shape_margin):
+    """``margin(points)``: how far the thinnest triangle is below :data:`RELEASE_THINNEST` of its
+    floor (relative), where it is; else the larger of that and ``shape_margin(points)`` (the
+    same sign either way, and the shape margin is not computed where it need not be)."""
+    def margin(points):
+        thinnest = float(np.min(injectivity.grid_areas(problem.grid, points) / floor))
+        crushed = 1.0 - thinnest / RELEASE_THINNEST
+        return crushed if crushed > 0 else max(shape_margin(points), crushed)
+    return margin
 
 
 def _converge_grid(problem, systems, rhs, offset, tied, x, floor, record):

@@ -23,7 +23,7 @@ TAPER_CELLS = 3
 MOVE_SAMPLES = 8
 #: How far :func:`furthest_move` steps back from the margin's root, in turn, until the margin
 #: passes there (its rounding noise is about 1e-13 of the move).
-ROOT_BACKOFF = (4e-12, 1e-9, 1e-6)
+ROOT_BACKOFF = (4e-12, 1e-9, 1e-6, 1e-4, 1e-2)
 
 
 def _anisotropy(state, points: np.ndarray) -> np.ndarray:
@@ -134,6 +134,7 @@ def plain_margin(state, warped: np.ndarray):
              _fit_per_component(state, warped) * (1.0 + 1e-9) + 1e-9)
 
     def margin(points):
+        """Relative excess of the worst component over W's figures (<= 0: no worse)."""
         if np.any(signed_areas(points, state.triangles) <= 0):
             return np.inf
         return max(float(np.max(_worst_per_component(state, _anisotropy(state, points)) / plain[0], initial=0.0)),

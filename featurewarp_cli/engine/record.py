@@ -219,8 +219,11 @@ def _why(record: "SolveRecord", k: int) -> str:
         causes.append("cut by a border that no similarity of it can follow, it gives way so that the outline "
                       "stays the warp's (--boundary release keeps its shape instead where that folds nothing)")
     if k in guard.released_components:
-        causes.append(f"relaxed to avoid fold-overs: it gives way where the background can thin no further "
-                      f"(its targets {guard.feature_blend:.2f} of the way from the plain warp's shape to its own)")
+        causes.append("relaxed to avoid fold-overs: untied, it keeps its own shape only as far as the background "
+                      "can thin" if guard.feature_blend >= 1.0 else
+                      f"relaxed to avoid fold-overs: untied, its targets {guard.feature_blend:.2f} of the way from the "
+                      f"plain warp's shape to its own, where the background could thin no further or it would end "
+                      f"worse than the plain warp")
     if k in guard.degraded_components:
         causes.append(f"moved towards the plain warp (blend {guard.plain_blend:.2f}, 0 = the plain warp) to be "
                       f"no more distorted than under it")
