@@ -109,7 +109,7 @@ def no_worse_than_plain(state, x: np.ndarray, warped: np.ndarray, record, proble
         return x
     if problem is not None:
         found = blend_search(problem, offending, floor, record,
-                             margin=lambda p: _fixable_margin(state, p, warped, plain, margin), origin=x, steps=0)
+                             margin=release_margin(state, warped, margin), origin=x, steps=0)
         if found is not None:
             best, blend = found
             best, taper = (best, 1.0) if ok(best) else _tapered_fix(state, best, warped, plain, margin, floor)
@@ -170,14 +170,19 @@ def _moves_towards_plain(state, points: np.ndarray, warped: np.ndarray, plain: t
     return moves
 
 
-def release_margin(state, warped: np.ndarray):
+def release_margin(state, warped: np.ndarray, margin=None):
     """The margin a release's blend must pass (:func:`guard.blend_search`): no component worse
-    than under W, or a tapered move towards W fixes it (:func:`_fixable_margin`); None where
-    W folds."""
-    margin = plain_margin(state, warped)
-    if margin is None:
-        return None
-    return lambda points: _fixable_margin(state, points, warped, margin.plain, margin)
+    than under W, or a tapered move towards W fixes it (:func:`_fixable_margin`); anything
+    passes where W folds. ``margin``: :func:`plain_margin`'s, where it is at hand; else it is
+    made at the first call (most solves never release, and W's figures cost a pass over the
+    features)."""
+    made = [] if margin is None else [margin]
+
+    def fixable(points):
+        if not made:
+            made.append(plain_margin(state, warped))
+        return -1.0 if made[0] is None else _fixable_margin(state, points, warped, made[0].plain, made[0])
+    return fixable
 
 
 def _fixable_margin(state, points: np.ndarray, warped: np.ndarray, plain: tuple, margin) -> float:
