@@ -26,14 +26,6 @@ MOVE_SAMPLES = 8
 ROOT_BACKOFF = (4e-12, 1e-9, 1e-6, 1e-4, 1e-2)
 
 
-def _anisotropy(state, points: np.ndarray) -> np.ndarray:
-    """Anisotropy of every triangle of a feature quad under ``points`` (inf elsewhere unused): (M,)."""
-    on = state.tri_component >= 0
-    out = np.ones(state.triangles.shape[0])
-    out[on] = quality.triangle_anisotropy(state.nodes, points, state.triangles[on])
-    return out
-
-
 def middle_nodes(nodes: np.ndarray, node_component: np.ndarray, n: int) -> np.ndarray:
     """(N,) bool: the feature nodes within half their component's radius of its centre (where a
     photo's keypoints gather), for :func:`no_worse_than_plain`. Depends on the grid and mask only."""
@@ -49,14 +41,72 @@ def middle_nodes(nodes: np.ndarray, node_component: np.ndarray, n: int) -> np.nd
     return middle
 
 
-def _fit_per_component(state, points: np.ndarray) -> np.ndarray:
-    """Anisotropy of each component's best-fitting affine map under ``points`` (what keypoints
-    measure), over all its nodes and over its middle (``state.node_middle``,
-    :func:`middle_nodes`: a rim kept at the middle's cost is worse for keypoints): (2, C)."""
-    n = state.features.n_components
-    fits = [quality.affine_fits(state.nodes[on], points[on], state.node_component[on], n)
-            for on in (state.node_component >= 0, state.node_middle)]
-    return np.stack([np.nan_to_num(quality.map_anisotropy(np.nan_to_num(f)), nan=1.0, posinf=1e9) for f in fits])
+class FeatureFigures:
+    """What the plain bound measures of the features under any positions (:meth:`of`): the
+    anisotropy of every feature triangle, and of each component's best-fitting affine map
+    over all its nodes and over its middle (:func:`middle_nodes`: a rim kept at the middle's
+    cost is worse for keypoints), which is what keypoints measure. Both are linear in the
+    positions, so what depends on the source alone is made once per grid and mask (the grid
+    state's ``figures``, made at its first use).
+
+    ``state``: the warper's grid state (``nodes``, ``triangles``, ``tri_component``,
+    ``node_component``, ``node_middle``, ``features``).
+    """
+
+    def __init__(self, state):
+        self.on = state.tri_component >= 0
+        triangles = state.triangles[self.on]
+        self.corners = [np.ascontiguousarray(triangles[:, k]) for k in range(3)]
+        a, b, c = (state.nodes[corner].astype(float) for corner in self.corners)
+        (s00, s10), (s01, s11) = (b - a).T, (c - a).T          # the source's edge matrix S
+        det = s00 * s11 - s01 * s10
+        self.inverse = (s11 / det, -s10 / det, -s01 / det, s00 / det)       # J = T S^-1 in T's terms
+        self.n = state.features.n_components
+        self.operators = [_fit_operator(state.nodes, state.node_component, self.n, on)
+                          for on in (state.node_component >= 0, state.node_middle)]
+
+    def of(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(M,) the anisotropy (sigma_max / sigma_min) of each feature triangle under ``points`` (1
+        elsewhere, inf where degenerate) and (2, C) of each component's two fits (1e9 where a
+        component has fewer than three nodes, or nodes on a line, or its fit is singular)."""
+        x, y = np.ascontiguousarray(points[:, 0]), np.ascontiguousarray(points[:, 1])
+        a, b, c = self.corners
+        t00, t10, t01, t11 = x.take(b) - x.take(a), y.take(b) - y.take(a), x.take(c) - x.take(a), y.take(c) - y.take(a)
+        u0, u1, v0, v1 = self.inverse
+        triangles = np.ones(self.on.size)
+        triangles[self.on] = quality.entry_anisotropy(t00 * u0 + t01 * u1, t00 * v0 + t01 * v1,
+                                             t10 * u0 + t11 * u1, t10 * v0 + t11 * v1)
+        fits = []
+        for operator, good in self.operators:
+            maps = (operator @ points).reshape(self.n, 2, 2)        # [k, b, a]: entry (a, b) of fit k
+            ratio = quality.entry_anisotropy(maps[:, 0, 0], maps[:, 1, 0], maps[:, 0, 1], maps[:, 1, 1])
+            fits.append(np.where(good, np.nan_to_num(ratio, nan=1.0, posinf=1e9), 1e9))
+        return triangles, np.stack(fits)
+
+
+def _fit_operator(nodes: np.ndarray, node_component: np.ndarray, n: int, on: np.ndarray):
+    """(operator, good): the (2 n, N) sparse matrix whose product with positions t gives, in
+    row 2 k + b and column a, entry (a, b) of component k's least-squares affine map over the
+    nodes ``on``: sum_i t_i[a] (S_k^-1 p_i)[b], with p_i a node's offset from its component's
+    centre in the source and S_k the sum of p_i p_i' (the translation drops out: the p_i sum
+    to 0); ``good``: (n,) components with three nodes or more, not on a line."""
+    import scipy.sparse as sp                 # SciPy: imported by the solves that need it
+
+    index = np.flatnonzero(on)
+    labels, source = node_component[index], nodes[index].astype(float)
+    count = np.bincount(labels, minlength=n)
+    centre = np.stack([np.bincount(labels, source[:, k], minlength=n) for k in range(2)], 1) / np.maximum(count, 1)[:, None]
+    offset = source - centre[labels]
+    spread = np.stack([np.stack([np.bincount(labels, offset[:, i] * offset[:, j], minlength=n) for j in range(2)], -1)
+                       for i in range(2)], -2)
+    det = spread[:, 0, 0] * spread[:, 1, 1] - spread[:, 0, 1] * spread[:, 1, 0]
+    good = (count >= 3) & (det > 1e-9 * np.maximum(spread[:, 0, 0] * spread[:, 1, 1], 1e-300))
+    inverse = np.zeros((n, 2, 2))
+    inverse[good] = np.linalg.inv(spread[good])
+    weights = np.einsum("kij,kj->ki", inverse[labels], offset)
+    rows = (2 * labels[:, None] + np.arange(2)).ravel()
+    operator = sp.csr_matrix((weights.ravel(), (rows, np.repeat(index, 2))), shape=(2 * n, node_component.size))
+    return operator, good
 
 
 def _worst_per_component(state, anisotropy: np.ndarray) -> np.ndarray:
@@ -93,7 +143,6 @@ def no_worse_than_plain(state, x: np.ndarray, warped: np.ndarray, record, proble
     margin = plain_margin(state, warped)
     if margin is None:
         return x
-    plain = margin.plain
     floor = barrier.SAFE_FRACTION * signed_areas(warped, state.triangles)
 
     def ok(points):
@@ -101,8 +150,8 @@ def no_worse_than_plain(state, x: np.ndarray, warped: np.ndarray, record, proble
 
     if ok(x):
         return x
-    offending = np.unique(state.tri_component[_worse(state, x, plain)])
-    fixed = _tapered_fix(state, x, warped, plain, margin, floor)
+    offending = np.unique(state.tri_component[_worse(state, margin.figures(x), margin.plain)])
+    fixed = _tapered_fix(state, x, warped, margin, floor)
     if fixed is not None:
         x, record.plain_blend = fixed
         record.degraded_components = [int(c) for c in offending if c >= 0]
@@ -112,7 +161,7 @@ def no_worse_than_plain(state, x: np.ndarray, warped: np.ndarray, record, proble
                              margin=release_margin(state, warped, margin), origin=x, steps=0)
         if found is not None:
             best, blend = found
-            best, taper = (best, 1.0) if ok(best) else _tapered_fix(state, best, warped, plain, margin, floor)
+            best, taper = (best, 1.0) if ok(best) else _tapered_fix(state, best, warped, margin, floor)
             record.degraded_components = [int(c) for c in offending]
             record.plain_blend = blend * taper
             return best
@@ -124,38 +173,55 @@ def no_worse_than_plain(state, x: np.ndarray, warped: np.ndarray, record, proble
 
 
 def plain_margin(state, warped: np.ndarray):
-    """``margin(points)``: how much more distorted than under W the worst component comes out
-    under ``points`` (relative; <= 0: no worse; inf with a fold), as its worst triangle or as
-    its best-fitting affine map; None where W itself folds a triangle. ``margin.plain`` holds
-    W's figures (per component: worst triangle, and affine fits)."""
+    """The :class:`PlainMargin` of W, or None where W itself folds a triangle."""
     if np.any(signed_areas(warped, state.triangles) <= 0):
         return None
-    plain = (_worst_per_component(state, _anisotropy(state, warped)) * (1.0 + 1e-9) + 1e-9,
-             _fit_per_component(state, warped) * (1.0 + 1e-9) + 1e-9)
+    return PlainMargin(state, warped)
 
-    def margin(points):
-        """Relative excess of the worst component over W's figures (<= 0: no worse)."""
-        if np.any(signed_areas(points, state.triangles) <= 0):
+
+class PlainMargin:
+    """``margin(points)``: how much more distorted than under W the worst component comes out
+    under ``points`` (relative; <= 0: no worse; inf with a fold), as its worst triangle or as
+    its best-fitting affine map. ``plain`` holds W's figures (per component: worst triangle,
+    and affine fits), with a relative slack of 1e-9 for rounding."""
+
+    def __init__(self, state, warped: np.ndarray):
+        self.state = state
+        triangles, fits = self.figures(warped)
+        self.plain = (_worst_per_component(state, triangles) * (1.0 + 1e-9) + 1e-9, fits * (1.0 + 1e-9) + 1e-9)
+
+    def figures(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(the anisotropy of every feature triangle (M,), and of each component's fits (2, C))
+        under ``points``."""
+        if self.state.figures is None:
+            self.state.figures = FeatureFigures(self.state)
+        return self.state.figures.of(points)
+
+    def __call__(self, points: np.ndarray, figures=None) -> float:
+        """Relative excess of the worst component over W's figures (<= 0: no worse); ``figures``:
+        :meth:`figures` of ``points``, where they are at hand."""
+        if np.any(signed_areas(points, self.state.triangles) <= 0):
             return np.inf
-        return max(float(np.max(_worst_per_component(state, _anisotropy(state, points)) / plain[0], initial=0.0)),
-                   float(np.max(_fit_per_component(state, points) / plain[1], initial=0.0))) - 1.0
-
-    margin.plain = plain
-    return margin
+        triangles, fits = self.figures(points) if figures is None else figures
+        return max(float(np.max(_worst_per_component(self.state, triangles) / self.plain[0], initial=0.0)),
+                   float(np.max(fits / self.plain[1], initial=0.0))) - 1.0
 
 
-def _worse(state, points: np.ndarray, plain: tuple) -> np.ndarray:
-    """Feature triangles more anisotropic under ``points`` than their component's worst under W,
-    and every triangle of a component whose affine fit is (``plain``: both figures under W)."""
+def _worse(state, figures: tuple, plain: tuple) -> np.ndarray:
+    """Feature triangles more anisotropic than their component's worst under W, and every
+    triangle of a component whose affine fit is (``figures``: :meth:`PlainMargin.figures` of the
+    positions; ``plain``: both figures under W)."""
     component = np.maximum(state.tri_component, 0)
-    fit_worse = np.any(_fit_per_component(state, points) > plain[1], axis=0)
-    return (state.tri_component >= 0) & ((_anisotropy(state, points) > plain[0][component]) | fit_worse[component])
+    triangles, fits = figures
+    fit_worse = np.any(fits > plain[1], axis=0)
+    return (state.tri_component >= 0) & ((triangles > plain[0][component]) | fit_worse[component])
 
 
-def _moves_towards_plain(state, points: np.ndarray, warped: np.ndarray, plain: tuple):
+def _moves_towards_plain(state, points: np.ndarray, warped: np.ndarray, margin, figures=None):
     """The moves of :func:`_tapered_fix`: ``move(t)`` from ``points`` (t = 1) towards W (t = 0)
-    around the offending triangles, then around the offending components, tapered."""
-    worse = _worse(state, points, plain)
+    around the offending triangles, then around the offending components, tapered
+    (``margin``: W's :class:`PlainMargin`; ``figures``: its figures of ``points``, if at hand)."""
+    worse = _worse(state, margin.figures(points) if figures is None else figures, margin.plain)
     n_quads = state.features.weight.size
     local = np.zeros(n_quads, bool)
     local[np.flatnonzero(worse) % n_quads] = True
@@ -181,24 +247,25 @@ def release_margin(state, warped: np.ndarray, margin=None):
     def fixable(points):
         if not made:
             made.append(plain_margin(state, warped))
-        return -1.0 if made[0] is None else _fixable_margin(state, points, warped, made[0].plain, made[0])
+        return -1.0 if made[0] is None else _fixable_margin(state, points, warped, made[0])
     return fixable
 
 
-def _fixable_margin(state, points: np.ndarray, warped: np.ndarray, plain: tuple, margin) -> float:
+def _fixable_margin(state, points: np.ndarray, warped: np.ndarray, margin) -> float:
     """``margin(points)``, or where that fails the best margin of the tapered moves' full
     step (<= 0: :func:`_tapered_fix` finds a fix)."""
-    value = margin(points)
+    figures = margin.figures(points)
+    value = margin(points, figures)
     if value <= 0:
         return value
-    return min(margin(move(0.0)) for move in _moves_towards_plain(state, points, warped, plain))
+    return min(margin(move(0.0)) for move in _moves_towards_plain(state, points, warped, margin, figures))
 
 
-def _tapered_fix(state, points: np.ndarray, warped: np.ndarray, plain: tuple, margin, floor):
+def _tapered_fix(state, points: np.ndarray, warped: np.ndarray, margin, floor):
     """``points`` moved towards W around the offending triangles (then components), tapered,
     as little as passes (``margin`` <= 0): (positions, t) as :func:`furthest_move`, or None
     where even the whole move does not pass."""
-    for move in _moves_towards_plain(state, points, warped, plain):
+    for move in _moves_towards_plain(state, points, warped, margin):
         if margin(move(0.0)) <= 0:
             return furthest_move(move, margin, state.triangles, floor)
     return None

@@ -55,9 +55,8 @@ def triangle_anisotropy(source: np.ndarray, target: np.ndarray, triangles: np.nd
     """Ratio of the larger to the smaller singular value of each triangle's affine map, (M,)
     (inf for a degenerate image).
 
-    The map is J = T S^-1 with S and T the triangle's edge matrices; its singular values
-    come in closed form from p = |(J00 + J11, J10 - J01)| and q = |(J00 - J11, J10 + J01)|
-    (sigma = (p + q) / 2, |p - q| / 2), and J's inverse of S as the 2x2 adjugate.
+    The map is J = T S^-1 with S and T the triangle's edge matrices, S's inverse as the 2x2
+    adjugate; its singular values in closed form (:func:`entry_anisotropy`).
     """
     a, b, c = (np.ascontiguousarray(triangles[:, k]) for k in range(3))
     sx, sy = np.ascontiguousarray(source[:, 0]), np.ascontiguousarray(source[:, 1])
@@ -69,6 +68,13 @@ def triangle_anisotropy(source: np.ndarray, target: np.ndarray, triangles: np.nd
     det = s00 * s11 - s01 * s10
     j00, j01 = (t00 * s11 - t01 * s10) / det, (t01 * s00 - t00 * s01) / det
     j10, j11 = (t10 * s11 - t11 * s10) / det, (t11 * s00 - t10 * s01) / det
+    return entry_anisotropy(j00, j01, j10, j11)
+
+
+def entry_anisotropy(j00, j01, j10, j11) -> np.ndarray:
+    """sigma_max / sigma_min of the 2x2 maps [[j00, j01], [j10, j11]], given entry by entry
+    (arrays of one shape; inf where singular). The singular values come in closed form from
+    p = |(j00 + j11, j10 - j01)| and q = |(j00 - j11, j10 + j01)|: (p + q) / 2, |p - q| / 2."""
     p = np.hypot(j00 + j11, j10 - j01)
     q = np.hypot(j00 - j11, j10 + j01)
     with np.errstate(divide="ignore", invalid="ignore"):

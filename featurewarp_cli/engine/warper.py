@@ -86,6 +86,7 @@ class _GridState:
     systems_by_ties: dict = field(default_factory=dict) # the same, by Ties.key() (skips the numbering)
     scale_solvers: dict = field(default_factory=dict)   # components.ScaleSolver by ties
     node_middle: np.ndarray | None = None  # nodes in their component's middle (plain_bound.middle_nodes)
+    figures: object = None                # plain_bound.FeatureFigures, made at its first use
 
 
 class FeatureWarper:
