@@ -232,3 +232,22 @@ def test_the_inverse_entries_match_a_dense_inverse_with_held_and_tied_nodes():
     columns = np.array([grid.nx + 3, 0, 9, 17])
     assert np.allclose(reduced.entries(rows, columns), dense[np.ix_(rows, columns)], atol=1e-10)
     assert np.allclose(reduced.entries(rows, columns)[[0, 4]], 0.0)            # held nodes do not move
+
+
+def test_where_no_release_is_injective_the_result_is_the_furthest_point_from_w_that_keeps_half_a_floor(monkeypatch):
+    """The guard's last resort (both release rounds found nothing; forced here): W moved
+    towards the folded solution up to where a triangle reaches half its floor, so nothing
+    folds and nothing is thinner than that (the never-worse-than-plain step after it is left out)."""
+    from featurewarp_cli.engine import plain_bound
+
+    y, x = np.mgrid[0:60, 0:80]
+    mask = ((x - 40) ** 2 + (y - 30) ** 2 < 9**2) | ((x - 17) ** 2 + (y - 17) ** 2 < 7**2)
+    monkeypatch.setattr(release, "blend_search", lambda *args, **kwargs: None)
+    monkeypatch.setattr(plain_bound, "no_worse_than_plain", lambda state, x, *args, **kwargs: x)
+    warp = load_warp("swirl")(80, 60, angle=360)
+    mesh = FeatureWarper(80, 60, mask, feature_weight=100.0).solve(warp, "similarity")
+    assert mesh.record.guard.fallback
+    assert mesh.flips() == 0
+    ratio = signed_areas(mesh.target, mesh.triangles) / signed_areas(warp(mesh.source), mesh.triangles)
+    assert ratio.min() >= 0.5 * barrier.SAFE_FRACTION * (1 - 1e-9)
+    assert ratio.min() <= 0.5 * barrier.SAFE_FRACTION * (1 + 1e-6)       # as far as that allows

@@ -242,9 +242,11 @@ def _release(problem: Problem, x, floor, record: GuardRecord):
         best, record.feature_blend = found
         record.released_components = [int(c) for c in released]
         return best
-    record.fallback = True
+    from .plain_bound import furthest_move      # it imports this module
+
+    record.fallback = True                # nothing injective found: from W towards x, up to half a floor
     warped = problem.warped
-    return warped + injectivity.max_step(warped, x, tris) * 0.95 * (x - warped)
+    return furthest_move(lambda t: warped + t * (x - warped), lambda points: -1.0, tris, floor)[0]
 
 
 def blend_search(problem: Problem, released: np.ndarray, floor, record: GuardRecord, margin=None, origin=None,
