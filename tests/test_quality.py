@@ -158,3 +158,30 @@ def test_compare_rejects_mode(files):
     out = run("compare", "arc", str(files / "in.png"), str(files / "p.png"), "--mode", "rigid")
     assert out.code == 2
     assert not (files / "p.png").exists()
+
+
+def test_the_plain_bounds_fits_are_exact_far_from_the_origin():
+    """FeatureFigures' fits (linear operators made once) match a least-squares fit of centred
+    positions on small components 12 000 px from the origin (weights not centred again: 5e-11)."""
+    from types import SimpleNamespace
+
+    from featurewarp_cli.engine import quality
+    from featurewarp_cli.engine.plain_bound import FeatureFigures, middle_nodes
+
+    rng = np.random.default_rng(3)
+    nodes = np.concatenate([12000.0 + 3.0 * rng.random((9, 2)), 9000.0 + 2.0 * rng.random((7, 2)),
+                            rng.random((4, 2))])
+    node_component = np.repeat([0, 1, 2, -1], [9, 7, 3, 1])
+    state = SimpleNamespace(nodes=nodes, triangles=np.array([[0, 1, 2], [9, 10, 11]]),
+                            tri_component=np.array([0, 1]), node_component=node_component,
+                            node_middle=middle_nodes(nodes, node_component, 3),
+                            features=SimpleNamespace(n_components=3))
+    maps = rng.normal(size=(3, 2, 2)) + 2.0 * np.eye(2)
+    points = nodes.copy()
+    for k in range(3):
+        on = node_component == k
+        points[on] = (nodes[on] - nodes[on].mean(axis=0)) @ maps[k].T + 500.0 * k
+    _, fits = FeatureFigures(state).of(points)
+    expected = quality.map_anisotropy(maps[:2])
+    np.testing.assert_allclose(fits[0, :2], expected, rtol=1e-12)
+    assert fits[0, 2] == pytest.approx(quality.map_anisotropy(maps[2:])[0], rel=1e-11)   # 3 points: exact

@@ -1,8 +1,10 @@
 """Never worse than plain: where a component comes out more distorted than under the warp W
 itself, the guard's result is moved towards W as little as makes it no worse.
 
-``state`` below is the warper's grid state: ``nodes``, ``triangles``, ``grid``, ``features``
-and ``tri_component`` (the component of each triangle of a feature quad, -1 elsewhere).
+``state`` below is the warper's grid state: ``nodes``, ``triangles``, ``grid``, ``features``,
+``tri_component`` (the component of each triangle of a feature quad, -1 elsewhere),
+``node_component`` and ``node_middle`` (:func:`middle_nodes`); :class:`PlainMargin` stores its
+:class:`FeatureFigures` there as ``figures``.
 """
 
 from __future__ import annotations
@@ -46,8 +48,8 @@ class FeatureFigures:
     anisotropy of every feature triangle, and of each component's best-fitting affine map
     over all its nodes and over its middle (:func:`middle_nodes`: a rim kept at the middle's
     cost is worse for keypoints), which is what keypoints measure. Both are linear in the
-    positions, so what depends on the source alone is made once per grid and mask (the grid
-    state's ``figures``, made at its first use).
+    positions, so what depends on the source alone is made once per grid state (the state's
+    ``figures``, made at its first use; a state's grid and mask do not change).
 
     ``state``: the warper's grid state (``nodes``, ``triangles``, ``tri_component``,
     ``node_component``, ``node_middle``, ``features``).
@@ -67,20 +69,22 @@ class FeatureFigures:
 
     def of(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(M,) the anisotropy (sigma_max / sigma_min) of each feature triangle under ``points`` (1
-        elsewhere, inf where degenerate) and (2, C) of each component's two fits (1e9 where a
-        component has fewer than three nodes, or nodes on a line, or its fit is singular)."""
+        elsewhere, inf where degenerate) and (2, C) of each component's two fits (at most 1e9:
+        1e9 where a component has fewer than three nodes, or nodes on a line, or its fit is
+        singular or nearly)."""
         x, y = np.ascontiguousarray(points[:, 0]), np.ascontiguousarray(points[:, 1])
         a, b, c = self.corners
-        t00, t10, t01, t11 = x.take(b) - x.take(a), y.take(b) - y.take(a), x.take(c) - x.take(a), y.take(c) - y.take(a)
+        t00, t10 = x.take(b) - x.take(a), y.take(b) - y.take(a)             # T's columns: edges ab, ac
+        t01, t11 = x.take(c) - x.take(a), y.take(c) - y.take(a)
         u0, u1, v0, v1 = self.inverse
         triangles = np.ones(self.on.size)
         triangles[self.on] = quality.entry_anisotropy(t00 * u0 + t01 * u1, t00 * v0 + t01 * v1,
-                                             t10 * u0 + t11 * u1, t10 * v0 + t11 * v1)
+                                                      t10 * u0 + t11 * u1, t10 * v0 + t11 * v1)
         fits = []
         for operator, good in self.operators:
             maps = (operator @ points).reshape(self.n, 2, 2)        # [k, b, a]: entry (a, b) of fit k
             ratio = quality.entry_anisotropy(maps[:, 0, 0], maps[:, 1, 0], maps[:, 0, 1], maps[:, 1, 1])
-            fits.append(np.where(good, np.nan_to_num(ratio, nan=1.0, posinf=1e9), 1e9))
+            fits.append(np.where(good, np.minimum(np.nan_to_num(ratio, nan=1.0, posinf=1e9), 1e9), 1e9))
         return triangles, np.stack(fits)
 
 
@@ -88,14 +92,15 @@ def _fit_operator(nodes: np.ndarray, node_component: np.ndarray, n: int, on: np.
     """(operator, good): the (2 n, N) sparse matrix whose product with positions t gives, in
     row 2 k + b and column a, entry (a, b) of component k's least-squares affine map over the
     nodes ``on``: sum_i t_i[a] (S_k^-1 p_i)[b], with p_i a node's offset from its component's
-    centre in the source and S_k the sum of p_i p_i' (the translation drops out: the p_i sum
-    to 0); ``good``: (n,) components with three nodes or more, not on a line."""
+    centre in the source and S_k the sum of p_i p_i' (the translation drops out: the weights
+    sum to 0 over each component); ``good``: (n,) components with three nodes or more, not on a line."""
     import scipy.sparse as sp                 # SciPy: imported by the solves that need it
 
     index = np.flatnonzero(on)
     labels, source = node_component[index], nodes[index].astype(float)
     count = np.bincount(labels, minlength=n)
-    centre = np.stack([np.bincount(labels, source[:, k], minlength=n) for k in range(2)], 1) / np.maximum(count, 1)[:, None]
+    centre = np.stack([np.bincount(labels, source[:, k], minlength=n) for k in range(2)], 1)
+    centre /= np.maximum(count, 1)[:, None]
     offset = source - centre[labels]
     spread = np.stack([np.stack([np.bincount(labels, offset[:, i] * offset[:, j], minlength=n) for j in range(2)], -1)
                        for i in range(2)], -2)
@@ -104,6 +109,10 @@ def _fit_operator(nodes: np.ndarray, node_component: np.ndarray, n: int, on: np.
     inverse = np.zeros((n, 2, 2))
     inverse[good] = np.linalg.inv(spread[good])
     weights = np.einsum("kij,kj->ki", inverse[labels], offset)
+    # They sum to 0 over a component only to rounding, which the positions' size (thousands of
+    # pixels) would amplify: centred again, a fit is as exact as fitted from centred positions.
+    weights -= (np.stack([np.bincount(labels, weights[:, b], minlength=n) for b in range(2)], 1)
+                / np.maximum(count, 1)[:, None])[labels]
     rows = (2 * labels[:, None] + np.arange(2)).ravel()
     operator = sp.csr_matrix((weights.ravel(), (rows, np.repeat(index, 2))), shape=(2 * n, node_component.size))
     return operator, good
@@ -148,10 +157,11 @@ def no_worse_than_plain(state, x: np.ndarray, warped: np.ndarray, record, proble
     def ok(points):
         return margin(points) <= 0
 
-    if ok(x):
+    figures = margin.figures(x)
+    if margin(x, figures) <= 0:
         return x
-    offending = np.unique(state.tri_component[_worse(state, margin.figures(x), margin.plain)])
-    fixed = _tapered_fix(state, x, warped, margin, floor)
+    offending = np.unique(state.tri_component[_worse(state, figures, margin.plain)])
+    fixed = _tapered_fix(state, x, warped, margin, floor, figures)
     if fixed is not None:
         x, record.plain_blend = fixed
         record.degraded_components = [int(c) for c in offending if c >= 0]
@@ -261,11 +271,12 @@ def _fixable_margin(state, points: np.ndarray, warped: np.ndarray, margin) -> fl
     return min(margin(move(0.0)) for move in _moves_towards_plain(state, points, warped, margin, figures))
 
 
-def _tapered_fix(state, points: np.ndarray, warped: np.ndarray, margin, floor):
+def _tapered_fix(state, points: np.ndarray, warped: np.ndarray, margin, floor, figures=None):
     """``points`` moved towards W around the offending triangles (then components), tapered,
     as little as passes (``margin`` <= 0): (positions, t) as :func:`furthest_move`, or None
-    where even the whole move does not pass."""
-    for move in _moves_towards_plain(state, points, warped, margin):
+    where even the whole move does not pass (``figures``: :meth:`PlainMargin.figures` of
+    ``points``, if at hand)."""
+    for move in _moves_towards_plain(state, points, warped, margin, figures):
         if margin(move(0.0)) <= 0:
             return furthest_move(move, margin, state.triangles, floor)
     return None
