@@ -99,8 +99,8 @@ def _fit_operator(nodes: np.ndarray, node_component: np.ndarray, n: int, on: np.
     index = np.flatnonzero(on)
     labels, source = node_component[index], nodes[index].astype(float)
     count = np.bincount(labels, minlength=n)
-    centre = np.stack([np.bincount(labels, source[:, k], minlength=n) for k in range(2)], 1)
-    centre /= np.maximum(count, 1)[:, None]
+    sums = np.stack([np.bincount(labels, source[:, k], minlength=n) for k in range(2)], 1)
+    centre = sums / np.maximum(count, 1)[:, None]                   # (bincount of nothing is int)
     offset = source - centre[labels]
     spread = np.stack([np.stack([np.bincount(labels, offset[:, i] * offset[:, j], minlength=n) for j in range(2)], -1)
                        for i in range(2)], -2)
