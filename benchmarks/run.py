@@ -75,6 +75,10 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+from featurewarp_cli import blas  # noqa: E402
+
+blas.one_thread()           # the in-process sections run as the command does (featurewarp_cli.blas)
+
 import cv2  # noqa: E402
 import numpy as np  # noqa: E402
 

@@ -5,9 +5,13 @@ from __future__ import annotations
 import os
 import sys
 
-import cv2
-import numpy as np
-import pytest
+from featurewarp_cli import blas
+
+blas.one_thread()                       # as the command runs, before numpy loads OpenBLAS
+
+import cv2  # noqa: E402
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
 
 sys.path.insert(0, os.path.dirname(__file__))
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))   # samples.scenes

@@ -381,3 +381,17 @@ def test_broken_pipe_is_one_line(tmp_path):
                          shell=True, capture_output=True, timeout=120)
     lines = run.stderr.decode().splitlines()
     assert lines == ["featurewarp: error: cannot write -: Broken pipe"]
+
+
+def test_the_command_runs_openblas_with_one_thread_unless_told_otherwise():
+    """A fresh ``featurewarp`` process: OPENBLAS_NUM_THREADS is 1 by the time numpy loads,
+    unless the environment sets it (featurewarp_cli.blas)."""
+    probe = ("import os, sys; from featurewarp_cli.cli import main; "
+             "main.cli.add_command(main.click.Command('probe', callback=lambda: print("
+             "os.environ.get('OPENBLAS_NUM_THREADS'), 'numpy' in sys.modules))); main.main(['probe'])")
+    env = {key: value for key, value in os.environ.items() if key != "OPENBLAS_NUM_THREADS"}
+    fresh = subprocess.run([sys.executable, "-c", probe], env=env, capture_output=True, text=True, timeout=60)
+    assert fresh.stdout.split() == ["1", "False"], fresh.stderr
+    told = subprocess.run([sys.executable, "-c", probe], env={**env, "OPENBLAS_NUM_THREADS": "3"},
+                          capture_output=True, text=True, timeout=60)
+    assert told.stdout.split() == ["3", "False"], told.stderr

@@ -18,7 +18,7 @@ import warnings
 
 import click
 
-from .. import __version__, plugins
+from .. import __version__, blas, plugins
 from .deform import deform_command
 from .diff import diff_command
 from .edit import edit_command
@@ -203,6 +203,7 @@ def main(argv=None):
     failures (and for anything unexpected). ``--debug``, before the command or
     anywhere after it (up to a ``--``), also prints the traceback of processing failures.
     """
+    blas.one_thread()                      # before numpy loads OpenBLAS (see featurewarp_cli.blas)
     argv = sys.argv[1:] if argv is None else list(argv)
     end = argv.index("--") if "--" in argv else len(argv)
     debug = "--debug" in argv[:end]
