@@ -216,10 +216,11 @@ def _newton_direction(solve, optimum, normal, movable, points, triangles, blocks
     return direction, True
 
 
-class _InverseRows:
+class InverseRows:
     """The least-squares inverse S between some nodes (G = P' S P per axis), from
     back-substitutions of unit forces (``inverse(rows, columns)`` -> (2, r, c) entries), kept
-    as the barrier's active set grows: S does not change within a :func:`converge` run."""
+    as the barrier's active set grows: S is the factored system's, the same for every
+    :func:`converge` run on it (a release's path of minima passes one instance to each)."""
 
     def __init__(self, inverse, n: int):
         self.inverse = inverse
@@ -267,7 +268,7 @@ class _InverseRows:
         return self.last[1]
 
 
-def _direct_direction(rows: _InverseRows, solve, optimum, points, triangles, blocks, gradient):
+def _direct_direction(rows: InverseRows, solve, optimum, points, triangles, blocks, gradient):
     """The Newton direction -(H + B)^-1 g exactly, by the Woodbury identity on the barrier's
     active nodes, or None where H + B is not positive definite.
 
@@ -276,7 +277,7 @@ def _direct_direction(rows: _InverseRows, solve, optimum, points, triangles, blo
     singular where nodes are held or share a feature's unknown):
     (H + B)^-1 = S - S P (D - D C M^-1 C' D) P' S with M = I + C' D C, which is positive
     definite exactly when H + B is. Two back-substitutions and dense work of the active
-    nodes' size; S's entries grow with the active set (:class:`_InverseRows`)."""
+    nodes' size; S's entries grow with the active set (:class:`InverseRows`)."""
     nodes, local = np.unique(triangles, return_inverse=True)
     u = nodes.size
     dof = (2 * local.reshape(-1, 3)[:, :, None] + np.arange(2)).reshape(-1, 6)
@@ -320,9 +321,10 @@ def converge(solve, normal, movable: np.ndarray, x: np.ndarray, triangles: np.nd
     max_steps : int, optional
         Newton steps at most (default :data:`MAX_STEPS`; an interactive preview takes a few:
         not converged, bounded).
-    inverse : callable, optional
+    inverse : callable or InverseRows, optional
         ``inverse(rows, columns)`` -> (2, r, c): the moves of the nodes ``rows`` in x and in y
-        under a unit force on each node of ``columns`` (``solve``'s linear part). With it, a
+        under a unit force on each node of ``columns`` (``solve``'s linear part), or an
+        :class:`InverseRows` of it that earlier runs on the same system filled. With it, a
         Newton system whose barrier touches few nodes (:data:`_DIRECT_NODES`,
         :data:`_DIRECT_WORK`) is solved exactly with the exact Hessian wherever that is positive
         definite (:func:`_direct_direction`), else with the bound; other systems by conjugate
@@ -345,7 +347,7 @@ def converge(solve, normal, movable: np.ndarray, x: np.ndarray, triangles: np.nd
         return 0.5 * float((normal.dot(offset) * offset).sum()) + float((kappa * clamped_log(current / floor)[0]).sum())
 
     near, bound, value = False, False, energy(x)
-    rows = None if inverse is None else _InverseRows(inverse, x.shape[0])
+    rows = inverse if inverse is None or isinstance(inverse, InverseRows) else InverseRows(inverse, x.shape[0])
     for step in range(max_steps):
         ratio = areas(x) / floor
         active = np.flatnonzero(ratio < 1.0)

@@ -114,6 +114,8 @@ class Problem:
         ``rebuild(edges, released)`` -> (systems, rhs, offset, tied) for other edge
         targets with the components ``released`` untied.
     timings : dict
+    inverses : dict
+        :meth:`inverse`'s, by system.
     margin : callable or None
         ``margin(positions)`` <= 0 where a release's blend is acceptable: no component worse
         than under W, or fixable by a tapered move (:func:`blend_search`,
@@ -140,11 +142,16 @@ class Problem:
     timings: dict
     preview: bool = False
     margin: object = None
+    inverses: dict = field(default_factory=dict)
 
     def inverse(self, systems):
-        """``inverse(rows, columns)``: (2, r, c) entries of ``systems``' inverse
-        (:meth:`AxisSystems.entries`), for :func:`barrier.converge`."""
-        return _timed(self.timings, systems.entries)
+        """:class:`barrier.InverseRows` of ``systems``' inverse (:meth:`AxisSystems.entries`), for
+        :func:`barrier.converge`: one per system, so the runs of a release's path share its
+        back-substitutions."""
+        if id(systems) not in self.inverses:
+            self.inverses[id(systems)] = (systems, barrier.InverseRows(_timed(self.timings, systems.entries),
+                                                                       self.warped.shape[0]))
+        return self.inverses[id(systems)][1]
 
     def solver(self, systems, rhs, offset):
         """``solve(force)``: positions for these constants plus a force per node."""
