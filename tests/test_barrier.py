@@ -251,3 +251,43 @@ def test_where_no_release_is_injective_the_result_is_the_furthest_point_from_w_t
     ratio = signed_areas(mesh.target, mesh.triangles) / signed_areas(warp(mesh.source), mesh.triangles)
     assert ratio.min() >= 0.5 * barrier.SAFE_FRACTION * (1 - 1e-9)
     assert ratio.min() <= 0.5 * barrier.SAFE_FRACTION * (1 + 1e-6)       # as far as that allows
+
+
+def _strips(stretch: float, squeeze: float):
+    """``spread_stretch``'s inputs for 50 background triangles stretched ``stretch`` times and
+    50 squeezed to ``squeeze`` of their area under W (unit right triangles side by side), at
+    feature scale 1; growing the features to scale m takes m - 1 off the stretch and squeezes
+    the others by 1 - (m - 1) / 2 more."""
+    base = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
+    warped = np.concatenate([base + (2.0 * k, 0.0) for k in range(100)])
+    triangles = np.arange(300).reshape(100, 3)
+
+    def solve(ab):
+        grown = ab[0, 0] - 1.0
+        points = warped.copy()
+        points[2::3, 1] = np.repeat([stretch - grown, squeeze * (1.0 - 0.5 * grown)], 50)
+        return (points,)
+    return solve, triangles, warped
+
+
+def test_the_spread_grows_the_features_continuously_from_where_the_stretch_passes_its_threshold():
+    """Just above SPREAD_ABOVE the features grow just a little (they used to jump to where the
+    stretch meets the compression), and the growth stops where the stretch is down to
+    SPREAD_ABOVE or meets the compression, whichever comes first."""
+    from featurewarp_cli.engine import scale_search
+
+    ab, scalable, background = np.array([[1.0, 0.0]]), np.array([True]), np.ones(100, bool)
+
+    def grown(stretch, squeeze):
+        solve, triangles, warped = _strips(stretch, squeeze)
+        found, result = scale_search.spread_stretch(solve, ab, solve(ab), scalable, triangles, warped, background)
+        heights = result[0][2::3, 1]
+        return found[0, 0], heights.max(), heights.min()
+
+    above = scale_search.SPREAD_ABOVE
+    scale, _, _ = grown(above * (1 + 1e-12), 0.9)
+    assert 1.0 <= scale < 1.0 + 1e-9
+    scale, high, low = grown(above + 0.8, 0.9)            # down to SPREAD_ABOVE before the balance
+    assert scale == pytest.approx(1.8, rel=1e-9) and high == pytest.approx(above, rel=1e-9) and high * low > 1
+    scale, high, low = grown(6.0, 0.3)                    # the balance first
+    assert 1.0 < scale < 2.0 and high > above and high * low == pytest.approx(1.0, rel=1e-9)

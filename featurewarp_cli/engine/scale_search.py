@@ -112,11 +112,13 @@ def spread_stretch(solve, ab: np.ndarray, result, scalable: np.ndarray, triangle
     When the largest background area ratio against W exceeds :data:`SPREAD_ABOVE` and
     outweighs the largest compression, the ``scalable`` components' (a, b) are multiplied
     by one factor m in [1, SPREAD_RANGE]: the point where the largest stretch equals the
-    largest compression (log max + log min changes sign; a root found to convergence by
-    Brent's method, SciPy's ``brentq``), unless a triangle reaches its floor before (half of
-    :data:`SCALE_FLOOR` of its area under W, or half its area in ``result`` where that is
-    smaller already; the first root of quadratics, :func:`injectivity.max_step`). Shrinking is
-    not searched here: squeezed features are :func:`shrink_to_fit`'s.
+    largest compression (log max + log min changes sign), or where it has come down to
+    SPREAD_ABOVE if that comes first, so that a stretch just above SPREAD_ABOVE grows the
+    features just a little (no jump where a one-ulp change crosses it); a root found to
+    convergence by Brent's method (SciPy's ``brentq``), unless a triangle reaches its floor
+    before (half of :data:`SCALE_FLOOR` of its area under W, or half its area in ``result``
+    where that is smaller already; the first root of quadratics, :func:`injectivity.max_step`).
+    Shrinking is not searched here: squeezed features are :func:`shrink_to_fit`'s.
 
     Growing a feature stretches the strip over it sideways too, so the area ratio there
     falls more slowly than the strip's height: a subject that fills the height and most of
@@ -156,9 +158,9 @@ def spread_stretch(solve, ab: np.ndarray, result, scalable: np.ndarray, triangle
     grown = solve(np.where(scalable[:, None], ab * SPREAD_RANGE, ab))
     reach = max_step(result[0], grown[0], triangles, floor)       # the solution is affine in m
 
-    def balance(t):
+    def balance(t):                           # both > 0 at t = 0; the first to reach 0 stops the growth
         high, low = _log_extremes(result[0] + t * (grown[0] - result[0]), reference, tris)
-        return high + low
+        return min(high + low, high - np.log(SPREAD_ABOVE))
 
     if reach > 0 and balance(reach) <= 0:
         from scipy.optimize import brentq     # SciPy: imported where a spread is searched
