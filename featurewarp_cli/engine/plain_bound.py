@@ -15,7 +15,7 @@ import numpy as np
 from . import barrier, quality
 from .grid import signed_areas
 from .guard import Problem, blend_search
-from .injectivity import max_step
+from .injectivity import grid_areas, max_step
 
 #: Cells over which the move towards W tapers off around offending triangles
 #: (:func:`no_worse_than_plain`).
@@ -210,7 +210,7 @@ class PlainMargin:
     def __call__(self, points: np.ndarray, figures=None) -> float:
         """Relative excess of the worst component over W's figures (<= 0: no worse); ``figures``:
         :meth:`figures` of ``points``, where they are at hand."""
-        if np.any(signed_areas(points, self.state.triangles) <= 0):
+        if np.any(grid_areas(self.state.grid, points) <= 0):      # the grid's own triangles, by slicing
             return np.inf
         triangles, fits = self.figures(points) if figures is None else figures
         return max(float(np.max(_worst_per_component(self.state, triangles) / self.plain[0], initial=0.0)),
