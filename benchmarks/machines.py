@@ -9,8 +9,8 @@ output with the default machine's (the first one):
   in a temporary directory; per picture the RMSE (grey levels of the decoded JPEGs, all
   channels, as tests/test_readme.py does), whether the bytes are equal, and the RMSE to the
   committed picture in docs/gallery (the test's limit is 2);
-* a few of benchmarks/stability.py's cases at ``--size`` px: the largest node move (px)
-  of the solved mesh and the RMSE of the rendered image.
+* a few of benchmarks/stability.py's cases at ``--size`` px, and :data:`PHOTO_CASES` (other
+  photos): the largest node move (px) of the solved mesh and the RMSE of the rendered image.
 
 Knobs (checked by hashing kernel outputs; ``OPENBLAS_CORETYPE`` acts on all three OpenBLAS
 copies: numpy's and scipy's scipy_openblas and the system one CHOLMOD links):
@@ -76,6 +76,11 @@ QUICK_MACHINES = ("default", "blas-prescott", "numpy-x86-v3", "opencv-sse4")
 #: Indices into stability.CASES: swirl rigid, arc similarity, cylinder, fish, stretch sy 2, inflate.
 CASES = (0, 3, 5, 7, 8, 10)
 QUICK_CASES = (0, 3)
+#: Cases on other photos that once depended on the machine: (photo, mask, longest side px,
+#: preset, parameters, mode). The coins under swirl 90 converge to one of two nearby minima
+#: (0.02 px apart) depending on the BLAS kernel; until the plain bound had EXACT_ENOUGH's
+#: headroom, the one Sandybridge's kernels reach was moved all the way to W (24 px).
+PHOTO_CASES = (("coins.png", "coins_mask.png", 256, "swirl", {"angle": 90}, "similarity"),)
 #: The pictures --quick makes: two that an AVX2 machine moved (sphere past the limit) and two it did not.
 QUICK_PICTURES = ("swirl.jpg", "shapes-swirl-grid.jpg", "squeeze.jpg", "sphere.jpg")
 GALLERY_LIMIT = 2.0
@@ -117,7 +122,8 @@ def run_gallery(out: Path, commands: list[str]) -> None:
 
 
 def run_cases(out: Path, cases: tuple, size: int) -> None:
-    """Solve and render stability cases; save nodes (case<i>.npy) and the image (case<i>.png)."""
+    """Solve and render stability cases and :data:`PHOTO_CASES`; save nodes (case<i>.npy,
+    photo<i>.npy) and the images (case<i>.png, photo<i>.png)."""
     import cv2
 
     from benchmarks.stability import CASES as ALL
@@ -135,6 +141,17 @@ def run_cases(out: Path, cases: tuple, size: int) -> None:
         np.save(out / f"case{index}.npy", mesh.target)
         rendered = warper.render(image, mesh, background=(255, 255, 255))
         cv2.imwrite(str(out / f"case{index}.png"), cv2.cvtColor(rendered, cv2.COLOR_RGB2BGR))
+    for index, (photo, mask_name, side, preset, params, mode) in enumerate(PHOTO_CASES):
+        image, mask = (cv2.imread(str(samples / name), flag) for name, flag in
+                       ((photo, cv2.IMREAD_COLOR), (mask_name, cv2.IMREAD_GRAYSCALE)))
+        scale = side / max(image.shape[:2])
+        size = (round(image.shape[1] * scale), round(image.shape[0] * scale))
+        image = cv2.resize(image, size, interpolation=cv2.INTER_AREA)
+        mask = cv2.resize(mask, size, interpolation=cv2.INTER_NEAREST) >= 128
+        warper = FeatureWarper(*size, mask)
+        mesh = warper.solve(load_warp(preset)(*size, **params), mode)
+        np.save(out / f"photo{index}.npy", mesh.target)
+        cv2.imwrite(str(out / f"photo{index}.png"), warper.render(image, mesh, background=(255, 255, 255)))
 
 
 def fingerprint() -> dict:
@@ -202,14 +219,15 @@ def compare_cases(base: Path, other: Path, cases: tuple) -> list[dict]:
     """Per stability case: largest node move (px), image RMSE and whether the nodes are bit-equal."""
     from benchmarks.stability import CASES as ALL
 
+    named = [(f"case{index}", "{} {} {}".format(*ALL[index][:3])) for index in cases]
+    named += [(f"photo{index}", f"{case[0][:-4]} {case[3]} {case[4]} {case[5]}") for index, case in enumerate(PHOTO_CASES)]
     rows = []
-    for index in cases:
-        nodes, base_nodes = np.load(other / f"case{index}.npy"), np.load(base / f"case{index}.npy")
+    for stem, label in named:
+        nodes, base_nodes = np.load(other / f"{stem}.npy"), np.load(base / f"{stem}.npy")
         move = float(np.abs(nodes - base_nodes).max()) if nodes.shape == base_nodes.shape else float("inf")
-        preset, params, mode, _ = ALL[index]
-        rows.append({"case": f"{index} {preset} {params} {mode}", "node_move_px": move,
+        rows.append({"case": f"{stem[4:] if stem.startswith('case') else stem} {label}", "node_move_px": move,
                      "same_nodes": bool(nodes.shape == base_nodes.shape and np.array_equal(nodes, base_nodes)),
-                     "rmse": rmse(base / f"case{index}.png", other / f"case{index}.png")})
+                     "rmse": rmse(base / f"{stem}.png", other / f"{stem}.png")})
     return rows
 
 
@@ -290,7 +308,7 @@ def main(argv=None) -> int:
     dropped = {key: value for key, value in os.environ.items() if key.startswith(KNOBS)}
     print(f"\nknobs set here and dropped for every machine: {dropped or 'none'}")
     print(f"Emulated machines vs {machines[0][0]}: {len(names)} gallery pictures, "
-          f"stability cases {list(args.cases)} at {args.size} px")
+          f"stability cases {list(args.cases)} at {args.size} px, {len(PHOTO_CASES)} on other photos")
     print_table(results)
     total = time.perf_counter() - start
     print(f"\nwall time {total:.0f} s")

@@ -291,3 +291,34 @@ def test_the_spread_grows_the_features_continuously_from_where_the_stretch_passe
     assert scale == pytest.approx(1.8, rel=1e-9) and high == pytest.approx(above, rel=1e-9) and high * low > 1
     scale, high, low = grown(6.0, 0.3)                    # the balance first
     assert 1.0 < scale < 2.0 and high > above and high * low == pytest.approx(1.0, rel=1e-9)
+
+
+@pytest.mark.parametrize("shear,kept", [(2e-4, True), (3e-3, False)])
+def test_a_component_w_maps_by_an_exact_similarity_may_break_the_symmetry_invisibly(shear, kept):
+    """A disc centred on a swirl: by symmetry W maps it by an exact similarity (its fit's
+    anisotropy is 1 to rounding). A solution that shears it by 2e-4 (what another BLAS kernel's
+    minimum did to the coins) is no worse than plain within ``EXACT_ENOUGH`` and is kept as it
+    is; before, it had no headroom and the whole grid moved to W (24 px on the coins). A shear
+    of 3e-3 is still moved towards W."""
+    from featurewarp_cli.engine import plain_bound
+
+    y, x = np.mgrid[0:64, 0:64]
+    mask = (x - 31.5) ** 2 + (y - 31.5) ** 2 < 10**2
+    warp = load_warp("swirl")(64, 64, angle=90)
+    warper = FeatureWarper(64, 64, mask)
+    mesh = warper.solve(warp, "similarity")
+    (state,) = warper._states.values()
+    warped = warp(state.nodes)
+    margin = plain_bound.plain_margin(state, warped)
+    assert abs(margin.figures(warped)[1] - 1.0).max() < 1e-9          # W: an exact similarity
+    on = state.node_component == 0
+    sheared = mesh.target.copy()
+    centre = sheared[on].mean(axis=0)
+    sheared[on, 0] += shear * (sheared[on, 1] - centre[1])
+    record = release.GuardRecord()
+    result = plain_bound.no_worse_than_plain(state, sheared, warped, record)
+    assert (record.plain_blend == 1.0) == kept
+    if kept:
+        assert np.array_equal(result, sheared)
+    else:
+        assert margin(result) <= 0 and not np.array_equal(result, sheared)

@@ -26,6 +26,12 @@ MOVE_SAMPLES = 8
 #: How far :func:`furthest_move` steps back from the margin's root, in turn, until the margin
 #: passes there (its rounding noise is about 1e-13 of the move).
 ROOT_BACKOFF = (4e-12, 1e-9, 1e-6, 1e-4, 1e-2)
+#: The anisotropy (sigma_max / sigma_min - 1) below which a component counts as no worse than
+#: under W whatever W's (5e-4: 0.05 px across 100 px). Without it a component that W maps by
+#: an exact similarity (one centred on a swirl, fisheye or bulge: its fit is one by symmetry)
+#: has no headroom: a solution that broke the symmetry by 2e-4 failed, and the whole grid moved
+#: to W (the coins at 256 px, swirl 90, on OpenBLAS's Sandybridge kernels: 24 px).
+EXACT_ENOUGH = 5e-4
 
 
 def middle_nodes(nodes: np.ndarray, node_component: np.ndarray, n: int) -> np.ndarray:
@@ -193,12 +199,14 @@ class PlainMargin:
     """``margin(points)``: how much more distorted than under W the worst component comes out
     under ``points`` (relative; <= 0: no worse; inf with a fold), as its worst triangle or as
     its best-fitting affine map. ``plain`` holds W's figures (per component: worst triangle,
-    and affine fits), with a relative slack of 1e-9 for rounding."""
+    and affine fits), with a relative slack of 1e-9 for rounding, and at least
+    1 + :data:`EXACT_ENOUGH`."""
 
     def __init__(self, state, warped: np.ndarray):
         self.state = state
         triangles, fits = self.figures(warped)
-        self.plain = (_worst_per_component(state, triangles) * (1.0 + 1e-9) + 1e-9, fits * (1.0 + 1e-9) + 1e-9)
+        self.plain = tuple(np.maximum(figure * (1.0 + 1e-9) + 1e-9, 1.0 + EXACT_ENOUGH)
+                           for figure in (_worst_per_component(state, triangles), fits))
 
     def figures(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(the anisotropy of every feature triangle (M,), and of each component's fits (2, C))
