@@ -1,5 +1,6 @@
 """No fold-overs: the final grid has no triangle of non-positive area anywhere in the presets' ranges."""
 
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -92,6 +93,24 @@ def test_local_folds_are_opened_in_a_window():
     moved = np.abs(mesh.target - raw.target).max(axis=1) > 1e-9
     assert 0 < moved.mean() < 0.2
     assert max(c["residual_percent"] for c in mesh.info["quality"]["components"]) < 0.5
+
+
+@pytest.mark.parametrize("preset", ["fish", "rise"])
+def test_a_window_takes_in_the_ground_around_a_tied_feature_it_reaches(preset):
+    """The astronaut's head, patch and shuttle at 256 px: the folds lie between her head (cut
+    by the top edge) and the edge. A window that let the head move as a whole but held the
+    ground beyond it could not open them, and her features were released (blend towards W);
+    with that ground in the window, a window opens them and every feature keeps its shape."""
+    import cv2
+
+    samples = Path(__file__).resolve().parent.parent / "samples"
+    mask = cv2.resize(cv2.imread(str(samples / "astronaut_mask.png"), cv2.IMREAD_GRAYSCALE), (256, 256),
+                      interpolation=cv2.INTER_NEAREST) >= 128
+    mesh = FeatureWarper(256, 256, mask).solve(load_warp(preset)(256, 256), "similarity")
+    guard = mesh.record.guard
+    assert guard.flipped_before > 0 and mesh.flips() == 0
+    assert guard.window_quads > 0 and guard.release_rounds == 0 and guard.converged
+    assert max(c.anisotropy_worst for c in mesh.record.components) < 1e-6
 
 
 def test_window_inner_nodes_change_only_window_triangles():
