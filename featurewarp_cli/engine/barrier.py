@@ -56,9 +56,10 @@ STIFFNESS = 300.0
 TOLERANCE = 1e-12
 #: Newton steps at most (the report says when a solve stopped there). A swirl's centre that
 #: tied features ring untwists slowly: the astronaut's head, patch and shuttle under swirl 180
-#: at 1 MP converge in 388 steps (12 s); stopped at 100, a one-ulp change moved the result by
-#: 0.09 px. Most solves take under 100.
-MAX_STEPS = 400
+#: at 1 MP converge in 388 steps (12 s), the china photo's pagoda under swirl 360 at 384 px in
+#: 440-480; stopped at 100 or 400, a one-ulp change moved them by up to 0.09 px (stopped
+#: short of a minimum, the result depends on the path). Most solves take under 100.
+MAX_STEPS = 600
 
 #: Exact barrier Hessians (not projected) once a full step was taken and the decrement fell
 #: below this fraction of Phi: quadratic convergence near the minimum.
