@@ -145,11 +145,11 @@ def run_cases(out: Path, cases: tuple, size: int) -> None:
         image, mask = (cv2.imread(str(samples / name), flag) for name, flag in
                        ((photo, cv2.IMREAD_COLOR), (mask_name, cv2.IMREAD_GRAYSCALE)))
         scale = side / max(image.shape[:2])
-        size = (round(image.shape[1] * scale), round(image.shape[0] * scale))
-        image = cv2.resize(image, size, interpolation=cv2.INTER_AREA)
-        mask = cv2.resize(mask, size, interpolation=cv2.INTER_NEAREST) >= 128
-        warper = FeatureWarper(*size, mask)
-        mesh = warper.solve(load_warp(preset)(*size, **params), mode)
+        dims = (round(image.shape[1] * scale), round(image.shape[0] * scale))
+        image = cv2.resize(image, dims, interpolation=cv2.INTER_AREA)
+        mask = cv2.resize(mask, dims, interpolation=cv2.INTER_NEAREST) >= 128
+        warper = FeatureWarper(*dims, mask)
+        mesh = warper.solve(load_warp(preset)(*dims, **params), mode)
         np.save(out / f"photo{index}.npy", mesh.target)
         cv2.imwrite(str(out / f"photo{index}.png"), warper.render(image, mesh, background=(255, 255, 255)))
 
@@ -216,11 +216,13 @@ def compare_gallery(base: Path, other: Path, names: list[str]) -> list[dict]:
 
 
 def compare_cases(base: Path, other: Path, cases: tuple) -> list[dict]:
-    """Per stability case: largest node move (px), image RMSE and whether the nodes are bit-equal."""
+    """Per stability case and photo case: largest node move (px), image RMSE and whether the nodes
+    are bit-equal."""
     from benchmarks.stability import CASES as ALL
 
     named = [(f"case{index}", "{} {} {}".format(*ALL[index][:3])) for index in cases]
-    named += [(f"photo{index}", f"{case[0][:-4]} {case[3]} {case[4]} {case[5]}") for index, case in enumerate(PHOTO_CASES)]
+    named += [(f"photo{index}", f"{case[0][:-4]} {case[3]} {case[4]} {case[5]}")
+              for index, case in enumerate(PHOTO_CASES)]
     rows = []
     for stem, label in named:
         nodes, base_nodes = np.load(other / f"{stem}.npy"), np.load(base / f"{stem}.npy")

@@ -19,14 +19,15 @@ import numpy as np
 from . import barrier, injectivity, system
 from .grid import signed_areas
 
-#: The guard first untangles a window around the folds, reaching these many times the
-#: largest fold's extent beyond it (at least WINDOW_MIN_MARGIN quads), in at most
-#: WINDOW_ITERATIONS steps each (a hopeless window stops early); where both fail, the whole
-#: grid. 12 MP swirl 180, head + helmet mask: the first window stalls at 60 steps (5 900
-#: folds down to 2 200), the wider one opens the rest in 27: 0.45 s on 160 000 nodes, where
-#: the global pass took 3.4 s. Each window that opens its folds converges the barrier's
-#: energy there (:mod:`barrier`); a least-squares solution with crushed but unfolded
-#: triangles is converged WINDOW_MIN_MARGIN quads around them.
+#: The guard first untangles a window around the folds, reaching these many times the largest
+#: fold's extent beyond it (at least WINDOW_MIN_MARGIN quads), in at most WINDOW_ITERATIONS
+#: steps each (a hopeless window stops early), then the first again with the ground around the
+#: tied features it reaches; where all fail, the whole grid. 12 MP swirl 180, head + helmet
+#: mask: the first window stalls at 60 steps (5 900 folds down to 2 200), the wider one opens
+#: the rest in 27: 0.45 s on 160 000 nodes, where the global pass took 3.4 s. Each window that
+#: opens its folds converges the barrier's energy there (:mod:`barrier`); a least-squares
+#: solution with crushed but unfolded triangles is converged WINDOW_MIN_MARGIN quads around
+#: them.
 WINDOW_MARGINS = (0.5, 1.0)
 WINDOW_MIN_MARGIN = 8
 WINDOW_ITERATIONS = 150
@@ -189,21 +190,20 @@ def guard(problem: Problem, x: np.ndarray, record: GuardRecord) -> np.ndarray | 
 
 def _untangled(problem, start, floor, record):
     """Untangle in a window around the folds (a wider one next, from where the first left off
-    if it has fewer folds; then the first window taking in the ground around the tied features
-    it reaches, from ``start``; a window that opens its folds converges the barrier's energy
+    if it has fewer folds; then the first window with the ground around the tied features it
+    reaches, from ``start``; a window that opens its folds converges the barrier's energy
     there, see :func:`_untangle_window`), else on the whole grid from the best of the first
-    two (its slivers lifted to half their floor; :func:`guard` converges the whole grid after
-    it); a preview stops after a window that gave up, or after the windows; (x, no folds
-    left).
+    two (slivers lifted to half their floor; :func:`guard` converges the whole grid after it);
+    a preview stops after a window that gave up, or after the first two (the third is several
+    times larger: 0.4-1 s at 1 MP); (x, no folds left).
 
-    The window that takes in the ground around tied features comes last: where a tied
-    feature blocks the folds (the astronaut's head cut by the top edge under ``fish``), it
-    opens them where the others cannot (12 MP: 1.4 s instead of 9 s on the whole grid), but
-    tried first it also opened folds that the release relaxes with less distortion (a
-    close-up under ``flag``: 0.165 against 0.118)."""
+    The third window comes last: where a tied feature blocks the folds (the astronaut's head
+    cut by the top edge under ``fish``), it opens them where the others cannot (12 MP: 1.4 s
+    instead of 9 s on the whole grid), but tried first it also opened folds that the release
+    relaxes with less distortion (a close-up under ``flag``: 0.165 against 0.118)."""
     tris, rhs, offset, tied = problem.triangles, problem.rhs, problem.offset, problem.tied
     folds, solution = int(np.count_nonzero(injectivity.flipped(start, tris))), start
-    passes = [(margin, False) for margin in WINDOW_MARGINS] + [(WINDOW_MARGINS[0], True)]
+    passes = [(margin, False) for margin in WINDOW_MARGINS] + [(WINDOW_MARGINS[0], True)] * (not problem.preview)
     for margin, around_ties in passes:
         x, iterations, window_quads = _untangle_window(problem, rhs, offset, tied, solution if around_ties else start,
                                                        floor, margin, record, around_ties)
@@ -372,12 +372,13 @@ def _untangle_window(problem: Problem, rhs, offset, tied, x, floor, margin_facto
     half their floor), converged there (:meth:`Window.converge`) once nothing is folded.
 
     A fold is a local defect, so the guard first works on the nodes within ``margin_factor``
-    times the largest fold's extent of them, everything else held where it is.
+    times the largest fold's extent of them, everything else held where it is (and, with
+    ``around_ties``, the ground around the tied features they reach: :func:`_window`).
 
     Returns
     -------
     x : (N, 2) ndarray or None
-        New positions; None when the window would be about as large as the grid.
+        New positions; None where :func:`_window` gives none.
     iterations : int
     quads : int
         Quads whose shape the window may change.
@@ -446,23 +447,25 @@ def _window(problem: Problem, rhs, offset, tied, x, crushed: np.ndarray, margin:
     """The :class:`Window` of the quads within ``margin`` quads of those with a ``crushed``
     triangle ((M,) bool), holding every other node at ``x``, except that a tied feature
     reaching into it keeps its shared unknown (it may shift as a whole); None when nothing
-    could move or the window would be about as large as the grid.
+    could move, when it would take in more than WINDOW_MAX_FRACTION of the grid, or (with
+    ``around_ties``) when it would be the window without it.
 
-    With ``around_ties``, a tied feature that reaches into the window brings its own quads and
-    ``margin`` quads around them: it can only shift, turn or scale if the ground around all of
-    it may follow.
-    Without them (the astronaut's head, patch and shuttle, its head cut by the top edge
-    under ``fish``, ``squeeze`` and ``rise`` at 1 and 12 MP) no window opened the folds; the
-    whole grid had to be untangled and converged (12 MP: 6-10 s instead of 1.1-2.0 s), or the
-    features were released (swirl 180: blend 0.62 instead of 1, 19 s instead of 5)."""
+    With ``around_ties`` (once; a feature only the grown window reaches brings none), a tied
+    feature that reaches into the window brings its own quads and ``margin`` quads around them:
+    it can only shift if the ground around all of it may follow. Without them (the astronaut's
+    head, patch and shuttle, its head cut by the top edge under ``fish``, ``squeeze`` and
+    ``rise`` at 1 and 12 MP) no window opened the folds; the whole grid had to be untangled and
+    converged (12 MP: 6-10 s instead of 1.1-2.0 s), or the features were released (swirl 180:
+    blend 0.62 instead of 1, 19 s instead of 5)."""
     grid, n_quads = problem.grid, problem.features.weight.size
     quads = np.zeros(n_quads, bool)
     quads[np.flatnonzero(crushed) % n_quads] = True
-    _, near, inner = injectivity.window(grid, quads, margin)
-    reaching = np.isin(tied, np.unique(tied[near & (tied >= 0)])) & (tied >= 0)
-    if around_ties and reaching.any():
-        quads |= reaching[grid.quads()].any(axis=1)
-        _, near, inner = injectivity.window(grid, quads, margin)
+    inside, near, inner = injectivity.window(grid, quads, margin)
+    if around_ties:
+        reaching = np.isin(tied, np.unique(tied[near & (tied >= 0)])) & (tied >= 0)
+        grown, near, inner = injectivity.window(grid, quads | reaching[grid.quads()].any(axis=1), margin)
+        if np.array_equal(grown, inside):
+            return None
     moving = (inner & ~problem.fixed & (tied < 0)) | (np.isin(tied, np.unique(tied[near & (tied >= 0)]))
                                                        & (tied >= 0))
     corners = grid.quads()
