@@ -220,14 +220,14 @@ def compare_cases(base: Path, other: Path, cases: tuple) -> list[dict]:
     are bit-equal."""
     from benchmarks.stability import CASES as ALL
 
-    named = [(f"case{index}", "{} {} {}".format(*ALL[index][:3])) for index in cases]
-    named += [(f"photo{index}", f"{case[0][:-4]} {case[3]} {case[4]} {case[5]}")
+    named = [(f"case{index}", "{} {} {} {}".format(index, *ALL[index][:3])) for index in cases]
+    named += [(f"photo{index}", f"photo{index} {case[0][:-4]} {case[3]} {case[4]} {case[5]}")
               for index, case in enumerate(PHOTO_CASES)]
     rows = []
     for stem, label in named:
         nodes, base_nodes = np.load(other / f"{stem}.npy"), np.load(base / f"{stem}.npy")
         move = float(np.abs(nodes - base_nodes).max()) if nodes.shape == base_nodes.shape else float("inf")
-        rows.append({"case": f"{stem[4:] if stem.startswith('case') else stem} {label}", "node_move_px": move,
+        rows.append({"case": label, "node_move_px": move,
                      "same_nodes": bool(nodes.shape == base_nodes.shape and np.array_equal(nodes, base_nodes)),
                      "rmse": rmse(base / f"{stem}.png", other / f"{stem}.png")})
     return rows

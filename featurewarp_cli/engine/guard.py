@@ -461,14 +461,14 @@ def _window(problem: Problem, rhs, offset, tied, x, crushed: np.ndarray, margin:
     quads = np.zeros(n_quads, bool)
     quads[np.flatnonzero(crushed) % n_quads] = True
     inside, near, inner = injectivity.window(grid, quads, margin)
+    corners = grid.quads()
+    def reached(nodes):                   # the nodes of every tied feature with a node in ``nodes``
+        return np.isin(tied, np.unique(tied[nodes & (tied >= 0)])) & (tied >= 0)
     if around_ties:
-        reaching = np.isin(tied, np.unique(tied[near & (tied >= 0)])) & (tied >= 0)
-        grown, near, inner = injectivity.window(grid, quads | reaching[grid.quads()].any(axis=1), margin)
+        grown, near, inner = injectivity.window(grid, quads | reached(near)[corners].any(axis=1), margin)
         if np.array_equal(grown, inside):
             return None
-    moving = (inner & ~problem.fixed & (tied < 0)) | (np.isin(tied, np.unique(tied[near & (tied >= 0)]))
-                                                       & (tied >= 0))
-    corners = grid.quads()
+    moving = (inner & ~problem.fixed & (tied < 0)) | reached(near)
     touched = moving[corners].any(axis=1)
     ties = tied[corners]
     rigid = (ties[:, 0] >= 0) & (ties == ties[:, :1]).all(axis=1)    # inside one tied feature
