@@ -323,3 +323,31 @@ def test_a_component_w_maps_by_an_exact_similarity_may_break_the_symmetry_invisi
         assert np.array_equal(result, sheared)
     else:
         assert margin(result) <= 0 and not np.array_equal(result, sheared)
+
+
+def test_the_plain_margin_turns_positive_at_its_closed_form_first_root():
+    """:meth:`PlainMargin.first_root` (quadratics, no search): the margin passes just before the
+    root and fails just after it, for a shear of a feature and for a fold of the background;
+    where nothing fails on the segment, the root is its end."""
+    from featurewarp_cli.engine import plain_bound
+
+    y, x = np.mgrid[0:64, 0:64]
+    mask = (x - 31.5) ** 2 + (y - 31.5) ** 2 < 10**2
+    warp = load_warp("swirl")(64, 64, angle=90)
+    warper = FeatureWarper(64, 64, mask)
+    start = warper.solve(warp, "similarity").target
+    (state,) = warper._states.values()
+    margin = plain_bound.plain_margin(state, warp(state.nodes))
+    assert margin(start) <= 0
+    on = state.node_component == 0
+    sheared = start.copy()
+    sheared[on, 0] += 0.05 * (sheared[on, 1] - sheared[on, 1].mean())
+    folded = start.copy()
+    corner = np.flatnonzero(state.node_component < 0)[0]
+    folded[corner] = 2.0 * folded[state.grid.nx + 1] - folded[corner]     # through its diagonal
+    for end in (sheared, folded):
+        root = margin.first_root(start, end, 1.0)
+        assert 0.0 < root < 1.0
+        assert margin(start + root * (1.0 - 1e-9) * (end - start)) <= 0
+        assert margin(start + root * (1.0 + 1e-6) * (end - start)) > 0
+    assert margin.first_root(start, start + 1e-6 * (sheared - start), 1.0) == 1.0

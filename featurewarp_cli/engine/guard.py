@@ -4,9 +4,8 @@ The primitives (step limits, areas, the penalty descent, windows) are in
 :mod:`featurewarp_cli.engine.injectivity`; the energy a window's result, a crushed solution
 and a release's blend are converged to is in :mod:`featurewarp_cli.engine.barrier`; this
 module decides how to use them for one solve (the never-worse-than-plain step after it is
-:mod:`featurewarp_cli.engine.plain_bound`). A :class:`Problem` is everything the guard needs
-to re-solve: the factored systems, the right-hand side, the offsets and a way to rebuild
-them for other edge targets or ties.
+:mod:`featurewarp_cli.engine.plain_bound`). A :class:`Problem` is everything the guard needs to
+re-solve: factored systems, right-hand side, offsets, and a way to rebuild them.
 """
 
 from __future__ import annotations
@@ -19,15 +18,11 @@ import numpy as np
 from . import barrier, injectivity, system
 from .grid import signed_areas
 
-#: The guard first untangles a window around the folds, reaching these many times the largest
-#: fold's extent beyond it (at least WINDOW_MIN_MARGIN quads), in at most WINDOW_ITERATIONS
-#: steps each (a hopeless window stops early), then the first again with the ground around the
-#: tied features it reaches; where all fail, the whole grid. 12 MP swirl 180, head + helmet
-#: mask: the first window stalls at 60 steps (5 900 folds down to 2 200), the wider one opens
-#: the rest in 27: 0.45 s on 160 000 nodes, where the global pass took 3.4 s. Each window that
-#: opens its folds converges the barrier's energy there (:mod:`barrier`); a least-squares
-#: solution with crushed but unfolded triangles is converged WINDOW_MIN_MARGIN quads around
-#: them.
+#: The guard untangles windows around the folds, reaching these many times the largest fold's
+#: extent beyond it (at least WINDOW_MIN_MARGIN quads), in at most WINDOW_ITERATIONS steps each,
+#: then the first with the ground around the tied features it reaches; where all fail, the
+#: whole grid (several times slower). A window that opens its folds converges the barrier's
+#: energy there (:mod:`barrier`), as does one WINDOW_MIN_MARGIN quads around crushed ones.
 WINDOW_MARGINS = (0.5, 1.0)
 WINDOW_MIN_MARGIN = 8
 WINDOW_ITERATIONS = 150
@@ -346,12 +341,17 @@ def blend_search(problem: Problem, released: np.ndarray, floor, record: GuardRec
 
 def _thinnest_margin(problem, floor, shape_margin):
     """``margin(points)``: how far the thinnest triangle is below :data:`RELEASE_THINNEST` of its
-    floor (relative), where it is; else the larger of that and ``shape_margin(points)`` (the
-    same sign either way, and the shape margin is not computed where it need not be)."""
+    floor (relative), where it is; else the larger of that and ``shape_margin(points)``; its
+    ``first_root`` (:func:`plain_bound.furthest_move`) where the shape margin has one."""
     def margin(points):
         thinnest = float(np.min(injectivity.grid_areas(problem.grid, points) / floor))
         crushed = 1.0 - thinnest / RELEASE_THINNEST
         return crushed if crushed > 0 else max(shape_margin(points), crushed)
+
+    def first_root(start, end, upto):
+        root = shape_margin.first_root(start, end, upto)
+        return root and min(root, injectivity.max_step(start, end, problem.triangles, RELEASE_THINNEST * floor))
+    margin.first_root = first_root if hasattr(shape_margin, "first_root") else None
     return margin
 
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from . import barrier, quality
+from . import barrier, injectivity, quality
 from .grid import signed_areas
 from .guard import Problem, blend_search
 from .injectivity import grid_areas, max_step
@@ -63,6 +63,7 @@ class FeatureFigures:
 
     def __init__(self, state):
         self.on = state.tri_component >= 0
+        self.component = state.tri_component[self.on]
         triangles = state.triangles[self.on]
         self.corners = [np.ascontiguousarray(triangles[:, k]) for k in range(3)]
         a, b, c = (state.nodes[corner].astype(float) for corner in self.corners)
@@ -73,25 +74,58 @@ class FeatureFigures:
         self.operators = [_fit_operator(state.nodes, state.node_component, self.n, on)
                           for on in (state.node_component >= 0, state.node_middle)]
 
-    def of(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(M,) the anisotropy (sigma_max / sigma_min) of each feature triangle under ``points`` (1
-        elsewhere, inf where degenerate) and (2, C) of each component's two fits (at most 1e9:
-        1e9 where a component has fewer than three nodes, or nodes on a line, or its fit is
-        singular or nearly)."""
+    def entries(self, points: np.ndarray) -> tuple[tuple, list]:
+        """The 2x2 maps that :meth:`of` measures, entry by entry ((j00, j01, j10, j11) arrays):
+        of each feature triangle (M_f,), and of each component's two fits ((C,) each). Linear in
+        ``points`` (a translation drops out)."""
         x, y = np.ascontiguousarray(points[:, 0]), np.ascontiguousarray(points[:, 1])
         a, b, c = self.corners
         t00, t10 = x.take(b) - x.take(a), y.take(b) - y.take(a)             # T's columns: edges ab, ac
         t01, t11 = x.take(c) - x.take(a), y.take(c) - y.take(a)
         u0, u1, v0, v1 = self.inverse
+        triangles = (t00 * u0 + t01 * u1, t00 * v0 + t01 * v1, t10 * u0 + t11 * u1, t10 * v0 + t11 * v1)
+        maps = [(operator @ points).reshape(self.n, 2, 2) for operator, _ in self.operators]  # [k, b, a]: (a, b)
+        return triangles, [(m[:, 0, 0], m[:, 1, 0], m[:, 0, 1], m[:, 1, 1]) for m in maps]
+
+    def of(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(M,) the anisotropy (sigma_max / sigma_min) of each feature triangle under ``points`` (1
+        elsewhere, inf where degenerate) and (2, C) of each component's two fits (at most 1e9:
+        1e9 where a component has fewer than three nodes, or nodes on a line, or its fit is
+        singular or nearly)."""
+        entries, maps = self.entries(points)
         triangles = np.ones(self.on.size)
-        triangles[self.on] = quality.entry_anisotropy(t00 * u0 + t01 * u1, t00 * v0 + t01 * v1,
-                                                      t10 * u0 + t11 * u1, t10 * v0 + t11 * v1)
+        triangles[self.on] = quality.entry_anisotropy(*entries)
         fits = []
-        for operator, good in self.operators:
-            maps = (operator @ points).reshape(self.n, 2, 2)        # [k, b, a]: entry (a, b) of fit k
-            ratio = quality.entry_anisotropy(maps[:, 0, 0], maps[:, 1, 0], maps[:, 0, 1], maps[:, 1, 1])
+        for fit, (_, good) in zip(maps, self.operators):
+            ratio = quality.entry_anisotropy(*fit)
             fits.append(np.where(good, np.minimum(np.nan_to_num(ratio, nan=1.0, posinf=1e9), 1e9), 1e9))
         return triangles, np.stack(fits)
+
+    def first_root(self, start: np.ndarray, end: np.ndarray, limits: tuple) -> float:
+        """The first t in [0, 1] at which a feature triangle or a fit on start -> end turns more
+        anisotropic than its limit (``limits``: (C,) for the triangles of each component, (2, C)
+        for the fits); 1.0 where none does. A map's sigma_max / sigma_min <= c with a positive
+        determinant is m^2 p^2 - q^2 >= 0 (m = (c - 1) / (c + 1), p and q of
+        :func:`quality.entry_anisotropy`), and the maps are affine in t: the first root of
+        quadratics (:func:`injectivity.first_root`), with no search."""
+        (tri0, fits0), (tri1, fits1) = self.entries(start), self.entries(end - start)
+        roots = [_ratio_root(tri0, tri1, limits[0][self.component])]
+        for k, (_, good) in enumerate(self.operators):
+            roots.append(_ratio_root(*(tuple(e[good] for e in fit) for fit in (fits0[k], fits1[k])), limits[1][k][good]))
+        return min(roots)
+
+
+def _ratio_root(at_start, along, limit: np.ndarray) -> float:
+    """:meth:`FeatureFigures.first_root` for maps ``at_start + t along`` (entry tuples) and
+    anisotropy limits ``limit``."""
+    m2 = ((limit - 1.0) / (limit + 1.0)) ** 2
+    (a00, a01, a10, a11), (d00, d01, d10, d11) = at_start, along
+    p0, q0, r0, s0 = a00 + a11, a10 - a01, a00 - a11, a10 + a01
+    p1, q1, r1, s1 = d00 + d11, d10 - d01, d00 - d11, d10 + d01
+    c = m2 * (p0 * p0 + q0 * q0) - (r0 * r0 + s0 * s0)
+    b = 2.0 * (m2 * (p0 * p1 + q0 * q1) - (r0 * r1 + s0 * s1))
+    a = m2 * (p1 * p1 + q1 * q1) - (r1 * r1 + s1 * s1)
+    return injectivity.first_root(np.maximum(c, 0.0), b, a)
 
 
 def _fit_operator(nodes: np.ndarray, node_component: np.ndarray, n: int, on: np.ndarray):
@@ -215,6 +249,13 @@ class PlainMargin:
             self.state.figures = FeatureFigures(self.state)
         return self.state.figures.of(points)
 
+    def first_root(self, start: np.ndarray, end: np.ndarray, upto: float) -> float:
+        """Where on start -> end (t in [0, ``upto``]) a component first turns worse than under W,
+        or a triangle folds (``upto`` where none does before it), in closed form
+        (:meth:`FeatureFigures.first_root`, :func:`injectivity.max_step`)."""
+        return min(upto, self.state.figures.first_root(start, end, self.plain),
+                   max_step(start, end, self.state.triangles))
+
     def __call__(self, points: np.ndarray, figures=None) -> float:
         """Relative excess of the worst component over W's figures (<= 0: no worse); ``figures``:
         :meth:`figures` of ``points``, where they are at hand."""
@@ -239,6 +280,12 @@ def _moves_towards_plain(state, points: np.ndarray, warped: np.ndarray, margin, 
     """The moves of :func:`_tapered_fix`: ``move(t)`` from ``points`` (t = 1) towards W (t = 0)
     around the offending triangles, then around the offending components, tapered
     (``margin``: W's :class:`PlainMargin`; ``figures``: its figures of ``points``, if at hand)."""
+    return [lambda t, weight=weight: points + (1.0 - t) * weight * (warped - points)
+            for weight in _move_weights(state, points, margin, figures)]
+
+
+def _move_weights(state, points: np.ndarray, margin, figures=None) -> list:
+    """The (N, 1) weights of :func:`_moves_towards_plain`'s two moves."""
     worse = _worse(state, margin.figures(points) if figures is None else figures, margin.plain)
     n_quads = state.features.weight.size
     local = np.zeros(n_quads, bool)
@@ -246,12 +293,12 @@ def _moves_towards_plain(state, points: np.ndarray, warped: np.ndarray, margin, 
     offending = np.unique(state.tri_component[worse])
     bad = np.isin(state.features.component, offending) & state.features.is_constrained
     others = (state.node_component >= 0) & ~np.isin(state.node_component, offending)
-    moves = []
+    weights = []
     for region in (local, bad):
         weight = _taper(state, region)
         weight[others] = 0.0                # the move leaves the other features as they are
-        moves.append(lambda t, weight=weight: points + (1.0 - t) * weight * (warped - points))
-    return moves
+        weights.append(weight)
+    return weights
 
 
 def release_margin(state, warped: np.ndarray, margin=None):
@@ -266,6 +313,11 @@ def release_margin(state, warped: np.ndarray, margin=None):
         if not made:
             made.append(plain_margin(state, warped))
         return -1.0 if made[0] is None else _fixable_margin(state, points, warped, made[0])
+
+    def first_root(start, end, upto):
+        fixable(start)
+        return upto if made[0] is None else _fixable_root(state, warped, made[0], start, end, upto)
+    fixable.first_root = first_root
     return fixable
 
 
@@ -277,6 +329,32 @@ def _fixable_margin(state, points: np.ndarray, warped: np.ndarray, margin) -> fl
     if value <= 0:
         return value
     return min(margin(move(0.0)) for move in _moves_towards_plain(state, points, warped, margin, figures))
+
+
+def _fixable_root(state, warped: np.ndarray, margin, start: np.ndarray, end: np.ndarray, upto: float):
+    """Where :func:`_fixable_margin` first turns positive on start -> end (t in [0, ``upto``]), in
+    closed form, or None where it cannot tell. Past the plain margin's root
+    (:meth:`PlainMargin.first_root`) the tapered moves that fix the point just beyond it, each
+    a path affine in t for its weights, fix it up to their own roots: the last of them, where
+    that move's weights are the same there (else None: a search finds it)."""
+    root = margin.first_root(start, end, upto)
+    beyond = min(upto, root + ROOT_BACKOFF[2])
+    if root >= upto:
+        return upto
+    furthest, weights_there = root, None
+    ahead, last = start + beyond * (end - start), start + upto * (end - start)
+    for weight in _move_weights(state, ahead, margin):
+        moved = ahead + weight * (warped - ahead)             # the move's path from ``beyond`` on
+        if margin(moved) <= 0:
+            reach = beyond + (upto - beyond) * margin.first_root(moved, last + weight * (warped - last), 1.0)
+            if reach > furthest:
+                furthest, weights_there = reach, weight
+    if weights_there is None:
+        return root
+    before = max(beyond, furthest - ROOT_BACKOFF[2])
+    same = any(np.array_equal(weight, weights_there)
+               for weight in _move_weights(state, start + before * (end - start), margin))
+    return furthest if same else None
 
 
 def _tapered_fix(state, points: np.ndarray, warped: np.ndarray, margin, floor, figures=None):
@@ -296,19 +374,24 @@ def furthest_move(move, margin, triangles: np.ndarray, floor: np.ndarray) -> tup
 
     Up to where a triangle falls to half its floor (or to half its area at t = 0 where that is
     smaller: the first root of quadratics, :func:`injectivity.max_step`) and, where the margin
-    turns positive before that, at its first root: the first of :data:`MOVE_SAMPLES` evenly
-    spaced points where it fails brackets it, and SciPy's ``brentq`` finds it to convergence.
+    turns positive before that, at its root: the first of :data:`MOVE_SAMPLES` evenly spaced
+    points where it fails brackets it, and the root is the margin's own in closed form where it
+    gives one in the bracket (``margin.first_root(start, end, upto)``: :class:`PlainMargin`, and
+    :func:`release_margin` where it can tell), else SciPy's ``brentq`` finds it to convergence.
     Both are functions of the inputs with no threshold to flip, so a one-ulp change of them
     moves t by rounding only."""
-    start = move(0.0)
-    reach = max_step(start, move(1.0), triangles, 0.5 * np.minimum(floor, signed_areas(start, triangles)))
+    start, end = move(0.0), move(1.0)
+    reach = max_step(start, end, triangles, 0.5 * np.minimum(floor, signed_areas(start, triangles)))
     if reach > 0 and margin(move(reach)) > 0:
-        from scipy.optimize import brentq     # SciPy: imported where a move is searched
-
         samples = reach * np.arange(1, MOVE_SAMPLES + 1) / MOVE_SAMPLES
         failing = next(k for k, t in enumerate(samples) if margin(move(t)) > 0)
-        low = samples[failing - 1] if failing else 0.0
-        root = brentq(lambda t: margin(move(t)), low, samples[failing], xtol=1e-12)
+        low, high = (samples[failing - 1] if failing else 0.0), samples[failing]
+        closed_form = getattr(margin, "first_root", None)
+        root = closed_form(start, end, high) if closed_form is not None else None
+        if root is None or not low <= root <= high:
+            from scipy.optimize import brentq     # SciPy: imported where a root is searched
+
+            root = brentq(lambda t: margin(move(t)), low, high, xtol=1e-12)
         # The margin is noisy at the root (areas of crushed triangles lose digits): back off a
         # little, then a little more, rather than all the way to the last sample that passed.
         reach = next((t for t in (max(low, root - back) for back in ROOT_BACKOFF) if margin(move(t)) <= 0), low)
