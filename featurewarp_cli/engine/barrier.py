@@ -17,7 +17,9 @@ triangles' areas::
   energy's is ``STIFFNESS b''(r) / 2`` at any cell size; a function of the grid, the weights
   and W alone.
 
-Where x* keeps every triangle above its safe fraction, Phi's minimum is x* itself. The
+Where x* keeps every triangle above its safe fraction, Phi's minimum is x* itself (where no
+triangle is below its floor at x either, the Newton step lands on x* exactly, and the solver
+stops there: further steps would only chase rounding). The
 solver (:func:`converge`) takes Newton steps from an injective start, each step no longer
 than the first fold along it allows (:func:`injectivity.max_step`), and stops when the
 Newton decrement is below ``TOLERANCE`` times Phi: the result no longer depends on the start
@@ -323,16 +325,14 @@ def converge(solve, normal, movable: np.ndarray, x: np.ndarray, triangles: np.nd
     areas : callable, optional
         ``areas(points)`` -> signed area per triangle (default :func:`grid.signed_areas`).
     max_steps : int, optional
-        Newton steps at most (default :data:`MAX_STEPS`; an interactive preview takes a few:
-        not converged, bounded).
+        Newton steps at most (default :data:`MAX_STEPS`; a preview takes a few, not converged).
     inverse : callable or InverseRows, optional
         ``inverse(rows, columns)`` -> (2, r, c): the moves of the nodes ``rows`` in x and in y
         under a unit force on each node of ``columns`` (``solve``'s linear part), or an
         :class:`InverseRows` of it that earlier runs on the same system filled. With it, a
-        Newton system whose barrier touches few nodes (:data:`_DIRECT_NODES`,
-        :data:`_DIRECT_WORK`) is solved exactly with the exact Hessian wherever that is positive
-        definite (:func:`_direct_direction`), else with the bound; other systems by conjugate
-        gradients.
+        Newton system whose barrier touches few nodes (:data:`_DIRECT_NODES`) is solved exactly,
+        with the exact Hessian where positive definite (:func:`_direct_direction`); other
+        systems by conjugate gradients.
 
     Returns
     -------
@@ -367,6 +367,8 @@ def converge(solve, normal, movable: np.ndarray, x: np.ndarray, triangles: np.nd
         decrement = -float((gradient * direction).sum())
         if decrement <= TOLERANCE * value or decrement < 1e-18:
             return x, Convergence(step, True)
+        if active.size == 0 and np.all(areas(x + direction) >= floor):    # x*: Phi's minimum, exactly
+            return x + direction, Convergence(step + 1, True)
         length = min(1.0, 1.8 * injectivity.max_step_of(areas, x, x + 2.0 * direction))
         trial = energy(x + length * direction)
         while length > 1e-12 and not trial <= value - 1e-4 * length * decrement:
