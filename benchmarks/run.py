@@ -46,6 +46,7 @@ cluster   Issue 25 (benchmarks/cluster.py): 200 images of 1 MP on 2 local Dask w
 hard      Issue 10's hard cases (benchmarks/hard_cases.py): the 12 MP photo with a
           head + helmet mask that makes the fold guard work, swirl 180, arc 300 and
           bulge 2.95, each beside ImageMagick's -swirl / -distort Arc / -implode.
+floor     Issue 21 (benchmarks/floor_ratio.py): 14 presets at defaults, 2 masks, 1 and 12 MP / floor.
 
 Medians of 5 runs (``--quick``: 3 runs, fewer sizes, 12 MP swirl only). A figure
 whose first run takes over 45 s, or any figure once the time budget (``--budget``,
@@ -87,8 +88,8 @@ from benchmarks.hard_cases import bench_hard  # noqa: E402
 from benchmarks.inputs import make_photos  # noqa: E402
 from samples.scenes import disc_mask  # noqa: E402
 
-SECTIONS = ("table1", "render", "rewarp", "deform", "rigid", "drag", "commands", "magick", "hard", "stability", "machines", "photos",
-            "cluster")
+SECTIONS = ("table1", "render", "rewarp", "deform", "rigid", "drag", "commands", "magick", "hard", "floor", "stability",
+            "machines", "photos", "cluster")
 
 #: The paper's Table 1 (Pentium 4, 3.2 GHz): setup, factor, rhs setup, solve in seconds.
 PAPER_TABLE1 = {
@@ -112,8 +113,6 @@ PRESETS = {
 def median(values):
     return float(statistics.median(values)) if values else float("nan")
 
-
-# --------------------------------------------------------------------------- running
 
 TIME = shutil.which("time") or ("/usr/bin/time" if os.path.exists("/usr/bin/time") else None)
 #: A figure whose first run takes longer than this many seconds is not repeated.
@@ -434,7 +433,7 @@ def main(argv=None) -> int:
     with tempfile.TemporaryDirectory(prefix="featurewarp-bench-") as tmpdir:
         tmp = Path(tmpdir)
         photos = None
-        if {"render", "rewarp", "deform", "drag", "commands", "hard"} & set(sections):
+        if {"render", "rewarp", "deform", "drag", "commands", "hard", "floor"} & set(sections):
             photos = make_photos(ROOT / "samples", tmp)
         if "table1" in sections:
             report["table1"] = bench_table1(runs, QUICK_GRIDS if args.quick else GRIDS)
@@ -462,6 +461,10 @@ def main(argv=None) -> int:
         if "hard" in sections:
             report["hard"] = bench_hard(runs, exe, photos["12MP"][0], ROOT / "samples", tmp,
                                         "magick" in sections, repeat, show)
+        if "floor" in sections:
+            from benchmarks.floor_ratio import bench_floor
+
+            report["floor"] = bench_floor(min(runs, 3), exe, photos, ROOT / "samples", tmp, repeat, show)
         if "stability" in sections:
             from benchmarks.stability import bench_stability
 

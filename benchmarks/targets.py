@@ -21,6 +21,7 @@ RIGIDITY_RATIO = 1.2             # issue 23: rigid map's rigidity error / libigl
 AREA_DEVIATION = 0.05            # issue 23: |area ratio / libigl's - 1|, the same cases
 DRAG_P95_S = 0.15                # issue 23: recorded drags at 1 MP, update p95
 DRAG_MAX_S = 0.5                 #           and the slowest update
+FLOOR_RATIO = 2.5                # issue 21: every preset at its defaults, head + object mask / its floor
 
 
 def _row(name, value, limit, unit="s"):
@@ -83,6 +84,9 @@ def evaluate(report: dict) -> list[dict]:
     for r in hard.get("ratios", []):
         if r["preset"] == "swirl":
             rows.append(_row("12 MP portrait (hard mask) swirl 180 / magick", r["ratio"], SWIRL_12MP_RATIO, "x"))
+    for size, result in report.get("floor", {}).items():
+        for r in result["runs"]:
+            rows.append(_row(f"{size} {r['preset']} ({r['mask']} mask) / its floor", r["ratio"], FLOOR_RATIO, "x"))
     cluster = report.get("cluster")
     if cluster:
         rows.append(_row("200 x 1 MP on 2 Dask workers: overhead", cluster["dask_overhead"], CLUSTER_OVERHEAD, "x"))

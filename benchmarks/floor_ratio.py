@@ -1,0 +1,61 @@
+"""``make bench``'s floor section (issue 21): every preset at its defaults, whole command, against its floor.
+
+The floor is what any command on the same files must spend: a process that starts the
+interpreter, imports the design card's packages, decodes the photo and the mask and encodes
+an image of the photo's size with the tool's own PNG settings. Each preset runs at its
+defaults (automatic cell) on the 1 MP and 12 MP photos of :mod:`benchmarks.inputs` with two
+head + object masks: the astronaut's own (head, patch, shuttle) and the head + helmet mask of
+:mod:`benchmarks.hard_cases` (the helmet cut by two edges: where a preset bends the edges it
+gives way, and the never-worse-than-plain step works). Issue 21's target: at most
+:data:`benchmarks.targets.FLOOR_RATIO` times the floor.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+from benchmarks.inputs import SIZES, upscale_mask
+
+PRESETS = ("arc", "arch", "bulge", "cylinder", "fish", "flag", "inflate", "perspective", "rise", "shell",
+           "sphere", "squeeze", "stretch", "swirl")
+MASKS = {"own": "astronaut_mask.png", "helmet": "astronaut_helmet_mask.png"}
+
+#: The floor process: imports, decode of both files, encode of an image of the photo's size.
+FLOOR = """
+import sys
+import numpy, scipy.sparse, sksparse.cholmod, cv2, click
+from featurewarp_cli.io.encode import encode_image
+image = cv2.imdecode(numpy.fromfile(sys.argv[1], numpy.uint8), cv2.IMREAD_UNCHANGED)
+mask = cv2.imdecode(numpy.fromfile(sys.argv[2], numpy.uint8), cv2.IMREAD_UNCHANGED)
+open(sys.argv[3], "wb").write(encode_image(image, "png"))
+"""
+
+
+def bench_floor(runs: int, exe: Path, photos: dict, samples: Path, tmp: Path, repeat, show) -> dict:
+    """Run the floor and every preset with both masks at each size; ``repeat(cmd, runs)`` and
+    ``show(label, result, runs)`` come from run.py.
+
+    Returns
+    -------
+    dict
+        size -> {"floor": result, "runs": [result with preset, mask, ratio]}.
+    """
+    print("\n(f) Every preset at its defaults against its floor (imports, decode, encode), "
+          "median wall seconds")
+    report = {}
+    for size, (photo, _) in photos.items():
+        masks = {name: upscale_mask(samples / file, SIZES[size], tmp / f"floor-mask-{size}-{name}.png")
+                 for name, file in MASKS.items()}
+        floor = repeat([sys.executable, "-c", FLOOR, str(photo), str(masks["own"]), str(tmp / "floor.png")], runs)
+        show(f"{size} floor", floor, runs)
+        rows = []
+        for preset in PRESETS:
+            for name, mask in masks.items():
+                r = repeat([str(exe), "warp", preset, str(photo), str(tmp / f"floor-{preset}.png"),
+                            "--mask", str(mask), "-q"], runs)
+                r.update(preset=preset, mask=name, ratio=r["median_s"] / floor["median_s"])
+                rows.append(r)
+                show(f"{size} {preset} ({name} mask): {r['ratio']:4.1f}x the floor", r, runs)
+        report[size] = {"floor": floor, "runs": rows}
+    return report
