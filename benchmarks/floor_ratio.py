@@ -32,9 +32,10 @@ open(sys.argv[3], "wb").write(encode_image(image, "png"))
 """
 
 
-def bench_floor(runs: int, exe: Path, photos: dict, samples: Path, tmp: Path, repeat, show) -> dict:
-    """Run the floor and every preset with both masks at each size; ``repeat(cmd, runs)`` and
-    ``show(label, result, runs)`` come from run.py.
+def bench_floor(runs: int, exe: Path, photos: dict, samples: Path, tmp: Path, repeat, show, quick=False) -> dict:
+    """Run the floor and every preset with both masks at each size (``quick``: 1 MP only); a
+    command that fails counts as infinitely slow. ``repeat(cmd, runs)`` and ``show(label,
+    result, runs)`` come from run.py.
 
     Returns
     -------
@@ -45,6 +46,8 @@ def bench_floor(runs: int, exe: Path, photos: dict, samples: Path, tmp: Path, re
           "median wall seconds")
     report = {}
     for size, (photo, _) in photos.items():
+        if quick and size != "1MP":
+            continue
         masks = {name: upscale_mask(samples / file, SIZES[size], tmp / f"floor-mask-{size}-{name}.png")
                  for name, file in MASKS.items()}
         floor = repeat([sys.executable, "-c", FLOOR, str(photo), str(masks["own"]), str(tmp / "floor.png")], runs)
@@ -54,7 +57,7 @@ def bench_floor(runs: int, exe: Path, photos: dict, samples: Path, tmp: Path, re
             for name, mask in masks.items():
                 r = repeat([str(exe), "warp", preset, str(photo), str(tmp / f"floor-{preset}.png"),
                             "--mask", str(mask), "-q"], runs)
-                r.update(preset=preset, mask=name, ratio=r["median_s"] / floor["median_s"])
+                r.update(preset=preset, mask=name, ratio=r["median_s"] / floor["median_s"] if r["ok"] else float("inf"))
                 rows.append(r)
                 show(f"{size} {preset} ({name} mask): {r['ratio']:4.1f}x the floor", r, runs)
         report[size] = {"floor": floor, "runs": rows}

@@ -464,7 +464,7 @@ def main(argv=None) -> int:
         if "floor" in sections:
             from benchmarks.floor_ratio import bench_floor
 
-            report["floor"] = bench_floor(min(runs, 3), exe, photos, ROOT / "samples", tmp, repeat, show)
+            report["floor"] = bench_floor(min(runs, 3), exe, photos, ROOT / "samples", tmp, repeat, show, args.quick)
         if "stability" in sections:
             from benchmarks.stability import bench_stability
 

@@ -367,3 +367,24 @@ def test_the_plain_margin_turns_positive_at_its_closed_form_first_root():
         assert margin(start + root * (1.0 - 1e-9) * (end - start)) <= 0
         assert margin(start + root * (1.0 + 1e-6) * (end - start)) > 0
     assert margin.first_root(start, start + 1e-6 * (sheared - start), 1.0) == 1.0
+    fixable = plain_bound.release_margin(state, warp(state.nodes), margin)
+    assert fixable(sheared) <= 0 < margin(sheared)        # passes only through a tapered fix
+    assert fixable.first_root(sheared, 4 * sheared - 3 * start, 1.0) == 1.0      # all the way
+    end = sheared + folded - start                        # until a fold no tapered move undoes
+    root = fixable.first_root(sheared, end, 1.0)
+    assert fixable(sheared + root * (1 - 1e-9) * (end - sheared)) <= 0 < fixable(sheared + (root + 1e-5) * (end - sheared))
+
+
+def test_the_closed_form_anisotropy_root_holds_for_maps_that_reverse_orientation():
+    """A map with sigma_max / sigma_min = 5 and a negative determinant, limit 7.5: kept at 5 it
+    never fails; stretched to 5 + 5 t it fails at t = 0.5, as for the same map with a positive
+    determinant (the quadratic's roles of the two lengths swap with the orientation)."""
+    from featurewarp_cli.engine.plain_bound import _ratio_root
+
+    def entries(*maps):
+        return tuple(np.array([m[i][j] for m in maps], float) for i, j in ((0, 0), (0, 1), (1, 0), (1, 1)))
+
+    limit = np.array([7.5, 7.5])
+    start = entries([[1, 0], [0, -5]], [[1, 0], [0, 5]])
+    assert _ratio_root(start, entries([[0.1, 0], [0, -0.5]], [[0.1, 0], [0, 0.5]]), limit) == 1.0
+    assert _ratio_root(start, entries([[0, 0], [0, -5]], [[0, 0], [0, 5]]), limit) == pytest.approx(0.5)

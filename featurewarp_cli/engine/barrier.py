@@ -18,8 +18,8 @@ triangles' areas::
   and W alone.
 
 Where x* keeps every triangle above its safe fraction, Phi's minimum is x* itself (where no
-triangle is below its floor at x either, the Newton step lands on x* exactly, and the solver
-stops there: further steps would only chase rounding). The
+triangle is below its floor at x either and the straight step to x* folds none, the solver
+takes that step and stops: further steps would only chase rounding). The
 solver (:func:`converge`) takes Newton steps from an injective start, each step no longer
 than the first fold along it allows (:func:`injectivity.max_step`), and stops when the
 Newton decrement is below ``TOLERANCE`` times Phi: the result no longer depends on the start
@@ -325,14 +325,13 @@ def converge(solve, normal, movable: np.ndarray, x: np.ndarray, triangles: np.nd
     areas : callable, optional
         ``areas(points)`` -> signed area per triangle (default :func:`grid.signed_areas`).
     max_steps : int, optional
-        Newton steps at most (default :data:`MAX_STEPS`; a preview takes a few, not converged).
+        Newton steps at most (default :data:`MAX_STEPS`; a preview takes a few, bounded).
     inverse : callable or InverseRows, optional
         ``inverse(rows, columns)`` -> (2, r, c): the moves of the nodes ``rows`` in x and in y
         under a unit force on each node of ``columns`` (``solve``'s linear part), or an
         :class:`InverseRows` of it that earlier runs on the same system filled. With it, a
-        Newton system whose barrier touches few nodes (:data:`_DIRECT_NODES`) is solved exactly,
-        with the exact Hessian where positive definite (:func:`_direct_direction`); other
-        systems by conjugate gradients.
+        Newton system whose barrier touches few nodes (:func:`_direction`) is solved exactly,
+        with the exact Hessian where positive definite, else the bound; others by CG.
 
     Returns
     -------
@@ -367,8 +366,8 @@ def converge(solve, normal, movable: np.ndarray, x: np.ndarray, triangles: np.nd
         decrement = -float((gradient * direction).sum())
         if decrement <= TOLERANCE * value or decrement < 1e-18:
             return x, Convergence(step, True)
-        if active.size == 0 and np.all(areas(x + direction) >= floor):    # x*: Phi's minimum, exactly
-            return x + direction, Convergence(step + 1, True)
+        if active.size == 0 and _reaches_optimum(areas, x, optimum, floor):
+            return optimum, Convergence(step + 1, True)
         length = min(1.0, 1.8 * injectivity.max_step_of(areas, x, x + 2.0 * direction))
         trial = energy(x + length * direction)
         while length > 1e-12 and not trial <= value - 1e-4 * length * decrement:
@@ -382,6 +381,13 @@ def converge(solve, normal, movable: np.ndarray, x: np.ndarray, triangles: np.nd
         near, bound = length == 1.0 and decrement < _EXACT_BELOW * value, False
         x, value = x + length * direction, trial
     return x, Convergence(max_steps, False)
+
+
+def _reaches_optimum(areas, x: np.ndarray, optimum: np.ndarray, floor: np.ndarray) -> bool:
+    """Whether x* keeps every triangle at its floor or above and the straight step from ``x``
+    (no triangle below its floor) to it folds none: there Phi is the least-squares quadratic,
+    x* its minimum, and further Newton steps would only chase the solves' rounding."""
+    return bool(np.all(areas(optimum) >= floor)) and injectivity.max_step_of(areas, x, optimum) >= 1.0
 
 
 def _direction(rows, solve, optimum, normal, movable, x, triangles, ratio, floor, kappa, gradient, near,

@@ -284,10 +284,10 @@ def blend_search(problem: Problem, released: np.ndarray, floor, record: GuardRec
     Returns (positions, s), or None when the start at s = 0 (W's targets) fails ``margin``
     (it folds, or is too thin, and no ``origin`` is given, or the minimum from ``origin``
     fails it too)."""
-    from .plain_bound import furthest_move      # it imports this module
+    from .plain_bound import furthest_move, thinnest_margin      # it imports this module
 
     blend = np.isin(problem.features.component, released) & problem.features.is_constrained
-    margin = _thinnest_margin(problem, floor, margin or problem.margin or (lambda points: -1.0))
+    margin = thinnest_margin(problem, floor, margin or problem.margin or (lambda points: -1.0), RELEASE_THINNEST)
 
     def constants(s):
         edges = np.where(blend[:, None, None], s * problem.edges + (1.0 - s) * problem.warp_edges, problem.edges)
@@ -337,22 +337,6 @@ def blend_search(problem: Problem, released: np.ndarray, floor, record: GuardRec
             return settle(s, between), s
         x, s = trial, t
     return x, s
-
-
-def _thinnest_margin(problem, floor, shape_margin):
-    """``margin(points)``: how far the thinnest triangle is below :data:`RELEASE_THINNEST` of its
-    floor (relative), where it is; else the larger of that and ``shape_margin(points)``; its
-    ``first_root`` (:func:`plain_bound.furthest_move`) where the shape margin has one."""
-    def margin(points):
-        thinnest = float(np.min(injectivity.grid_areas(problem.grid, points) / floor))
-        crushed = 1.0 - thinnest / RELEASE_THINNEST
-        return crushed if crushed > 0 else max(shape_margin(points), crushed)
-
-    def first_root(start, end, upto):
-        root = shape_margin.first_root(start, end, upto)
-        return root and min(root, injectivity.max_step(start, end, problem.triangles, RELEASE_THINNEST * floor))
-    margin.first_root = first_root if hasattr(shape_margin, "first_root") else None
-    return margin
 
 
 def _converge_grid(problem, systems, rhs, offset, tied, x, floor, record):

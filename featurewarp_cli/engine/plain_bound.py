@@ -26,6 +26,9 @@ MOVE_SAMPLES = 8
 #: How far :func:`furthest_move` steps back from the margin's root, in turn, until the margin
 #: passes there (its rounding noise is about 1e-13 of the move).
 ROOT_BACKOFF = (4e-12, 1e-9, 1e-6, 1e-4, 1e-2)
+#: How far past a root of the plain margin :func:`_fixable_root` looks for the tapered moves
+#: that fix the point (and past their root, for one that no longer fixes it).
+ROOT_STEP = 1e-6
 #: The anisotropy (sigma_max / sigma_min - 1) below which a component counts as no worse than
 #: under W whatever W's (5e-4: 0.05 px across 100 px). Without it a component that W maps by
 #: an exact similarity (one centred on a swirl, fisheye or bulge: its fit is one by symmetry)
@@ -104,14 +107,19 @@ class FeatureFigures:
     def first_root(self, start: np.ndarray, end: np.ndarray, limits: tuple) -> float:
         """The first t in [0, 1] at which a feature triangle or a fit on start -> end turns more
         anisotropic than its limit (``limits``: (C,) for the triangles of each component, (2, C)
-        for the fits); 1.0 where none does. A map's sigma_max / sigma_min <= c with a positive
-        determinant is m^2 p^2 - q^2 >= 0 (m = (c - 1) / (c + 1), p and q of
-        :func:`quality.entry_anisotropy`), and the maps are affine in t: the first root of
-        quadratics (:func:`injectivity.first_root`), with no search."""
+        for the fits; :meth:`of` caps a fit at 1e9, so a limit of 1e9 or more never fails);
+        1.0 where none does. With u and v the lengths of :func:`quality.entry_anisotropy`
+        (sigma_max, sigma_min = (u + v) / 2, |u - v| / 2), a map keeps sigma_max / sigma_min <= c
+        exactly while m^2 u^2 - v^2 >= 0 (m = (c - 1) / (c + 1); u > v: orientation kept) or,
+        for one that reverses orientation, m^2 v^2 - u^2 >= 0; between the two the ratio passes
+        infinity, so the first failure is the first root of the start's quadratic. The maps are
+        affine in t: first roots of quadratics (:func:`injectivity.first_root`), with no search."""
         (tri0, fits0), (tri1, fits1) = self.entries(start), self.entries(end - start)
         roots = [_ratio_root(tri0, tri1, limits[0][self.component])]
         for k, (_, good) in enumerate(self.operators):
-            roots.append(_ratio_root(*(tuple(e[good] for e in fit) for fit in (fits0[k], fits1[k])), limits[1][k][good]))
+            kept = good & (limits[1][k] < 1e9)
+            roots.append(_ratio_root(*(tuple(e[kept] for e in fit) for fit in (fits0[k], fits1[k])),
+                                     limits[1][k][kept]))
         return min(roots)
 
 
@@ -120,11 +128,14 @@ def _ratio_root(at_start, along, limit: np.ndarray) -> float:
     anisotropy limits ``limit``."""
     m2 = ((limit - 1.0) / (limit + 1.0)) ** 2
     (a00, a01, a10, a11), (d00, d01, d10, d11) = at_start, along
-    p0, q0, r0, s0 = a00 + a11, a10 - a01, a00 - a11, a10 + a01
-    p1, q1, r1, s1 = d00 + d11, d10 - d01, d00 - d11, d10 + d01
-    c = m2 * (p0 * p0 + q0 * q0) - (r0 * r0 + s0 * s0)
-    b = 2.0 * (m2 * (p0 * p1 + q0 * q1) - (r0 * r1 + s0 * s1))
-    a = m2 * (p1 * p1 + q1 * q1) - (r1 * r1 + s1 * s1)
+    u0, v0 = np.stack([a00 + a11, a10 - a01]), np.stack([a00 - a11, a10 + a01])   # u^2 = |u0 + t u1|^2
+    u1, v1 = np.stack([d00 + d11, d10 - d01]), np.stack([d00 - d11, d10 + d01])
+    reversed_ = (v0 * v0).sum(0) > (u0 * u0).sum(0)              # det < 0: the roles swap
+    u0, v0 = np.where(reversed_, v0, u0), np.where(reversed_, u0, v0)
+    u1, v1 = np.where(reversed_, v1, u1), np.where(reversed_, u1, v1)
+    c = m2 * (u0 * u0).sum(0) - (v0 * v0).sum(0)
+    b = 2.0 * (m2 * (u0 * u1).sum(0) - (v0 * v1).sum(0))
+    a = m2 * (u1 * u1).sum(0) - (v1 * v1).sum(0)
     return injectivity.first_root(np.maximum(c, 0.0), b, a)
 
 
@@ -184,8 +195,8 @@ def no_worse_than_plain(state, x: np.ndarray, warped: np.ndarray, record, proble
     proportions) is.
 
     Tried in turn, each as far as it passes (:func:`furthest_move`): the move
-    ``(1 - t) w (W - x)`` with ``w`` 1 around the offending triangles, tapering to 0 over :data:`TAPER_CELLS` cells (then
-    around the offending components); a new solve (``problem``) with only the offending
+    ``(1 - t) w (W - x)`` with ``w`` 1 around the offending triangles, tapering to 0 over
+    :data:`TAPER_CELLS` cells (then around the offending components); a new solve (``problem``) with only the offending
     components untied and their targets blended towards W's, so the other features stay
     as they are, finished by the tapered move where needed; last, every node moved evenly
     towards W."""
@@ -245,15 +256,19 @@ class PlainMargin:
     def figures(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(the anisotropy of every feature triangle (M,), and of each component's fits (2, C))
         under ``points``."""
+        return self._feature_figures().of(points)
+
+    def _feature_figures(self) -> FeatureFigures:
+        """The state's :class:`FeatureFigures`, made at the first use."""
         if self.state.figures is None:
             self.state.figures = FeatureFigures(self.state)
-        return self.state.figures.of(points)
+        return self.state.figures
 
     def first_root(self, start: np.ndarray, end: np.ndarray, upto: float) -> float:
         """Where on start -> end (t in [0, ``upto``]) a component first turns worse than under W,
         or a triangle folds (``upto`` where none does before it), in closed form
         (:meth:`FeatureFigures.first_root`, :func:`injectivity.max_step`)."""
-        return min(upto, self.state.figures.first_root(start, end, self.plain),
+        return min(upto, self._feature_figures().first_root(start, end, self.plain),
                    max_step(start, end, self.state.triangles))
 
     def __call__(self, points: np.ndarray, figures=None) -> float:
@@ -306,19 +321,39 @@ def release_margin(state, warped: np.ndarray, margin=None):
     than under W, or a tapered move towards W fixes it (:func:`_fixable_margin`); anything
     passes where W folds. ``margin``: :func:`plain_margin`'s, where it is at hand; else it is
     made at the first call (most solves never release, and W's figures cost a pass over the
-    features)."""
+    features). Its ``first_root`` is :func:`_fixable_root`'s (see :func:`furthest_move`)."""
     made = [] if margin is None else [margin]
 
-    def fixable(points):
+    def plain():
         if not made:
             made.append(plain_margin(state, warped))
-        return -1.0 if made[0] is None else _fixable_margin(state, points, warped, made[0])
+        return made[0]
+
+    def fixable(points):
+        return -1.0 if plain() is None else _fixable_margin(state, points, warped, plain())
 
     def first_root(start, end, upto):
-        fixable(start)
-        return upto if made[0] is None else _fixable_root(state, warped, made[0], start, end, upto)
+        return upto if plain() is None else _fixable_root(state, warped, plain(), start, end, upto)
     fixable.first_root = first_root
     return fixable
+
+
+def thinnest_margin(problem, floor, shape_margin, thinnest_share: float):
+    """``margin(points)`` of a release's blend (:func:`guard.blend_search`): how far the thinnest
+    triangle is below ``thinnest_share`` of its floor (relative), where it is; else the larger
+    of that and ``shape_margin(points)``; its ``first_root`` (:func:`furthest_move`) where the
+    shape margin has one."""
+    def margin(points):
+        thinnest = float(np.min(grid_areas(problem.grid, points) / floor))
+        crushed = 1.0 - thinnest / thinnest_share
+        return crushed if crushed > 0 else max(shape_margin(points), crushed)
+
+    def first_root(start, end, upto):
+        root = shape_margin.first_root(start, end, upto)      # None: it cannot tell
+        return None if root is None else min(root, max_step(start, end, problem.triangles,
+                                                             thinnest_share * floor))
+    margin.first_root = first_root if hasattr(shape_margin, "first_root") else None
+    return margin
 
 
 def _fixable_margin(state, points: np.ndarray, warped: np.ndarray, margin) -> float:
@@ -332,15 +367,16 @@ def _fixable_margin(state, points: np.ndarray, warped: np.ndarray, margin) -> fl
 
 
 def _fixable_root(state, warped: np.ndarray, margin, start: np.ndarray, end: np.ndarray, upto: float):
-    """Where :func:`_fixable_margin` first turns positive on start -> end (t in [0, ``upto``]), in
-    closed form, or None where it cannot tell. Past the plain margin's root
-    (:meth:`PlainMargin.first_root`) the tapered moves that fix the point just beyond it, each
-    a path affine in t for its weights, fix it up to their own roots: the last of them, where
-    that move's weights are the same there (else None: a search finds it)."""
-    root = margin.first_root(start, end, upto)
-    beyond = min(upto, root + ROOT_BACKOFF[2])
+    """A point where :func:`_fixable_margin` turns positive on start -> end (t in [0, ``upto``]),
+    in closed form, or None where this cannot tell (a search finds one). Past the plain
+    margin's root (:meth:`PlainMargin.first_root`; 0 where the start passes only through a
+    fix), the tapered moves that fix the point :data:`ROOT_STEP` beyond it, each a path affine
+    in t for its weights, fix it up to their own roots; the last of them counts where that
+    move's weights are the same there and nothing fixes the point ROOT_STEP beyond it."""
+    root = 0.0 if margin(start) > 0 else margin.first_root(start, end, upto)
     if root >= upto:
         return upto
+    beyond = min(upto, root + ROOT_STEP)
     furthest, weights_there = root, None
     ahead, last = start + beyond * (end - start), start + upto * (end - start)
     for weight in _move_weights(state, ahead, margin):
@@ -351,10 +387,13 @@ def _fixable_root(state, warped: np.ndarray, margin, start: np.ndarray, end: np.
                 furthest, weights_there = reach, weight
     if weights_there is None:
         return root
-    before = max(beyond, furthest - ROOT_BACKOFF[2])
-    same = any(np.array_equal(weight, weights_there)
-               for weight in _move_weights(state, start + before * (end - start), margin))
-    return furthest if same else None
+    before, after = max(beyond, furthest - ROOT_STEP), min(upto, furthest + ROOT_STEP)
+    if not any(np.array_equal(weight, weights_there)
+               for weight in _move_weights(state, start + before * (end - start), margin)):
+        return None
+    if furthest >= upto:
+        return upto
+    return furthest if _fixable_margin(state, start + after * (end - start), warped, margin) > 0 else None
 
 
 def _tapered_fix(state, points: np.ndarray, warped: np.ndarray, margin, floor, figures=None):
@@ -378,8 +417,9 @@ def furthest_move(move, margin, triangles: np.ndarray, floor: np.ndarray) -> tup
     points where it fails brackets it, and the root is the margin's own in closed form where it
     gives one in the bracket (``margin.first_root(start, end, upto)``: :class:`PlainMargin`, and
     :func:`release_margin` where it can tell), else SciPy's ``brentq`` finds it to convergence.
-    Both are functions of the inputs with no threshold to flip, so a one-ulp change of them
-    moves t by rounding only."""
+    Both are functions of the inputs, and a root has no threshold to flip; where the margin
+    turns positive more than once in the bracket, the closed form may find another root than
+    ``brentq`` would have (an earlier one)."""
     start, end = move(0.0), move(1.0)
     reach = max_step(start, end, triangles, 0.5 * np.minimum(floor, signed_areas(start, triangles)))
     if reach > 0 and margin(move(reach)) > 0:
