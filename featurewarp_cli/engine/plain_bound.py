@@ -108,7 +108,7 @@ class FeatureFigures:
         """The first t in [0, 1] at which a feature triangle or a fit on start -> end turns more
         anisotropic than its limit (``limits``: (C,) for the triangles of each component, (2, C)
         for the fits; :meth:`of` caps a fit at 1e9, so a limit of 1e9 or more never fails);
-        1.0 where none does. With u and v the lengths of :func:`quality.entry_anisotropy`
+        1.0 where none does. With u and v the lengths of :func:`quality.conformal_parts`
         (sigma_max, sigma_min = (u + v) / 2, |u - v| / 2), a map keeps sigma_max / sigma_min <= c
         exactly while m^2 u^2 - v^2 >= 0 (m = (c - 1) / (c + 1); u > v: orientation kept) or,
         for one that reverses orientation, m^2 v^2 - u^2 >= 0; between the two the ratio passes
@@ -127,9 +127,8 @@ def _ratio_root(at_start, along, limit: np.ndarray) -> float:
     """:meth:`FeatureFigures.first_root` for maps ``at_start + t along`` (entry tuples) and
     anisotropy limits ``limit``."""
     m2 = ((limit - 1.0) / (limit + 1.0)) ** 2
-    (a00, a01, a10, a11), (d00, d01, d10, d11) = at_start, along
-    u0, v0 = np.stack([a00 + a11, a10 - a01]), np.stack([a00 - a11, a10 + a01])   # u^2 = |u0 + t u1|^2
-    u1, v1 = np.stack([d00 + d11, d10 - d01]), np.stack([d00 - d11, d10 + d01])
+    (u0, v0), (u1, v1) = (tuple(np.stack(part) for part in quality.conformal_parts(*entries))
+                          for entries in (at_start, along))              # u^2 = |u0 + t u1|^2
     reversed_ = (v0 * v0).sum(0) > (u0 * u0).sum(0)              # det < 0: the roles swap
     u0, v0 = np.where(reversed_, v0, u0), np.where(reversed_, u0, v0)
     u1, v1 = np.where(reversed_, v1, u1), np.where(reversed_, u1, v1)

@@ -71,12 +71,18 @@ def triangle_anisotropy(source: np.ndarray, target: np.ndarray, triangles: np.nd
     return entry_anisotropy(j00, j01, j10, j11)
 
 
+def conformal_parts(j00, j01, j10, j11) -> tuple[tuple, tuple]:
+    """The 2x2 maps' conformal and anticonformal parts as vectors, ((j00 + j11, j10 - j01),
+    (j00 - j11, j10 + j01)): their lengths p and q give the singular values (p + q) / 2 and
+    |p - q| / 2, and p > q exactly where the map keeps its orientation."""
+    return (j00 + j11, j10 - j01), (j00 - j11, j10 + j01)
+
+
 def entry_anisotropy(j00, j01, j10, j11) -> np.ndarray:
     """sigma_max / sigma_min of the 2x2 maps [[j00, j01], [j10, j11]], given entry by entry
-    (arrays of one shape; inf where singular). The singular values come in closed form from
-    p = |(j00 + j11, j10 - j01)| and q = |(j00 - j11, j10 + j01)|: (p + q) / 2, |p - q| / 2."""
-    p = np.hypot(j00 + j11, j10 - j01)
-    q = np.hypot(j00 - j11, j10 + j01)
+    (arrays of one shape; inf where singular), from :func:`conformal_parts`."""
+    conformal, anticonformal = conformal_parts(j00, j01, j10, j11)
+    p, q = np.hypot(*conformal), np.hypot(*anticonformal)
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.where(np.abs(p - q) > 1e-12 * (p + q), (p + q) / np.abs(p - q), np.inf)
 
