@@ -19,16 +19,19 @@ from benchmarks.inputs import SIZES, upscale_mask
 
 PRESETS = ("arc", "arch", "bulge", "cylinder", "fish", "flag", "inflate", "perspective", "rise", "shell",
            "sphere", "squeeze", "stretch", "swirl")
-MASKS = {"own": "astronaut_mask.png", "helmet": "astronaut_helmet_mask.png"}
+HELMET = "astronaut_helmet_mask.png"          # the own mask comes with the photos (inputs.make_photos)
 
-#: The floor process: imports, decode of both files, encode of an image of the photo's size.
+#: The floor process: imports, decode of both files, encode of an image of the photo's size
+#: (argv: photo, mask, output, and optionally how many times wider the output is).
 FLOOR = """
 import sys
 import numpy, scipy.sparse, sksparse.cholmod, cv2, click
 from featurewarp_cli.io.encode import encode_image
 image = cv2.imdecode(numpy.fromfile(sys.argv[1], numpy.uint8), cv2.IMREAD_UNCHANGED)
 mask = cv2.imdecode(numpy.fromfile(sys.argv[2], numpy.uint8), cv2.IMREAD_UNCHANGED)
-open(sys.argv[3], "wb").write(encode_image(image, "png"))
+wider = int(sys.argv[4]) if len(sys.argv) > 4 else 1
+out = cv2.resize(image, (wider * image.shape[1], image.shape[0]), interpolation=cv2.INTER_NEAREST)
+open(sys.argv[3], "wb").write(encode_image(out, "png"))
 """
 
 
@@ -45,11 +48,11 @@ def bench_floor(runs: int, exe: Path, photos: dict, samples: Path, tmp: Path, re
     print("\n(f) Every preset at its defaults against its floor (imports, decode, encode), "
           "median wall seconds")
     report = {}
-    for size, (photo, _) in photos.items():
+    for size, (photo, own) in photos.items():       # own: the astronaut's mask at that size
         if quick and size != "1MP":
             continue
-        masks = {name: upscale_mask(samples / file, SIZES[size], tmp / f"floor-mask-{size}-{name}.png")
-                 for name, file in MASKS.items()}
+        masks = {"own": own, "helmet": upscale_mask(samples / HELMET, SIZES[size],
+                                                     tmp / f"floor-mask-{size}-helmet.png")}
         floor = repeat([sys.executable, "-c", FLOOR, str(photo), str(masks["own"]), str(tmp / "floor.png")], runs)
         show(f"{size} floor", floor, runs)
         rows = []

@@ -84,6 +84,7 @@ import cv2  # noqa: E402
 import numpy as np  # noqa: E402
 
 from benchmarks import targets as tgt  # noqa: E402
+from benchmarks.floor_ratio import FLOOR  # noqa: E402
 from benchmarks.hard_cases import bench_hard  # noqa: E402
 from benchmarks.inputs import make_photos  # noqa: E402
 from samples.scenes import disc_mask  # noqa: E402
@@ -291,20 +292,6 @@ def bench_rewarp(runs: int, photo1: Path, mask1: Path) -> dict:
     return result
 
 
-#: Issue 12's floor of a 1 MP ``stretch --sx 2``: a process that starts the interpreter, imports
-#: the design card's packages, decodes the same input and mask and encodes an image of the
-#: output's size with the same settings (the tool's own encoder call).
-FLOOR = """
-import sys
-import numpy, scipy.sparse, sksparse.cholmod, cv2, click
-from featurewarp_cli.io.encode import encode_image
-image = cv2.imdecode(numpy.fromfile(sys.argv[1], numpy.uint8), cv2.IMREAD_UNCHANGED)
-mask = cv2.imdecode(numpy.fromfile(sys.argv[2], numpy.uint8), cv2.IMREAD_UNCHANGED)
-out = cv2.resize(image, (2 * image.shape[1], image.shape[0]), interpolation=cv2.INTER_NEAREST)
-open(sys.argv[3], "wb").write(encode_image(out, "png"))
-"""
-
-
 def ours_cmd(exe: Path, preset, photo, mask, out, extra=()):
     args, _ = PRESETS[preset]
     return [str(exe), "warp", preset, str(photo), str(out), "--mask", str(mask), *args, *extra]
@@ -335,7 +322,8 @@ def bench_commands(runs, exe, photos, tmp, quick, with_magick) -> tuple[dict, di
     plan += [("12MP", preset, []) for preset in (("swirl",) if quick else ("swirl", "bulge", "arc"))]
     plan.append(("12MP", "swirl", ["--cell", "4"]))     # stretch: liquid-rescale is a 1 MP comparison
     photo, mask = photos["1MP"]
-    results["floor"] = repeat([sys.executable, "-c", FLOOR, str(photo), str(mask), str(tmp / "floor.png")], runs)
+    floor = [sys.executable, "-c", FLOOR, str(photo), str(mask), str(tmp / "floor.png"), "2"]   # 2: twice as wide
+    results["floor"] = repeat(floor, runs)                  # issue 12's floor of a 1 MP stretch --sx 2
     show("1MP floor of stretch --sx 2 (imports, decode, encode)", results["floor"], runs)
     done = set()
     for size, preset, extra in plan:

@@ -195,10 +195,10 @@ def no_worse_than_plain(state, x: np.ndarray, warped: np.ndarray, record, proble
 
     Tried in turn, each as far as it passes (:func:`furthest_move`): the move
     ``(1 - t) w (W - x)`` with ``w`` 1 around the offending triangles, tapering to 0 over
-    :data:`TAPER_CELLS` cells (then around the offending components); a new solve (``problem``) with only the offending
-    components untied and their targets blended towards W's, so the other features stay
-    as they are, finished by the tapered move where needed; last, every node moved evenly
-    towards W."""
+    :data:`TAPER_CELLS` cells (then around the offending components); a new solve
+    (``problem``) with only the offending components untied and their targets blended towards
+    W's, so the other features stay as they are, finished by the tapered move where needed;
+    last, every node moved evenly towards W."""
     margin = plain_margin(state, warped)
     if margin is None:
         return x
