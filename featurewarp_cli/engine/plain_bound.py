@@ -16,6 +16,7 @@ from . import barrier, injectivity, quality
 from .grid import signed_areas
 from .guard import Problem, blend_search
 from .injectivity import grid_areas, max_step
+from .roots import bracketed_root
 
 #: Cells over which the move towards W tapers off around offending triangles
 #: (:func:`no_worse_than_plain`).
@@ -415,10 +416,10 @@ def furthest_move(move, margin, triangles: np.ndarray, floor: np.ndarray) -> tup
     turns positive before that, at its root: the first of :data:`MOVE_SAMPLES` evenly spaced
     points where it fails brackets it, and the root is the margin's own in closed form where it
     gives one in the bracket (``margin.first_root(start, end, upto)``: :class:`PlainMargin`, and
-    :func:`release_margin` where it can tell), else SciPy's ``brentq`` finds it to convergence.
-    Both are functions of the inputs, and a root has no threshold to flip; where the margin
-    turns positive more than once in the bracket, the closed form may find another root than
-    ``brentq`` would have (an earlier one)."""
+    :func:`release_margin` where it can tell), else :func:`roots.bracketed_root` finds it to
+    convergence. Both are functions of the inputs, and a root has no threshold to flip; where
+    the margin turns positive more than once in the bracket, the closed form may find another
+    root than the bracketed search would have (an earlier one)."""
     start, end = move(0.0), move(1.0)
     reach = max_step(start, end, triangles, 0.5 * np.minimum(floor, signed_areas(start, triangles)))
     if reach > 0 and margin(move(reach)) > 0:
@@ -428,9 +429,7 @@ def furthest_move(move, margin, triangles: np.ndarray, floor: np.ndarray) -> tup
         closed_form = getattr(margin, "first_root", None)
         root = closed_form(start, end, high) if closed_form is not None else None
         if root is None or not low <= root <= high:
-            from scipy.optimize import brentq     # SciPy: imported where a root is searched
-
-            root = brentq(lambda t: margin(move(t)), low, high, xtol=1e-12)
+            root = bracketed_root(lambda t: margin(move(t)), low, high, xtol=1e-12)
         # The margin is noisy at the root (areas of crushed triangles lose digits): back off a
         # little, then a little more, rather than all the way to the last sample that passed.
         reach = next((t for t in (max(low, root - back) for back in ROOT_BACKOFF) if margin(move(t)) <= 0), low)

@@ -26,6 +26,7 @@ import numpy as np
 
 from .grid import signed_areas
 from .injectivity import max_step
+from .roots import bracketed_root
 
 #: Smallest area, relative to W's, that the scale search lets a triangle keep.
 SCALE_FLOOR = 0.05
@@ -115,7 +116,7 @@ def spread_stretch(solve, ab: np.ndarray, result, scalable: np.ndarray, triangle
     largest compression (log max + log min changes sign), or where it has come down to
     SPREAD_ABOVE if that comes first, so that a stretch just above SPREAD_ABOVE grows the
     features just a little (no jump where a one-ulp change crosses it); a root found to
-    convergence by Brent's method (SciPy's ``brentq``), unless a triangle reaches its floor
+    convergence (:func:`roots.bracketed_root`, the ITP method), unless a triangle reaches its floor
     before (half of :data:`SCALE_FLOOR` of its area under W, or half its area in ``result``
     where that is smaller already; the first root of quadratics, :func:`injectivity.max_step`).
     Shrinking is not searched here: squeezed features are :func:`shrink_to_fit`'s.
@@ -163,7 +164,5 @@ def spread_stretch(solve, ab: np.ndarray, result, scalable: np.ndarray, triangle
         return min(high + low, high - np.log(SPREAD_ABOVE))
 
     if reach > 0 and balance(reach) <= 0:
-        from scipy.optimize import brentq     # SciPy: imported where a spread is searched
-
-        reach = brentq(balance, 0.0, reach, xtol=1e-12)
+        reach = bracketed_root(balance, 0.0, reach, xtol=1e-12)
     return np.where(scalable[:, None], ab * (1.0 + reach * (SPREAD_RANGE - 1.0)), ab), _between(result, grown, reach)
