@@ -94,7 +94,9 @@ def test_direct_newton_systems_reach_the_minimum_conjugate_gradients_reach(seed,
     calls = []
     direct_direction = barrier._direct_direction
     monkeypatch.setattr(barrier, "_direct_direction", lambda *a: calls.append(1) or direct_direction(*a))
-    direct, how = barrier.converge(solve, normal, movable, start, tris, floor, kappa, inverse=inverse)
+    unknown = np.where(movable, np.cumsum(movable) - 1, -1)
+    direct, how = barrier.converge(solve, normal, movable, start, tris, floor, kappa,
+                                   inverse=barrier.InverseRows(inverse, np.stack([unknown, unknown])))
     assert calls                                  # the Woodbury path did run
     assert how.converged and how_cg.converged and signed_areas(direct, tris).min() > 0
     assert np.abs(direct - by_cg).max() < 1e-4
@@ -148,7 +150,7 @@ def test_the_move_stops_just_before_a_noisy_root_not_at_the_last_sample():
 
     def margin(points):
         t = points[1, 0] - 10.0
-        return (t - 0.3) + 3e-12 * np.cos(1e13 * t)       # noise three times brentq's xtol
+        return (t - 0.3) + 3e-12 * np.cos(1e13 * t)       # noise three times the root search's xtol
 
     _, t = furthest_move(lambda t: warped + t * (target - warped), margin, triangle, floor)
     assert 0.3 - 1e-6 <= t <= 0.3 and margin(warped + t * (target - warped)) <= 0
@@ -249,6 +251,37 @@ def test_the_inverse_entries_match_a_dense_inverse_with_held_and_tied_nodes():
     columns = np.array([grid.nx + 3, 0, 9, 17])
     assert np.allclose(reduced.entries(rows, columns), dense[np.ix_(rows, columns)], atol=1e-10)
     assert np.allclose(reduced.entries(rows, columns)[[0, 4]], 0.0)            # held nodes do not move
+
+
+def test_the_woodbury_factor_of_the_inverse_between_held_tied_and_free_nodes_is_exact():
+    """``InverseRows.factor``: C C' = G = P' S P for a set of nodes with held ones (zero rows)
+    and several of one tied feature (equal rows): Cholesky on one node per unknown, repeated,
+    where LAPACK's pivoted Cholesky (scipy.linalg, 40 ms to import) found the rank. The x
+    and y numberings may differ (a sliding side holds one coordinate only)."""
+    from featurewarp_cli.engine import system
+    from featurewarp_cli.engine.grid import Grid
+    from featurewarp_cli.engine.solver import AxisSystems
+
+    grid = Grid.for_image(64, 48, 8.0)
+    matrix = system.normal_matrix(grid, np.ones((grid.ny - 1) * (grid.nx - 1)))
+    n = grid.n_nodes
+    held = grid.boundary()
+    tied = np.full(n, -1)
+    tied[[grid.nx + 2, grid.nx + 3, 2 * grid.nx + 2, 2 * grid.nx + 3]] = 0
+    unknown_y = system.number_unknowns(held, tied)
+    held_x = held.copy()
+    held_x[grid.nx * np.arange(1, grid.ny - 1)] = False          # the left side slides in x
+    unknown_x = system.number_unknowns(held_x, tied)
+    systems = AxisSystems(matrix, unknown_x, unknown_y)
+    rows = barrier.InverseRows(systems.entries, np.stack([unknown_x, unknown_y]))
+    nodes = np.unique(np.r_[0, grid.nx, 2 * grid.nx, grid.nx + 1, grid.nx + 2, grid.nx + 3, 2 * grid.nx + 2,
+                            2 * grid.nx + 3, 3 * grid.nx + 4, n - 1])
+    factor = rows.factor(nodes)
+    inverse = systems.entries(nodes, nodes)                          # (2, u, u)
+    expected = np.zeros((2 * nodes.size, 2 * nodes.size))
+    expected[0::2, 0::2], expected[1::2, 1::2] = inverse
+    assert np.abs(factor @ factor.T - expected).max() < 1e-12 * np.abs(expected).max()
+    assert factor.shape[1] == sum(np.unique(u[nodes][u[nodes] >= 0]).size for u in (unknown_x, unknown_y))
 
 
 def test_where_no_release_is_injective_the_result_is_the_furthest_point_from_w_that_keeps_half_a_floor(monkeypatch):

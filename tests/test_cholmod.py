@@ -228,8 +228,9 @@ def test_help_and_warps_import_no_scipy(args):
     assert out.stderr.strip().endswith("[]"), out.stderr
 
 
-def warp_process_modules(tmp_path, *options):
-    """The SciPy packages loaded by a ``featurewarp warp swirl`` process with these options."""
+def warp_process_modules(tmp_path, *options, modules=SCIPY_MODULES):
+    """The SciPy packages (or what ``modules`` lists) a ``featurewarp warp swirl`` process with
+    these options loaded."""
     import cv2
 
     y, x = np.mgrid[0:60, 0:80]
@@ -240,7 +241,7 @@ def warp_process_modules(tmp_path, *options):
             f"sys.argv = ['featurewarp', 'warp', 'swirl', {str(tmp_path / 'in.png')!r}, "
             f"{str(tmp_path / 'out.png')!r}, *{options!r}]\n"
             "try:\n    main()\nexcept SystemExit as exit:\n    assert not exit.code, exit.code\n"
-            f"print({SCIPY_MODULES})\n")
+            f"print({modules})\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     return out.stdout.strip()
 
@@ -248,6 +249,20 @@ def warp_process_modules(tmp_path, *options):
 @needs_cholmod
 def test_a_warp_process_uses_scikit_sparse(tmp_path):
     assert warp_process_modules(tmp_path, "--mask", "mask.png") == "['scipy', 'sksparse']"
+
+
+@needs_cholmod
+def test_the_fold_guard_imports_neither_scipy_linalg_nor_scipy_optimize(tmp_path):
+    """Importing them took 40 ms (LAPACK's pivoted Cholesky, for the Woodbury solves) and
+    0.13-0.2 s (brentq) of a 1 MP command; the guard's Newton steps and roots need neither."""
+    import json
+
+    report = tmp_path / "report.json"
+    assert warp_process_modules(tmp_path, "--angle", "180", "--mask", "mask.png", "--report", str(report),
+                                modules="sorted(m for m in sys.modules if m.startswith(('scipy.linalg', "
+                                        "'scipy.optimize')))") == "[]"
+    guard = json.loads(report.read_text())["fold_guard"]
+    assert guard["flipped_before"] and guard["barrier"]["newton_steps"]       # the guard did its work
 
 
 @pytest.mark.parametrize("options", [[], ["--mask", "mask.png", "--mode", "plain"]])

@@ -226,10 +226,13 @@ class InverseRows:
     """The least-squares inverse S between some nodes (G = P' S P per axis), from
     back-substitutions of unit forces (``inverse(rows, columns)`` -> (2, r, c) entries), kept
     as the barrier's active set grows: S is the factored system's, the same for every
-    :func:`converge` run on it (a release's path of minima passes one instance to each)."""
+    :func:`converge` run on it (a release's path of minima passes one instance to each).
+    ``unknowns`` ((2, N) int) is the solve's unknown of each node in x and in y (-1 held; the
+    nodes of a tied feature share one): it says which nodes' rows of S are zero or the same."""
 
-    def __init__(self, inverse, n: int):
-        self.inverse = inverse
+    def __init__(self, inverse, unknowns: np.ndarray):
+        self.inverse, self.unknowns = inverse, np.asarray(unknowns)
+        n = self.unknowns.shape[1]
         self.index = np.full(n, -1)
         self.known = np.zeros(0, dtype=np.int64)
         self.block = np.zeros((2, 0, 0))
@@ -256,17 +259,25 @@ class InverseRows:
         return self.block[:, at][:, :, at]
 
     def factor(self, nodes: np.ndarray) -> np.ndarray:
-        """(2u, r) C with C C' = G (interleaved x, y coordinates of ``nodes``), by LAPACK's
-        pivoted Cholesky of each axis's block; the last one is kept for the same nodes."""
+        """(2u, r) C with C C' = G (interleaved x, y coordinates of ``nodes``); the last one is
+        kept for the same nodes. Per axis, G's rows are S's between one node of each unknown
+        (positive definite: the inverse of the reduced system, restricted), Cholesky-factored,
+        and repeated for the nodes that share the unknown (zero for held nodes).
+
+        Raises
+        ------
+        numpy.linalg.LinAlgError
+            Where rounding left that block not numerically positive definite."""
         key = nodes.tobytes()
         if self.last is None or self.last[0] != key:
-            from scipy.linalg.lapack import dpstrf  # SciPy: imported by the solves that need it
-
             parts = []
-            for block in self.rows(nodes):
-                lower, pivots, rank, _ = dpstrf(block, lower=1)
-                part = np.zeros((nodes.size, rank))
-                part[pivots - 1] = np.tril(lower)[:, :rank]
+            for block, unknown in zip(self.rows(nodes), self.unknowns[:, nodes]):
+                ids, first, group = np.unique(unknown, return_index=True, return_inverse=True)
+                moving = ids >= 0
+                lower = np.linalg.cholesky(block[np.ix_(first[moving], first[moving])])
+                part = np.zeros((nodes.size, lower.shape[1]))
+                on = unknown >= 0
+                part[on] = lower[(np.cumsum(moving) - 1)[group.ravel()[on]]]
                 parts.append(part)
             factor = np.zeros((2 * nodes.size, parts[0].shape[1] + parts[1].shape[1]))
             factor[0::2, :parts[0].shape[1]], factor[1::2, parts[0].shape[1]:] = parts
@@ -279,8 +290,8 @@ def _direct_direction(rows: InverseRows, solve, optimum, points, triangles, bloc
     active nodes, or None where H + B is not positive definite.
 
     With S = H^-1 (back-substitutions of the factored system, admissible positions only), P
-    the active nodes' coordinates, B = P D P' and G = P' S P = C C' (pivoted Cholesky; G is
-    singular where nodes are held or share a feature's unknown):
+    the active nodes' coordinates, B = P D P' and G = P' S P = C C' (:meth:`InverseRows.factor`;
+    G is singular where nodes are held or share a feature's unknown):
     (H + B)^-1 = S - S P (D - D C M^-1 C' D) P' S with M = I + C' D C, which is positive
     definite exactly when H + B is. Two back-substitutions and dense work of the active
     nodes' size; S's entries grow with the active set (:class:`InverseRows`)."""
@@ -326,10 +337,9 @@ def converge(solve, normal, movable: np.ndarray, x: np.ndarray, triangles: np.nd
         ``areas(points)`` -> signed area per triangle (default :func:`grid.signed_areas`).
     max_steps : int, optional
         Newton steps at most (default :data:`MAX_STEPS`; a preview takes a few, bounded).
-    inverse : callable or InverseRows, optional
-        ``inverse(rows, columns)`` -> (2, r, c): the moves of the nodes ``rows`` in x and in y
-        under a unit force on each node of ``columns`` (``solve``'s linear part), or an
-        :class:`InverseRows` of it that earlier runs on the same system filled. With it, a
+    inverse : InverseRows, optional
+        The moves of nodes in x and in y under unit forces on nodes (``solve``'s linear part),
+        as far as earlier runs on the same system filled it. With it, a
         Newton system whose barrier touches few nodes (:func:`_direction`) is solved exactly,
         with the exact Hessian where positive definite, else the bound; others by CG.
 
@@ -350,7 +360,7 @@ def converge(solve, normal, movable: np.ndarray, x: np.ndarray, triangles: np.nd
         return 0.5 * float((normal.dot(offset) * offset).sum()) + float((kappa * clamped_log(current / floor)[0]).sum())
 
     near, bound, value = False, False, energy(x)
-    rows = inverse if inverse is None or isinstance(inverse, InverseRows) else InverseRows(inverse, x.shape[0])
+    rows = inverse
     for step in range(max_steps):
         ratio = areas(x) / floor
         active = np.flatnonzero(ratio < 1.0)
@@ -395,10 +405,11 @@ def _direction(rows, solve, optimum, normal, movable, x, triangles, ratio, floor
     """(direction, ok, direct): the Newton direction by :func:`_direct_direction` where ``rows``
     is given and the barrier touches few nodes (the exact Hessian where the system is positive
     definite with it and ``exact_first``, else the bound), else by :func:`_newton_direction`
-    (the exact Hessian when ``near``)."""
+    (the exact Hessian when ``near``; also where rounding keeps :meth:`InverseRows.factor`
+    from factoring)."""
     nodes, n = np.unique(triangles).size, x.shape[0]
     if (rows is not None and nodes <= _DIRECT_NODES and (2 * nodes) ** 3 <= _DIRECT_WORK * n
-            and nodes * n <= _DIRECT_SOLVES):
+            and nodes * n <= _DIRECT_SOLVES and _factors(rows, triangles)):
         for exact in ((True, False) if exact_first else (False,)):
             direction = _direct_direction(rows, solve, optimum, x, triangles,
                                           _hessians(x, triangles, ratio, floor, kappa, exact=exact), gradient)
@@ -407,3 +418,12 @@ def _direction(rows, solve, optimum, normal, movable, x, triangles, ratio, floor
         return None, False, True
     blocks = _hessians(x, triangles, ratio, floor, kappa, exact=near)
     return (*_newton_direction(solve, optimum, normal, movable, x, triangles, blocks, gradient, near), False)
+
+
+def _factors(rows: InverseRows, triangles: np.ndarray) -> bool:
+    """Whether :meth:`InverseRows.factor` factors G for the corners of ``triangles`` (kept)."""
+    try:
+        rows.factor(np.unique(triangles))
+    except np.linalg.LinAlgError:
+        return False
+    return True

@@ -145,8 +145,9 @@ class Problem:
         :func:`barrier.converge`: one per system, so the runs of a release's path share its
         back-substitutions."""
         if id(systems) not in self.inverses:
+            unknowns = np.stack([systems.x.unknown, systems.y.unknown])
             self.inverses[id(systems)] = (systems, barrier.InverseRows(_timed(self.timings, systems.entries),
-                                                                       self.warped.shape[0]))
+                                                                       unknowns))
         return self.inverses[id(systems)][1]
 
     def solver(self, systems, rhs, offset):
@@ -472,8 +473,8 @@ def _window(problem: Problem, rhs, offset, tied, x, crushed: np.ndarray, margin:
     local_rhs, timings = rhs[nodes], problem.timings
 
     solve = _timed(timings, lambda force: reduced.solve(local_rhs + force, held))
-    inverse = _timed(timings, lambda rows, columns: np.broadcast_to(reduced.entries(rows, columns),
-                                                                    (2, rows.size, columns.size)))
+    inverse = barrier.InverseRows(_timed(timings, lambda rows, columns: np.broadcast_to(
+        reduced.entries(rows, columns), (2, rows.size, columns.size))), np.stack([unknown, unknown]))
 
     local = np.full(grid.n_nodes, -1)
     local[nodes] = np.arange(nodes.size)
