@@ -11,7 +11,7 @@ Target (issue 21): every mesh within 0.01 px, every image within RMSE 0.5 grey l
 
 Usage::
 
-    .venv/bin/python benchmarks/stability.py [--size 256]
+    .venv/bin/python benchmarks/stability.py [--size 256] [--photos --size 384]
 """
 
 from __future__ import annotations
@@ -113,11 +113,47 @@ def bench_stability(size: int = 256) -> list[dict]:
     return rows
 
 
+#: Other photos (their longest side scaled to ``--size``) and the settings ``--photos`` runs on
+#: each of them in both modes: cases the harness above was not tuned on.
+PHOTOS = (("china.png", "china_mask.png"), ("closeup.png", "closeup_mask.png"), ("dahlia.png", "dahlia_mask.png"),
+          ("coins.png", "coins_mask.png"), ("shapes.png", "shapes_mask.png"))
+PHOTO_SETTINGS = (("swirl", {"angle": 180}), ("swirl", {"angle": 300}), ("arc", {"angle": 300}),
+                  ("cylinder", {"angle": 150}), ("fish", {}), ("sphere", {}), ("squeeze", {}), ("rise", {}),
+                  ("flag", {}), ("perspective", {}))
+
+
+def bench_photos(size: int = 384) -> list[dict]:
+    """:data:`PHOTO_SETTINGS` in both modes on each of :data:`PHOTOS`; print and return the rows."""
+    samples, rows = ROOT / "samples", []
+    print(f"\nStability on other photos (longest side {size} px): one-ulp nudges ({', '.join(PATTERNS)})")
+    for photo, mask_name in PHOTOS:
+        image = cv2.cvtColor(cv2.imread(str(samples / photo)), cv2.COLOR_BGR2RGB)
+        scale = size / max(image.shape[:2])
+        shape = (max(8, round(image.shape[1] * scale)), max(8, round(image.shape[0] * scale)))
+        image = cv2.resize(image, shape, interpolation=cv2.INTER_AREA)
+        mask = cv2.resize(cv2.imread(str(samples / mask_name), cv2.IMREAD_GRAYSCALE), shape,
+                          interpolation=cv2.INTER_NEAREST) >= 128
+        for preset, params in PHOTO_SETTINGS:
+            for mode in ("similarity", "rigid"):
+                move, rmse, flips = measure_case(image, mask, preset, params, mode)
+                ok = move <= MESH_TARGET_PX and rmse <= IMAGE_TARGET_RMSE
+                print(f"{photo:12s} {preset:12s} {str(params):16s} {mode:10s} {move:13.4g} {rmse:8.3f}  "
+                      f"{'yes' if ok else 'NO'}")
+                rows.append({"photo": photo, "preset": preset, "params": params, "mode": mode,
+                             "node_move_px": move, "rmse": rmse, "flips": flips, "ok": bool(ok)})
+    print(f"{sum(r['ok'] for r in rows)} of {len(rows)} cases within the targets")
+    return rows
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--size", type=int, default=256)
+    parser.add_argument("--photos", action="store_true", help="the settings on other photos instead (--size 384)")
     args = parser.parse_args(argv)
-    bench_stability(args.size)
+    if args.photos:
+        bench_photos(args.size)
+    else:
+        bench_stability(args.size)
     return 0
 
 
