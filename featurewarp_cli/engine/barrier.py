@@ -33,7 +33,8 @@ the system is positive definite. Far from the minimum each triangle's
 barrier Hessian is bounded by a positive semi-definite one (the area Hessian's negative part
 dropped); once a full step is taken with a decrement below ``_EXACT_BELOW`` of Phi, the exact
 Hessian (quadratic convergence), back to the bound wherever the exact system is not positive
-definite.
+definite. A full step of the bound is doubled while the energy falls (:func:`_extended`): the
+bound over-estimates the curvature, and its full steps fall short along the energy's valleys.
 """
 
 from __future__ import annotations
