@@ -147,13 +147,13 @@ def bench_photos(size: int = 384) -> list[dict]:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--size", type=int, default=256)
-    parser.add_argument("--photos", action="store_true", help="the settings on other photos instead (--size 384)")
+    parser.add_argument("--size", type=int, default=None, help="default 256; 384 with --photos")
+    parser.add_argument("--photos", action="store_true", help="the settings on other photos instead")
     args = parser.parse_args(argv)
     if args.photos:
-        bench_photos(args.size)
+        bench_photos(args.size or 384)
     else:
-        bench_stability(args.size)
+        bench_stability(args.size or 256)
     return 0
 
 

@@ -33,8 +33,9 @@ the system is positive definite. Far from the minimum each triangle's
 barrier Hessian is bounded by a positive semi-definite one (the area Hessian's negative part
 dropped); once a full step is taken with a decrement below ``_EXACT_BELOW`` of Phi, the exact
 Hessian (quadratic convergence), back to the bound wherever the exact system is not positive
-definite. A full step of the bound is doubled while the energy falls (:func:`_extended`): the
-bound over-estimates the curvature, and its full steps fall short along the energy's valleys.
+definite. A full step of the bound by conjugate gradients is doubled while the energy falls
+(:func:`_extended`): the bound over-estimates the curvature, and its full steps fall short
+along the energy's valleys.
 """
 
 from __future__ import annotations
@@ -412,7 +413,8 @@ def converge(solve, normal, movable: np.ndarray, x: np.ndarray, triangles: np.nd
 
 def _extended(energy, areas, x: np.ndarray, direction: np.ndarray, value: float) -> tuple[float, float]:
     """(length, energy) of the step along ``direction`` from ``x``: a full step (energy ``value``)
-    doubled while that lowers the energy, up to 0.9 of the way to the first fold along the ray.
+    doubled while that lowers the energy, up to 0.9 of the way to the first fold along the ray
+    and at most 0.9 :data:`_FAR` (512 steps).
 
     The bound's Hessian over-estimates the curvature where the barrier's area term has a
     negative part, so its full steps fall short along the valleys of the energy (the

@@ -68,7 +68,7 @@ def first_root(c: np.ndarray, b: np.ndarray, a: np.ndarray) -> float:
     c / q with q = -(b + sign(b) sqrt(b^2 - 4 a c)) / 2, the form that does not cancel (a
     linear one, a = 0, has the second only). Only quadratics that can reach zero on [0, 1]
     (c <= |b| + |a|, with room for rounding) are solved: most are far from it."""
-    near = np.flatnonzero(c <= (1.0 + 1e-9) * (np.abs(b) + np.abs(a)))
+    near = np.flatnonzero(~(c > (1.0 + 1e-9) * (np.abs(b) + np.abs(a))))      # NaN rows stay, as before
     c, b, a = c[near], b[near], a[near]
     roots = np.where((c <= 0) & ((b < 0) | ((b == 0) & (a < 0))), 0.0, np.inf)
     disc = b * b - 4.0 * a * c

@@ -34,11 +34,13 @@ def bracketed_root(function, low: float, high: float, xtol: float = 1e-12) -> fl
     Raises
     ------
     ValueError
-        Where the signs at the two ends do not differ.
+        Where the signs at the two ends do not differ, low >= high or xtol <= 0.
 
     >>> round(bracketed_root(lambda t: t * t - 2.0, 0.0, 2.0), 12)
     1.414213562373
     """
+    if not (low < high and xtol > 0):
+        raise ValueError(f"the bracket must have low < high and xtol > 0, not [{low}, {high}], {xtol}")
     f_low, f_high = function(low), function(high)
     if f_low == 0.0:
         return low
