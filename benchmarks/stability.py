@@ -91,6 +91,16 @@ def measure_case(image, mask, preset, params, mode):
     return max(moves), max(errors), base_mesh.flips()
 
 
+def _measured_row(name: str, image, features, preset: str, params: dict, mode: str, **where) -> dict:
+    """:func:`measure_case` (``features``: the mask), printed as one line under ``name`` and
+    returned as a row (with ``where``)."""
+    move, rmse, flips = measure_case(image, features, preset, params, mode)
+    ok = move <= MESH_TARGET_PX and rmse <= IMAGE_TARGET_RMSE
+    print(f"{name[:58]:58s} {move:13.4g} {rmse:8.3f}  {'yes' if ok else 'NO'}")
+    return {**where, "preset": preset, "params": params, "mode": mode, "node_move_px": move, "rmse": rmse,
+            "flips": flips, "ok": bool(ok)}
+
+
 def bench_stability(size: int = 256) -> list[dict]:
     """Run every case on the astronaut sample scaled to ``size`` px; print and return the rows."""
     samples = ROOT / "samples"
@@ -103,12 +113,8 @@ def bench_stability(size: int = 256) -> list[dict]:
     for preset, params, mode, mask_name in CASES:
         mask = cv2.imread(str(samples / mask_name), cv2.IMREAD_GRAYSCALE)
         mask = cv2.resize(mask, (size, size), interpolation=cv2.INTER_NEAREST) >= 128
-        move, rmse, flips = measure_case(image, mask, preset, params, mode)
-        ok = move <= MESH_TARGET_PX and rmse <= IMAGE_TARGET_RMSE
-        name = f"{preset} {params} {mode} ({mask_name.split('.')[0]})"
-        print(f"{name[:58]:58s} {move:13.4g} {rmse:8.3f}  {'yes' if ok else 'NO'}")
-        rows.append({"preset": preset, "params": params, "mode": mode, "mask": mask_name, "node_move_px": move,
-                     "rmse": rmse, "flips": flips, "ok": bool(ok)})
+        rows.append(_measured_row(f"{preset} {params} {mode} ({mask_name.split('.')[0]})", image, mask, preset,
+                                  params, mode, mask=mask_name))
     print(f"{sum(r['ok'] for r in rows)} of {len(rows)} cases within the targets")
     return rows
 
@@ -135,12 +141,8 @@ def bench_photos(size: int = 384) -> list[dict]:
                           interpolation=cv2.INTER_NEAREST) >= 128
         for preset, params in PHOTO_SETTINGS:
             for mode in ("similarity", "rigid"):
-                move, rmse, flips = measure_case(image, mask, preset, params, mode)
-                ok = move <= MESH_TARGET_PX and rmse <= IMAGE_TARGET_RMSE
-                print(f"{photo:12s} {preset:12s} {str(params):16s} {mode:10s} {move:13.4g} {rmse:8.3f}  "
-                      f"{'yes' if ok else 'NO'}")
-                rows.append({"photo": photo, "preset": preset, "params": params, "mode": mode,
-                             "node_move_px": move, "rmse": rmse, "flips": flips, "ok": bool(ok)})
+                rows.append(_measured_row(f"{photo} {preset} {params} {mode}", image, mask, preset, params, mode,
+                                          photo=photo))
     print(f"{sum(r['ok'] for r in rows)} of {len(rows)} cases within the targets")
     return rows
 

@@ -444,9 +444,9 @@ def _direction(rows, solve, optimum, normal, movable, x, triangles, ratio, floor
     definite with it and ``exact_first``, else the bound), else by :func:`_newton_direction`
     (the exact Hessian when ``near``; also where rounding keeps :meth:`InverseRows.factor`
     from factoring, or the direct direction from pointing downhill)."""
-    nodes, n = np.unique(triangles).size, x.shape[0]
-    if (rows is not None and nodes <= _DIRECT_NODES and (2 * nodes) ** 3 <= _DIRECT_WORK * n
-            and nodes * n <= _DIRECT_SOLVES and _factors(rows, triangles)):
+    nodes, n = np.unique(triangles), x.shape[0]
+    if (rows is not None and nodes.size <= _DIRECT_NODES and (2 * nodes.size) ** 3 <= _DIRECT_WORK * n
+            and nodes.size * n <= _DIRECT_SOLVES and _factors(rows, nodes)):
         for exact in ((True, False) if exact_first else (False,)):
             direction = _direct_direction(rows, solve, optimum, x, triangles,
                                           _hessians(x, triangles, ratio, floor, kappa, exact=exact), gradient)
@@ -461,10 +461,10 @@ def _direction(rows, solve, optimum, normal, movable, x, triangles, ratio, floor
     return (*_newton_direction(solve, optimum, normal, movable, x, triangles, blocks, gradient, near), False)
 
 
-def _factors(rows: InverseRows, triangles: np.ndarray) -> bool:
-    """Whether :meth:`InverseRows.factor` factors G for the corners of ``triangles`` (kept)."""
+def _factors(rows: InverseRows, nodes: np.ndarray) -> bool:
+    """Whether :meth:`InverseRows.factor` factors G for ``nodes`` (sorted, unique; kept)."""
     try:
-        rows.factor(np.unique(triangles))
+        rows.factor(nodes)
     except np.linalg.LinAlgError:
         return False
     return True
