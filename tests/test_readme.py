@@ -74,8 +74,9 @@ def test_the_makefile_makes_a_gallery():
 @pytest.mark.slow
 @pytest.mark.parametrize("command", gallery_commands(), ids=lambda command: Path(shlex.split(command)[4]).name)
 def test_the_committed_gallery_is_what_make_gallery_makes(tmp_path, monkeypatch, command):
-    """The picture in docs/gallery that a Makefile line makes is what it makes now (JPEG: within
-    RMSE 2). Run in-process, one picture per test: the pictures are what is checked here, not the
+    """The picture in docs/gallery that a Makefile line makes is what it makes now: within RMSE 0.5,
+    issue 21's bound for any machine (emulated machines stay within 0.02; README, *Stability
+    across machines*). Run in-process, one picture per test: the pictures are what is checked here, not the
     process around them (the README blocks above run the real command)."""
     import cv2
     import numpy as np
@@ -95,4 +96,4 @@ def test_the_committed_gallery_is_what_make_gallery_makes(tmp_path, monkeypatch,
         committed = cv2.imread(str(ROOT / "docs" / "gallery" / picture.name)).astype(float)
         fresh = cv2.imread(str(picture)).astype(float)
         assert committed.shape == fresh.shape, picture.name
-        assert np.sqrt(np.mean((committed - fresh) ** 2)) <= 2.0, picture.name
+        assert np.sqrt(np.mean((committed - fresh) ** 2)) <= 0.5, picture.name
