@@ -526,3 +526,48 @@ def test_rounding_in_the_conjugate_gradients_cannot_untie_a_feature_or_move_a_he
     moved = x[feature] - optimum[feature]
     assert np.abs(moved - moved[0]).max() < 1e-9                         # rigid: one translation
     assert np.abs(x - clean).max() < 1e-4
+
+
+def test_the_local_preconditioner_solves_the_reduced_system_on_its_unknowns_tied_features_included():
+    """The CG preconditioner's local solve (``_local_solver``) is the reduced Newton system
+    P' (H + B) P restricted to the unknowns the barrier's active corners take: a tied feature
+    with a corner among them enters with its one translation per axis (its nodes all move by
+    it), held coordinates do not enter, and x and y may be numbered differently."""
+    import scipy.sparse as sp
+
+    from featurewarp_cli.engine import system
+
+    grid = Grid.for_image(56, 48, 8.0)
+    n, tris = grid.n_nodes, grid.triangles()
+    normal = system.normal_matrix(grid, np.ones((grid.ny - 1) * (grid.nx - 1)))
+    held = grid.boundary()
+    tied = np.full(n, -1)
+    tied[[2 * grid.nx + 2, 2 * grid.nx + 3, 3 * grid.nx + 2, 3 * grid.nx + 3]] = 0
+    unknown_y = system.number_unknowns(held, tied)
+    held_x = held.copy()
+    held_x[grid.nx * np.arange(1, grid.ny - 1)] = False                    # the left side slides in x
+    unknowns = np.stack([system.number_unknowns(held_x, tied), unknown_y])
+    active = tris[[0, 1, 2 * (grid.nx - 1) + 2, 2 * (grid.nx - 1) + 3, len(tris) // 2 + 3]]
+    rng = np.random.default_rng(4)
+    factors = rng.normal(size=(len(active), 6, 3))
+    blocks = factors @ np.transpose(factors, (0, 2, 1))                   # positive semi-definite
+    r = rng.normal(size=(n, 2))
+    z = barrier._local_solver(normal, unknowns, active, blocks)(r)
+
+    columns = [np.flatnonzero(u >= 0) for u in unknowns]
+    sizes = [int(u.max()) + 1 for u in unknowns]
+    projection = sp.lil_matrix((2 * n, sum(sizes)))
+    for axis, (u, size_before) in enumerate(zip(unknowns, (0, sizes[0]))):
+        projection[2 * columns[axis] + axis, size_before + u[columns[axis]]] = 1.0
+    projection = projection.toarray()
+    full = np.kron(normal.toarray(), np.eye(2))
+    dof = (2 * active[:, :, None] + np.arange(2)).reshape(-1, 6)
+    for block, d in zip(blocks, dof):
+        full[np.ix_(d, d)] += block
+    reduced = projection.T @ full @ projection
+    local = np.flatnonzero(projection[dof.ravel()].any(axis=0))
+    moved = np.linalg.solve(reduced[np.ix_(local, local)], (projection.T @ r.reshape(-1))[local])
+    expected = (projection[:, local] @ moved).reshape(n, 2)
+    assert np.abs(z - expected).max() < 1e-10 * np.abs(expected).max()
+    assert np.ptp(z[tied == 0], axis=0).max() < 1e-12 and np.abs(z[tied == 0]).max() > 0
+    assert np.all(z[held_x, 0] == 0) and np.all(z[held, 1] == 0)

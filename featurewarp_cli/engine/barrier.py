@@ -146,40 +146,60 @@ def _hessians(points, triangles, ratio, floor, kappa, exact: bool) -> np.ndarray
             + (-kappa * first / floor)[:, None, None] * _AREA_HESSIAN_NEGATIVE)
 
 
-def _local_solver(normal, movable: np.ndarray, triangles: np.ndarray, blocks: np.ndarray):
-    """``r -> z``: the Newton system restricted to the movable corners of ``triangles`` (the
-    barrier's active ones), everything else held, solved exactly (one small factorization)."""
+def _local_solver(normal, unknowns: np.ndarray, triangles: np.ndarray, blocks: np.ndarray):
+    """``r -> z``: the Newton system restricted to the solve's unknowns that the corners of
+    ``triangles`` (the barrier's active ones) take, everything else held, solved exactly (one
+    small factorization). ``unknowns`` ((2, N) int, -1 held) is the solve's numbering per axis:
+    a tied feature with a corner among them enters with its shared translation (all its nodes
+    move with it), so a feature pressed against crushed triangles is preconditioned by the
+    barrier's stiffness too, not by the least-squares energy alone (which is 1e11 times softer
+    there: CG then needed its full 100 iterations and still pointed uphill). The matrix is a
+    principal submatrix of the reduced Newton system: where it is not positive definite,
+    neither is the whole."""
     import scipy.sparse as sp                 # SciPy: imported by the solves that need it
 
     from .solver import spd_solver
 
-    n = movable.size
+    n = unknowns.shape[1]
     on = np.zeros(n, bool)
     on[triangles.ravel()] = True
-    nodes = np.flatnonzero(on & movable)
-    if nodes.size == 0:
+    column, size = np.full((n, 2), -1), 0     # the local unknown of each node's x and y
+    for axis, unknown in enumerate(unknowns):
+        ids = np.unique(unknown[on & (unknown >= 0)])
+        lookup = np.full(int(unknown.max()) + 2, -1)
+        lookup[ids] = size + np.arange(ids.size)
+        column[:, axis] = np.where(unknown >= 0, lookup[unknown], -1)
+        size += ids.size
+    if size == 0:
         return lambda r: np.zeros_like(r)
-    index = np.full(n, -1)
-    index[nodes] = np.arange(nodes.size)
-    block = normal[nodes][:, nodes].tocoo()
-    dof = np.where(index[triangles][:, :, None] >= 0, 2 * index[triangles][:, :, None] + np.arange(2), -1)
-    dof = dof.reshape(-1, 6)
-    rows, cols = np.broadcast_to(dof[:, :, None], blocks.shape), np.broadcast_to(dof[:, None, :], blocks.shape)
-    keep = (rows >= 0) & (cols >= 0)
-    matrix = sp.csc_matrix((np.concatenate([block.data, block.data, blocks[keep]]),
-                            (np.concatenate([2 * block.row, 2 * block.row + 1, rows[keep]]),
-                             np.concatenate([2 * block.col, 2 * block.col + 1, cols[keep]]))),
-                           shape=(2 * nodes.size, 2 * nodes.size))
+    rows, cols, data = [], [], []
+    for axis in range(2):                     # P' H P per axis: entries summed per unknown pair
+        nodes = np.flatnonzero(column[:, axis] >= 0)
+        block = normal[nodes][:, nodes].tocoo()
+        rows.append(column[nodes[block.row], axis])
+        cols.append(column[nodes[block.col], axis])
+        data.append(block.data)
+    dof = column[triangles].reshape(-1, 6)
+    dof_rows, dof_cols = np.broadcast_to(dof[:, :, None], blocks.shape), np.broadcast_to(dof[:, None, :], blocks.shape)
+    keep = (dof_rows >= 0) & (dof_cols >= 0)
+    matrix = sp.csc_matrix((np.concatenate(data + [blocks[keep]]),
+                            (np.concatenate(rows + [dof_rows[keep]]), np.concatenate(cols + [dof_cols[keep]]))),
+                           shape=(size, size))
     solve = spd_solver(matrix)
+    mapped = [np.flatnonzero(column[:, axis] >= 0) for axis in range(2)]
 
     def local(r):
+        rhs = sum(np.bincount(column[mapped[axis], axis], r[mapped[axis], axis], minlength=size)
+                  for axis in range(2))
+        moved = np.asarray(solve(rhs)).reshape(-1)
         z = np.zeros_like(r)
-        z[nodes] = np.asarray(solve(r[nodes].reshape(-1))).reshape(-1, 2)
+        for axis in range(2):
+            z[mapped[axis], axis] = moved[column[mapped[axis], axis]]
         return z
     return local
 
 
-def _newton_direction(solve, optimum, normal, movable, points, triangles, blocks, gradient, near: bool):
+def _newton_direction(solve, optimum, normal, unknowns, points, triangles, blocks, gradient, near: bool):
     """Conjugate gradients on (H + barrier Hessian) d = -gradient, preconditioned by a local
     solve, a back-substitution of the factored H and the local solve again; (d, ok), ok False
     where the system or the preconditioner shows a direction of non-positive curvature, or
@@ -205,7 +225,7 @@ def _newton_direction(solve, optimum, normal, movable, points, triangles, blocks
     from . import cholmod                     # scikit-sparse: imported by the solves that need it
 
     try:
-        local = _local_solver(normal, movable, triangles, blocks)
+        local = _local_solver(normal, unknowns, triangles, blocks)
     except cholmod.NotPositiveDefinite:
         return None, False
 
@@ -465,7 +485,8 @@ def _direction(rows, solve, optimum, normal, movable, x, triangles, ratio, floor
         else:
             return None, False, True
     blocks = _hessians(x, triangles, ratio, floor, kappa, exact=near)
-    return (*_newton_direction(solve, optimum, normal, movable, x, triangles, blocks, gradient, near), False)
+    unknowns = rows.unknowns if rows is not None else np.stack([np.where(movable, np.arange(n), -1)] * 2)
+    return (*_newton_direction(solve, optimum, normal, unknowns, x, triangles, blocks, gradient, near), False)
 
 
 def _factors(rows: InverseRows, nodes: np.ndarray) -> bool:
