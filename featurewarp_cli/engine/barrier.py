@@ -199,19 +199,15 @@ def _local_solver(normal, unknowns: np.ndarray, triangles: np.ndarray, blocks: n
     return local
 
 
-def _newton_direction(solve, optimum, normal, unknowns, points, triangles, blocks, gradient, near: bool):
+def _newton_direction(move, normal, unknowns, points, triangles, blocks, gradient, near: bool):
     """Conjugate gradients on (H + barrier Hessian) d = -gradient, preconditioned by a local
     solve, a back-substitution of the factored H and the local solve again; (d, ok), ok False
     where the system or the preconditioner shows a direction of non-positive curvature, or
     ``near`` and CG did not converge in :data:`_CG_NEAR`'s iterations. (The local solve fails
     only where the whole system is indefinite too: its matrix is a principal submatrix.)
 
-    The direction is returned projected onto the solve's positions (S H d, one more
-    back-substitution): each preconditioned residual is on them up to rounding, but CG sums
-    many, and where the barrier is far stiffer than H their rounding piled up into moves that
-    pulled a tied feature's nodes apart (0.044 px on the coins under swirl 90 at 256 px; the
-    solve then "converged" 53 below the constrained minimum, and a one-ulp nudge of W jumped
-    between the two)."""
+    ``move``: the solve's linear part (:func:`converge`'s ``linear``): every preconditioned
+    residual, and so the direction, is exactly on the solve's positions."""
     n = points.shape[0]
     corners = triangles.ravel()
 
@@ -231,7 +227,7 @@ def _newton_direction(solve, optimum, normal, unknowns, points, triangles, block
 
     def precondition(r):
         z = local(r)
-        z = z + solve(r - product(z)) - optimum
+        z = z + move(r - product(z))
         return z + local(r - product(z))
 
     residual = -gradient
@@ -255,9 +251,9 @@ def _newton_direction(solve, optimum, normal, unknowns, points, triangles, block
         if rz_next < 0 and near:
             return None, False
         if rz_next <= tolerance * first:
-            return solve(normal.dot(direction)) - optimum, True
+            return direction, True
         step, rz = z + (rz_next / rz) * step, rz_next
-    return (None, False) if near else (solve(normal.dot(direction)) - optimum, True)
+    return (None, False) if near else (direction, True)
 
 
 class InverseRows:
@@ -323,7 +319,7 @@ class InverseRows:
         return self.last[1]
 
 
-def _direct_direction(rows: InverseRows, solve, optimum, points, triangles, blocks, gradient):
+def _direct_direction(rows: InverseRows, move, points, triangles, blocks, gradient):
     """The Newton direction -(H + B)^-1 g exactly, by the Woodbury identity on the barrier's
     active nodes, or None where H + B is not positive definite.
 
@@ -350,17 +346,17 @@ def _direct_direction(rows: InverseRows, solve, optimum, points, triangles, bloc
         lower = np.linalg.cholesky(np.eye(factor.shape[1]) + reduced @ factor)
     except np.linalg.LinAlgError:
         return None
-    moved = solve(gradient) - optimum                               # S g
+    moved = move(gradient)                                          # S g
     v = moved[nodes].reshape(-1)
     inner = np.linalg.solve(lower.T, np.linalg.solve(lower, reduced @ v))
     force = np.zeros_like(points)
     force[nodes] = (coupling @ v - reduced.T @ inner).reshape(u, 2)
-    return solve(force) - optimum - moved
+    return move(force) - moved
 
 
 def converge(solve, normal, movable: np.ndarray, x: np.ndarray, triangles: np.ndarray, floor: np.ndarray,
              kappa: np.ndarray, areas=None, max_steps: int | None = None,
-             inverse=None) -> tuple[np.ndarray, Convergence]:
+             inverse=None, linear=None) -> tuple[np.ndarray, Convergence]:
     """Minimise Phi (module docstring) from the injective positions ``x``.
 
     Parameters
@@ -371,21 +367,21 @@ def converge(solve, normal, movable: np.ndarray, x: np.ndarray, triangles: np.nd
     normal : scipy.sparse matrix
         The least-squares energy's Hessian per axis (N x N; exact on the rows ``solve`` moves).
     movable : (N,) bool ndarray
-        Nodes ``solve`` moves one by one (not held, not tied to a feature).
-    x : (N, 2) ndarray
-        Start: no triangle folded.
-    triangles : (M, 3) ndarray of int
-    floor, kappa : (M,) ndarray
-        f_t and kappa_t (:func:`weights`).
-    areas : callable, optional
-        ``areas(points)`` -> signed area per triangle (default :func:`grid.signed_areas`).
-    max_steps : int, optional
+        Nodes ``solve`` moves one by one (not held, not tied; used without ``inverse``).
+    x, triangles, floor, kappa : (N, 2), (M, 3), (M,), (M,) ndarray
+        Start (no triangle folded), the triangles, f_t and kappa_t (:func:`weights`).
+    areas, max_steps : callable, int, optional
+        ``areas(points)`` -> signed area per triangle (default :func:`grid.signed_areas`);
         Newton steps at most (default :data:`MAX_STEPS`; a preview takes a few, bounded).
     inverse : InverseRows, optional
-        The moves of nodes in x and in y under unit forces on nodes (``solve``'s linear part),
-        as far as earlier runs on the same system filled it. With it, a
-        Newton system whose barrier touches few nodes (:func:`_direction`) is solved exactly,
-        with the exact Hessian where positive definite, else the bound; others by CG.
+        ``solve``'s linear part between nodes, as far as earlier runs on the same system filled
+        it: with it, a Newton system whose barrier touches few nodes is solved exactly.
+    linear : callable, optional
+        ``linear(force)`` -> S force, exactly 0 on held coordinates and one value per unknown.
+        The default, ``solve(force) - solve(0)``, subtracts positions: a tied feature's nodes
+        came out 1e-14 apart, times reaction forces of 1e4 that spoiled CG's inner products
+        and the decrement (the coins under swirl 90 at 256 px "converged" 0.044 px off the
+        solve's positions; 7 of 8 exact-Hessian CGs failed).
 
     Returns
     -------
@@ -395,6 +391,7 @@ def converge(solve, normal, movable: np.ndarray, x: np.ndarray, triangles: np.nd
     areas = areas or (lambda points: signed_areas(points, triangles))
     max_steps = MAX_STEPS if max_steps is None else max_steps
     optimum = solve(np.zeros_like(x))
+    move = linear or (lambda force: solve(force) - optimum)
 
     def energy(points):
         current = areas(points)
@@ -409,7 +406,7 @@ def converge(solve, normal, movable: np.ndarray, x: np.ndarray, triangles: np.nd
         active = np.flatnonzero(ratio < 1.0)
         tris, scale = triangles[active], kappa[active] / floor[active]
         gradient = normal.dot(x - optimum) + injectivity.penalty_force(x, tris, scale * clamped_log(ratio[active])[1])
-        direction, ok, direct = _direction(rows, solve, optimum, normal, movable, x, tris, ratio[active],
+        direction, ok, direct = _direction(rows, move, normal, movable, x, tris, ratio[active],
                                            floor[active], kappa[active], gradient, near, not bound)
         if not ok:                             # not positive definite
             if not near:
@@ -464,7 +461,7 @@ def _reaches_optimum(areas, x: np.ndarray, optimum: np.ndarray, floor: np.ndarra
     return bool(np.all(areas(optimum) >= floor)) and injectivity.max_step_of(areas, x, optimum) >= 1.0
 
 
-def _direction(rows, solve, optimum, normal, movable, x, triangles, ratio, floor, kappa, gradient, near,
+def _direction(rows, move, normal, movable, x, triangles, ratio, floor, kappa, gradient, near,
                exact_first=True):
     """(direction, ok, direct): the Newton direction by :func:`_direct_direction` where ``rows``
     is given and the barrier touches few nodes (the exact Hessian where the system is positive
@@ -475,7 +472,7 @@ def _direction(rows, solve, optimum, normal, movable, x, triangles, ratio, floor
     if (rows is not None and nodes.size <= _DIRECT_NODES and (2 * nodes.size) ** 3 <= _DIRECT_WORK * n
             and nodes.size * n <= _DIRECT_SOLVES and _factors(rows, nodes)):
         for exact in ((True, False) if exact_first else (False,)):
-            direction = _direct_direction(rows, solve, optimum, x, triangles,
+            direction = _direct_direction(rows, move, x, triangles,
                                           _hessians(x, triangles, ratio, floor, kappa, exact=exact), gradient)
             if direction is None:                 # not positive definite with these blocks
                 continue
@@ -486,7 +483,7 @@ def _direction(rows, solve, optimum, normal, movable, x, triangles, ratio, floor
             return None, False, True
     blocks = _hessians(x, triangles, ratio, floor, kappa, exact=near)
     unknowns = rows.unknowns if rows is not None else np.stack([np.where(movable, np.arange(n), -1)] * 2)
-    return (*_newton_direction(solve, optimum, normal, unknowns, x, triangles, blocks, gradient, near), False)
+    return (*_newton_direction(move, normal, unknowns, x, triangles, blocks, gradient, near), False)
 
 
 def _factors(rows: InverseRows, nodes: np.ndarray) -> bool:

@@ -154,6 +154,11 @@ class Problem:
         """``solve(force)``: positions for these constants plus a force per node."""
         return _timed(self.timings, lambda force=None: systems.solve(rhs if force is None else rhs + force, offset))
 
+    def linear(self, systems):
+        """``move(force)``: the solve's linear part, the positions' change under a force per node
+        (exactly 0 where held, one value per tied unknown; :func:`barrier.converge`)."""
+        return _timed(self.timings, lambda force: systems.solve(force, np.zeros_like(force)))
+
 
 def _timed(timings: dict, function):
     """``function``, adding its wall time to ``timings["solve"]`` (the report's solve stage)."""
@@ -346,7 +351,8 @@ def _converge_grid(problem, systems, rhs, offset, tied, x, floor, record):
     x, how = barrier.converge(problem.solver(systems, rhs, offset), problem.normal, ~problem.fixed & (tied < 0), x,
                               problem.triangles, floor, kappa,
                               areas=lambda points: injectivity.grid_areas(problem.grid, points),
-                              max_steps=PREVIEW_STEPS if problem.preview else None, inverse=problem.inverse(systems))
+                              max_steps=PREVIEW_STEPS if problem.preview else None, inverse=problem.inverse(systems),
+                              linear=problem.linear(systems))
     record.count(how)
     return x
 
@@ -394,8 +400,9 @@ class Window:
         The window's nodes (its moving ones and the held ones around them).
     quads : (q,) int ndarray
         Quads whose shape the window may change; ``triangles`` are theirs, in window indices.
-    matrix, solve
-        The normal matrix's rows for the nodes, and ``solve(force)`` -> (n, 2) positions.
+    matrix, solve, linear
+        The normal matrix's rows for the nodes, ``solve(force)`` -> (n, 2) positions, and its
+        linear part (the change of the positions under ``force``).
     movable : (n,) bool ndarray
         Nodes moved one by one (not held, not tied to a feature).
     warped, stiffness : (n, 2), (n,) ndarray
@@ -411,6 +418,7 @@ class Window:
     stiffness: np.ndarray
     max_steps: int | None = None
     inverse: object = None
+    linear: object = None
 
     def floor(self, floor: np.ndarray) -> np.ndarray:
         """The window's triangles' entries of a per-triangle array of the grid."""
@@ -422,7 +430,8 @@ class Window:
         local_floor = self.floor(floor)
         kappa = barrier.weights(self.warped, self.triangles, self.stiffness, local_floor)
         moved, how = barrier.converge(self.solve, self.matrix, self.movable, x[self.nodes], self.triangles,
-                                      local_floor, kappa, max_steps=self.max_steps, inverse=self.inverse)
+                                      local_floor, kappa, max_steps=self.max_steps, inverse=self.inverse,
+                                      linear=self.linear)
         record.count(how)
         return moved
 
@@ -473,6 +482,7 @@ def _window(problem: Problem, rhs, offset, tied, x, crushed: np.ndarray, margin:
     local_rhs, timings = rhs[nodes], problem.timings
 
     solve = _timed(timings, lambda force: reduced.solve(local_rhs + force, held))
+    linear = _timed(timings, lambda force: reduced.solve(force, np.zeros_like(force)))
     inverse = barrier.InverseRows(_timed(timings, lambda rows, columns: np.broadcast_to(
         reduced.entries(rows, columns), (2, rows.size, columns.size))), np.stack([unknown, unknown]))
 
@@ -481,4 +491,5 @@ def _window(problem: Problem, rhs, offset, tied, x, crushed: np.ndarray, margin:
     quad_corners = local[corners[changing]]
     triangles = np.concatenate([quad_corners[:, [0, 1, 2]], quad_corners[:, [0, 2, 3]]])
     return Window(nodes, changing, triangles, matrix, solve, local_moving & (tied[nodes] < 0),
-                  problem.warped[nodes], problem.stiffness[nodes], PREVIEW_STEPS if problem.preview else None, inverse)
+                  problem.warped[nodes], problem.stiffness[nodes], PREVIEW_STEPS if problem.preview else None, inverse,
+                  linear)
