@@ -574,3 +574,36 @@ def test_the_local_preconditioner_solves_the_reduced_system_on_its_unknowns_tied
     assert np.abs(z - expected).max() < 1e-10 * np.abs(expected).max()
     assert np.ptp(z[tied == 0], axis=0).max() < 1e-12 and np.abs(z[tied == 0]).max() > 0
     assert np.all(z[held_x, 0] == 0) and np.all(z[held, 1] == 0)
+
+
+def test_a_release_does_not_start_from_positions_its_untied_system_would_hold_elsewhere(monkeypatch):
+    """``blend_search(origin=...)`` starts the release's path from the guard's result. Untying
+    a component that was let go of the border (``boundary="release"``) holds its border nodes
+    at W again, where the result has them at the feature's similarity (the close-up under
+    ``flag`` at 192 px: 72 nodes up to 18 px away); converge never moves a held coordinate, so
+    such a start ended "converged" with the border off W. It is refused now."""
+    from featurewarp_cli.engine import components
+
+    image = cv2.imread(str(SAMPLES / "closeup.png"))
+    scale = 192 / max(image.shape[:2])
+    shape = (round(image.shape[1] * scale), round(image.shape[0] * scale))
+    mask = cv2.resize(cv2.imread(str(SAMPLES / "closeup_mask.png"), cv2.IMREAD_GRAYSCALE), shape,
+                      interpolation=cv2.INTER_NEAREST) >= 128
+    seen = {}
+    guard_of, parametrize = release.guard, components.parametrize
+    monkeypatch.setattr(release, "guard", lambda problem, x, record: seen.setdefault("guard", (
+        problem, guard_of(problem, x, record)))[1])
+    monkeypatch.setattr(components, "parametrize", lambda *a, **k: seen.setdefault("ties", parametrize(*a, **k)))
+    w, h = shape
+    FeatureWarper(w, h, mask, boundary="release").solve(load_warp("flag")(w, h), "similarity")
+    problem, result = seen["guard"]
+    ties = seen["ties"]
+    let_go = np.flatnonzero(ties.unpinned & ties.tied)
+    assert let_go.size and result is not None
+    systems, _, offset, _ = problem.rebuild(problem.edges, let_go)
+    assert not release._holds(systems, result, offset)
+    calls = []
+    found = release.blend_search(problem, let_go, barrier.SAFE_FRACTION * signed_areas(problem.warped, problem.triangles),
+                                 release.GuardRecord(), margin=lambda p: calls.append(1) or (1.0 if len(calls) == 1 else -1.0),
+                                 origin=result, steps=0)
+    assert found is None                                   # the least-squares start failed, the origin is refused

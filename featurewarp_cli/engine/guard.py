@@ -1,11 +1,8 @@
 """The fold-over guard's policy: untangle near the folds, then globally, then relax features.
 
-The primitives (step limits, areas, the penalty descent, windows) are in
-:mod:`featurewarp_cli.engine.injectivity`; the energy a window's result, a crushed solution
-and a release's blend are converged to is in :mod:`featurewarp_cli.engine.barrier`; this
-module decides how to use them for one solve (the never-worse-than-plain step after it is
-:mod:`featurewarp_cli.engine.plain_bound`). A :class:`Problem` is everything the guard needs to
-re-solve: factored systems, right-hand side, offsets, and a way to rebuild them.
+The primitives (step limits, areas, penalty descent, windows) are in :mod:`injectivity`, the
+energy every result is converged to in :mod:`barrier`, the never-worse-than-plain step after
+the guard in :mod:`plain_bound`. A :class:`Problem` is what the guard needs to re-solve.
 """
 
 from __future__ import annotations
@@ -192,11 +189,9 @@ def guard(problem: Problem, x: np.ndarray, record: GuardRecord) -> np.ndarray | 
 def _untangled(problem, start, floor, record):
     """Untangle in a window around the folds (a wider one next, from where the first left off
     if it has fewer folds; then the first window with the ground around the tied features it
-    reaches, from ``start``; a window that opens its folds converges the barrier's energy
-    there, see :func:`_untangle_window`), else on the whole grid from the best of the first
-    two (slivers lifted to half their floor; :func:`guard` converges the whole grid after it);
-    a preview stops after a window that gave up, or after the first two (the third is several
-    times larger: 0.4-1 s at 1 MP); (x, no folds left).
+    reaches, from ``start``; :func:`_untangle_window`), else on the whole grid from the best
+    of the first two; a preview stops after a window that gave up, or after the first two
+    (the third is several times larger: 0.4-1 s at 1 MP); (x, no folds left).
 
     The third window comes last: where a tied feature blocks the folds (the astronaut's head
     cut by the top edge under ``fish``), it opens them where the others cannot (12 MP: 1.4 s
@@ -279,7 +274,9 @@ def blend_search(problem: Problem, released: np.ndarray, floor, record: GuardRec
       only): it is followed up to the first root of the areas' quadratics at half the
       floor, or of the margin (:func:`plain_bound.furthest_move`); where it fails the margin
       at s = 0 already, the path starts at the minimum for s = 0 converged from ``origin``
-      (positions with no fold that tie ``released``: the guard's result);
+      (positions with no fold that tie ``released``: the guard's result), where ``origin``
+      keeps the coordinates the untied system holds (not so where untying a component that
+      was let go of the border holds its border nodes at W again);
     - from there, ``steps`` even steps of s up to 1, each converged from the last point.
       Where one fails ``margin``, the furthest point between it and the last point that
       passed, converged at its blend (:func:`settle` below). Without steps, the start
@@ -327,7 +324,7 @@ def blend_search(problem: Problem, released: np.ndarray, floor, record: GuardRec
         x, s = furthest_move(lambda t: start + t * along, margin, problem.triangles, floor)
         if not steps:
             return settle(s, x), s
-    elif origin is not None:                  # admissible here too: untying only frees nodes
+    elif origin is not None and _holds(systems, origin, offset):
         x, value = at(0.0, origin)
         if value > 0:
             return None
@@ -343,6 +340,13 @@ def blend_search(problem: Problem, released: np.ndarray, floor, record: GuardRec
             return settle(s, between), s
         x, s = trial, t
     return x, s
+
+
+def _holds(systems, points: np.ndarray, offset: np.ndarray) -> bool:
+    """Whether ``points`` keep the coordinates ``systems`` hold at ``offset`` (a start for
+    :func:`barrier.converge`, which never moves them)."""
+    return all(np.abs(points[u < 0, k] - offset[u < 0, k]).max(initial=0.0) <= 1e-9
+               for k, u in enumerate((systems.x.unknown, systems.y.unknown)))
 
 
 def _converge_grid(problem, systems, rhs, offset, tied, x, floor, record):
