@@ -78,8 +78,8 @@ CASES = (0, 3, 5, 7, 8, 10)
 QUICK_CASES = (0, 3)
 #: Cases on other photos that once depended on the machine: (photo, mask, longest side px,
 #: preset, parameters, mode). The coins under swirl 90 seemed to converge to one of two nearby
-#: minima (0.02-0.12 px apart) depending on the BLAS kernel, until CG's directions were
-#: projected back onto the solve's positions (one was off them); before the plain bound had
+#: minima (0.02-0.12 px apart) depending on the BLAS kernel, until Newton directions were built
+#: from the solve's linear part (one had left the solve's positions); before the plain bound had
 #: EXACT_ENOUGH's headroom, the one Sandybridge's kernels reached was moved to W (24 px).
 PHOTO_CASES = (("coins.png", "coins_mask.png", 256, "swirl", {"angle": 90}, "similarity"),)
 #: The pictures --quick makes: two that an AVX2 machine moved (sphere past the limit) and two it did not.

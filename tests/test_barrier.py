@@ -471,8 +471,8 @@ def test_the_closed_form_anisotropy_root_holds_for_maps_that_reverse_orientation
 def test_every_newton_direction_keeps_a_tied_feature_rigid_and_the_border_held_exactly(monkeypatch):
     """The Newton directions are built from the solve's linear part (``converge(linear=...)``),
     not from differences of positions: held coordinates move by exactly 0 and a tied feature's
-    nodes by exactly one translation, in every step of conjugate gradients and of the Woodbury
-    path. Differences of ~100 px positions left the feature's nodes 1e-14 apart; times the
+    nodes by exactly one translation, in every direction of conjugate gradients and of the
+    Woodbury path (with the feature among the barrier's active nodes). Differences of ~100 px positions left the feature's nodes 1e-14 apart; times the
     reaction forces on them (~1e4) that spoiled CG's inner products and the decrement, and CG
     summed the rounding into a direction that pulled the coins' features 0.044 px apart under
     swirl 90 at 256 px (the solve then "converged" 53 below the constrained minimum)."""
@@ -507,26 +507,37 @@ def test_every_newton_direction_keeps_a_tied_feature_rigid_and_the_border_held_e
     start[~held & (tied < 0)] = nodes[~held & (tied < 0)]            # the grid, the feature at x*
     start[feature] = nodes[feature] + (optimum[feature[0]] - nodes[feature[0]])
     assert not injectivity.flipped(start, tris).any()
-    directions = []
-    for name in ("_newton_direction", "_direct_direction"):
-        original = getattr(barrier, name)
+    directions, woodbury_with_feature, cg_unknowns = [], [], []
+    newton_direction, direct_direction = barrier._newton_direction, barrier._direct_direction
 
-        def recorded(*args, original=original):
-            out = original(*args)
-            direction = out[0] if isinstance(out, tuple) else out
-            if direction is not None:
-                directions.append(direction)
-            return out
-        monkeypatch.setattr(barrier, name, recorded)
-    inverse = barrier.InverseRows(systems.entries, np.stack([unknown, unknown]))
-    for rows in (None, inverse):
-        x, how = barrier.converge(solve, matrix, ~held & (tied < 0), start, tris, floor, kappa, inverse=rows,
+    def by_cg(move, normal, unknowns, points, triangles, *rest):
+        out = newton_direction(move, normal, unknowns, points, triangles, *rest)
+        cg_unknowns.append(unknowns)
+        directions.append(out[0]) if out[0] is not None else None
+        return out
+
+    def by_woodbury(rows, move, points, triangles, *rest):
+        out = direct_direction(rows, move, points, triangles, *rest)
+        if out is not None:
+            directions.append(out)
+            woodbury_with_feature.append(np.isin(feature, triangles).any())
+        return out
+
+    monkeypatch.setattr(barrier, "_newton_direction", by_cg)
+    monkeypatch.setattr(barrier, "_direct_direction", by_woodbury)
+    for rows, direct_work in ((None, barrier._DIRECT_WORK), ("cg", barrier._DIRECT_WORK), ("woodbury", 1e9)):
+        monkeypatch.setattr(barrier, "_DIRECT_WORK", direct_work)
+        inverse = None if rows is None else barrier.InverseRows(systems.entries, np.stack([unknown, unknown]))
+        cg_unknowns.clear()
+        x, how = barrier.converge(solve, matrix, ~held & (tied < 0), start, tris, floor, kappa, inverse=inverse,
                                   linear=linear)
         assert how.converged and signed_areas(x, tris).min() > 0
         assert np.all(x[held] == nodes[held])
         moved = x[feature] - start[feature]
         assert np.abs(moved - moved[0]).max() < 1e-12                  # rigid (positions round)
-    assert len(directions) > 10
+        if rows == "cg":                                               # CG's local solve gets the solve's numbering
+            assert cg_unknowns and all(np.array_equal(u, inverse.unknowns) for u in cg_unknowns)
+    assert sum(woodbury_with_feature) > 0 and len(directions) > 20
     for direction in directions:
         assert np.all(direction[held] == 0.0) and np.all(direction[feature] == direction[feature[0]])
 
@@ -601,9 +612,60 @@ def test_a_release_does_not_start_from_positions_its_untied_system_would_hold_el
     let_go = np.flatnonzero(ties.unpinned & ties.tied)
     assert let_go.size and result is not None
     systems, _, offset, _ = problem.rebuild(problem.edges, let_go)
-    assert not release._holds(systems, result, offset)
+    assert not systems.admits(result, offset)
+    assert systems.admits(systems.solve(problem.rhs, offset), offset)
     calls = []
     found = release.blend_search(problem, let_go, barrier.SAFE_FRACTION * signed_areas(problem.warped, problem.triangles),
                                  release.GuardRecord(), margin=lambda p: calls.append(1) or (1.0 if len(calls) == 1 else -1.0),
                                  origin=result, steps=0)
     assert found is None                                   # the least-squares start failed, the origin is refused
+
+
+def test_positions_of_a_system_are_told_from_ones_that_untie_a_feature_or_move_a_held_node():
+    """``AxisSystems.admits``: the solve's own positions pass; a held coordinate moved, or one
+    node of a tied feature moved alone, do not; a coordinate free in one axis may move."""
+    from featurewarp_cli.engine import system
+    from featurewarp_cli.engine.solver import AxisSystems
+
+    grid = Grid.for_image(64, 48, 8.0)
+    n = grid.n_nodes
+    matrix = system.normal_matrix(grid, np.ones((grid.ny - 1) * (grid.nx - 1)))
+    held = grid.boundary()
+    tied = np.full(n, -1)
+    tied[[grid.nx + 2, grid.nx + 3, 2 * grid.nx + 2]] = 0
+    held_x = held.copy()
+    held_x[grid.nx * np.arange(1, grid.ny - 1)] = False          # the left side slides in x
+    systems = AxisSystems(matrix, system.number_unknowns(held_x, tied), system.number_unknowns(held, tied))
+    rng = np.random.default_rng(5)
+    offset = rng.normal(0.0, 50.0, (n, 2))
+    x = systems.solve(rng.normal(size=(n, 2)), offset)
+    assert systems.admits(x, offset)
+    sliding = x.copy()
+    sliding[grid.nx, 0] += 0.5                                    # free in x on the left side
+    assert systems.admits(sliding, offset)
+    for node, axis in ((grid.nx, 1), (0, 0), (grid.nx + 3, 0)):   # held in y, a corner, one tied node
+        moved = x.copy()
+        moved[node, axis] += 1e-6
+        assert not systems.admits(moved, offset), (node, axis)
+
+
+@pytest.mark.parametrize("below,converged", [(0.5, True), (2.0, False)])
+def test_a_decrement_below_zero_within_the_tolerance_is_convergence_beyond_it_is_not(below, converged, monkeypatch):
+    """At a minimum, rounding can leave the Newton decrement a little below zero: within
+    TOLERANCE times Phi it is the minimum (converged); further below, the direction points
+    uphill and the solve stops unconverged where it is."""
+    nodes, tris, floor, kappa, solve, normal, movable, target = _pinned_problem(2, spread=6.0)
+    minimum, how = barrier.converge(solve, normal, movable, _furthest_fold_free(nodes, tris, target, 0.5),
+                                    tris, floor, kappa)
+    assert how.converged
+    offset = minimum - target
+    phi = (0.5 * float((normal.dot(offset) * offset).sum())
+           + float((kappa * barrier.clamped_log(signed_areas(minimum, tris) / floor)[0]).sum()))
+
+    def uphill(rows, move, normal_, movable_, x, triangles, ratio, floor_, kappa_, gradient, *rest):
+        step = gradient * (below * barrier.TOLERANCE * phi / float((gradient * gradient).sum()))
+        return step, True, False                                  # decrement -below * TOLERANCE * Phi
+
+    monkeypatch.setattr(barrier, "_direction", uphill)
+    x, how = barrier.converge(solve, normal, movable, minimum, tris, floor, kappa)
+    assert how.steps == 0 and how.converged == converged and np.array_equal(x, minimum)

@@ -324,7 +324,7 @@ def blend_search(problem: Problem, released: np.ndarray, floor, record: GuardRec
         x, s = furthest_move(lambda t: start + t * along, margin, problem.triangles, floor)
         if not steps:
             return settle(s, x), s
-    elif origin is not None and _holds(systems, origin, offset):
+    elif origin is not None and systems.admits(origin, offset):
         x, value = at(0.0, origin)
         if value > 0:
             return None
@@ -340,13 +340,6 @@ def blend_search(problem: Problem, released: np.ndarray, floor, record: GuardRec
             return settle(s, between), s
         x, s = trial, t
     return x, s
-
-
-def _holds(systems, points: np.ndarray, offset: np.ndarray) -> bool:
-    """Whether ``points`` keep the coordinates ``systems`` hold at ``offset`` (a start for
-    :func:`barrier.converge`, which never moves them)."""
-    return all(np.abs(points[u < 0, k] - offset[u < 0, k]).max(initial=0.0) <= 1e-9
-               for k, u in enumerate((systems.x.unknown, systems.y.unknown)))
 
 
 def _converge_grid(problem, systems, rhs, offset, tied, x, floor, record):

@@ -461,6 +461,19 @@ class AxisSystems:
         return np.concatenate([self.x.solve(rhs[:, :1], offset[:, :1]),
                                self.y.solve(rhs[:, 1:], offset[:, 1:])], axis=1)
 
+    def admits(self, points: np.ndarray, offset: np.ndarray, tolerance: float = 1e-9) -> bool:
+        """Whether ``points`` ((N, 2)) are positions of these systems for ``offset``: held
+        coordinates at it, the nodes of one unknown at it plus one shared move (a start that
+        Newton steps built from :meth:`solve`'s linear part keep so exactly)."""
+        for k, unknown in enumerate((self.x.unknown, self.y.unknown)):
+            moved, on = points[:, k] - offset[:, k], unknown >= 0
+            low, high = np.full(unknown.max() + 1, np.inf), np.full(unknown.max() + 1, -np.inf)
+            np.minimum.at(low, unknown[on], moved[on])
+            np.maximum.at(high, unknown[on], moved[on])
+            if np.abs(moved[~on]).max(initial=0.0) > tolerance or (high - low).max(initial=0.0) > tolerance:
+                return False
+        return True
+
     def entries(self, rows: np.ndarray, columns: np.ndarray) -> np.ndarray:
         """(2, r, c): :meth:`ReducedSystem.entries` for x and for y."""
         x = self.x.entries(rows, columns)
