@@ -79,19 +79,30 @@ def test_guard_leaves_features_exact_when_folds_are_local():
     assert max(c["residual_percent"] for c in mesh.info["quality"]["components"]) < 0.5
 
 
-def test_local_folds_are_opened_in_a_window():
-    """Folds next to one feature are opened by moving only the nodes around them: the
-    window holds a fraction of the grid, every node outside it stays at the
-    least-squares optimum, and the features stay exact."""
+def test_local_folds_are_opened_in_a_window_that_starts_the_whole_grids_minimum(monkeypatch):
+    """Folds next to one feature are opened in a window (a fraction of the grid); its result
+    holds everything outside at the least-squares solution, so it only starts the whole grid's
+    convergence: the result is the barrier energy's minimum on the whole grid (converging it
+    again moves nothing; from the window's result it moved 3-27 px on the 1 and 12 MP
+    astronaut), and the features stay exact."""
+    from featurewarp_cli.engine import barrier, guard
+
     y, x = np.mgrid[0:360, 0:500]
     mask = ((x - 250) ** 2 + (y - 90) ** 2 < 60**2) | ((x - 120) ** 2 + (y - 280) ** 2 < 30**2)
     warp = load_warp("swirl")(500, 360, angle=150)
     raw = FeatureWarper(500, 360, mask, injective=False).solve(warp)
+    seen = []
+    guard_of = guard.guard
+    monkeypatch.setattr(guard, "guard", lambda problem, x, record: seen.append(problem) or guard_of(problem, x, record))
     mesh = FeatureWarper(500, 360, mask).solve(warp)
     assert raw.flips() > 0 and mesh.flips() == 0
     assert 0 < mesh.info["untangle_window_quads"] < 0.2 * mesh.info["grid"]["quads"]
-    moved = np.abs(mesh.target - raw.target).max(axis=1) > 1e-9
-    assert 0 < moved.mean() < 0.2
+    assert mesh.record.guard.converged and mesh.record.guard.plain_blend == 1.0
+    problem = seen[0]
+    floor = barrier.SAFE_FRACTION * signed_areas(problem.warped, problem.triangles)
+    again = guard._converge_grid(problem, problem.systems, problem.rhs, problem.offset, problem.tied, mesh.target,
+                                 floor, guard.GuardRecord())
+    assert np.abs(again - mesh.target).max() < 1e-6
     assert max(c["residual_percent"] for c in mesh.info["quality"]["components"]) < 0.5
 
 
