@@ -246,7 +246,7 @@ def print_table(results: list[dict]) -> None:
             print(f"    {r['picture']:28s} RMSE vs default {r['rmse']:7.3f}   vs committed {r['rmse_committed']:7.3f}")
         for r in cases:
             print(f"    case {r['case'][:44]:44s} node move {r['node_move_px']:9.3g} px  RMSE {r['rmse']:6.3f}")
-    print(f"\n{'machine':18s} {'s':>4s} {'pictures moved':>14s} {'worst RMSE':>10s} {'> 2 vs committed':>16s} "
+    print(f"\n{'machine':18s} {'s':>4s} {'pictures moved':>14s} {'worst RMSE':>10s} {f'> {GALLERY_LIMIT:g} vs committed':>16s} "
           f"{'cases moved':>11s} {'worst move px':>13s} {'worst RMSE':>10s}")
     for result in results:
         gallery, cases = result["gallery"], result["cases"]
