@@ -98,6 +98,7 @@ def test_local_folds_are_opened_in_a_window_that_starts_the_whole_grids_minimum(
     assert raw.flips() > 0 and mesh.flips() == 0
     assert 0 < mesh.info["untangle_window_quads"] < 0.2 * mesh.info["grid"]["quads"]
     assert mesh.record.guard.converged and mesh.record.guard.plain_blend == 1.0
+    assert len(seen) == 1
     problem = seen[0]
     floor = barrier.SAFE_FRACTION * signed_areas(problem.warped, problem.triangles)
     again = guard._converge_grid(problem, problem.systems, problem.rhs, problem.offset, problem.tied, mesh.target,

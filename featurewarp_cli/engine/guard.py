@@ -177,18 +177,18 @@ def guard(problem: Problem, x: np.ndarray, record: GuardRecord) -> np.ndarray | 
         return x                          # the grid cannot follow the warp: nothing injective to keep
     floor = barrier.SAFE_FRACTION * warp_areas
     if record.flipped_before == 0:        # crushed but not folded: the barrier's minimum all the same
-        x, windowed = _converged(problem, x, floor, record)
+        (x, windowed), ok = _converged(problem, x, floor, record), True
         if windowed is None:
             return x                      # no triangle below its floor: x is the energy's minimum
-        ok = True
     else:
         x, ok = _untangled(problem, x, floor, record)
         windowed = bool(record.window_quads)
-    if ok and problem.preview and windowed:
-        return x                          # a preview: the window's minimum, in bounded time
+    if ok and problem.preview and windowed:   # a preview: the window's minimum, in bounded time
+        return x
     if ok:
-        # A window's minimum holds everything outside it at the least-squares solution (up to
-        # 27 px from the energy's minimum at 12 MP): it only starts the whole grid's.
+        # A window's minimum holds the rest at the least-squares solution (up to 27 px from the
+        # energy's minimum at 12 MP): it only starts the whole grid's, whose run says converged.
+        record.converged = True
         return _converge_grid(problem, problem.systems, problem.rhs, problem.offset, problem.tied, x, floor, record)
     return None if problem.preview else _release(problem, x, floor, record)
 
