@@ -172,10 +172,11 @@ def _local_solver(normal, unknowns: np.ndarray, triangles: np.ndarray, blocks: n
         size += ids.size
     if size == 0:
         return lambda r: np.zeros_like(r)
+    mapped = [np.flatnonzero(column[:, axis] >= 0) for axis in range(2)]
     rows, cols, data = [], [], []
-    for axis in range(2):                     # P' H P per axis: entries summed per unknown pair
-        nodes = np.flatnonzero(column[:, axis] >= 0)
-        block = normal[nodes][:, nodes].tocoo()
+    for axis, nodes in enumerate(mapped):     # P' H P per axis: entries summed per unknown pair
+        if axis == 0 or not np.array_equal(nodes, mapped[0]):
+            block = normal[nodes][:, nodes].tocoo()   # the same slice for both axes where they map alike
         rows.append(column[nodes[block.row], axis])
         cols.append(column[nodes[block.col], axis])
         data.append(block.data)
@@ -186,7 +187,6 @@ def _local_solver(normal, unknowns: np.ndarray, triangles: np.ndarray, blocks: n
                             (np.concatenate(rows + [dof_rows[keep]]), np.concatenate(cols + [dof_cols[keep]]))),
                            shape=(size, size))
     solve = spd_solver(matrix)
-    mapped = [np.flatnonzero(column[:, axis] >= 0) for axis in range(2)]
 
     def local(r):
         rhs = sum(np.bincount(column[mapped[axis], axis], r[mapped[axis], axis], minlength=size)
