@@ -11,7 +11,7 @@ import scipy.sparse.linalg as spla
 from featurewarp_cli.engine import cholmod
 from featurewarp_cli.engine import features as feat
 from featurewarp_cli.render import raster as render
-from featurewarp_cli.engine import solver
+from featurewarp_cli.engine import ordering, solver
 from featurewarp_cli.engine import system
 from featurewarp_cli.engine.warper import load_warp
 from featurewarp_cli.engine.grid import Grid
@@ -164,13 +164,13 @@ def test_gray_and_sixteen_bit_images_render():
 @pytest.mark.parametrize("leaf", [0, 1, 4, 16])
 def test_nested_dissection_is_a_permutation_of_the_live_nodes(ny, nx, holes, leaf):
     live = np.random.default_rng(ny * nx).random((ny, nx)) > 0.3 if holes else np.ones((ny, nx), bool)
-    order = solver.grid_nested_dissection(live, leaf=leaf)
+    order = ordering.grid_nested_dissection(live, leaf=leaf)
     assert np.array_equal(np.sort(order), np.flatnonzero(live))
 
 
 @pytest.mark.parametrize("ny, nx", [(2, 6), (3, 7), (20, 13), (64, 64), (30, 55)])
 def test_nested_dissection_numbers_both_halves_then_a_diagonal_cut(ny, nx):
-    order = solver.grid_nested_dissection(np.ones((ny, nx), bool), leaf=4)
+    order = ordering.grid_nested_dissection(np.ones((ny, nx), bool), leaf=4)
     # The last nodes are the top cut: every node of one diagonal (x + y or x - y
     # constant); before it all nodes of one side, then all of the other (never adjacent).
     y, x = np.divmod(order, nx)
@@ -179,7 +179,7 @@ def test_nested_dissection_numbers_both_halves_then_a_diagonal_cut(ny, nx):
 
 @pytest.mark.parametrize("ny, nx", [(5, 60), (60, 5), (1, 30)])
 def test_nested_dissection_cuts_long_strips_straight_across_first(ny, nx):
-    order = solver.grid_nested_dissection(np.ones((ny, nx), bool), leaf=4)
+    order = ordering.grid_nested_dissection(np.ones((ny, nx), bool), leaf=4)
     along = order % nx if nx > ny else order // nx          # position along the strip
     short, long = min(ny, nx), max(ny, nx)
     # Blocks at most about twice as long as wide, one after the other, then the
@@ -200,7 +200,7 @@ def cut_last(coord):
 
 
 def test_nested_dissection_of_nothing_is_empty():
-    assert solver.grid_nested_dissection(np.zeros((5, 4), bool)).size == 0
+    assert ordering.grid_nested_dissection(np.zeros((5, 4), bool)).size == 0
 
 
 def grid_system(width, height, cell, with_mask=True):
