@@ -54,12 +54,13 @@ _fallback_noted = False
 #: measured on 1 MP with 100-3000 single-pixel features, the crossover lies at 200-300.
 MAX_SHARED_LAST = 256
 #: Largest system factored by CHOLMOD's simplicial method (supernodal above). Grid
-#: systems in the grid order (2 cores, medians of 9, OpenMP off, see cholmod.py):
-#: simplicial vs supernodal factor 0.030 vs 0.032 s at 51 k unknowns, 0.18 vs 0.15 s at
-#: 191 k, 1.42 vs 0.67 s at 772 k; simplicial solves (x and y) are twice as fast
-#: (1.7 vs 6.4 ms at 51 k, 13 vs 28 ms at 191 k), and the fold-over guard's
-#: global pass solves the full grid once per step.
-_SIMPLICIAL_MAX = 150_000
+#: systems in the grid order (2 cores, medians of 5-9, OpenMP off, see cholmod.py):
+#: simplicial vs supernodal factor 0.030 vs 0.032 s at 51 k unknowns, 0.15 vs 0.13 s at
+#: 191 k, 1.42 vs 0.67 s at 772 k; simplicial solves (x and y) are about twice as fast
+#: (1.7 vs 6.4 ms at 51 k, 10 vs 18 ms at 191 k), and the fold-over guard back-substitutes
+#: tens to hundreds of times: the 12 MP swirl 360 with the head + helmet mask (160 k nodes)
+#: 11.5 -> 8.9 s, the swirl 540 (321 k) 46 -> 36 s, the same results.
+_SIMPLICIAL_MAX = 400_000
 #: Entries kept in the cache: symbolic analyses (keyed by the reduced matrix's
 #: sparsity pattern) and grid orderings (keyed by the tied nodes).
 _SYMBOLIC_CACHE_SIZE = 8
