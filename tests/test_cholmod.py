@@ -73,24 +73,35 @@ def test_one_analysis_serves_other_values_and_stays_symbolic(supernodal):
 @needs_cholmod
 @pytest.mark.parametrize("supernodal", [False, True])
 def test_not_positive_definite_is_the_project_exception(supernodal):
-    """A zero pivot (node 5 cut off: what a piece of grid with no fixed node gives) with
-    either method; an indefinite matrix with the supernodal LL' (the simplicial method
-    computes LDL', which has no square roots to fail on negative pivots)."""
+    """A zero pivot (node 5 cut off: what a piece of grid with no fixed node gives) and an
+    indefinite matrix, with either method (the simplicial method computes LDL', which has no
+    square roots to fail on negative pivots: ``factorize(simplicial=True)`` checks them)."""
     lower = laplacian_lower(20)
     column = np.repeat(np.arange(lower.shape[1]), np.diff(lower.indptr))
     singular = lower.copy()
     singular.data[(lower.indices == 5) | (column == 5)] = 0.0       # same pattern, zero values
-    bad = [singular]
-    if supernodal:
-        bad.append(lower - sp.diags(lower.diagonal() * 1.5, format="csc"))
+    indefinite = lower - sp.diags(lower.diagonal() * 1.5, format="csc")
     assert issubclass(cholmod.NotPositiveDefinite, ArithmeticError)
     analysis = cholmod.analyze(lower, "natural", supernodal)
-    for matrix in bad:
+    for matrix in (singular, indefinite):
         with pytest.raises(cholmod.NotPositiveDefinite, match="not positive definite"):
-            cholmod.factorize(analysis, matrix)
+            cholmod.factorize(analysis, matrix, simplicial=not supernodal)
+    if not supernodal:                          # unchecked, CHOLMOD's LDL' takes it
+        assert cholmod.factorize(analysis, indefinite).D().min() < 0
     b = np.ones(lower.shape[0])
     full = lower + sp.tril(lower, -1).T
-    np.testing.assert_allclose(full @ cholmod.solve(cholmod.factorize(analysis, lower), b), b)   # still serves
+    factor = cholmod.factorize(analysis, lower, simplicial=not supernodal)
+    np.testing.assert_allclose(full @ cholmod.solve(factor, b), b)   # still serves
+
+
+@needs_cholmod
+def test_spd_solver_refuses_an_indefinite_matrix():
+    """The barrier's local preconditioner (spd_solver) relies on the refusal: its matrix is a
+    principal submatrix of the Newton system, so an indefinite one means the whole is."""
+    from featurewarp_cli.engine.solver import spd_solver
+
+    with pytest.raises(cholmod.NotPositiveDefinite):
+        spd_solver(sp.csc_matrix(np.array([[2.0, 1.0, 0.0], [1.0, -3.0, 1.0], [0.0, 1.0, 2.0]])))
 
 
 @needs_cholmod

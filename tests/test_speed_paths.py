@@ -300,6 +300,32 @@ def test_renumbered_unknowns_reuse_the_grid_ordering_and_solve_the_same():
     np.testing.assert_allclose(y, x, rtol=1e-9, atol=1e-9)
 
 
+@pytest.mark.parametrize("with_mask", [False, True])
+@pytest.mark.parametrize("sliding", [False, True])
+def test_the_linear_part_is_the_solve_with_a_zero_offset_bit_for_bit(with_mask, sliding):
+    """``move(force)`` skips the product of the matrix and a zero offset: the same bits as
+    ``solve(force, 0)``, for one shared system and for separate x and y systems, shared
+    (tied) unknowns or none; exactly 0 on held nodes, one value per tied unknown."""
+    grid, matrix, unknown = grid_system(240, 160, 4, with_mask)
+    other = unknown.copy()
+    if sliding:                                   # the top border slides in x: x has its own system
+        top = np.zeros(grid.n_nodes, bool)
+        top[1:grid.nx - 1] = True
+        other[top] = unknown.max() + 1 + np.arange(np.count_nonzero(top))
+    systems = solver.AxisSystems(matrix, other, unknown)
+    assert systems.factorizations == 1 + sliding
+    force = np.random.default_rng(3).normal(size=(grid.n_nodes, 2)) * 1e3
+    moved = systems.move(force)
+    assert np.array_equal(moved, systems.solve(force, np.zeros_like(force)))
+    assert not np.shares_memory(moved, force)
+    assert np.all(moved[other < 0, 0] == 0) and np.all(moved[unknown < 0, 1] == 0)
+    for k, numbering in enumerate((other, unknown)):
+        tied = numbering >= 0
+        spread = np.full(numbering.max() + 1, -np.inf)
+        np.maximum.at(spread, numbering[tied], moved[tied, k])
+        assert np.array_equal(spread[numbering[tied]], moved[tied, k])   # one value per unknown
+
+
 def test_systems_with_other_fixed_nodes_share_the_grid_ordering():
     grid, matrix, unknown = grid_system(200, 120, 4)
     top = np.zeros(grid.n_nodes, bool)

@@ -78,11 +78,14 @@ def analyze(lower, ordering: str = "default", supernodal: bool = False):
     return _sksparse.analyze(lower, mode="supernodal" if supernodal else "simplicial", ordering_method=ordering)
 
 
-def factorize(analysis, lower):
+def factorize(analysis, lower, simplicial: bool = False):
     """Numeric factorization of ``lower`` (same pattern as the analysed matrix).
 
     The analysis is copied first (its symbolic part only: cheap), so that it stays
-    symbolic and earlier factors stay valid; the copy is factored in place.
+    symbolic and earlier factors stay valid; the copy is factored in place. With
+    ``simplicial`` (an analysis for the simplicial method), the LDL' factor's pivots are
+    checked: CHOLMOD's simplicial method factors an indefinite matrix without complaint
+    (D = [2, 2, -4] for [[2, 1, 0], [1, -3, 1], [0, 1, 2]]), the supernodal one raises.
 
     Returns
     -------
@@ -99,6 +102,8 @@ def factorize(analysis, lower):
             factor.cholesky_inplace(lower)
     except _sksparse.CholmodNotPositiveDefiniteError as error:
         raise NotPositiveDefinite(f"the matrix is not positive definite ({error})") from None
+    if simplicial and not factor.D().min(initial=1.0) > 0:
+        raise NotPositiveDefinite("the matrix is not positive definite (a pivot of its LDL' factor is not positive)")
     return factor
 
 

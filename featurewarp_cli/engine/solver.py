@@ -16,7 +16,7 @@ Ordering
 When L has the pattern of a grid's 5-point Laplacian (what
 :func:`featurewarp_cli.engine.system.normal_matrix` builds: offsets 0, +-1 and +-nx),
 the free unknowns are numbered in a geometric nested-dissection order of the
-grid cut along diagonals (:func:`grid_nested_dissection`); the shared unknowns
+grid cut along diagonals (:func:`.ordering.grid_nested_dissection`); the shared unknowns
 of tied features, each coupled to every node around its feature, come after
 everything else. The reduced matrix is permuted into that order and CHOLMOD
 factors it with its natural ordering, which skips the ordering it would
@@ -128,7 +128,7 @@ def _cholmod_factor(lower, natural: bool):
     supernodal = n > _SIMPLICIAL_MAX
     key = ("symbolic", n, natural, supernodal, _digest(lower.indptr, lower.indices))
     analysis = _cached(key, lambda: cholmod.analyze(lower, "natural" if natural else "default", supernodal))
-    return cholmod.factorize(analysis, lower)
+    return cholmod.factorize(analysis, lower, simplicial=not supernodal)
 
 
 def _splu_solve(lower):
@@ -260,7 +260,7 @@ class ReducedSystem:
             residual = np.ascontiguousarray((rhs - self.matrix @ offset).toarray().T)
             offset = offset.toarray()
         else:
-            residual = rhs.T - (self.matrix @ offset).T                   # (k, N), rows contiguous
+            residual = rhs.T - (self.matrix @ offset).T                   # (k, N)
         return offset + self._back_substitute(residual)
 
     def move(self, force: np.ndarray) -> np.ndarray:
@@ -271,7 +271,7 @@ class ReducedSystem:
         return self._back_substitute(np.ascontiguousarray(force.T))
 
     def _back_substitute(self, residual: np.ndarray) -> np.ndarray:
-        """(N, k): P (P' L P)^-1 P' of ``residual`` ((k, N), rows contiguous)."""
+        """(N, k): P (P' L P)^-1 P' of ``residual`` ((k, N) float64)."""
         n = self.n_unknowns
         gathered = np.take(residual, self._gather, axis=1)
         if self._shared is not None:
