@@ -1,4 +1,4 @@
-"""The speed and memory targets of issues 4 and 10, checked against a benchmark report."""
+"""The speed, memory and stability targets of the issues (4, 10, 21, 23, 25), checked against a benchmark report."""
 
 from __future__ import annotations
 

@@ -85,7 +85,7 @@ def factorize(analysis, lower, simplicial: bool = False):
     symbolic and earlier factors stay valid; the copy is factored in place. With
     ``simplicial`` (an analysis for the simplicial method), the LDL' factor's pivots are
     checked: CHOLMOD's simplicial method factors an indefinite matrix without complaint
-    (D = [2, 2, -4] for [[2, 1, 0], [1, -3, 1], [0, 1, 2]]), the supernodal one raises.
+    (D = [2, -3.5, 16/7] for [[2, 1, 0], [1, -3, 1], [0, 1, 2]]), the supernodal one raises.
 
     Returns
     -------
