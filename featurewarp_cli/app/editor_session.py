@@ -30,9 +30,11 @@ import numpy as np
 from ..io import write
 from .pipeline import Settings, WarpError, load_image_and_mask, warp_file
 
-#: The live preview keeps its grid at about this many nodes at most at the normal density
-#: (Export uses the full pipeline, whose grid follows the warp).
-PREVIEW_NODES = 65_000
+#: The live preview's grid is the pipeline's base grid (:func:`fidelity.base_cell`) at the
+#: normal density, its cell doubled or halved for fewer or more nodes, with at most this many
+#: (a forced small ``--cell`` at the density ``more``). Export uses the full pipeline, whose
+#: grid also follows the warp.
+PREVIEW_MAX_NODES = 260_000
 #: Longest side of the image the browser gets as its texture (and paints the mask on).
 TEXTURE_SIDE = 4096
 #: The rigid map's Newton steps per update at most (each warm-started from the last update;
@@ -82,8 +84,7 @@ class EditorSession:
         image, self.feature_mask, self.warnings = load_image_and_mask(replace(settings, mode="similarity"),
                                                                       input, mask)
         self.height, self.width = image.shape[:2]
-        self.normal_cell = settings.cell or max(base_cell(self.width, self.height),
-                                                math.sqrt(self.width * self.height / PREVIEW_NODES))
+        self.normal_cell = settings.cell or base_cell(self.width, self.height)
         self.density, self.cell, self.painted = "normal", self.normal_cell, False
         texture = _texture(image)
         self.texture_size = (texture.shape[1], texture.shape[0])
@@ -188,8 +189,7 @@ class EditorSession:
         density = body.get("density")
         if density not in DENSITIES:
             raise ValueError(f"density {density!r}: use {', '.join(DENSITIES)}")
-        most = 4 * PREVIEW_NODES
-        cell = max(self.normal_cell * DENSITIES[density], math.sqrt(self.width * self.height / most))
+        cell = max(self.normal_cell * DENSITIES[density], math.sqrt(self.width * self.height / PREVIEW_MAX_NODES))
         with self.lock:
             self.density, self.cell = density, round(cell, 4)
             self._build()

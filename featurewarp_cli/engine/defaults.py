@@ -56,7 +56,7 @@ MIN_CELL = 1.0
 
 CELL_PARAM = Param(
     "cell", float, None,
-    "Grid cell size in pixels. Default: automatic: 4 px, or sqrt(w*h/80000) above 1.28 MP; "
+    "Grid cell size in pixels. Default: automatic: 4 px, or sqrt(w*h/30000) above 0.48 MP; "
     "then divided by sqrt(2) until the grid is within 0.5 px of the warp and the warp "
     "folds none of its triangles (sub-pixel allowed, at most 800 000 nodes).",
     min=MIN_CELL, metavar="PX")

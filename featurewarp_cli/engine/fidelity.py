@@ -23,16 +23,16 @@ MAX_PL_ERROR = 0.5
 #: its remaining error in the report. 800 000 lets a 1 x 5000 strip follow swirl 720 at
 #: radius 10 (680 000 nodes, 1.9 s).
 MAX_NODES = 800_000
-#: Node count the automatic rule aims for when the warp is gentle (images above 1.28 MP;
+#: Node count the automatic rule aims for when the warp is gentle (images above 0.48 MP;
 #: smaller ones get the 4 px cell). The warp's own accuracy does not depend on it (the
-#: 0.5 px rule refines the grid where W needs it); what it sets is how closely the grid's
-#: feature quads hug the mask: within one cell (12.2 px on 12 MP, about the 1 MP photo's
-#: 4 px cell relative to the image), the decay two more. Every mask pixel is in a feature
-#: quad at any cell, so features stay exact. At 250 000 the 12 MP hard swirl 180 took 3.8 s
-#: and 490 MB; at 160 000, 4.0 s once every result was converged on the whole grid; at
-#: 80 000 the 28 solves of the 14 presets with two masks at 12 MP take 16.6 s instead of
-#: 41 s, the same features kept in each, the pictures alike at screen size.
-BASE_NODES = 80_000
+#: 0.5 px rule refines the grid where W needs it: the 12 MP swirl 180 gets 60 000 nodes);
+#: what it sets is how closely the grid's feature quads hug the mask, within one cell (5.9 px
+#: on 1 MP, 20 px on 12 MP: 200 cells across a 4:3 image), the decay two more, and how
+#: finely the background gives way beside a feature. Every mask pixel is in a feature quad
+#: at any cell, so features stay exact. The 28 solves of the 14 presets with two masks take
+#: 4.6 s at 1 MP and 6.5 s at 12 MP, against 11.4 s and 14.2 s at 80 000, the same features
+#: kept in each; at 20 000, 6.1 s at 12 MP and one feature fewer kept (fish, the shuttle).
+BASE_NODES = 30_000
 
 
 def _deviation(grid: Grid, warp) -> tuple[float, np.ndarray]:
@@ -95,7 +95,7 @@ def _cell_for_nodes(width: int, height: int, nodes: int) -> float:
 
 
 def base_cell(width: int, height: int) -> float:
-    """Cell size for a gentle warp: 4 px, or larger so the grid keeps about 80 000 nodes."""
+    """Cell size for a gentle warp: 4 px, or larger so the grid keeps about :data:`BASE_NODES` nodes."""
     return max(4.0, math.sqrt(width * height / BASE_NODES))
 
 
@@ -130,7 +130,7 @@ def auto_cell(width: int, height: int, warp=None) -> tuple[float, float]:
     """Automatic cell size: the base cell, made finer until the grid follows ``warp``.
 
     Rule: start from :func:`base_cell` (4 px, or larger so the grid keeps about
-    80 000 nodes); while the piecewise-linear grid strays more than 0.5 px from
+    :data:`BASE_NODES` nodes); while the piecewise-linear grid strays more than 0.5 px from
     the warp, or folds a triangle the warp itself does not fold, divide the
     cell by sqrt(2) (sub-pixel cells included), down to the size at which the grid
     would pass :data:`MAX_NODES`. The sizes are a fixed ladder, so warps that need the
