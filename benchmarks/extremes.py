@@ -35,8 +35,8 @@ CASES += ["flag --waves 12 --bend 100", "shell --side upper --bend 100", "arc --
           "cylinder --angle 160", "cylinder --angle 160 --axis horizontal", "cylinder --angle 1 --distance 1.001",
           "sphere --angle 120", "sphere --angle 1 --distance 1.001"]
 # The tightest swirl each angle allows at 1 MP (warps/swirl.py), and the corners of perspective.
-CASES_1MP = CASES + [f"swirl --angle {a} --radius {r}" for a, r in ((540, 0.22), (-540, 0.22), (360, 0.1),
-                                                                      (180, 0.025), (90, 0.007))]
+CASES_1MP = CASES + [f"swirl --angle {a} --radius {r}" for a, r in ((540, 0.221), (-540, 0.221), (360, 0.1),
+                                                                      (180, 0.025), (90, 0.0073))]
 CASES_1MP += ["perspective --tl 0%,0% --tr 100%,45% --br 100%,55% --bl 0%,100%",
               "perspective --tl 0%,50% --tr 80%,45.8% --br 100%,50% --bl 80%,54.2%",
               "stretch --sx 100 --sy 0.01", "stretch --size 65535x1"]

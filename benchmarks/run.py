@@ -18,7 +18,7 @@ commands  Whole ``featurewarp warp`` commands (subprocess wall time, peak RSS of
           made by upscaling samples/astronaut.png and its mask into a temporary
           folder; 1 MP at --cell 4, 12 MP at the default cell, plus 12 MP swirl
           at --cell 4; the 1 MP stretch runs exactly as in the target (automatic
-          cell, which is 4 there). Also ``featurewarp --help`` start-up.
+          cell, 5.9 px there). Also ``featurewarp --help`` start-up.
 magick    ImageMagick's plain equivalents on the same files, each run right after
           ours (part of ``commands``), when ``convert`` is installed, and the
           ratios ours / ImageMagick.

@@ -30,10 +30,11 @@ import numpy as np
 from ..io import write
 from .pipeline import Settings, WarpError, load_image_and_mask, warp_file
 
-#: The live preview's grid is the pipeline's base grid (:func:`fidelity.base_cell`) at the
-#: normal density, its cell doubled or halved for fewer or more nodes, with at most this many
-#: (a forced small ``--cell`` at the density ``more``). Export uses the full pipeline, whose
-#: grid also follows the warp.
+#: The live preview's grid is the handles' rigid grid refined k times (:func:`deform.solve_grid`),
+#: k from the cell of ``--cell`` or the pipeline's base cell (:func:`fidelity.base_cell`); the
+#: densities ``fewer`` and ``more`` take k/2 (rounded up) and 2k. At most this many nodes at any
+#: density (a forced small ``--cell``). Export uses the full pipeline, whose grid also follows
+#: the warp.
 PREVIEW_MAX_NODES = 260_000
 #: Longest side of the image the browser gets as its texture (and paints the mask on).
 TEXTURE_SIDE = 4096
@@ -42,7 +43,7 @@ TEXTURE_SIDE = 4096
 EDITOR_RIGID_STEPS = 8
 DRAG_RIGID_STEPS = 1
 #: The page's mesh densities: the preview cell's factor against the normal one.
-DENSITIES = {"fewer": 2.0, "normal": 1.0, "more": 0.5}
+DENSITIES = {"fewer": lambda k: -(-k // 2), "normal": lambda k: k, "more": lambda k: 2 * k}
 #: Pages whose newest request number is remembered.
 CLIENTS = 16
 
@@ -85,7 +86,7 @@ class EditorSession:
                                                                       input, mask)
         self.height, self.width = image.shape[:2]
         self.normal_cell = settings.cell or base_cell(self.width, self.height)
-        self.density, self.cell, self.painted = "normal", self.normal_cell, False
+        self.density, self.cell, self.painted = "normal", self._density_cell("normal"), False
         texture = _texture(image)
         self.texture_size = (texture.shape[1], texture.shape[0])
         self.image_png = _png(texture)
@@ -189,11 +190,20 @@ class EditorSession:
         density = body.get("density")
         if density not in DENSITIES:
             raise ValueError(f"density {density!r}: use {', '.join(DENSITIES)}")
-        cell = max(self.normal_cell * DENSITIES[density], math.sqrt(self.width * self.height / PREVIEW_MAX_NODES))
+        cell = self._density_cell(density)
         with self.lock:
-            self.density, self.cell = density, round(cell, 4)
+            self.density, self.cell = density, cell
             self._build()
         return self.state()
+
+    def _density_cell(self, density: str) -> float:
+        """The preview's cell at ``density``: the rigid grid's spacing over its refinement
+        (:data:`DENSITIES`), no finer than :data:`PREVIEW_MAX_NODES` allows."""
+        from ..engine.deform import rigid_grid
+
+        spacing = max(rigid_grid(self.width, self.height).spacing)
+        refinement = DENSITIES[density](max(1, round(spacing / self.normal_cell)))
+        return round(max(spacing / refinement, math.sqrt(self.width * self.height / PREVIEW_MAX_NODES)), 4)
 
     def set_mask(self, body: dict) -> dict:
         """Replace the feature mask by the one painted in the page (``png``: a data URL of a

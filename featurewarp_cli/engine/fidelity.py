@@ -17,8 +17,9 @@ from .grid import Grid, grid_for
 #: Largest piecewise-linear deviation from the warp the automatic cell allows, in pixels.
 MAX_PL_ERROR = 0.5
 #: Largest grid the automatic rule builds, so memory and time stay bounded (a fold-over
-#: guard on 830 000 nodes took 43 s and 2 GB). Swirl 720 needs about 300 000 nodes at any
-#: image size, 500 000 on 12 MP; a warp that bends an image thinner than a pixel around a
+#: guard on 830 000 nodes took 43 s and 2 GB). The ladder of :func:`auto_cell` halves the
+#: cell's area from :data:`BASE_NODES`, so on images above 0.48 MP its finest rung has about
+#: 480 000 nodes (:func:`finest_cell`: the swirl's tightest radius); a warp that bends an image thinner than a pixel around a
 #: ring (arc 360 of a 1 x 5000 image) never comes within 0.5 px of its grid and stops here,
 #: its remaining error in the report. 800 000 lets a 1 x 5000 strip follow swirl 720 at
 #: radius 10 (680 000 nodes, 1.9 s).
