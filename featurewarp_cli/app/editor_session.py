@@ -32,9 +32,9 @@ from .pipeline import Settings, WarpError, load_image_and_mask, warp_file
 
 #: The live preview's grid is the handles' rigid grid refined k times (:func:`deform.solve_grid`),
 #: k from the cell of ``--cell`` or the pipeline's base cell (:func:`fidelity.base_cell`); the
-#: densities ``fewer`` and ``more`` take k/2 (rounded up) and 2k. At most this many nodes at any
-#: density (a forced small ``--cell``). Export uses the full pipeline, whose grid also follows
-#: the warp.
+#: densities ``fewer`` and ``more`` take k/2 (rounded up) and 2k. About this many nodes at most
+#: at any density (a forced small ``--cell``; the capped cell is rounded to a refinement).
+#: Export uses the full pipeline, whose grid also follows the warp.
 PREVIEW_MAX_NODES = 260_000
 #: Longest side of the image the browser gets as its texture (and paints the mask on).
 TEXTURE_SIDE = 4096
@@ -42,7 +42,7 @@ TEXTURE_SIDE = 4096
 #: Export runs them to convergence), and while the pointer is still dragging.
 EDITOR_RIGID_STEPS = 8
 DRAG_RIGID_STEPS = 1
-#: The page's mesh densities: the preview cell's factor against the normal one.
+#: The page's mesh densities: the rigid grid's refinement at each, from the normal one's k.
 DENSITIES = {"fewer": lambda k: -(-k // 2), "normal": lambda k: k, "more": lambda k: 2 * k}
 #: Pages whose newest request number is remembered.
 CLIENTS = 16

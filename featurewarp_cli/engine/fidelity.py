@@ -22,7 +22,7 @@ MAX_PL_ERROR = 0.5
 #: 480 000 nodes (:func:`finest_cell`: the swirl's tightest radius); a warp that bends an
 #: image thinner than a pixel around a ring (arc 360 of a 1 x 5000 image) never comes within
 #: 0.5 px of its grid and stops here, its remaining error in the report. 800 000 lets a
-#: 1 x 5000 strip follow swirl 720 at radius 10 (680 000 nodes, 1.9 s).
+#: 1 x 5000 strip follow swirl 360 at radius 10 (680 000 nodes).
 MAX_NODES = 800_000
 #: Node count the automatic rule aims for when the warp is gentle (images above 0.48 MP;
 #: smaller ones get the 4 px cell). The warp's own accuracy does not depend on it (the
