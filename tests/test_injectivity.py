@@ -101,8 +101,8 @@ def test_local_folds_are_opened_in_a_window_that_starts_the_whole_grids_minimum(
     assert len(seen) == 1
     problem = seen[0]
     floor = barrier.SAFE_FRACTION * signed_areas(problem.warped, problem.triangles)
-    again = guard._converge_grid(problem, problem.systems, problem.rhs, problem.offset, problem.tied, mesh.target,
-                                 floor, guard.GuardRecord())
+    again, _ = guard._converge_grid(problem, problem.systems, problem.rhs, problem.offset, problem.tied,
+                                    mesh.target, floor, guard.GuardRecord())
     assert np.abs(again - mesh.target).max() < 1e-6
     assert max(c["residual_percent"] for c in mesh.info["quality"]["components"]) < 0.5
 

@@ -30,6 +30,11 @@ PREVIEW_STEPS = 4
 #: to the released features' own targets (:func:`blend_search`); more follow the path of
 #: minima more closely (the stop is interpolated between two of them) at more Newton steps.
 BLEND_STEPS = 8
+#: Newton steps after which a step of that blend whose iterate fails the margin ends the path
+#: (the chord towards it; one that passes converges). Lower is faster where the next minimum
+#: is far and crushed (the image pressed to 1 px: 500 steps, 35 s at 1 MP), and stops paths
+#: that would have passed; they take 4-35 steps on the photos and extremes.
+TRIAL_STEPS = 100
 #: The thinnest a release lets a triangle be, as a fraction of its floor: beyond, the
 #: released features give way (their targets blend towards W's) instead of the background.
 RELEASE_THINNEST = 0.5
@@ -189,16 +194,15 @@ def guard(problem: Problem, x: np.ndarray, record: GuardRecord) -> np.ndarray | 
         # A window's minimum holds the rest at the least-squares solution (up to 27 px from the
         # energy's minimum at 12 MP): it only starts the whole grid's, whose run says converged.
         record.converged = True
-        return _converge_grid(problem, problem.systems, problem.rhs, problem.offset, problem.tied, x, floor, record)
+        return _converge_grid(problem, problem.systems, problem.rhs, problem.offset, problem.tied, x, floor, record)[0]
     return None if problem.preview else _release(problem, x, floor, record)
 
 
 def _untangled(problem, start, floor, record):
     """Untangle in a window around the folds (a wider one next, from where the first left off
-    if it has fewer folds; then the first window with the ground around the tied features it
-    reaches, from ``start``; :func:`_untangle_window`), else on the whole grid from the best
-    of the first two; a preview stops after a window that gave up, or after the first two
-    (the third is several times larger: 0.4-1 s at 1 MP); (x, no folds left).
+    if it has fewer folds; then the first with the ground around the tied features it reaches,
+    from ``start``; :func:`_untangle_window`), else on the whole grid from the best of the
+    first two; a preview stops after a window that gave up, or the first two; (x, no folds).
 
     The third window comes last: where a tied feature blocks the folds (the astronaut's head
     cut by the top edge under ``fish``), it opens them where the others cannot (12 MP: 1.4 s
@@ -277,17 +281,15 @@ def blend_search(problem: Problem, released: np.ndarray, floor, record: GuardRec
     combined with a triangle thinner than :data:`RELEASE_THINNEST` of its floor failing.
 
     A path of minima, each converged from the one before, so every point is injective:
-    - the least-squares solution is affine in s (the targets enter the right-hand side
-      only): it is followed up to the first root of the areas' quadratics at half the
-      floor, or of the margin (:func:`plain_bound.furthest_move`); where it fails the margin
-      at s = 0 already, the path starts at the minimum for s = 0 converged from ``origin``
-      (positions with no fold that tie ``released``: the guard's result), where ``origin``
-      keeps the coordinates the untied system holds (not so where untying a component that
-      was let go of the border holds its border nodes at W again);
-    - from there, ``steps`` even steps of s up to 1, each converged from the last point.
+    - the least-squares solution is affine in s (the targets enter the right-hand side only):
+      followed up to the first root of the areas' quadratics at half the floor, or of the
+      margin (:func:`plain_bound.furthest_move`); where it fails the margin at s = 0, the path
+      starts at the minimum for s = 0 converged from ``origin`` (positions with no fold that
+      tie ``released`` and keep the coordinates the untied system holds);
+    - from there, ``steps`` even steps of s up to 1, each converged from the last point (one
+      whose iterate fails the margin after :data:`TRIAL_STEPS` Newton steps fails there).
       Where one fails ``margin``, the furthest point between it and the last point that
-      passed, converged at its blend (:func:`settle` below). Without steps, the start
-      converged at its blend the same way.
+      passed, converged at its blend (:func:`settle`). Without steps, the start likewise.
     Each point is a continuous function of the inputs: roots, and a converged minimum that,
     where it fails the margin, gives way to the chord towards it.
 
@@ -306,12 +308,14 @@ def blend_search(problem: Problem, released: np.ndarray, floor, record: GuardRec
     systems, rhs, offset, tied = constants(0.0)
     _, rhs_own, offset_own, _ = constants(1.0)
 
-    def at(t, start):
-        """(the barrier energy's minimum at blend ``t`` converged from ``start``, its margin);
-        a minimum that fails the margin is not kept: its convergence does not count."""
-        converged = record.converged
-        point = _converge_grid(problem, systems, rhs + t * (rhs_own - rhs), offset + t * (offset_own - offset),
-                               tied, start, floor, record)
+    def at(t, start, trial=False):
+        """(the barrier energy's minimum at blend ``t`` converged from ``start``, its margin); one
+        that fails the margin is not kept: its convergence does not count. (``trial``: above.)"""
+        converged, args = record.converged, (systems, rhs + t * (rhs_own - rhs), offset + t * (offset_own - offset))
+        point, how = _converge_grid(problem, *args, tied, start, floor, record, TRIAL_STEPS if trial else None)
+        if trial and how.steps >= TRIAL_STEPS and not how.converged and margin(point) <= 0:
+            record.converged = converged          # it passes so far: on to the minimum
+            point, _ = _converge_grid(problem, *args, tied, point, floor, record)
         value = margin(point)
         if value > 0:
             record.converged = converged
@@ -340,7 +344,7 @@ def blend_search(problem: Problem, released: np.ndarray, floor, record: GuardRec
     first, count = s, steps if s < 1.0 else min(steps, 1)
     for step in range(1, count + 1):
         t = first + (1.0 - first) * step / count
-        trial, value = at(t, x)
+        trial, value = at(t, x, trial=True)
         if value > 0:                           # between the two points, as far as passes
             between, share = furthest_move(lambda u: x + u * (trial - x), margin, problem.triangles, floor)
             s = s + share * (t - s)
@@ -349,26 +353,24 @@ def blend_search(problem: Problem, released: np.ndarray, floor, record: GuardRec
     return x, s
 
 
-def _converge_grid(problem, systems, rhs, offset, tied, x, floor, record):
-    """``x`` (no folds) moved to the barrier energy's minimum on the whole grid."""
+def _converge_grid(problem, systems, rhs, offset, tied, x, floor, record, max_steps=None):
+    """(``x`` (no folds) moved to the barrier energy's minimum on the whole grid, how the run ended)."""
     kappa = barrier.weights(problem.warped, problem.triangles, problem.stiffness, floor)
     x, how = barrier.converge(problem.solver(systems, rhs, offset), problem.normal, ~problem.fixed & (tied < 0), x,
                               problem.triangles, floor, kappa,
                               areas=lambda points: injectivity.grid_areas(problem.grid, points),
-                              max_steps=PREVIEW_STEPS if problem.preview else None, inverse=problem.inverse(systems),
-                              linear=problem.linear(systems))
+                              max_steps=PREVIEW_STEPS if problem.preview else max_steps,
+                              inverse=problem.inverse(systems), linear=problem.linear(systems))
     record.count(how)
-    return x
+    return x, how
 
 
 def _untangle_window(problem: Problem, rhs, offset, tied, x, floor, margin_factor: float, record,
                      around_ties: bool = False):
     """:func:`injectivity.untangle` on a window around the folded or crushed triangles (below
-    half their floor), converged there (:meth:`Window.converge`) once nothing is folded.
-
-    A fold is a local defect, so the guard first works on the nodes within ``margin_factor``
-    times the largest fold's extent of them, everything else held where it is (and, with
-    ``around_ties``, the ground around the tied features they reach: :func:`_window`).
+    half their floor), converged there (:meth:`Window.converge`) once nothing is folded: the
+    nodes within ``margin_factor`` times the largest fold's extent of them, everything else
+    held (with ``around_ties``, the ground around the tied features they reach: :func:`_window`).
 
     Returns
     -------
@@ -448,13 +450,10 @@ def _window(problem: Problem, rhs, offset, tied, x, crushed: np.ndarray, margin:
     could move, when it would take in more than WINDOW_MAX_FRACTION of the grid, or (with
     ``around_ties``) when it would be the window without it.
 
-    With ``around_ties`` (once; a feature only the grown window reaches brings none), a tied
-    feature that reaches into the window brings its own quads and ``margin`` quads around them:
-    it can only shift if the ground around all of it may follow. Without them (the astronaut's
-    head, patch and shuttle, its head cut by the top edge under ``fish``, ``squeeze`` and
-    ``rise`` at 1 and 12 MP) no window opened the folds; the whole grid had to be untangled and
-    converged (12 MP: 6-10 s instead of 1.1-2.0 s), or the features were released (swirl 180:
-    blend 0.62 instead of 1, 19 s instead of 5)."""
+    With ``around_ties`` (once), a tied feature that reaches into the window brings its quads
+    and ``margin`` quads around them: it can only shift if the ground around all of it may
+    follow. Without (the astronaut's head cut by the top edge under ``fish``, ``squeeze``),
+    the whole grid untangled (12 MP: 6-10 s instead of 1.1-2.0 s) or features were released."""
     grid, n_quads = problem.grid, problem.features.weight.size
     quads = np.zeros(n_quads, bool)
     quads[np.flatnonzero(crushed) % n_quads] = True
