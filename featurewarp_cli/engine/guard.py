@@ -30,10 +30,10 @@ PREVIEW_STEPS = 4
 #: to the released features' own targets (:func:`blend_search`); more follow the path of
 #: minima more closely (the stop is interpolated between two of them) at more Newton steps.
 BLEND_STEPS = 8
-#: Newton steps after which a step of that blend whose iterate fails the margin ends the path
-#: (the chord towards it; one that passes converges). Lower is faster where the next minimum
-#: is far and crushed (the image pressed to 1 px: 500 steps, 35 s at 1 MP), and stops paths
-#: that would have passed; they take 4-35 steps on the photos and extremes.
+#: A step of that blend not converged in these many Newton steps ends the path at the point
+#: before it (its iterate is not used). Lower is faster where the next minimum is far and
+#: crushed (the image pressed to 1 px: 500 steps, 35 s at 1 MP, then failing anyway) and ends
+#: more paths early; the steps on the photos and the extremes converge in 4-35.
 TRIAL_STEPS = 100
 #: The thinnest a release lets a triangle be, as a fraction of its floor: beyond, the
 #: released features give way (their targets blend towards W's) instead of the background.
@@ -287,9 +287,9 @@ def blend_search(problem: Problem, released: np.ndarray, floor, record: GuardRec
       starts at the minimum for s = 0 converged from ``origin`` (positions with no fold that
       tie ``released`` and keep the coordinates the untied system holds);
     - from there, ``steps`` even steps of s up to 1, each converged from the last point (one
-      whose iterate fails the margin after :data:`TRIAL_STEPS` Newton steps fails there).
-      Where one fails ``margin``, the furthest point between it and the last point that
-      passed, converged at its blend (:func:`settle`). Without steps, the start likewise.
+      not converged in :data:`TRIAL_STEPS` Newton steps ends the path at that point). Where
+      one fails ``margin``, the furthest point between it and the last point that passed,
+      converged at its blend (:func:`settle`). Without steps, the start likewise.
     Each point is a continuous function of the inputs: roots, and a converged minimum that,
     where it fails the margin, gives way to the chord towards it.
 
@@ -308,23 +308,21 @@ def blend_search(problem: Problem, released: np.ndarray, floor, record: GuardRec
     systems, rhs, offset, tied = constants(0.0)
     _, rhs_own, offset_own, _ = constants(1.0)
 
-    def at(t, start, trial=False):
-        """(the barrier energy's minimum at blend ``t`` converged from ``start``, its margin); one
-        that fails the margin is not kept: its convergence does not count. (``trial``: above.)"""
+    def at(t, start, steps=None):
+        """(the barrier energy's minimum at blend ``t`` converged from ``start`` in at most ``steps``
+        Newton steps, its margin, whether it stopped there); a minimum that fails the margin, or
+        a run stopped there, is not kept: its convergence does not count."""
         converged, args = record.converged, (systems, rhs + t * (rhs_own - rhs), offset + t * (offset_own - offset))
-        point, how = _converge_grid(problem, *args, tied, start, floor, record, TRIAL_STEPS if trial else None)
-        if trial and how.steps >= TRIAL_STEPS and not how.converged and margin(point) <= 0:
-            record.converged = converged          # it passes so far: on to the minimum
-            point, _ = _converge_grid(problem, *args, tied, point, floor, record)
-        value = margin(point)
-        if value > 0:
+        point, how = _converge_grid(problem, *args, tied, start, floor, record, steps)
+        value, stopped = margin(point), steps is not None and how.steps >= steps
+        if value > 0 or stopped:
             record.converged = converged
-        return point, value
+        return point, value, stopped
 
     def settle(t, start):
         """The minimum at ``t`` from ``start`` (which passes) where it passes, else the chord
         from ``start`` towards it as far as passes: no jump where its margin crosses 0."""
-        point, value = at(t, start)
+        point, value, _ = at(t, start)
         return point if value <= 0 else furthest_move(lambda u: start + u * (point - start), margin,
                                                       problem.triangles, floor)[0]
 
@@ -336,7 +334,7 @@ def blend_search(problem: Problem, released: np.ndarray, floor, record: GuardRec
         if not steps:
             return settle(s, x), s
     elif origin is not None and systems.admits(origin, offset):
-        x, value = at(0.0, origin)
+        x, value, _ = at(0.0, origin)
         if value > 0:
             return None
     else:
@@ -344,7 +342,9 @@ def blend_search(problem: Problem, released: np.ndarray, floor, record: GuardRec
     first, count = s, steps if s < 1.0 else min(steps, 1)
     for step in range(1, count + 1):
         t = first + (1.0 - first) * step / count
-        trial, value = at(t, x, trial=True)
+        trial, value, stopped = at(t, x, TRIAL_STEPS)
+        if stopped:                             # a minimum far away: the path ends at its last point
+            return settle(s, x), s
         if value > 0:                           # between the two points, as far as passes
             between, share = furthest_move(lambda u: x + u * (trial - x), margin, problem.triangles, floor)
             s = s + share * (t - s)
