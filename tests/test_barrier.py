@@ -303,7 +303,8 @@ def test_a_release_step_not_converged_in_trial_steps_ends_the_path_at_the_point_
     assert runs[0] == (trial_steps, False) and runs[1][1]                 # the trial, then the settling
     assert guard.newton_steps < uncapped.record.guard.newton_steps
     assert guard.release_rounds == 1 and 0 < guard.feature_blend <= uncapped.record.guard.feature_blend
-    assert guard.converged and mesh.flips() == 0
+    assert guard.converged and mesh.flips() == 0 and guard.release_cut and not uncapped.record.guard.release_cut
+    assert any(f"{trial_steps} Newton steps" in line for line in mesh.record.warnings)          # said
     floor = barrier.SAFE_FRACTION * signed_areas(mesh.source * [sx, 1.0], mesh.triangles)
     assert (signed_areas(mesh.target, mesh.triangles) / floor).min() >= release.RELEASE_THINNEST * (1 - 1e-9)
     for pattern in ("up", "alternate"):

@@ -10,6 +10,7 @@ import numpy as np
 
 from .. import __version__
 from ..engine import barrier
+from ..engine import guard as fold_guard
 
 
 #: The report's own format version (``featurewarp schema report`` prints its JSON Schema).
@@ -84,6 +85,8 @@ def build_report(input_path, output_path, image, result, warp, mesh, timings) ->
             "release_rounds": info.get("release_rounds", 0),
             "released_components": info.get("released_components", []),
             "feature_blend": info.get("feature_blend", 1.0),
+            "release": {"blend_steps": fold_guard.BLEND_STEPS, "thinnest": fold_guard.RELEASE_THINNEST,
+                        "trial_steps": fold_guard.TRIAL_STEPS, "cut": info.get("release_cut", False)},
             "plain_blend": info.get("plain_blend", 1.0),
             "degraded_components": info.get("degraded_components", []),
             "barrier": {"safe_fraction": barrier.SAFE_FRACTION, "stiffness": barrier.STIFFNESS,

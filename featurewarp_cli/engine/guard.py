@@ -17,9 +17,8 @@ from .grid import signed_areas
 
 #: The guard untangles windows around the folds, reaching these many times the largest fold's
 #: extent beyond it (at least WINDOW_MIN_MARGIN quads), in at most WINDOW_ITERATIONS steps each,
-#: then the first with the ground around the tied features it reaches; where all fail, the
-#: whole grid (several times slower). A window that opens its folds converges the barrier's
-#: energy there (:mod:`barrier`), as does one WINDOW_MIN_MARGIN quads around crushed ones.
+#: then the first with the ground around the tied features it reaches; else the whole grid. A
+#: window that opens its folds converges the barrier there, as does one around crushed ones.
 WINDOW_MARGINS = (0.5, 1.0)
 WINDOW_MIN_MARGIN = 8
 WINDOW_ITERATIONS = 150
@@ -56,8 +55,8 @@ class GuardRecord:
     release_rounds : int
         0: features kept their targets; 1 or 2: some were relaxed towards W.
     released_components : list of int
-    feature_blend : float
-        1: released features at their own shape; 0: at the warp's.
+    feature_blend, release_cut : float, bool
+        1: released features at their own shape, 0: at W's; cut short by a step (TRIAL_STEPS).
     fallback : bool
         Nothing injective was found; the result is a step from W towards the solution.
     plain_blend : float
@@ -81,6 +80,7 @@ class GuardRecord:
     release_rounds: int = 0
     released_components: list = field(default_factory=list)
     feature_blend: float = 1.0
+    release_cut: bool = False
     fallback: bool = False
     plain_blend: float = 1.0
     degraded_components: list = field(default_factory=list)
@@ -344,6 +344,7 @@ def blend_search(problem: Problem, released: np.ndarray, floor, record: GuardRec
         t = first + (1.0 - first) * step / count
         trial, value, stopped = at(t, x, TRIAL_STEPS)
         if stopped:                             # a minimum far away: the path ends at its last point
+            record.release_cut = True
             return settle(s, x), s
         if value > 0:                           # between the two points, as far as passes
             between, share = furthest_move(lambda u: x + u * (trial - x), margin, problem.triangles, floor)

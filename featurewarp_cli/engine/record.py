@@ -6,6 +6,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from . import guard as fold_guard
 from .guard import GuardRecord
 
 
@@ -162,6 +163,7 @@ class SolveRecord:
             "release_rounds": guard.release_rounds,
             "released_components": list(guard.released_components),
             "feature_blend": guard.feature_blend,
+            "release_cut": guard.release_cut,
             "fallback": guard.fallback,
             "plain_blend": guard.plain_blend,
             "degraded_components": list(guard.degraded_components),
@@ -222,8 +224,10 @@ def _why(record: "SolveRecord", k: int) -> str:
         causes.append("relaxed to avoid fold-overs: untied, it keeps its own shape only as far as the background "
                       "can thin" if guard.feature_blend >= 1.0 else
                       f"relaxed to avoid fold-overs: untied, its targets {guard.feature_blend:.2f} of the way from the "
-                      f"plain warp's shape to its own, where the background could thin no further or it would end "
-                      f"worse than the plain warp")
+                      f"plain warp's shape to its own, " + (
+                          f"where the next step's minimum was too far to reach in {fold_guard.TRIAL_STEPS} Newton steps"
+                          if guard.release_cut else
+                          "where the background could thin no further or it would end worse than the plain warp"))
     if k in guard.degraded_components:
         causes.append(f"moved towards the plain warp (blend {guard.plain_blend:.2f}, 0 = the plain warp) to be "
                       f"no more distorted than under it")
