@@ -31,8 +31,8 @@ PREVIEW_STEPS = 4
 BLEND_STEPS = 8
 #: A step of that blend not converged in these many Newton steps ends the path at the point
 #: before it (its iterate is not used). Lower is faster where the next minimum is far and
-#: crushed (the image pressed to 1 px: 500 steps, 35 s at 1 MP, then failing anyway) and ends
-#: more paths early; the steps on the photos and the extremes converge in 4-35.
+#: crushed (the image pressed to 1 px: 530 steps, 35 s at 1 MP, then failing anyway) and ends
+#: more paths early; the steps on the photos and the other extremes converge in 4-35.
 TRIAL_STEPS = 100
 #: The thinnest a release lets a triangle be, as a fraction of its floor: beyond, the
 #: released features give way (their targets blend towards W's) instead of the background.
@@ -291,11 +291,11 @@ def blend_search(problem: Problem, released: np.ndarray, floor, record: GuardRec
       one fails ``margin``, the furthest point between it and the last point that passed,
       converged at its blend (:func:`settle`). Without steps, the start likewise.
     Each point is a continuous function of the inputs: roots, and a converged minimum that,
-    where it fails the margin, gives way to the chord towards it.
+    where it fails the margin, gives way to the chord towards it; whether a step converges in
+    TRIAL_STEPS is a discrete choice.
 
     Returns (positions, s), or None when the start at s = 0 (W's targets) fails ``margin``
-    (it folds, or is too thin, and no ``origin`` is given, or the minimum from ``origin``
-    fails it too)."""
+    (it folds, or is too thin, with no ``origin``, or the minimum from ``origin`` fails too)."""
     from .plain_bound import furthest_move, thinnest_margin      # it imports this module
 
     blend = np.isin(problem.features.component, released) & problem.features.is_constrained
@@ -314,7 +314,7 @@ def blend_search(problem: Problem, released: np.ndarray, floor, record: GuardRec
         a run stopped there, is not kept: its convergence does not count."""
         converged, args = record.converged, (systems, rhs + t * (rhs_own - rhs), offset + t * (offset_own - offset))
         point, how = _converge_grid(problem, *args, tied, start, floor, record, steps)
-        value, stopped = margin(point), steps is not None and how.steps >= steps
+        value, stopped = margin(point), steps is not None and not how.converged and how.steps >= steps
         if value > 0 or stopped:
             record.converged = converged
         return point, value, stopped
@@ -342,7 +342,7 @@ def blend_search(problem: Problem, released: np.ndarray, floor, record: GuardRec
     first, count = s, steps if s < 1.0 else min(steps, 1)
     for step in range(1, count + 1):
         t = first + (1.0 - first) * step / count
-        trial, value, stopped = at(t, x, TRIAL_STEPS)
+        trial, value, stopped = at(t, x, TRIAL_STEPS if t > s else None)
         if stopped:                             # a minimum far away: the path ends at its last point
             record.release_cut = True
             return settle(s, x), s

@@ -225,7 +225,7 @@ def _why(record: "SolveRecord", k: int) -> str:
                       "can thin" if guard.feature_blend >= 1.0 else
                       f"relaxed to avoid fold-overs: untied, its targets {guard.feature_blend:.2f} of the way from the "
                       f"plain warp's shape to its own, " + (
-                          f"where the next step's minimum was too far to reach in {fold_guard.TRIAL_STEPS} Newton steps"
+                          f"where the blend's next step did not converge in {fold_guard.TRIAL_STEPS} Newton steps"
                           if guard.release_cut else
                           "where the background could thin no further or it would end worse than the plain warp"))
     if k in guard.degraded_components:
