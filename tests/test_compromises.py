@@ -159,3 +159,24 @@ def test_one_line_per_feature_not_kept_with_every_cause_and_none_for_a_feature_s
                                "cut by a border that no similarity of it can follow")
     assert "; moved towards the plain warp (blend 0.40, 0 = the plain warp)" in lines[0]
     assert lines[1] == "feature 2 (40 quads) not kept: worst-triangle anisotropy 0.200 (plain warp: 0.500)"
+
+
+def test_a_grid_that_strays_from_the_warp_is_said_whether_chosen_or_the_finest_automatic_one():
+    """The output follows W only as closely as its grid: a coarse ``--cell`` (20 px off under
+    swirl 180) and the finest automatic grid where even it cannot follow (a full circle of a
+    1-px strip: 0.8 px) are warnings with the figure; the automatic grid within 0.5 px, and
+    the plain mode with it, say nothing."""
+    mask = np.zeros((96, 128), bool)
+    mask[30:60, 40:80] = True
+    swirl = load_warp("swirl")(128, 96, angle=180)
+    coarse = FeatureWarper(128, 96, mask, cell=32).solve(swirl, "similarity").record
+    assert coarse.grid["pl_error_px"] > 10
+    assert [line for line in coarse.warnings if "strays" in line] == [
+        f"the --cell grid (cell 32 px) strays up to {coarse.grid['pl_error_px']:.1f} px from the warp: the output "
+        f"follows the warp only that closely (the automatic grid aims at 0.5 px)"]
+    for mode in ("similarity", "plain"):
+        automatic = FeatureWarper(128, 96, mask).solve(swirl, mode).record
+        assert automatic.grid["pl_error_px"] <= 0.5 and not any("strays" in line for line in automatic.warnings)
+    strip = FeatureWarper(1, 300, np.zeros((300, 1), bool)).solve(load_warp("arc")(1, 300, angle=360)).record
+    assert strip.grid["pl_error_px"] > 0.5
+    assert any(line.startswith("the finest automatic grid") and "strays" in line for line in strip.warnings)

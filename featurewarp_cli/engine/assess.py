@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import canvas, grow, quality
+from . import canvas, fidelity, grow, quality
 from .record import KEPT, ComponentRecord, SolveRecord, warnings_for
 
 #: Features (quads holding a mask pixel) covering more than this share of the grid get a warning.
@@ -12,10 +12,11 @@ MASK_COVERAGE = 0.9
 
 
 def assess(state, target, warped, tied, unpinned, warp, record: SolveRecord, notes: list,
-           quick: bool = False) -> None:
+           quick: bool = False, chosen_cell: bool = False) -> None:
     """Fill ``record`` with the quality figures, per-component records and warnings of the mesh
     ``target`` (``state``: the warper's grid state; ``notes``: the warper's own warnings;
-    ``quick``: the per-component records and the warnings only)."""
+    ``quick``: the per-component records and the warnings only; ``chosen_cell``: the grid's
+    cell was given, not automatic)."""
     features = state.features
     if not quick:
         transition = np.tile(features.is_constrained & ~features.is_feature, 2)
@@ -60,4 +61,10 @@ def assess(state, target, warped, tied, unpinned, warp, record: SolveRecord, not
             record.warnings.append(f"the mask's features cover {100 * coverage:.0f} % of the grid: little background "
                                    f"is left to take the warp (is the mask inverted, or a JPEG whose "
                                    f"noise crosses the threshold?)")
+    error = record.grid.get("pl_error_px", 0.0)
+    if not quick and error > fidelity.MAX_PL_ERROR:          # NaN (a preview's grid) is not above
+        chosen = "the --cell grid" if chosen_cell else "the finest automatic grid"
+        record.warnings.append(f"{chosen} (cell {record.grid['cell']:.3g} px) strays up to {error:.1f} px from "
+                               f"the warp: the output follows the warp only that closely"
+                               + (" (the automatic grid aims at 0.5 px)" if chosen_cell else ""))
     record.warnings.extend(notes)

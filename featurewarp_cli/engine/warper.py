@@ -334,7 +334,7 @@ class FeatureWarper:
             target, tied, unpinned = self._feature_aware(state, warped, mode, record, quick, self._releases(warp),
                                                          drag and quick, keep)
         t1 = time.perf_counter()
-        assess(state, target, warped, tied, unpinned, warp, record, self.notes, quick)
+        assess(state, target, warped, tied, unpinned, warp, record, self.notes, quick, self.cell is not None)
         self.timings["quality"] = time.perf_counter() - t1
         record.timings = dict(self.timings)
         return Mesh(state.nodes, target, state.triangles, tuple(warp.canvas), record, state.node_component)
