@@ -63,8 +63,9 @@ def assess(state, target, warped, tied, unpinned, warp, record: SolveRecord, not
                                    f"noise crosses the threshold?)")
     error = record.grid.get("pl_error_px", 0.0)
     if not quick and error > fidelity.MAX_PL_ERROR:          # NaN (a preview's grid) is not above
-        chosen = "the --cell grid" if chosen_cell else "the finest automatic grid"
+        chosen = "the given cell's grid" if chosen_cell else "the finest automatic grid (800 000 nodes at most)"
         record.warnings.append(f"{chosen} (cell {record.grid['cell']:.3g} px) strays up to {error:.1f} px from "
                                f"the warp: the output follows the warp only that closely"
-                               + (" (the automatic grid aims at 0.5 px)" if chosen_cell else ""))
+                               + ("; a finer --cell, or the automatic grid (within 0.5 px), follows it more "
+                                  "closely" if chosen_cell else ""))
     record.warnings.extend(notes)
