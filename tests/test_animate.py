@@ -55,6 +55,23 @@ def test_video(files):
     assert int(video.get(cv2.CAP_PROP_FRAME_COUNT)) == 4
 
 
+def test_each_frames_compromises_are_said_with_its_number_and_the_rest_counted(files, monkeypatch):
+    """What a frame could not do is a warning naming the frame (a coarse --cell strays from
+    the warp in every moving frame; the first frame does not move); past FRAME_WARNINGS
+    lines, one line counts the rest."""
+    from featurewarp_cli.app import animate
+
+    args = ["swirl", str(files / "in.png"), str(files / "cell.gif"), "-m", str(files / "mask.png"),
+            "--vary", "angle=0:90", "--frames", "4", "--cell", "60"]
+    out = run(*args)
+    assert out.code == 0, out.stderr
+    strays = [line for line in out.stderr.splitlines() if "strays up to" in line]
+    assert [line.split(": ")[3] for line in strays] == ["frame 1", "frame 2", "frame 3"], out.stderr
+    monkeypatch.setattr(animate, "FRAME_WARNINGS", 1)
+    counted = run(*args).stderr.splitlines()
+    assert "frame 1: " in counted[0] and "more compromises in frames 1 to 3" in counted[-1]
+
+
 @pytest.mark.parametrize("vary,message", [("angle", "NAME=START:END"), ("spin=0:1", "no parameter 'spin'"),
                                           ("angle=0:nan", "finite")])
 def test_bad_vary_is_a_usage_error(files, vary, message):

@@ -26,6 +26,8 @@ from .pipeline import (Settings, WarpError, background_colour, check_solution, l
 
 ANIMATED = {".gif", ".webp", ".png", ".apng"}
 VIDEO = {".mp4": "mp4v", ".avi": "MJPG"}
+#: The frames' compromises said one by one (``frame N: ...``); beyond, one line counts the rest.
+FRAME_WARNINGS = 10
 
 
 def parse_vary(texts, preset) -> dict[str, tuple[float, float]]:
@@ -137,24 +139,32 @@ def animate_file(settings: Settings, input: str, output: str, mask: str | None, 
     if settings.cell is None:                  # one grid fine enough for every frame: one factorization
         cell = min(fidelity.auto_cell(width, height, w)[0] for w in warps)
         warper = make_warper(Settings(**{**settings.__dict__, "cell": cell}), width, height, feature_mask)[1]
+        warper.cell_chosen_automatically = True
     fmt = "png" if kind != "video" else "bmp"
     background = background_colour(settings.background, fmt) if kind != "video" else (
         parse_colour(settings.background) if settings.background else (255, 255, 255))
     alpha = kind != "video" and background is None
     canvas = (max(w.canvas[0] for w in warps), max(w.canvas[1] for w in warps))
     fill = (0, 0, 0, 0) if alpha else tuple(background[::-1]) + (255,)
-    rendered, flips = [], 0
-    for warp in warps:
+    rendered, flips, said = [], 0, []
+    for index, warp in enumerate(warps):
         mesh = solve_within_budget(warper, warp, settings.mode)
         flips += mesh.info["flipped_triangles"]
         check_solution(replace(settings, strict=False), mesh)
+        said.extend(f"frame {index}: {line}" for line in mesh.record.warnings)
         frame = to_bgr(warper.render(image, mesh, settings.interp, background, order="bgr"), alpha)
         rendered.append(centre_on(frame, canvas, fill))
         if progress:
             progress(1)
     write_frames(output, kind, rendered, fps)
+    if len(said) > FRAME_WARNINGS:
+        frames_said = sorted({int(line.split(":")[0].split()[1]) for line in said[FRAME_WARNINGS:]})
+        where = (f"frame {frames_said[0]}" if len(frames_said) == 1
+                 else f"frames {frames_said[0]} to {frames_said[-1]}")
+        said = said[:FRAME_WARNINGS] + [f"{len(said) - FRAME_WARNINGS} more compromises in {where} "
+                                        f"(featurewarp warp with a frame's values says each)"]
     return {"frames": frames, "canvas": canvas, "factorizations": warper.factorizations,
-            "flipped_triangles": flips, "seconds": time.perf_counter() - t0, "warnings": warnings}
+            "flipped_triangles": flips, "seconds": time.perf_counter() - t0, "warnings": warnings + said}
 
 
 def write_frames(output: str, kind: str, frames: list[np.ndarray], fps: float) -> None:

@@ -189,6 +189,8 @@ class FeatureWarper:
         self.scale_prior = float(scale_prior)
         self.cell = cell
         self.max_nodes = max_nodes
+        #: The cell is automatic though set (animate's one grid for every frame): not "given".
+        self.cell_chosen_automatically = False
         self.grow_past_edge = bool(grow_past_edge)
         self.factorizations = 0
         self.timings: dict[str, float] = {}
@@ -334,7 +336,8 @@ class FeatureWarper:
             target, tied, unpinned = self._feature_aware(state, warped, mode, record, quick, self._releases(warp),
                                                          drag and quick, keep)
         t1 = time.perf_counter()
-        assess(state, target, warped, tied, unpinned, warp, record, self.notes, quick, self.cell is not None)
+        assess(state, target, warped, tied, unpinned, warp, record, self.notes, quick,
+               self.cell is not None and not self.cell_chosen_automatically)
         self.timings["quality"] = time.perf_counter() - t1
         record.timings = dict(self.timings)
         return Mesh(state.nodes, target, state.triangles, tuple(warp.canvas), record, state.node_component)
