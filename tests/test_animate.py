@@ -58,7 +58,7 @@ def test_video(files):
 def test_each_frames_compromises_are_said_with_its_number_and_the_rest_counted(files, monkeypatch):
     """What a frame could not do is a warning naming the frame (a coarse --cell strays from
     the warp in every moving frame; the first frame does not move); past FRAME_WARNINGS
-    lines, one line counts the rest."""
+    lines, one line counts the rest; ``--strict`` writes nothing."""
     from featurewarp_cli.app import animate
 
     args = ["swirl", str(files / "in.png"), str(files / "cell.gif"), "-m", str(files / "mask.png"),
@@ -70,6 +70,9 @@ def test_each_frames_compromises_are_said_with_its_number_and_the_rest_counted(f
     monkeypatch.setattr(animate, "FRAME_WARNINGS", 1)
     counted = run(*args).stderr.splitlines()
     assert "frame 1: " in counted[0] and "more compromises in frames 1 to 3" in counted[-1]
+    args[2] = str(files / "strict.gif")
+    strict = run(*args, "--strict")                     # the first frame's compromise refuses the whole
+    assert strict.code == 1 and "--strict: frame 1: " in strict.stderr and not (files / "strict.gif").exists()
 
 
 @pytest.mark.parametrize("vary,message", [("angle", "NAME=START:END"), ("spin=0:1", "no parameter 'spin'"),

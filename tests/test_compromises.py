@@ -183,3 +183,19 @@ def test_a_grid_that_strays_from_the_warp_is_said_whether_chosen_or_the_finest_a
     strip = FeatureWarper(1, 300, np.zeros((300, 1), bool)).solve(load_warp("arc")(1, 300, angle=360)).record
     assert strip.grid["pl_error_px"] > 0.5
     assert any(line.startswith("the finest automatic grid") and "strays" in line for line in strip.warnings)
+
+
+@pytest.mark.parametrize("cell", [7, 64])
+def test_a_handles_map_followed_on_a_refinement_of_its_lattice_never_strays(cell):
+    """``deform``'s W is piecewise linear on the handles' grid, and the mesh refines that
+    lattice at any ``--cell``: it follows W exactly, so no cell says it strays."""
+    from featurewarp_cli.engine.deform import Deformer
+    from featurewarp_cli.engine.handles import Handles
+
+    mask = np.zeros((90, 120), bool)
+    mask[30:60, 40:80] = True
+    handles = Handles.from_dict({"version": 1, "canvas": "input", "points": [
+        {"from": [10, 10], "to": [10, 10]}, {"from": [110, 80], "to": [90, 85]}, {"from": [60, 45], "to": [70, 30]}]},
+        120, 90)
+    record = Deformer(120, 90, mask, cell=cell).solve(handles).record
+    assert record.grid["pl_error_px"] < 1e-9 and not any("strays" in line for line in record.warnings)

@@ -152,6 +152,8 @@ def animate_file(settings: Settings, input: str, output: str, mask: str | None, 
         flips += mesh.info["flipped_triangles"]
         check_solution(replace(settings, strict=False), mesh)
         said.extend(f"frame {index}: {line}" for line in mesh.record.warnings)
+        if settings.strict and said:          # nothing is written before every frame is solved
+            raise WarpError(f"--strict: {said[0]}; nothing written")
         frame = to_bgr(warper.render(image, mesh, settings.interp, background, order="bgr"), alpha)
         rendered.append(centre_on(frame, canvas, fill))
         if progress:
