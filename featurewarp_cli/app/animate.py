@@ -151,22 +151,22 @@ def animate_file(settings: Settings, input: str, output: str, mask: str | None, 
         mesh = solve_within_budget(warper, warp, settings.mode)
         flips += mesh.info["flipped_triangles"]
         check_solution(replace(settings, strict=False), mesh)
-        said.extend(f"frame {index}: {line}" for line in mesh.record.warnings)
+        said.extend((index, line) for line in mesh.record.warnings)
         if settings.strict and said:          # nothing is written before every frame is solved
-            raise WarpError(f"--strict: {said[0]}; nothing written")
+            raise WarpError(f"--strict: frame {said[0][0]}: {said[0][1]}; nothing written")
         frame = to_bgr(warper.render(image, mesh, settings.interp, background, order="bgr"), alpha)
         rendered.append(centre_on(frame, canvas, fill))
         if progress:
             progress(1)
     write_frames(output, kind, rendered, fps)
+    lines = [f"frame {index}: {line}" for index, line in said[:FRAME_WARNINGS]]
     if len(said) > FRAME_WARNINGS:
-        frames_said = sorted({int(line.split(":")[0].split()[1]) for line in said[FRAME_WARNINGS:]})
-        where = (f"frame {frames_said[0]}" if len(frames_said) == 1
-                 else f"frames {frames_said[0]} to {frames_said[-1]}")
-        said = said[:FRAME_WARNINGS] + [f"{len(said) - FRAME_WARNINGS} more compromises in {where} "
-                                        f"(featurewarp warp with a frame's values says each)"]
+        first, last = said[FRAME_WARNINGS][0], said[-1][0]
+        where = f"frame {first}" if first == last else f"frames {first} to {last}"
+        lines.append(f"{len(said) - FRAME_WARNINGS} more compromises in {where} "
+                     f"(featurewarp warp with a frame's values says each)")
     return {"frames": frames, "canvas": canvas, "factorizations": warper.factorizations,
-            "flipped_triangles": flips, "seconds": time.perf_counter() - t0, "warnings": warnings + said}
+            "flipped_triangles": flips, "seconds": time.perf_counter() - t0, "warnings": warnings + lines}
 
 
 def write_frames(output: str, kind: str, frames: list[np.ndarray], fps: float) -> None:

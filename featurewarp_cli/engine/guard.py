@@ -309,13 +309,13 @@ def blend_search(problem: Problem, released: np.ndarray, floor, record: GuardRec
     _, rhs_own, offset_own, _ = constants(1.0)
 
     def at(t, start, steps=None):
-        """(the barrier energy's minimum at blend ``t`` converged from ``start`` in at most ``steps``
-        Newton steps, its margin, whether it stopped there); a minimum that fails the margin, or
-        a run stopped there, is not kept: its convergence does not count."""
+        """(the minimum at blend ``t`` from ``start`` in at most ``steps`` Newton steps, its margin (inf
+        where it stopped there), stopped); one failing the margin is not kept: its run does not count."""
         converged, args = record.converged, (systems, rhs + t * (rhs_own - rhs), offset + t * (offset_own - offset))
         point, how = _converge_grid(problem, *args, tied, start, floor, record, steps)
-        value, stopped = margin(point), steps is not None and not how.converged and how.steps >= steps
-        if value > 0 or stopped:
+        stopped = steps is not None and not how.converged and how.steps >= steps
+        value = np.inf if stopped else margin(point)      # a stopped run's point is not used
+        if value > 0:
             record.converged = converged
         return point, value, stopped
 
