@@ -113,6 +113,22 @@ def test_compare_says_each_views_warnings_and_strict_writes_nothing(tmp_path):
     assert strict.exit_code == 1 and "--strict" in strict.output and not (tmp_path / "strict.png").exists()
 
 
+def test_compare_says_a_coarse_grids_stray_once_for_all_views(tmp_path):
+    """The three views share one grid: its stray from the warp is one line, for all of them."""
+    import cv2
+
+    image = np.random.default_rng(2).integers(0, 255, (96, 128, 3), dtype=np.uint8)
+    mask = np.zeros((96, 128), np.uint8)
+    mask[30:60, 40:80] = 255
+    cv2.imwrite(str(tmp_path / "in.png"), image)
+    cv2.imwrite(str(tmp_path / "m.png"), mask)
+    run = CliRunner().invoke(cli, ["compare", "swirl", str(tmp_path / "in.png"), str(tmp_path / "panel.png"),
+                                   "-m", str(tmp_path / "m.png"), "--angle", "90", "--cell", "32"])
+    assert run.exit_code == 0, run.output
+    strays = [line for line in run.output.splitlines() if "strays up to" in line]
+    assert len(strays) == 1 and "all views: the given cell's grid (cell 32 px) strays up to" in strays[0]
+
+
 def test_many_features_not_kept_are_named_ten_at_a_time():
     """A noisy mask of thousands of specks printed a line for each; the ten largest are named,
     the rest counted in one line (the report keeps each)."""

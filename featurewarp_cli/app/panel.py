@@ -139,8 +139,11 @@ def compare_file(settings, input: str, output: str, mask: str | None = None,
     for mode in ("plain", "rigid", "similarity"):
         mesh = solve_within_budget(warper, warp, mode)
         check_solution(settings, mesh)
-        warnings.extend(f"{mode} view: {line}" for line in mesh.record.warnings
-                        if mode == "plain" or "strays up to" not in line)     # one grid: said once
+        for line in mesh.record.warnings:         # the grid is every view's: its stray said once, unprefixed
+            if "strays up to" not in line:
+                warnings.append(f"{mode} view: {line}")
+            elif mode == "plain":
+                warnings.append(f"all views: {line}")
         result = rendered(warper, image, mesh, settings.interp, background)
         tiles.append(draw_grid(result, mesh) if with_grid else result)
         labels.append(f"{mode} {settings.preset}" if mode == "plain" else f"featurewarp {mode}")
