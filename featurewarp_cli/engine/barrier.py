@@ -19,23 +19,22 @@ triangles' areas::
 
 Where x* keeps every triangle above its safe fraction, Phi's minimum is x* itself (where no
 triangle is below its floor at x either and the straight step to x* folds none, the solver
-takes that step and stops: further steps would only chase rounding). The
-solver (:func:`converge`) takes Newton steps from an injective start, each step no longer
-than the first fold along it allows (:func:`injectivity.max_step`), and stops when the
-Newton decrement is below ``TOLERANCE`` times Phi: the result no longer depends on the start
-or on the path, so a one-ulp change of the input moves it by rounding only. The Newton
-systems are solved by conjugate gradients preconditioned with the factorization the solve
-already has (one back-substitution per iteration) and a small factorization of the barrier's
-active nodes (a symmetric two-level preconditioner); where the barrier touches few nodes, they
-are solved exactly instead, by the Woodbury identity on those nodes (back-substitutions of unit
-forces, kept for the run, and a dense system of their size), with the exact Hessian wherever
-the system is positive definite. Far from the minimum each triangle's
-barrier Hessian is bounded by a positive semi-definite one (the area Hessian's negative part
-dropped); once a full step is taken with a decrement below ``_EXACT_BELOW`` of Phi, the exact
-Hessian (quadratic convergence), back to the bound wherever the exact system is not positive
-definite. A full step of the bound by conjugate gradients is doubled while the energy falls
-(:func:`_extended`): the bound over-estimates the curvature, and its full steps fall short
-along the energy's valleys.
+takes that step and stops: further steps would only chase rounding). The solver
+(:func:`converge`) takes Newton steps from an injective start, each no longer than the first
+fold along it allows (:func:`injectivity.max_step`), and stops when the Newton decrement is
+below ``TOLERANCE`` times Phi: the result no longer depends on the start or on the path, so a
+one-ulp change of the input moves it by rounding only. The Newton systems are solved by
+conjugate gradients preconditioned with the factorization the solve already has (one
+back-substitution per iteration) and a small factorization of the barrier's active nodes (a
+symmetric two-level preconditioner); where the barrier touches few nodes, exactly, by the
+Woodbury identity on those nodes (back-substitutions of unit forces, kept for the run, and a
+dense system of their size), with the exact Hessian wherever that system is positive definite.
+Far from the minimum each triangle's barrier Hessian is bounded by a positive semi-definite
+one (the area Hessian's negative part dropped; partly kept, :data:`_PARTIAL`, after a step the
+bound made too short); once a full step is taken with a decrement below ``_EXACT_BELOW`` of
+Phi, the exact Hessian (quadratic convergence), back to the bound wherever the exact system is
+not positive definite. A full step of the bound by conjugate gradients is doubled while the
+energy falls (:func:`_extended`): the bound over-estimates the curvature along the valleys.
 """
 
 from __future__ import annotations
@@ -59,13 +58,10 @@ STIFFNESS = 300.0
 #: lets a one-ulp change of the input move the result by more.
 TOLERANCE = 1e-12
 #: Newton steps at most (the report says when a solve stopped there). A swirl's centre that
-#: tied features ring untwists slowly: the astronaut's head, patch and shuttle under swirl 180
-#: at 1 MP (cell 4) converge in 203 steps (8 s; 388 before :func:`_extended`), the china photo's
-#: pagoda under swirl 360 at 384 px in 440-480; stopped at 100 or 400, a one-ulp change moved
-#: them by up to 0.09 px (stopped
-#: short of a minimum, the result depends on the path). Most solves take under 100.
+#: tied features ring untwists slowly (the astronaut's head, patch and shuttle under swirl 180 at
+#: 1 MP, cell 4: 109 + 62 steps; 201 + 61 without :data:`_PARTIAL`); stopped at 100 or 400, one
+#: ulp moved such results up to 0.09 px (short of a minimum, the path decides). Most take < 100.
 MAX_STEPS = 600
-
 #: Exact barrier Hessians (not projected) once a full step was taken and the decrement fell
 #: below this fraction of Phi: quadratic convergence near the minimum.
 _EXACT_BELOW = 1e-5
@@ -78,10 +74,14 @@ _EXACT_BELOW = 1e-5
 _DIRECT_NODES, _DIRECT_WORK, _DIRECT_SOLVES, _DIRECT_BYTES = 600, 2000, 2e7, 2 ** 23
 #: How far along a bound step's ray :func:`_extended` looks for the first fold (in steps).
 _FAR = 1024.0
-#: Conjugate-gradient tolerance (on r.z, relative) and iterations at most, far from and near
-#: the minimum. Near it (the exact Hessian), a system that needs more is nearly singular or
-#: indefinite in a direction CG has not met yet: the step takes the bound instead (the 12 MP
-#: fish with the head + helmet mask spent 96 back-substitutions, 1.8 s, on one such system).
+#: Once :func:`_extended` lengthened a step (the bound over-estimates the curvature), the CG
+#: directions far from the minimum keep this fraction of the area Hessian's part the bound drops
+#: while their system stays positive definite. 1 MP swirl 180, cell 4: 262 Newton steps, 6 470
+#: back-substitutions with the bound; 145, 3 970 at 0.9 (0.7: 4 570; 1, exact: 5 210).
+_PARTIAL = 0.9
+#: Conjugate-gradient tolerance (on r.z, relative) and iterations at most, far from and near the
+#: minimum. Near it (the exact Hessian), a system that needs more is nearly singular or indefinite
+#: in a direction CG has not met yet: the bound instead (12 MP fish, helmet: 96 solves on one).
 _CG_FAR, _CG_NEAR = (1e-2, 100), (1e-6, 20)
 #: Second derivatives of a triangle's signed area in its corners' coordinates
 #: (x0, y0, x1, y1, x2, y2): constant, indefinite.
@@ -96,6 +96,8 @@ _values, _vectors = np.linalg.eigh(_AREA_HESSIAN)
 #: -(its negative part): the area Hessian's term in b's Hessian is b' times it, b' < 0, so
 #: b' * _AREA_HESSIAN's positive semi-definite part is -b' * this (a constant).
 _AREA_HESSIAN_NEGATIVE = (_vectors * np.maximum(-_values, 0.0)) @ _vectors.T
+#: Its positive part: _AREA_HESSIAN = _AREA_HESSIAN_POSITIVE - _AREA_HESSIAN_NEGATIVE.
+_AREA_HESSIAN_POSITIVE = (_vectors * np.maximum(_values, 0.0)) @ _vectors.T
 
 
 @dataclass
@@ -133,17 +135,15 @@ def weights(warped: np.ndarray, triangles: np.ndarray, stiffness: np.ndarray, fl
     return STIFFNESS * injectivity.penalty_stiffness(warped, triangles, stiffness) * floor * floor
 
 
-def _hessians(points, triangles, ratio, floor, kappa, exact: bool) -> np.ndarray:
-    """(K, 6, 6) Hessians of the barrier terms of ``triangles`` (corner coordinates
-    interleaved); projected to positive semi-definite unless ``exact``."""
+def _hessians(points, triangles, ratio, floor, kappa, exact: float) -> np.ndarray:
+    """(K, 6, 6) Hessians of the barrier terms of ``triangles`` (corner coordinates interleaved):
+    exact (``exact`` 1 or True), the bound (0 or False: the area Hessian's term projected to
+    positive semi-definite), or the part the bound drops kept by the fraction ``exact``."""
     _, first, second = clamped_log(ratio)
     grads = injectivity.area_gradients(points, triangles).reshape(-1, 6)
-    blocks = ((kappa * second / floor ** 2)[:, None, None] * grads[:, :, None] * grads[:, None, :]
-              + (kappa * first / floor)[:, None, None] * _AREA_HESSIAN)
-    if exact:
-        return blocks
-    return ((kappa * second / floor ** 2)[:, None, None] * grads[:, :, None] * grads[:, None, :]
-            + (-kappa * first / floor)[:, None, None] * _AREA_HESSIAN_NEGATIVE)
+    area = -_AREA_HESSIAN if exact == 1 else _AREA_HESSIAN_NEGATIVE - float(exact) * _AREA_HESSIAN_POSITIVE
+    area_term = (-kappa * first / floor)[:, None, None] * area
+    return (kappa * second / floor ** 2)[:, None, None] * grads[:, :, None] * grads[:, None, :] + area_term
 
 
 def _local_solver(normal, unknowns: np.ndarray, triangles: np.ndarray, blocks: np.ndarray):
@@ -199,12 +199,15 @@ def _local_solver(normal, unknowns: np.ndarray, triangles: np.ndarray, blocks: n
     return local
 
 
-def _newton_direction(move, normal, unknowns, points, triangles, blocks, gradient, near: bool):
+def _newton_direction(move, normal, unknowns, points, triangles, blocks, gradient, near: bool,
+                      indefinite: bool = False):
     """Conjugate gradients on (H + barrier Hessian) d = -gradient, preconditioned by a local
     solve, a back-substitution of the factored H and the local solve again; (d, ok), ok False
     where the system or the preconditioner shows a direction of non-positive curvature, or
     ``near`` and CG did not converge in :data:`_CG_NEAR`'s iterations. (The local solve fails
     only where the whole system is indefinite too: its matrix is a principal submatrix.)
+    ``blocks`` may be indefinite where ``near`` or ``indefinite`` (the exact or the partial
+    Hessians): a preconditioner that is not positive definite is a failure too.
 
     ``move``: the solve's linear part (:func:`converge`'s ``linear``): every preconditioned
     residual, and so the direction, is exactly on the solve's positions."""
@@ -235,7 +238,7 @@ def _newton_direction(move, normal, unknowns, points, triangles, blocks, gradien
     direction, step = np.zeros_like(points), z.copy()
     rz = first = float((residual * z).sum())
     if first <= 0:                            # the bound's preconditioner is positive definite:
-        return (None, False) if near and first < 0 else (direction, True)   # a stationary point
+        return (None, False) if (near or indefinite) and first < 0 else (direction, True)   # a stationary point
 
     tolerance, steps = _CG_NEAR if near else _CG_FAR
     for _ in range(steps):
@@ -248,7 +251,7 @@ def _newton_direction(move, normal, unknowns, points, triangles, blocks, gradien
         residual -= alpha * product_step
         z = precondition(residual)
         rz_next = float((residual * z).sum())
-        if rz_next < 0 and near:
+        if rz_next < 0 and (near or indefinite):
             return None, False
         if rz_next <= tolerance * first:
             return direction, True
@@ -378,10 +381,9 @@ def converge(solve, normal, movable: np.ndarray, x: np.ndarray, triangles: np.nd
         it: with it, a Newton system whose barrier touches few nodes is solved exactly.
     linear : callable, optional
         ``linear(force)`` -> S force, exactly 0 on held coordinates and one value per unknown.
-        The default, ``solve(force) - solve(0)``, subtracts positions: a tied feature's nodes
-        came out 1e-14 apart, times reaction forces of 1e4 that spoiled CG's inner products
-        and the decrement (the coins under swirl 90 at 256 px "converged" 0.044 px off the
-        solve's positions; 7 of 8 exact-Hessian CGs failed).
+        The default, ``solve(force) - solve(0)``, subtracts positions: 1e-14 apart on a tied
+        feature, times reaction forces of 1e4, spoiled CG (the coins under swirl 90 at 256 px
+        "converged" 0.044 px off the solve's positions).
 
     Returns
     -------
@@ -400,20 +402,20 @@ def converge(solve, normal, movable: np.ndarray, x: np.ndarray, triangles: np.nd
         offset = points - optimum
         return 0.5 * float((normal.dot(offset) * offset).sum()) + float((kappa * clamped_log(current / floor)[0]).sum())
 
-    near, bound, value, rows = False, False, energy(x), inverse
+    near, bound, partial, value, rows = False, False, False, energy(x), inverse
     for step in range(max_steps):
         ratio = areas(x) / floor
         active = np.flatnonzero(ratio < 1.0)
         tris, scale = triangles[active], kappa[active] / floor[active]
         gradient = normal.dot(x - optimum) + injectivity.penalty_force(x, tris, scale * clamped_log(ratio[active])[1])
-        direction, ok, direct = _direction(rows, move, normal, movable, x, tris, ratio[active],
-                                           floor[active], kappa[active], gradient, near, not bound)
-        if not ok:                             # not positive definite
-            if not near:
+        direction, ok, direct = _direction(rows, move, normal, movable, x, tris, ratio[active], floor[active],
+                                           kappa[active], gradient, near, not bound, partial and not near)
+        decrement = -float((gradient * direction).sum()) if ok else 0.0
+        if not ok or (partial and not near and not decrement > 0):     # not positive definite
+            if not (near or partial):
                 return x, Convergence(step, False)     # even with the bound: stay
-            near = False
+            near = partial = False
             continue
-        decrement = -float((gradient * direction).sum())
         if decrement <= TOLERANCE * value or decrement < 1e-18:     # uphill beyond rounding: not a minimum
             return x, Convergence(step, decrement >= -TOLERANCE * value)
         if active.size == 0 and _reaches_optimum(areas, x, optimum, floor):
@@ -430,6 +432,7 @@ def converge(solve, normal, movable: np.ndarray, x: np.ndarray, triangles: np.nd
             return x, Convergence(step, False)     # no descent along the bound's direction: stay
         if length == 1.0 and not near and not direct:
             length, trial = _extended(energy, areas, x, direction, trial)
+        partial = partial or length > 1.0          # the bound over-estimated the curvature: see _PARTIAL
         near, bound = length >= 1.0 and decrement < _EXACT_BELOW * value, False
         x, value = x + length * direction, trial
     return x, Convergence(max_steps, False)
@@ -462,12 +465,13 @@ def _reaches_optimum(areas, x: np.ndarray, optimum: np.ndarray, floor: np.ndarra
 
 
 def _direction(rows, move, normal, movable, x, triangles, ratio, floor, kappa, gradient, near,
-               exact_first=True):
+               exact_first=True, partial=False):
     """(direction, ok, direct): the Newton direction by :func:`_direct_direction` where ``rows``
     is given and the barrier touches few nodes (the exact Hessian where the system is positive
     definite with it and ``exact_first``, else the bound), else by :func:`_newton_direction`
-    (the exact Hessian when ``near``; also where rounding keeps :meth:`InverseRows.factor`
-    from factoring, or the direct direction from pointing downhill)."""
+    (the exact Hessian when ``near``, else the partial one with ``partial``, else the bound;
+    also where rounding keeps :meth:`InverseRows.factor` from factoring, or the direct
+    direction from pointing downhill)."""
     nodes, n = np.unique(triangles), x.shape[0]
     if (rows is not None and nodes.size <= _DIRECT_NODES and (2 * nodes.size) ** 3 <= _DIRECT_WORK * n
             and nodes.size * n <= _DIRECT_SOLVES and _factors(rows, nodes)):
@@ -481,9 +485,9 @@ def _direction(rows, move, normal, movable, x, triangles, ratio, floor, kappa, g
             break                                 # uphill (see _direct_direction): CG below
         else:
             return None, False, True
-    blocks = _hessians(x, triangles, ratio, floor, kappa, exact=near)
+    blocks = _hessians(x, triangles, ratio, floor, kappa, exact=1.0 if near else _PARTIAL if partial else 0.0)
     unknowns = rows.unknowns if rows is not None else np.stack([np.where(movable, np.arange(n), -1)] * 2)
-    return (*_newton_direction(move, normal, unknowns, x, triangles, blocks, gradient, near), False)
+    return (*_newton_direction(move, normal, unknowns, x, triangles, blocks, gradient, near, partial), False)
 
 
 def _factors(rows: InverseRows, nodes: np.ndarray) -> bool:
