@@ -191,6 +191,9 @@ def test_a_grid_that_strays_from_the_warp_is_said_whether_chosen_or_the_finest_a
         f"the given cell's grid (cell 32 px) strays up to {coarse.grid['pl_error_px']:.1f} px from the warp: the "
         f"output follows the warp only that closely; a finer --cell, or the automatic grid (within 0.5 px), "
         f"follows it more closely"]
+    whole = FeatureWarper(128, 96, mask, cell=1000).solve(swirl, "similarity").record     # 4 nodes: W's midpoints
+    assert whole.grid["nodes"] == 4 and whole.grid["pl_error_px"] > 10                   # agree (its centre, the
+    assert any("strays up to" in line for line in whole.warnings)                        # border); inside, not
     preview = FeatureWarper(128, 96, mask, cell=32).solve(swirl, "similarity", quick=True).record
     assert not any("strays" in line for line in preview.warnings)      # a preview's grid is not measured
     for mode in ("similarity", "plain"):

@@ -143,12 +143,14 @@ def reference_pl_error(grid, warp):
 @pytest.mark.parametrize("preset, params", [("swirl", {"angle": 200}), ("arc", {"angle": 120}),
                                             ("bulge", {"strength": 0.8}), ("stretch", {"sx": 0.7, "sy": 1.6})])
 def test_grid_fidelity_numbers_are_unchanged(rng, preset, params):
-    """pl_error and the smallest triangle area are bit for bit the straightforward formulas."""
+    """pl_error's midpoints and the smallest triangle area are bit for bit the straightforward
+    formulas (pl_error adds a lattice of points inside the cells: at least as large)."""
     w, h = 157, 93
     warp = plugins.load(preset)(w, h, **params)
     for cell in (1.0, 2.7, 4.0, 13.0):
         grid = Grid.for_image(w, h, cell)
-        assert fidelity.pl_error(grid, warp) == reference_pl_error(grid, warp)
+        assert fidelity._deviation(grid, warp)[0] == reference_pl_error(grid, warp)
+        assert fidelity.pl_error(grid, warp) >= reference_pl_error(grid, warp)
         points = warp(grid.nodes())
         for pts in (points, points + rng.normal(0, cell / 2, points.shape)):
             expected = signed_areas(pts, grid.triangles()).min()

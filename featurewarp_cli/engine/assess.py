@@ -64,7 +64,7 @@ def assess(state, target, warped, tied, unpinned, warp, record: SolveRecord, not
     error = record.grid.get("pl_error_px", 0.0)
     if not quick and error > fidelity.MAX_PL_ERROR:          # NaN (a preview's grid) is not above
         chosen = "the given cell's grid" if chosen_cell else "the finest automatic grid (800 000 nodes at most)"
-        record.warnings.append(f"{chosen} (cell {record.grid['cell']:.3g} px) strays up to {error:.1f} px from "
+        record.warnings.append(f"{chosen} (cell {record.grid['cell']:.4g} px) strays up to {error:.1f} px from "
                                f"the warp: the output follows the warp only that closely"
                                + ("; a finer --cell, or the automatic grid (within 0.5 px), follows it more "
                                   "closely" if chosen_cell else ""))

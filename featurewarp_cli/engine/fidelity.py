@@ -54,10 +54,30 @@ def _deviation(grid: Grid, warp) -> tuple[float, np.ndarray]:
     return worst, warped
 
 
+def _lattice_deviation(grid: Grid, warped: np.ndarray, warp, step: float) -> float:
+    """Largest distance between ``warp`` and its piecewise-linear version on ``grid`` (W at the
+    nodes: ``warped``, (ny, nx, 2)) over a lattice of points about ``step`` px apart."""
+    columns = np.linspace(-0.5, grid.width - 0.5, max(2, math.ceil(grid.width / step) + 1))
+    rows = np.linspace(-0.5, grid.height - 0.5, max(2, math.ceil(grid.height / step) + 1))
+    x, y = (v.ravel() for v in np.meshgrid(columns, rows))
+    (sx, sy), (qy, qx) = grid.spacing, grid.quad_shape
+    i = np.minimum(((x + 0.5) / sx).astype(int), qx - 1)
+    j = np.minimum(((y + 0.5) / sy).astype(int), qy - 1)
+    u, v = ((x + 0.5) / sx - i)[:, None], ((y + 0.5) / sy - j)[:, None]
+    tl, tr, br, bl = warped[j, i], warped[j, i + 1], warped[j + 1, i + 1], warped[j + 1, i]
+    upper = u >= v                        # the triangles (tl, tr, br) and (tl, br, bl), as Grid cuts them
+    linear = np.where(upper, tl + u * (tr - tl) + v * (br - tr), tl + u * (br - bl) + v * (bl - tl))
+    gap = warp(np.stack([x, y], axis=1)) - linear
+    return float(np.sqrt((gap[:, 0] * gap[:, 0] + gap[:, 1] * gap[:, 1]).max(initial=0.0)))
+
+
 def pl_error(grid: Grid, warp) -> float:
     """Largest distance between the warp and its piecewise-linear grid version, in pixels.
 
-    Measured at the midpoints of every horizontal, vertical and diagonal triangle edge.
+    Measured at the midpoints of every horizontal, vertical and diagonal triangle edge, and on a
+    lattice of points half the base cell apart (:func:`base_cell`): a coarse given cell's
+    midpoints may all sit where W happens to agree with its grid (a swirl's centre and a border
+    it leaves in place, at ``--cell 1000`` on 512 px: 0.0 px), where the lattice finds 100 px.
 
     Parameters
     ----------
@@ -69,7 +89,8 @@ def pl_error(grid: Grid, warp) -> float:
     -------
     float
     """
-    return _deviation(grid, warp)[0]
+    error, warped = _deviation(grid, warp)
+    return max(error, _lattice_deviation(grid, warped, warp, 0.5 * base_cell(grid.width, grid.height)))
 
 
 def smallest_area(points: np.ndarray) -> float:
