@@ -186,6 +186,37 @@ def test_batch_refuses_to_write_over_another_jobs_input(tmp_path):
     assert run.exit_code == 2 and "also reads" in run.output
 
 
+def test_a_short_write_to_an_unbuffered_stdout_is_finished_or_is_an_error(picture, tmp_path):
+    """With ``PYTHONUNBUFFERED`` stdout is a raw file: a write may take part of the bytes (a pipe,
+    a nearly full disk). The rest is written; where the pipe is closed early that is exit 1 with
+    one line, not exit 0 with a cut-short image."""
+    args = [sys.executable, "-m", "featurewarp_cli", "warp", "stretch", str(picture), "-", "--sx", "2"]
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    whole = subprocess.run(args, capture_output=True, env=env, check=True).stdout
+    assert cv2.imdecode(np.frombuffer(whole, np.uint8), cv2.IMREAD_UNCHANGED).shape[1] == 2 * 160
+    reader = "import os, sys, time; os.read(0, 10); os.close(0); time.sleep(2)"
+    process = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
+    subprocess.run([sys.executable, "-c", reader], stdin=process.stdout, check=True)
+    process.stdout.close()
+    assert process.wait(timeout=60) == 1
+    assert process.stderr.read().decode().strip().endswith("cannot write -: Broken pipe")
+
+    class Partial:                                   # a raw stream that takes 5 bytes a call
+        def __init__(self):
+            self.data = b""
+
+        def write(self, view):
+            self.data += bytes(view[:5])
+            return min(5, len(view))
+
+        def flush(self):
+            pass
+
+    stream = Partial()
+    write._write_stream(stream, b"0123456789abc")
+    assert stream.data == b"0123456789abc"
+
+
 def test_stdout_takes_the_input_format(picture, tmp_path):
     """'-' as OUTPUT without --format: the input's own format (a JPEG gives JPEG bytes)."""
     jpeg = tmp_path / "p.jpg"

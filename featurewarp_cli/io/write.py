@@ -20,6 +20,7 @@ Where an output goes, by what its path is now:
 
 from __future__ import annotations
 
+import errno
 import os
 import stat
 import sys
@@ -72,6 +73,19 @@ def _write_all(fd: int, data: bytes) -> None:
     view = memoryview(data)
     while view:
         view = view[os.write(fd, view):]
+
+
+def _write_stream(stream, data: bytes) -> None:
+    """All of ``data`` to a binary stream, then flushed: unbuffered (``PYTHONUNBUFFERED``), stdout
+    is a raw file whose ``write`` may take part of it (a full disk, a pipe closed early) and
+    returns how much; the rest is written until that raises, so nothing is cut short silently."""
+    view = memoryview(data)
+    while view:
+        written = stream.write(view)
+        if not written:                   # None: a non-blocking stream that would block
+            raise OSError(errno.EAGAIN, "standard output would block")
+        view = view[written:]
+    stream.flush()
 
 
 def _stage_file(path: str, target: str, data: bytes) -> Staged:
@@ -173,7 +187,6 @@ def _write_direct(path: str, data: bytes) -> None:
 
 def _open_fifo(path: str) -> int:
     """A blocking write descriptor of a FIFO, once a reader has it open (ENXIO after the wait)."""
-    import errno
     import time
 
     deadline = time.monotonic() + FIFO_WAIT
@@ -194,8 +207,7 @@ def _open_fifo(path: str) -> int:
 def _commit_one(output: Staged) -> None:
     if output.kind == "stdout":
         try:
-            sys.stdout.buffer.write(output.data)
-            sys.stdout.buffer.flush()
+            _write_stream(sys.stdout.buffer, output.data)
         except (AttributeError, ValueError):
             raise OSError(9, "standard output is closed") from None
     elif output.kind == "direct":
