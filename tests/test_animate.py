@@ -89,3 +89,23 @@ def test_unknown_format_is_a_usage_error(files):
     """An output whose animation format cannot be told: exit 2."""
     out = run("swirl", str(files / "in.png"), str(files / "out.jpg"), "--vary", "angle=0:90")
     assert out.code == 2 and "animation format" in out.stderr
+
+
+def test_frames_that_would_not_fit_the_memory_limit_are_refused_before_any_is_made(files):
+    """Every frame is held until the animation is encoded: --frames times the canvas beyond
+    --max-memory is one line and exit 1, at once (10^8 frames used to build 10^8 parameter sets,
+    then a MemoryError traceback)."""
+    for frames, limit in (("100000000", None), ("300", "20M")):
+        args = ["swirl", str(files / "in.png"), str(files / "big.gif"), "--vary", "angle=0:90", "--frames", frames]
+        out = run(*args, *(["--max-memory", limit] if limit else []))
+        assert out.code == 1 and f"{frames} frames of 250x180 need about" in out.stderr, out.stderr
+        assert "(--max-memory)" in out.stderr and len(out.stderr.strip().splitlines()) == 1
+        assert not (files / "big.gif").exists()
+
+
+def test_strict_refuses_an_empty_mask_before_any_frame(files, tmp_path):
+    cv2.imwrite(str(tmp_path / "empty.png"), np.zeros((180, 250), np.uint8))
+    out = run("swirl", str(files / "in.png"), str(tmp_path / "e.gif"), "-m", str(tmp_path / "empty.png"),
+              "--vary", "angle=0:90", "--frames", "3", "--strict")
+    assert out.code == 1 and "--strict: the mask marks no feature" in out.stderr
+    assert not (tmp_path / "e.gif").exists()

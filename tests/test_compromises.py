@@ -129,6 +129,26 @@ def test_compare_says_a_coarse_grids_stray_once_for_all_views(tmp_path):
     assert len(strays) == 1 and "all views: the given cell's grid (cell 32 px) strays up to" in strays[0]
 
 
+def test_an_empty_mask_is_a_warning_in_the_report_and_under_strict_as_on_stderr(tmp_path):
+    """The mask's own warning (it marks nothing: a plain warp) was said on stderr only: the report's
+    ``warnings`` lacked it and --strict wrote the file."""
+    import json
+
+    import cv2
+
+    cv2.imwrite(str(tmp_path / "in.png"), np.random.default_rng(3).integers(0, 255, (60, 80, 3), dtype=np.uint8))
+    cv2.imwrite(str(tmp_path / "m.png"), np.zeros((60, 80), np.uint8))
+    base = [str(tmp_path / "in.png"), "-m", str(tmp_path / "m.png")]
+    run = CliRunner().invoke(cli, ["warp", "swirl", base[0], str(tmp_path / "o.png"), *base[1:],
+                                   "--report", str(tmp_path / "r.json")])
+    assert run.exit_code == 0 and "the mask marks no feature" in run.output
+    assert any("the mask marks no feature" in line for line in json.loads((tmp_path / "r.json").read_text())["warnings"])
+    for command in ("warp", "compare"):
+        strict = CliRunner().invoke(cli, [command, "swirl", base[0], str(tmp_path / "s.png"), *base[1:], "--strict"])
+        assert strict.exit_code == 1 and "--strict: the mask marks no feature" in strict.output
+        assert not (tmp_path / "s.png").exists()
+
+
 def test_many_features_not_kept_are_named_ten_at_a_time():
     """A noisy mask of thousands of specks printed a line for each; the ten largest are named,
     the rest counted in one line (the report keeps each)."""

@@ -28,6 +28,9 @@ ANIMATED = {".gif", ".webp", ".png", ".apng"}
 VIDEO = {".mp4": "mp4v", ".avi": "MJPG"}
 #: The frames' compromises said one by one (``frame N: ...``); beyond, one line counts the rest.
 FRAME_WARNINGS = 10
+#: Bytes each frame holds per canvas pixel until the animation is encoded: the 8-bit BGRA frame,
+#: and as much again for the encoder's copy.
+FRAME_PIXEL_BYTES = 8
 
 
 def parse_vary(texts, preset) -> dict[str, tuple[float, float]]:
@@ -65,6 +68,18 @@ def frame_params(settings: Settings, ranges: dict, frames: int) -> list[dict]:
             params[name] = round(value) if isinstance(start, int) and isinstance(end, int) else value
         out.append(params)
     return out
+
+
+def check_frames_fit(settings: Settings, frames: int, canvas: tuple[int, int]) -> None:
+    """WarpError when ``frames`` frames of the ``canvas`` (width, height) would not fit the memory
+    limit (``--max-memory``): every frame is held until the animation is encoded."""
+    from ..io.limits import size_text
+
+    need = frames * canvas[0] * canvas[1] * FRAME_PIXEL_BYTES
+    if settings.max_memory is not None and need > settings.max_memory:
+        raise WarpError(f"{frames} frames of {canvas[0]}x{canvas[1]} need about {size_text(need)}, above the "
+                        f"memory limit of {size_text(settings.max_memory)} (--max-memory): fewer --frames, "
+                        f"or a smaller image")
 
 
 def output_kind(path: str) -> str:
@@ -130,6 +145,9 @@ def animate_file(settings: Settings, input: str, output: str, mask: str | None, 
     prefetch_engine()
     image, feature_mask, warnings = load_image_and_mask(settings, formats.split_prefix(input)[1], mask)
     height, width = image.shape[:2]
+    check_frames_fit(settings, frames, (width, height))        # before a warp per frame is made
+    if settings.strict and warnings:
+        raise WarpError(f"--strict: {warnings[0]}; nothing written")
     per_frame = frame_params(settings, ranges, frames)
     warps = []
     for params in per_frame:
@@ -145,6 +163,7 @@ def animate_file(settings: Settings, input: str, output: str, mask: str | None, 
         parse_colour(settings.background) if settings.background else (255, 255, 255))
     alpha = kind != "video" and background is None
     canvas = (max(w.canvas[0] for w in warps), max(w.canvas[1] for w in warps))
+    check_frames_fit(settings, frames, canvas)
     fill = (0, 0, 0, 0) if alpha else tuple(background[::-1]) + (255,)
     rendered, flips, said = [], 0, []
     for index, warp in enumerate(warps):

@@ -138,7 +138,7 @@ def compare_file(settings, input: str, output: str, mask: str | None = None,
     tiles, labels = [tint(image, feature_mask)], ["input + mask"]
     for mode in ("plain", "rigid", "similarity"):
         mesh = solve_within_budget(warper, warp, mode)
-        check_solution(settings, mesh)
+        check_solution(settings, mesh, warnings)
         for line in mesh.record.warnings:         # the grid is every view's: its stray said once, unprefixed
             if "strays up to" not in line:
                 warnings.append(f"{mode} view: {line}")

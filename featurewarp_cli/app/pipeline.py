@@ -383,9 +383,9 @@ def rendered(warper, image, mesh, interp: str, background):
     return under_colour(warper.render(image, mesh, interp, None, order="bgr"), background)
 
 
-def check_solution(settings: Settings, mesh) -> None:
+def check_solution(settings: Settings, mesh, loaded: list = ()) -> None:
     """WarpError when the solve left folded triangles (unless ``allow_folds``) or, under
-    ``strict``, when it warned: nothing is written then."""
+    ``strict``, when it or the loading (``loaded``: an empty mask) warned: nothing is written then."""
     folded, crossings = mesh.flips(), getattr(mesh, "crossings", 0)
     if folded and not settings.allow_folds:
         raise WarpError(f"the result has {folded} folded triangles (the warp turns the image over itself "
@@ -393,8 +393,9 @@ def check_solution(settings: Settings, mesh) -> None:
     if crossings and not settings.allow_folds:
         raise WarpError(f"the result lays the image over itself (its border crosses itself {'once' if crossings == 1 else f'{crossings} times'}"
                         f"; a handle dragged across a pin's path does that): nothing written (--allow-folds writes it)")
-    if settings.strict and mesh.record.warnings:
-        raise WarpError(f"--strict: {mesh.record.warnings[0]}; nothing written")
+    said = [*loaded, *mesh.record.warnings]
+    if settings.strict and said:
+        raise WarpError(f"--strict: {said[0]}; nothing written")
 
 
 def check_outputs(settings: Settings, output: str, *extra: tuple[str | None, str], like: str | None = None):
@@ -477,7 +478,8 @@ def warp_file(settings: Settings, input: str, output: str, mask: str | None = No
         timings["load"] += time.perf_counter() - t1
     if image.shape[:2] != (height, width):
         raise WarpError(f"{input} decodes to {image.shape[1]}x{image.shape[0]}, its header says {width}x{height}")
-    warnings.extend(mesh.record.warnings)
+    mesh.record.warnings[:0] = warnings       # the loading's (an empty mask): said, reported, refused
+    warnings = list(mesh.record.warnings)
     check_solution(settings, mesh)
     result = rendered(warper, image, mesh, settings.interp, background)
     if draw_grid:
