@@ -56,7 +56,10 @@ def bracketed_root(function, low: float, high: float, xtol: float = 1e-12) -> fl
             break
         middle = 0.5 * (low + high)
         radius = xtol * 2.0 ** (steps - step) - 0.5 * (high - low)
-        falsi = (f_high * low - f_low * high) / (f_high - f_low)          # regula falsi
+        if math.isfinite(f_low) and math.isfinite(f_high):
+            falsi = (f_high * low - f_low * high) / (f_high - f_low)      # regula falsi
+        else:                                  # an infinite end (a fold) says nothing of where: bisect
+            falsi = middle
         side = math.copysign(1.0, middle - falsi)
         shift = kappa * (high - low) ** 2
         truncated = falsi + side * shift if shift <= abs(middle - falsi) else middle
