@@ -388,3 +388,45 @@ def test_a_swirl_too_tight_for_the_grid_is_refused_and_the_tightest_accepted_is_
     assert fidelity.follows(Grid.for_image(width, height, cell), warp) == (True, error) and error <= 0.5
     limit = int(re.search(r"within \+-(\d+)", str(err.value)).group(1))
     swirl(width, height, angle=math.copysign(limit, angle), radius=0.001)
+
+
+def _corrupt_tiff(tmp_path, compression: str, at: int):
+    """An 80 x 60 TIFF whose strip data has 30 bytes flipped (XOR 0xa5) after its first ``at``."""
+    import io
+
+    from PIL import Image
+
+    buffer = io.BytesIO()
+    Image.fromarray(textured()[:60, :80, :3]).save(buffer, "TIFF", compression=compression)
+    image = Image.open(io.BytesIO(buffer.getvalue()))
+    start = image.tag_v2[273][0] + at                   # StripOffsets
+    data = bytearray(buffer.getvalue())
+    data[start:start + 30] = bytes(b ^ 0xA5 for b in data[start:start + 30])
+    return save_bytes(tmp_path / f"{compression}.tif", bytes(data))
+
+
+def save_bytes(path, data: bytes):
+    path.write_bytes(data)
+    return path
+
+
+@pytest.mark.parametrize("compression, at", [("tiff_lzw", 40), ("tiff_adobe_deflate", 40), ("packbits", 0)])
+def test_a_tiff_whose_strips_fail_to_decode_is_refused_not_warped_as_garbage(tmp_path, compression, at):
+    """libtiff's errors reach featurewarp only through OpenCV's log: the corrupt strips decoded
+    to pixels 64-84 grey levels off and the command exited 0 (PackBits: where a run's header
+    overruns; a flipped byte inside a run, or in raw samples, no decoder can tell)."""
+    one_line(run("warp", "swirl", _corrupt_tiff(tmp_path, compression, at), tmp_path / "o.png"), 1, "is corrupt: ")
+    assert not (tmp_path / "o.png").exists()
+
+
+def test_a_jpeg_of_too_many_scans_is_refused_before_decoding(tmp_path):
+    """Each scan of a progressive JPEG is a pass over the image: 10 000 of them in 376 KB took 13 s."""
+    import cv2
+
+    ok, data = cv2.imencode(".jpg", textured(), [cv2.IMWRITE_JPEG_PROGRESSIVE, 1])
+    data = data.tobytes()
+    last = data.rindex(b"\xff\xda")                    # the last scan, repeated before the end marker
+    scan = data[data.rindex(b"\xff\xc4", 0, last) if b"\xff\xc4" in data[:last] else last:-2]
+    bomb = save_bytes(tmp_path / "scans.jpg", data[:-2] + scan * 600 + data[-2:])
+    one_line(run("warp", "swirl", bomb, tmp_path / "o.png"), 1, "JPEG scans, above 500")
+    assert run("warp", "swirl", save_bytes(tmp_path / "fine.jpg", data), tmp_path / "p.png").returncode == 0

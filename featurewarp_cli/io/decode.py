@@ -18,6 +18,7 @@ from __future__ import annotations
 import importlib
 import io
 import os
+import re
 import sys
 import warnings
 from dataclasses import dataclass, field
@@ -33,7 +34,15 @@ import cv2  # noqa: E402
 from PIL import Image  # noqa: E402
 
 # Silence OpenCV's own log (level 0); before 4.13 the call is cv2.setLogLevel.
-getattr(cv2.utils, "logging", cv2).setLogLevel(0)
+_LOGGING = getattr(cv2.utils, "logging", cv2)
+_LOGGING.setLogLevel(0)
+#: Scans (SOS markers, which entropy-coded data cannot contain) a JPEG may have: each costs a pass
+#: over the image, so 10 000 of them in 376 KB took 13 s at 4 MP (libjpeg-turbo's advice: 500).
+MAX_JPEG_SCANS = 500
+#: What a decoder prints about data it decodes anyway, and refused: libjpeg's corrupt or missing
+#: data, and libtiff's errors (an LZW or deflate strip that fails its check decodes to garbage,
+#: 64-84 grey levels off on average) and its PackBits overruns, through OpenCV's log.
+CORRUPT = re.compile(r"^(Corrupt JPEG.*|Premature end.*)|TIFF_Error (.*)|TIFF_Warning (.*(Corrupt|Discarding).*)")
 Image.MAX_IMAGE_PIXELS = None           # the caller's max_pixels decides, not Pillow's default
 
 # Pillow's header readers for the formats OpenCV decodes, imported one by one so that
@@ -301,13 +310,17 @@ def gray_alpha_to_bgra(image: np.ndarray) -> np.ndarray:
 
 
 def _opencv_decode(data: bytes, name: str) -> np.ndarray:
-    """OpenCV's decoding of ``data`` as stored (depth and alpha kept); ImageError if it fails."""
+    """OpenCV's decoding of ``data`` as stored (depth and alpha kept); ImageError if it fails,
+    or where the decoder said the data is corrupt (:data:`CORRUPT`) and decoded it anyway."""
     failure = None
     with captured_stderr() as messages:
+        _LOGGING.setLogLevel(3)               # its warnings, where libtiff's errors reach it
         try:
             image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
         except cv2.error as err:              # OpenCV's size limit (or another assertion)
             image, failure = None, str(err)
+        finally:
+            _LOGGING.setLogLevel(0)
     if failure and "CV_IO_MAX_IMAGE" in failure:
         raise ImageError(f"{name} is above the limit of {opencv_limit()} pixels of the decoder "
                          "(--max-pixels)")
@@ -315,9 +328,10 @@ def _opencv_decode(data: bytes, name: str) -> np.ndarray:
     if image is None:
         raise ImageError(f"{name} cannot be decoded (corrupt, truncated or not a supported "
                          f"image){detail}")
-    corrupt = [m for m in messages if m.startswith(("Corrupt JPEG", "Premature end"))]
+    corrupt = [m for m in messages if CORRUPT.search(m)]
     if corrupt:
-        raise ImageError(f"{name} is corrupt: {corrupt[0]}")
+        said = CORRUPT.search(corrupt[0])
+        raise ImageError(f"{name} is corrupt: {next(part for part in said.groups() if part)}")
     return image
 
 
@@ -360,6 +374,10 @@ def decode_image(data: bytes, name: str, max_pixels: int | None = MAX_PIXELS,
     header = read_header(data)
     if header is not None:
         check_size(header.width, header.height, name, max_pixels, max_memory)
+    scans = data.count(b"\xff\xda") if data.startswith(b"\xff\xd8") else 0
+    if scans > MAX_JPEG_SCANS:
+        raise ImageError(f"{name} has {scans} JPEG scans, above {MAX_JPEG_SCANS} (a progressive JPEG has about "
+                         f"10; each scan costs a pass over the image): refused")
     image = _opencv_decode(data, name)
     if image.dtype not in (np.uint8, np.uint16):
         raise ImageError(f"{name} has unsupported sample type {image.dtype}")
