@@ -152,3 +152,21 @@ def test_density_and_the_exact_cell_in_the_printed_command(tmp_path):
     assert state["density"] == "fewer" and state["cell"] == pytest.approx(2 * normal, abs=1e-3)
     assert options_given(Settings("deform", cell=7.8125)) == ["--cell", "7.8125"]
     assert options_given(Settings("deform", cell=1 / 3)) == ["--cell", repr(1 / 3)]
+
+
+def test_a_failed_export_leaves_the_handles_file_and_the_output_as_they_were(tmp_path):
+    """Export writes the handles file first (its printed command names it): where the warp then
+    fails (handles that lay the image over itself), that file is put back as it was, or removed."""
+    from featurewarp_cli.app.pipeline import WarpError
+
+    crossing = {"version": 2, "points": [{"from": [100, 100], "to": [400, 100]}, {"from": [400, 100], "to": [100, 100]},
+                                         {"from": [100, 400], "to": [400, 400]}, {"from": [400, 400], "to": [100, 400]}]}
+    for existed in (True, False):
+        out, handles = tmp_path / "out.png", tmp_path / "out.handles.json"
+        for path in (out, handles):
+            path.write_bytes(b"SENTINEL") if existed else path.unlink(missing_ok=True)
+        session = EditorSession(Settings("deform"), IMAGE, MASK, None, str(out))
+        with pytest.raises(WarpError, match="nothing written"):
+            session.export({"handles": crossing})
+        for path in (out, handles):
+            assert (path.read_bytes() == b"SENTINEL") if existed else not path.exists()

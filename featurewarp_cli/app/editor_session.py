@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import base64
 import binascii
+import contextlib
 import json
 import math
 import os
@@ -24,6 +25,7 @@ import struct
 import threading
 import time
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 
@@ -246,13 +248,15 @@ class EditorSession:
         if not self.output_path:
             raise ValueError("start the editor with --output OUT to export")
         handles_path = self.export_handles_path
-        write.write_atomic(handles_path, (json.dumps(data, indent=2) + "\n").encode())
-        mask = self._write_mask() if self.painted else self.mask
         mode = body.get("mode", self.settings.mode)
         settings = replace(self.settings, mode=mode, warp_factory=handles_factory(data, self.settings.decay))
         if self.density != "normal":
             settings = replace(settings, cell=self.cell)
-        summary = warp_file(settings, self.input, self.output_path, mask, also_read=((handles_path, "--handles"),))
+        with _restored_on_failure([handles_path] + ([self.mask_out] if self.painted else [])):
+            write.write_atomic(handles_path, (json.dumps(data, indent=2) + "\n").encode())
+            mask = self._write_mask() if self.painted else self.mask
+            summary = warp_file(settings, self.input, self.output_path, mask,
+                                also_read=((handles_path, "--handles"),))
         command = ["featurewarp", "deform", self.input, self.output_path] + (["-m", mask] if mask else [])
         command += ["--handles", handles_path] + (["--mode", mode] if mode != "similarity" else [])
         command += options_given(settings)
@@ -267,6 +271,23 @@ class EditorSession:
         if notes is not None:
             notes.extend(handles.notes)
         return handles.as_dict()
+
+
+@contextlib.contextmanager
+def _restored_on_failure(paths: list):
+    """Files put back as they were (or removed, where there was none) when the block fails: an
+    Export that fails leaves every existing file as it was, the handles and mask it wrote first
+    (for the command it prints) included."""
+    before = {path: Path(path).read_bytes() if os.path.isfile(path) else None for path in paths}
+    try:
+        yield
+    except BaseException:
+        for path, data in before.items():
+            if data is None:
+                write.remove_quietly(path)
+            else:
+                write.write_atomic(path, data)
+        raise
 
 
 def _ticket(body: dict) -> tuple | None:
