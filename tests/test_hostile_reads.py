@@ -430,3 +430,20 @@ def test_a_jpeg_of_too_many_scans_is_refused_before_decoding(tmp_path):
     bomb = save_bytes(tmp_path / "scans.jpg", data[:-2] + scan * 600 + data[-2:])
     one_line(run("warp", "swirl", bomb, tmp_path / "o.png"), 1, "JPEG scans, above 500")
     assert run("warp", "swirl", save_bytes(tmp_path / "fine.jpg", data), tmp_path / "p.png").returncode == 0
+
+
+@pytest.mark.parametrize("header, samples, dtype, top", [
+    (b"P6\n4 2\n3\n", bytes([0, 1, 2, 3] * 6), np.uint8, 255),
+    (b"P5\n# a comment\n4 2\n15\n", bytes([0, 15, 7, 8, 1, 2, 3, 4]), np.uint8, 255),
+    (b"P6\n2 2\n1023\n", np.array([0, 1023] * 6, ">u2").tobytes(), np.uint16, 65535)])
+def test_a_pnm_whose_maxval_is_not_the_types_is_scaled_to_its_full_range(header, samples, dtype, top):
+    """OpenCV keeps PNM samples as stored: MAXVAL 3 came out nearly black."""
+    from featurewarp_cli.io.decode import decode_image
+
+    image = decode_image(header + samples, "x.pnm")
+    assert image.dtype == dtype and image.min() == 0 and image.max() == top
+
+
+def test_a_pam_of_maxval_zero_is_refused(tmp_path):
+    pam = b"P7\nWIDTH 2\nHEIGHT 2\nDEPTH 1\nMAXVAL 0\nTUPLTYPE GRAYSCALE\nENDHDR\n" + bytes(4)
+    one_line(run("warp", "swirl", save_bytes(tmp_path / "z.pam", pam), tmp_path / "o.png"), 1, "MAXVAL 0")

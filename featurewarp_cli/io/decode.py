@@ -309,6 +309,13 @@ def gray_alpha_to_bgra(image: np.ndarray) -> np.ndarray:
     return image
 
 
+def _without_log_prefix(message: str) -> str:
+    """A decoder's message without OpenCV's log prefix and its source location."""
+    text = re.sub(r"^\[[^\]]*\]\s+global\s+\S+\s+(TIFF_Error |TIFF_Warning )?", "", message)
+    error = re.search(r"error: \([^)]*\) (.*)", text)
+    return error.group(1) if error else text
+
+
 def _opencv_decode(data: bytes, name: str) -> np.ndarray:
     """OpenCV's decoding of ``data`` as stored (depth and alpha kept); ImageError if it fails,
     or where the decoder said the data is corrupt (:data:`CORRUPT`) and decoded it anyway."""
@@ -324,7 +331,7 @@ def _opencv_decode(data: bytes, name: str) -> np.ndarray:
     if failure and "CV_IO_MAX_IMAGE" in failure:
         raise ImageError(f"{name} is above the limit of {opencv_limit()} pixels of the decoder "
                          "(--max-pixels)")
-    detail = f" ({messages[-1]})" if messages else ""
+    detail = f" ({_without_log_prefix(messages[-1])})" if messages else ""
     if image is None:
         raise ImageError(f"{name} cannot be decoded (corrupt, truncated or not a supported "
                          f"image){detail}")
@@ -333,6 +340,31 @@ def _opencv_decode(data: bytes, name: str) -> np.ndarray:
         said = CORRUPT.search(corrupt[0])
         raise ImageError(f"{name} is corrupt: {next(part for part in said.groups() if part)}")
     return image
+
+
+def pnm_maxval(data: bytes) -> int | None:
+    """The MAXVAL of a PGM, PPM (plain or raw) or PAM header, or None for another format."""
+    if data[:2] in (b"P2", b"P3", b"P5", b"P6"):
+        header = re.sub(rb"#[^\n\r]*", b" ", data[2:512]).split()        # comments, then numbers
+        return int(header[2]) if len(header) > 2 and header[2].isdigit() else None
+    if data[:2] == b"P7":
+        found = re.search(rb"\sMAXVAL\s+(\d+)", data[:1024])
+        return int(found.group(1)) if found else None
+    return None
+
+
+def _full_range(image: np.ndarray, maxval: int | None, name: str) -> np.ndarray:
+    """A PNM/PAM image whose samples run to ``maxval`` scaled to its type's full range (OpenCV
+    keeps them as stored: MAXVAL 3 came out nearly black); samples above it are clipped."""
+    if maxval is None:
+        return image
+    if maxval < 1:
+        raise ImageError(f"{name} has MAXVAL {maxval}: a PNM or PAM image needs at least 1")
+    top = np.iinfo(image.dtype).max
+    if maxval >= top or image.dtype not in (np.uint8, np.uint16):
+        return image
+    scaled = np.minimum(image, maxval).astype(np.float64) * (top / maxval)
+    return np.rint(scaled).astype(image.dtype)
 
 
 def decode_image(data: bytes, name: str, max_pixels: int | None = MAX_PIXELS,
@@ -378,7 +410,7 @@ def decode_image(data: bytes, name: str, max_pixels: int | None = MAX_PIXELS,
     if scans > MAX_JPEG_SCANS:
         raise ImageError(f"{name} has {scans} JPEG scans, above {MAX_JPEG_SCANS} (a progressive JPEG has about "
                          f"10; each scan costs a pass over the image): refused")
-    image = _opencv_decode(data, name)
+    image = _full_range(_opencv_decode(data, name), pnm_maxval(data), name)
     if image.dtype not in (np.uint8, np.uint16):
         raise ImageError(f"{name} has unsupported sample type {image.dtype}")
     check_pixels(image.shape[1], image.shape[0], name, max_pixels)
