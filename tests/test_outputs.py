@@ -329,3 +329,14 @@ def test_save_grid_as_obj_loads_in_trimesh(picture, tmp_path):
     np.testing.assert_array_equal(loaded.faces, arrays["triangles"])
     uv = loaded.visual.uv
     assert uv.min() >= 0 and uv.max() <= 1
+
+
+def test_a_gray_image_under_a_colour_background_comes_out_in_colour(tmp_path):
+    """A gray input under ``--background '#f00'`` had its red fill written as its luma (76)."""
+    gray = np.random.default_rng(4).integers(0, 255, (60, 80), np.uint8)
+    cv2.imwrite(str(tmp_path / "g.png"), gray)
+    for colour, shape, corner in (("#f00", (80, 60, 3), [0, 0, 255]), ("#808080", (80, 60), 128)):
+        run = invoke("warp", "arc", tmp_path / "g.png", tmp_path / "o.png", "--background", colour)
+        assert run.exit_code == 0, run.output
+        out = cv2.imread(str(tmp_path / "o.png"), cv2.IMREAD_UNCHANGED)
+        assert out.shape[:2] != (60, 80) and out.ndim == len(shape) and np.array_equal(out[0, 0], corner)

@@ -375,7 +375,12 @@ def solve_within_budget(warper, warp, mode: str):
 
 def rendered(warper, image, mesh, interp: str, background):
     """The BGR(A) image through ``mesh``; a translucent (r, g, b, a) background is laid under a
-    transparent render."""
+    transparent render. A gray image under a colour that is not gray is rendered in colour (the
+    fill came out as its luma)."""
+    if background is not None and len(set(background[:3])) > 1 and image.ndim == 2:
+        import cv2
+
+        image = cv2.cvtColor(image, cv2.COLOR_GRAY2BGR)
     if background is None or len(background) == 3:
         return warper.render(image, mesh, interp, background, order="bgr")
     from ..render.raster import under_colour
