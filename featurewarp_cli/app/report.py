@@ -17,18 +17,23 @@ from ..engine import guard as fold_guard
 REPORT_SCHEMA = "featurewarp-report/2"
 
 
-def image_summary(path: str, image: np.ndarray) -> dict:
-    """Path, size, channels and depth of an image."""
+def image_summary(path: str, image: np.ndarray, fmt: str | None = None) -> dict:
+    """Path, size, channels and depth of an image (as ``fmt`` stores it, where given: a 16-bit
+    result written as JPEG is an 8-bit file, an RGBA one as BMP has 3 channels)."""
+    from ..io.encode import stored_form
+
+    channels, bits = ((1 if image.ndim == 2 else int(image.shape[2]), 8 * image.dtype.itemsize) if fmt is None
+                      else stored_form(image, fmt))
     return {
         "path": os.path.abspath(path) if path != "-" else "-",
         "width": int(image.shape[1]),
         "height": int(image.shape[0]),
-        "channels": 1 if image.ndim == 2 else int(image.shape[2]),
-        "bits": 8 * image.dtype.itemsize,
+        "channels": channels,
+        "bits": bits,
     }
 
 
-def build_report(input_path, output_path, image, result, warp, mesh, timings) -> dict:
+def build_report(input_path, output_path, image, result, warp, mesh, timings, fmt: str | None = None) -> dict:
     """Assemble the report dictionary (JSON-ready).
 
     Parameters
@@ -40,6 +45,8 @@ def build_report(input_path, output_path, image, result, warp, mesh, timings) ->
     mesh : featurewarp_cli.engine.mesh.Mesh
     timings : dict
         Seconds per stage.
+    fmt : str, optional
+        The output's format: the output is described as it stores ``result``.
 
     Returns
     -------
@@ -60,7 +67,7 @@ def build_report(input_path, output_path, image, result, warp, mesh, timings) ->
         "formulation": info["formulation"],
         "boundary": info["boundary"],
         "input": image_summary(input_path, image),
-        "output": image_summary(output_path, result),
+        "output": image_summary(output_path, result, fmt),
         "canvas": {"width": mesh.canvas[0], "height": mesh.canvas[1], "offset": list(warp.offset)},
         "grid": info["grid"],
         "components": {"count": len(info["components"]), "items": info["components"]},
@@ -112,7 +119,8 @@ def summary(preset: str, mode: str, input: str, out_path: str, size, mesh, t0: f
     }
 
 
-def report_bytes(input, out_path, image, result, warp, mesh, timings, t0) -> bytes:
+def report_bytes(input, out_path, image, result, warp, mesh, timings, t0, fmt: str | None = None) -> bytes:
     """The JSON report's bytes (its ``seconds.total`` is the run so far)."""
     timings["total"] = time.perf_counter() - t0
-    return (json.dumps(build_report(input, out_path, image, result, warp, mesh, timings), indent=2) + "\n").encode()
+    report = build_report(input, out_path, image, result, warp, mesh, timings, fmt)
+    return (json.dumps(report, indent=2) + "\n").encode()

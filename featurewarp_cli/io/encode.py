@@ -43,6 +43,17 @@ def flatten(image: np.ndarray, rgb=(255, 255, 255)) -> np.ndarray:
     return np.round(out).astype(image.dtype)
 
 
+def stored_form(image: np.ndarray, fmt: str) -> tuple[int, int]:
+    """(channels, bits per sample) of ``image`` as :func:`encode_image` stores it as ``fmt``:
+    gray + alpha as BGRA, alpha laid over the background where ``fmt`` has none, 8 bits where
+    it holds no more."""
+    channels = 1 if image.ndim == 2 else int(image.shape[2])
+    channels = 4 if channels == 2 else channels
+    if channels == 4 and not FORMATS[fmt].alpha:
+        channels = 3
+    return channels, 8 if FORMATS[fmt].eight_bit else 8 * image.dtype.itemsize
+
+
 #: Formats whose ICC profile and EXIF block are kept (through Pillow, for 8-bit samples).
 METADATA_FORMATS = {"jpg": "JPEG", "png": "PNG", "webp": "WEBP", "tiff": "TIFF"}
 
