@@ -24,7 +24,7 @@ def captured_stderr():
     except OSError:                                                 # no stderr at all
         yield lines
         return
-    with tempfile.TemporaryFile() as tmp:
+    with _scratch() as tmp:
         os.dup2(tmp.fileno(), 2)
         try:
             yield lines
@@ -37,3 +37,12 @@ def captured_stderr():
             if ours and sys.stderr is not None:
                 sys.stderr.write("".join(line + "\n" for line in ours))
             lines.extend(line for line in printed if not line.startswith("featurewarp:"))
+
+
+def _scratch():
+    """A file in memory (Linux ``memfd_create``: no temporary directory needed, none may be
+    writable), else a temporary file."""
+    try:
+        return os.fdopen(os.memfd_create("featurewarp-stderr", os.MFD_CLOEXEC), "w+b")
+    except (AttributeError, OSError):
+        return tempfile.TemporaryFile()
