@@ -148,3 +148,20 @@ def test_eight_bit_formats_use_the_rule(fmt):
     image = textured(dtype=np.uint16) + np.arange(48, dtype=np.uint16)[None, :, None]
     stored = decode.decode_image(encode.encode_image(image, fmt), "x")
     assert np.array_equal(stored, depth.to_eight_bit(image))
+
+
+def test_library_messages_are_captured_without_a_temporary_directory(monkeypatch):
+    """With no writable temporary directory anywhere every command failed (FileNotFoundError):
+    the capture of the C libraries' messages needs none (a file in memory)."""
+    import os
+    import tempfile
+
+    from featurewarp_cli.io.capture import captured_stderr
+
+    def nowhere(*args, **kwargs):
+        raise FileNotFoundError("No usable temporary directory found")
+
+    monkeypatch.setattr(tempfile, "TemporaryFile", nowhere)
+    with captured_stderr() as lines:
+        os.write(2, b"libpng warning: iCCP: known incorrect sRGB profile\n")
+    assert lines == ["libpng warning: iCCP: known incorrect sRGB profile"]
