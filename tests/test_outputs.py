@@ -352,3 +352,13 @@ def test_the_report_describes_the_output_as_its_format_stores_it(tmp_path, name,
     output = json.loads((tmp_path / "r.json").read_text())["output"]
     written = cv2.imread(str(tmp_path / name), cv2.IMREAD_UNCHANGED)
     assert (output["channels"], output["bits"]) == (channels, bits) == (written.shape[2], 8 * written.itemsize)
+
+
+def test_a_transparent_input_laid_over_the_background_leaves_no_seam_at_the_warps_edge(tmp_path):
+    """The silhouette's partly covered pixels were blended with the fill by coverage alone, not by
+    their own alpha: the hidden colour under alpha 0 showed as a gray line along the edge (BMP, JPEG)."""
+    image = np.zeros((60, 80, 4), np.uint8)              # black, wholly transparent
+    cv2.imwrite(str(tmp_path / "in.png"), image)
+    run = invoke("warp", "arc", tmp_path / "in.png", tmp_path / "o.bmp", "--angle", "120")
+    assert run.exit_code == 0, run.output
+    assert cv2.imread(str(tmp_path / "o.bmp")).min() == 255

@@ -243,6 +243,14 @@ class _BandRenderer:
         dtype = flat.dtype
         if self.fill is not None:
             values = flat[partial].astype(np.float64)
+            if self.out_channels == 4:        # over an opaque fill, weighted by the pixel's own alpha too
+                top = float(np.iinfo(dtype).max)
+                alpha = values[:, 3:] / top * cov
+                values[:, 3:] = (alpha + (1.0 - cov)) * top
+                values[:, :3] = ((values[:, :3] * alpha + self.fill[None, :3] * (1.0 - cov))
+                                 / np.maximum(alpha + (1.0 - cov), 1e-12))
+                flat[partial] = np.rint(values).astype(dtype)
+                return True
             flat[partial] = np.rint(values * cov + self.fill[None, :] * (1.0 - cov)).astype(dtype)
             return True
         if self.out_channels == 4:
