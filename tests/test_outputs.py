@@ -362,3 +362,12 @@ def test_a_transparent_input_laid_over_the_background_leaves_no_seam_at_the_warp
     run = invoke("warp", "arc", tmp_path / "in.png", tmp_path / "o.bmp", "--angle", "120")
     assert run.exit_code == 0, run.output
     assert cv2.imread(str(tmp_path / "o.bmp")).min() == 255
+
+
+def test_a_gray_image_is_written_as_gif():
+    """OpenCV's GIF encoder refused one channel: "cannot encode the result as gif"."""
+    from featurewarp_cli.io.encode import encode_image
+
+    gray = np.random.default_rng(6).integers(0, 255, (30, 40), np.uint8)
+    decoded = cv2.imdecode(np.frombuffer(encode_image(gray, "gif"), np.uint8), cv2.IMREAD_GRAYSCALE)
+    assert decoded.shape == (30, 40) and np.abs(decoded.astype(int) - gray).mean() < 4
