@@ -95,8 +95,14 @@ def encode_image(image: np.ndarray, fmt: str, background=(255, 255, 255), qualit
         image = flatten(image, background)
     if FORMATS[fmt].eight_bit:
         image = to_eight_bit(image)
-    if fmt == "gif" and image.ndim == 2:       # OpenCV's GIF encoder takes colour only
-        image = cv2.cvtColor(image, cv2.COLOR_GRAY2BGR)
+    if fmt == "gif" and image.ndim == 2:       # OpenCV's GIF encoder takes colour only: a gray palette
+        import io
+
+        from PIL import Image
+
+        buffer = io.BytesIO()
+        Image.fromarray(image).save(buffer, "GIF")
+        return buffer.getvalue()
     if (icc or exif) and fmt in METADATA_FORMATS and image.dtype == np.uint8:
         return _pillow_encode(image, fmt, quality, icc, exif)
     settings = list(SETTINGS[fmt])
