@@ -298,6 +298,19 @@ class Warp:
 
 #: A point or size parameter's parts: pixels and percentages within these (beyond, a warp's
 #: arithmetic overflows or its grid cannot follow it: ``--center 1e308,1e308``).
+#: How far (px) a shape may reach past a whole number of pixels without its canvas growing a
+#: row or column: an arc of 0.001 degrees bows 0.001 px, a handles border at the image's
+#: corners lands 4e-5 px out by rounding; either added a blank row or column.
+CANVAS_SLACK = 0.01
+
+
+def canvas_size(extent) -> tuple[int, int]:
+    """The canvas (width, height) that holds a shape ``extent`` (width, height) pixels across,
+    within :data:`CANVAS_SLACK`."""
+    width, height = (max(1, math.ceil(float(side) - CANVAS_SLACK)) for side in extent)
+    return width, height
+
+
 PAIR_PIXEL_LIMIT = 1e5
 PAIR_PERCENT_LIMIT = 1e3
 

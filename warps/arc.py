@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-from featurewarp_cli.plugins import Param, ParamError, Warp
+from featurewarp_cli.plugins import Param, ParamError, Warp, canvas_size
 
 from .common import fit_canvas
 
@@ -62,8 +62,7 @@ class Arc(Warp):
         phis = [-half, half] + [a for a in (0.0, math.pi / 2, -math.pi / 2, math.pi, -math.pi) if abs(a) <= half]
         corners = self._place(np.repeat(np.array(phis), 2), np.tile([r_inner, self.r_outer], len(phis)))
         lo = corners.min(axis=0)
-        size = np.ceil(corners.max(axis=0) - lo - 1e-6).astype(int)
-        self.canvas = (max(1, int(size[0])), max(1, int(size[1])))
+        self.canvas = canvas_size(corners.max(axis=0) - lo)
         self.offset = (float(lo[0]), float(lo[1]))
         self._shift = lo + 0.5
 

@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 
-from featurewarp_cli.plugins import Param, Warp, centre
+from featurewarp_cli.plugins import Param, Warp, canvas_size, centre
 
 __all__ = ["BEND", "HDISTORT", "VDISTORT", "Style", "border", "bounds", "fit_canvas"]
 
@@ -62,10 +62,10 @@ def fit_canvas(warp: Warp, place) -> np.ndarray:
     top-left lands on the canvas extent's corner (-0.5, -0.5).
     """
     lo, hi = bounds(warp.width, warp.height, place)
-    size = np.ceil(hi - lo - 1e-6).astype(int)
-    if size.max() > 65535:
+    size = canvas_size(hi - lo)
+    if max(size) > 65535:
         raise ValueError(f"{warp.name}: the result would be {size[0]}x{size[1]} pixels (at most 65535 a side)")
-    warp.canvas = (max(1, int(size[0])), max(1, int(size[1])))
+    warp.canvas = size
     warp.offset = (float(lo[0]), float(lo[1]))
     return lo + 0.5
 

@@ -35,6 +35,7 @@ from .grid import Grid, grid_for, grid_shape, signed_areas
 from .injectivity import border_crossings
 from .handles import Handles, default_radius, resample
 from .mesh import Mesh
+from ..plugins import canvas_size
 from .warper import FeatureWarper
 
 #: A point handle may end this far from its target (px, or this share of the image's diagonal
@@ -99,8 +100,7 @@ class HandleWarp:
         self.canvas = (self.width, self.height)
         if canvas == "fit":
             lo, hi = nodes.min(axis=0), nodes.max(axis=0)
-            size = np.ceil(hi - lo - 1e-6).astype(int)
-            self.canvas = (max(1, int(size[0])), max(1, int(size[1])))
+            self.canvas = canvas_size(hi - lo)
             self.offset = (float(lo[0] + 0.5), float(lo[1] + 0.5))
         self.nodes = nodes - np.asarray(self.offset)
         self._embeddings = {} if embeddings is None else embeddings
