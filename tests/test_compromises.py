@@ -142,7 +142,15 @@ def test_an_empty_mask_is_a_warning_in_the_report_and_under_strict_as_on_stderr(
     run = CliRunner().invoke(cli, ["warp", "swirl", base[0], str(tmp_path / "o.png"), *base[1:],
                                    "--report", str(tmp_path / "r.json")])
     assert run.exit_code == 0 and "the mask marks no feature" in run.output
-    assert any("the mask marks no feature" in line for line in json.loads((tmp_path / "r.json").read_text())["warnings"])
+    report = json.loads((tmp_path / "r.json").read_text())
+    assert any("the mask marks no feature" in line for line in report["warnings"])
+    assert report["mode"] == "plain" and report["features_kept"] is None        # it said similarity, kept
+    cv2.imwrite(str(tmp_path / "full.png"), np.full((60, 80), 255, np.uint8) * (np.arange(80) > 40))
+    for extra, mode, kept in ((["--mode", "plain"], "plain", None), ([], "similarity", True)):
+        CliRunner().invoke(cli, ["warp", "stretch", base[0], str(tmp_path / "p.png"), "-m", str(tmp_path / "full.png"),
+                                 "--sx", "1.2", "--report", str(tmp_path / "p.json"), *extra])
+        report = json.loads((tmp_path / "p.json").read_text())
+        assert (report["mode"], report["features_kept"]) == (mode, kept)
     for command in ("warp", "compare"):
         strict = CliRunner().invoke(cli, [command, "swirl", base[0], str(tmp_path / "s.png"), *base[1:], "--strict"])
         assert strict.exit_code == 1 and "--strict: the mask marks no feature" in strict.output

@@ -133,9 +133,10 @@ class SolveRecord:
     grown: dict | None = None
 
     @property
-    def features_kept(self) -> bool:
-        """Every component kept its shape."""
-        return all(c.kept for c in self.components)
+    def features_kept(self) -> bool | None:
+        """Every component kept its shape; None where the result is the plain warp (the plain
+        mode, or no feature in the mask): no shape was kept, nor asked to be."""
+        return None if self.mode == "plain" else all(c.kept for c in self.components)
 
     @property
     def flipped_triangles(self) -> int:

@@ -324,7 +324,8 @@ class FeatureWarper:
         warped = warp(grid.nodes())
         state = self._state(grid, warped, boundary)
         self.timings["grid"] = time.perf_counter() - t0
-        record = SolveRecord(mode, self.formulation, "release" if self.boundary == "release" else boundary,
+        produced = "plain" if state.features.n_components == 0 else mode      # what the output is
+        record = SolveRecord(produced, self.formulation, "release" if self.boundary == "release" else boundary,
                              {"cell": cell, "spacing": list(grid.spacing), "nodes": grid.n_nodes,
                               "quads": int(state.features.weight.size), "pl_error_px": error})
         tied = unpinned = np.zeros(state.features.n_components, bool)
