@@ -191,6 +191,9 @@ def test_stdin_errors(runner, tmp_path):
     check_refused(runner("warp", "swirl", "-", tmp_path / "o.png", input=b"garbage"), 1,
                   ["stdin", "cannot be decoded"])
     assert list(tmp_path.iterdir()) == []
+    # stdin to stdout: what is wrong with stdin, not that its format is not one featurewarp writes
+    check_refused(runner("warp", "swirl", "-", "-", input=b""), 1, ["stdin is empty"])
+    check_refused(runner("warp", "swirl", "-", "-", input=b"hello\n"), 1, ["stdin", "cannot be decoded"])
 
 
 def test_huge_image_is_refused_before_decoding(runner, inputs, monkeypatch):

@@ -268,6 +268,11 @@ def _piped(settings: Settings, input: str, output: str) -> tuple[Settings, bytes
     kind = {"MPO": "JPEG"}.get(header.format, header.format) if header is not None else None   # a camera JPEG
     name = formats.format_name(kind) if kind else None
     if name is None:
+        if header is None:                    # not an image (empty, text): the decoder says what is wrong
+            try:
+                decode.decode_image(data, "stdin", settings.max_pixels, settings.max_memory)
+            except ImageError as err:
+                raise WarpError(str(err)) from None
         raise WarpError("stdout takes stdin's format, and stdin's is not one featurewarp writes; use --format "
                         "or a prefix such as png:-", "OUTPUT", usage=True)
     return replace(settings, fmt=name), data
