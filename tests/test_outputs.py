@@ -371,3 +371,10 @@ def test_a_gray_image_is_written_as_gif():
     gray = np.random.default_rng(6).integers(0, 255, (30, 40), np.uint8)
     decoded = cv2.imdecode(np.frombuffer(encode_image(gray, "gif"), np.uint8), cv2.IMREAD_GRAYSCALE)
     assert np.array_equal(decoded, gray)                 # 256 grays: exact
+
+
+def test_save_grid_names_one_of_the_two_forms_it_writes(picture, tmp_path):
+    """Any other name silently got an .npz archive."""
+    run = invoke("warp", "stretch", picture, tmp_path / "o.png", "--save-grid", tmp_path / "g.txt")
+    assert run.exit_code == 2 and "neither an .npz nor an .obj" in run.output
+    assert list(tmp_path.glob("[og].*")) == []

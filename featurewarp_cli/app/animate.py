@@ -16,6 +16,7 @@ import cv2
 import numpy as np
 
 from ..engine import fidelity
+from ..engine.record import LISTED_IN_REPORT
 from ..io import formats, write
 from ..io.colours import parse_colour
 from ..io.depth import to_eight_bit
@@ -170,7 +171,7 @@ def animate_file(settings: Settings, input: str, output: str, mask: str | None, 
         mesh = solve_within_budget(warper, warp, settings.mode)
         flips += mesh.info["flipped_triangles"]
         check_solution(replace(settings, strict=False), mesh)
-        said.extend((index, line) for line in mesh.record.warnings)
+        said.extend((index, line.replace(LISTED_IN_REPORT, "")) for line in mesh.record.warnings)   # no report
         if settings.strict and said:          # nothing is written before every frame is solved
             raise WarpError(f"--strict: frame {said[0][0]}: {said[0][1]}; nothing written")
         frame = to_bgr(warper.render(image, mesh, settings.interp, background, order="bgr"), alpha)

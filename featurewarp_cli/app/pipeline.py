@@ -474,6 +474,9 @@ def warp_file(settings: Settings, input: str, output: str, mask: str | None = No
                                   like=input)
     check_distinct([(out_path, "OUTPUT"), (report, "--report"), (save_grid, "--save-grid")],
                    [(input, "INPUT"), (mask, "--mask"), *also_read])
+    if save_grid and save_grid != "-" and not save_grid.lower().endswith((".npz", ".obj")):
+        raise WarpError(f"{save_grid} names neither an .npz nor an .obj file (the two forms it writes)",
+                        "--save-grid", usage=True)
     background = background_colour(settings.background, fmt)
     prefetch_engine(solver=mask is not None and settings.mode != "plain")
     pending, feature_mask, warnings, (width, height) = start_loading(settings, input, mask, piped)

@@ -70,7 +70,7 @@ def cli(ctx, debug, quiet, verbose):
 def warp():
     """Warp INPUT with PRESET into OUTPUT, keeping masked features in shape.
 
-    The output format follows OUTPUT's extension (png, jpg, webp, tif, bmp), an
+    The output format follows OUTPUT's extension (png, jpg, webp, tif, bmp, gif), an
     ImageMagick-style prefix (png:out.bin) or --format. '-' as INPUT reads stdin,
     '-' as OUTPUT writes stdout. Run 'featurewarp warp PRESET --help' for a preset's
     own options.
@@ -131,7 +131,7 @@ def schema_command(kind):
     """Print the JSON Schema (Draft 2020-12) of the --report file or of the handles file.
 
     Each schema has a version of its own: the report's 'schema' key
-    (featurewarp-report/2), the handles file's 'version' key (1).
+    (featurewarp-report/2), the handles file's 'version' key (1 or 2; 2 when a point has an angle).
     """
     from .. import schema
 

@@ -135,7 +135,8 @@ def engine_options() -> list[click.Option]:
                           "warp that moves pixels, a handle could not follow (deform) (each is "
                           "otherwise a warning)."),
         click.Option(["--background"], metavar="COLOR",
-                     help="Fill where no source pixel lands: #rrggbb, a colour name, or transparent. "
+                     help="Fill where no source pixel lands: #rrggbb or #rgb, a colour name, rgb(r,g,b), "
+                          "hsl(h,s%,l%), rgba(r,g,b,a) or #rrggbbaa (translucent), or transparent. "
                           "Default: transparent for PNG, WebP and TIFF output, white otherwise "
                           "(formats without alpha also get transparent input pixels flattened on it)."),
         click.Option(["--interp"], type=click.Choice(defaults.INTERPOLATIONS), default=defaults.INTERPOLATION, show_default=True,
@@ -150,8 +151,9 @@ def engine_options() -> list[click.Option]:
                           "its orientation reset, for JPEG, PNG, WebP and TIFF output)."),
         click.Option(["--max-memory"], type=ByteSize(), default=limits.MAX_MEMORY, metavar="SIZE",
                      help="Refuse, before allocating, work whose images and grid would need more "
-                          "memory than SIZE (bytes, or with K, M, G, T); an automatic grid stays "
-                          f"within it. [default: half of this machine's memory, "
+                          "memory than SIZE (bytes, or with K, M, G, T); it never makes the grid "
+                          f"coarser (the same command gives the same result on any machine). "
+                          f"[default: half of this machine's memory, "
                           f"{limits.MAX_MEMORY / 2**30:.1f}G]"),
         click.Option(["--allow-folds"], is_flag=True,
                      help="Write a result even if triangles are still folded over (they never are "

@@ -89,10 +89,11 @@ def warp_command(preset) -> click.Command:
                           "rotation, residual from a similarity), background deviation from "
                           "the warp, triangle area ratios, fold-overs before and after the "
                           "guard, solver, seconds per stage."),
-        click.Option(["--save-grid"], type=click.Path(dir_okay=False), metavar="PATH.npz",
+        click.Option(["--save-grid"], type=click.Path(dir_okay=False), metavar="PATH.npz|PATH.obj",
                      help="Save the mapping: arrays source (N x 2 source pixel positions of "
                           "the grid nodes), target (N x 2 on the output canvas), triangles "
-                          "(M x 3 node indices, counter-clockwise in source coordinates)."),
+                          "(M x 3 node indices, counter-clockwise in source coordinates); "
+                          ".obj: a textured mesh."),
         click.Option(["--grid", "draw_grid"], is_flag=True, help="Draw the deformed grid over the result."),
     ] + engine_options()
 

@@ -235,6 +235,10 @@ def _why(record: "SolveRecord", k: int) -> str:
     return "".join(": " + cause if i == 0 else "; " + cause for i, cause in enumerate(causes))
 
 
+#: How the count of smaller features not kept points at the report (commands without one drop it).
+LISTED_IN_REPORT = "; the report lists each"
+
+
 def warnings_for(record: "SolveRecord", source, target, warped, warp) -> list[str]:
     """One line per compromise the output shows: each feature not kept with its figure and
     why it gave way (the :data:`MOST_LISTED` largest one by one, the others in one line),
@@ -254,7 +258,7 @@ def warnings_for(record: "SolveRecord", source, target, warped, warp) -> list[st
     if len(lost) > MOST_LISTED:
         rest = [record.components[k] for k in lost[MOST_LISTED:]]
         lines.append(f"{len(rest)} smaller features not kept either ({min(c.quads for c in rest)} to "
-                     f"{max(c.quads for c in rest)} quads; the report lists each)")
+                     f"{max(c.quads for c in rest)} quads{LISTED_IN_REPORT})")
     lines.extend(canvas_warnings(record))
     if tuple(warp.canvas) == (warp.width, warp.height):
         wanted = np.hypot(*(warped - source).T)

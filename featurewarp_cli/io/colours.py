@@ -56,8 +56,8 @@ def parse_colour(text: str, alpha: bool = False) -> tuple[int, ...] | None:
     try:
         colour = ImageColor.getrgb(word)
     except ValueError:
-        raise ValueError(f"{text!r} is not a colour (use #rrggbb, a name such as white, "
-                         "or transparent)") from None
+        raise ValueError(f"{text!r} is not a colour (use #rrggbb, #rgb, a name such as white, rgb(r,g,b), "
+                         "hsl(h,s%,l%), or transparent)") from None
     if not all(0 <= value <= 255 for value in colour):
         raise ValueError(f"{text!r} has a value outside 0..255")
     if len(colour) == 4:
