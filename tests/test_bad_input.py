@@ -350,3 +350,22 @@ def test_palette_png(runner, tmp_path, transparent):
 def test_sixteen_bit_mask(runner, tmp_path):
     deep = square_mask().astype(np.uint16) * 257
     assert warp_bytes(runner, tmp_path, deep) == warp_bytes(runner, tmp_path, square_mask())
+
+
+def test_a_newline_in_a_file_name_keeps_warnings_and_summaries_on_one_line(tmp_path):
+    """Errors escaped it; warnings and -v's summary printed it raw, splitting their line."""
+    import subprocess
+    import sys
+
+    import cv2
+    import numpy as np
+
+    name = tmp_path / "two\nlines.png"
+    cv2.imwrite(str(tmp_path / "plain.png"), np.zeros((30, 40), np.uint8))
+    name.write_bytes((tmp_path / "plain.png").read_bytes())
+    cv2.imwrite(str(tmp_path / "empty.png"), np.zeros((30, 40), np.uint8))
+    run = subprocess.run([sys.executable, "-m", "featurewarp_cli", "warp", "swirl", str(name), str(tmp_path / "o.png"),
+                          "-m", str(tmp_path / "empty.png"), "-v"], capture_output=True, text=True, timeout=60)
+    assert run.returncode == 0, run.stderr
+    lines = run.stderr.splitlines()
+    assert len(lines) == 2 and all(line.startswith("featurewarp: ") and "two\\nlines.png" in line for line in lines)

@@ -24,6 +24,7 @@ from .diff import diff_command
 from .edit import edit_command
 from .measure import measure_command
 from .presets import AnimateGroup, BatchGroup, CompareGroup, PresetGroup
+from .progress import say
 
 #: click >= 8.2 raises this UsageError (exit 2), whose message is the help, for a command
 #: run without its arguments; click 8.1 has no such class: it prints the help and exits 0.
@@ -239,15 +240,6 @@ def main(argv=None):
             message, code = f"{type(err).__name__}: {err} (--debug shows a traceback)", 1
         say(f"featurewarp: error: {message}")
     sys.exit(code if isinstance(code, int) else 0)
-
-
-def say(line: str) -> None:
-    """One line on stderr, whatever the message holds (a file name with a newline stays on
-    one line) and even when stderr is closed."""
-    try:
-        click.echo(line.replace("\r", "\\r").replace("\n", "\\n"), err=True)
-    except (OSError, ValueError, AttributeError):
-        pass
 
 
 if __name__ == "__main__":

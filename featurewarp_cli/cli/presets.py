@@ -18,7 +18,7 @@ import click
 from .. import plugins
 from .options import (FPS, FRAMES, JOBS, PANEL_WIDTH, engine_options, input_output_mask, param_option, preset_options,
                       settings_from)
-from .progress import progress_line
+from .progress import progress_line, say
 
 MASK_HELP = ("Feature mask: pixels with gray value >= 128 (transparent ones count as black) keep their "
              "shape. Same width and height as INPUT. A feature with a pixel on the image's edge is cut "
@@ -47,9 +47,9 @@ def report_warnings(summary: dict, quiet: bool, verbose: bool) -> None:
     """Print an image's warnings (unless quiet) and its summary line (if verbose) on stderr."""
     if not quiet:
         for warning in summary["warnings"]:
-            click.echo(f"featurewarp: warning: {summary['input']}: {warning}", err=True)
+            say(f"featurewarp: warning: {summary['input']}: {warning}")
     if verbose:
-        click.echo(f"featurewarp: {summary_line(summary)}", err=True)
+        say(f"featurewarp: {summary_line(summary)}")
 
 
 class NoProgress:
@@ -149,7 +149,7 @@ def run_planned(settings, todo, jobs: int, scheduler, summary_path, resume: bool
                 bar.update(1)
                 if error:
                     failed += 1
-                    click.echo(f"featurewarp: error: {job.input}: {error}", err=True)
+                    say(f"featurewarp: error: {job.input}: {error}")
                 else:
                     report_warnings(summary, quiet, verbose)
                 record(summary_record(numbers[k], job, "failed" if error else "ok", seconds, summary, error))
@@ -258,11 +258,10 @@ def animate_command(preset) -> click.Command:
             raise click_error(err) from err
         if not quiet:
             for warning in summary["warnings"]:
-                click.echo(f"featurewarp: warning: {input}: {warning}", err=True)
+                say(f"featurewarp: warning: {input}: {warning}")
         if verbose:
-            click.echo(f"featurewarp: {output}: {summary['frames']} frames "
-                       f"{summary['canvas'][0]}x{summary['canvas'][1]}, {summary['factorizations']} "
-                       f"factorization(s), {summary['seconds']:.2f} s", err=True)
+            say(f"featurewarp: {output}: {summary['frames']} frames {summary['canvas'][0]}x{summary['canvas'][1]}, "
+                f"{summary['factorizations']} factorization(s), {summary['seconds']:.2f} s")
 
     intro = (f"Animate {preset.name}: vary its options over frames, factoring once. OUTPUT: .gif, "
              f".webp or .png (animated), .mp4 or .avi (video), or a numbered PNG sequence "

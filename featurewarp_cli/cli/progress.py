@@ -12,6 +12,8 @@ import sys
 import threading
 import time
 
+import click
+
 from .. import stages
 
 #: Seconds before the line appears, and between redraws.
@@ -72,3 +74,12 @@ def progress_line(quiet: bool):
     finally:
         stages.forget(line.enter)
         line.close()
+
+
+def say(line: str) -> None:
+    """One line on stderr, whatever the message holds (a file name with a newline stays on
+    one line) and even when stderr is closed."""
+    try:
+        click.echo(line.replace("\r", "\\r").replace("\n", "\\n"), err=True)
+    except (OSError, ValueError, AttributeError):
+        pass
