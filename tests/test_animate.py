@@ -91,6 +91,15 @@ def test_unknown_format_is_a_usage_error(files):
     assert out.code == 2 and "animation format" in out.stderr
 
 
+def test_a_parameter_varied_twice_and_a_sequence_name_python_cannot_fill_are_usage_errors(files):
+    """The second --vary of a parameter silently won; ``%n`` beside ``%d`` was a raw TypeError."""
+    out = run("swirl", str(files / "in.png"), str(files / "v.gif"), "--vary", "angle=0:90", "--vary", "angle=0:9")
+    assert out.code == 2 and "angle is given twice" in out.stderr
+    out = run("swirl", str(files / "in.png"), str(files / "f-%d%n.png"), "--vary", "angle=0:90", "--frames", "2")
+    assert out.code == 2 and "one %d field" in out.stderr and len(out.stderr.strip().splitlines()) == 1
+    assert not list(files.glob("f-*")) and not (files / "v.gif").exists()
+
+
 def test_frames_that_would_not_fit_the_memory_limit_are_refused_before_any_is_made(files):
     """Every frame is held until the animation is encoded: --frames times the canvas beyond
     --max-memory is one line and exit 1, at once (10^8 frames used to build 10^8 parameter sets,

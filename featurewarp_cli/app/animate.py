@@ -47,6 +47,8 @@ def parse_vary(texts, preset) -> dict[str, tuple[float, float]]:
             raise WarpError(f"{preset.name} has no parameter {name!r} (it has: {', '.join(names)})",
                             "--vary", usage=True)
         param = names[name]
+        if param.name in ranges:
+            raise WarpError(f"{name} is given twice", "--vary", usage=True)
         if param.type not in (int, float):
             raise WarpError(f"{name} is not a number and cannot vary", "--vary", usage=True)
         try:
@@ -86,6 +88,11 @@ def check_frames_fit(settings: Settings, frames: int, canvas: tuple[int, int]) -
 def output_kind(path: str) -> str:
     """'sequence' (a %d field in the name), 'animation' or 'video'."""
     if re.search(r"%0?\d*d", os.path.basename(path)):
+        try:
+            path % 0
+        except (TypeError, ValueError):
+            raise WarpError(f"{path}: a numbered sequence's name holds one %d field (such as %04d), and %% for "
+                            f"a percent sign", "OUTPUT", usage=True) from None
         return "sequence"
     ext = os.path.splitext(path)[1].lower()
     if ext in ANIMATED:

@@ -69,8 +69,8 @@ FEATURE_WEIGHT_PARAM = Param(
 DECAY_PARAM = Param(
     "decay", float, DECAY,
     "Width of the band around features where the weight falls smoothly from W to 1 "
-    "(the paper's rho), in cells.",
-    min=0.0, min_open=True, max=1000.0, metavar="CELLS")
+    "(the paper's rho), in cells (at least 0.001).",
+    min=0.001, max=1000.0, metavar="CELLS")
 SCALE_PRIOR_PARAM = Param(
     "scale_prior", float, SCALE_PRIOR,
     "Similarity mode: how firmly each feature's scale and rotation are pulled towards the warp's "
