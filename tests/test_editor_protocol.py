@@ -148,6 +148,8 @@ def test_density_and_the_exact_cell_in_the_printed_command(tmp_path):
     normal = session.cell
     with pytest.raises(ValueError, match="density 'many'"):
         session.set_density({"density": "many"})
+    with pytest.raises(ValueError, match="density {}"):                  # was "unhashable type: 'dict'"
+        session.set_density({"density": {}})
     state = session.set_density({"density": "fewer"})
     assert state["density"] == "fewer" and state["cell"] == pytest.approx(2 * normal, abs=1e-3)
     assert options_given(Settings("deform", cell=7.8125)) == ["--cell", "7.8125"]

@@ -190,7 +190,7 @@ class EditorSession:
     def set_density(self, body: dict) -> dict:
         """Change the preview mesh's density (``fewer``, ``normal``, ``more``); the new state."""
         density = body.get("density")
-        if density not in DENSITIES:
+        if not isinstance(density, str) or density not in DENSITIES:
             raise ValueError(f"density {density!r}: use {', '.join(DENSITIES)}")
         cell = self._density_cell(density)
         with self.lock:
