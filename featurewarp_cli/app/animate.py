@@ -22,7 +22,8 @@ from ..io.colours import parse_colour
 from ..io.depth import to_eight_bit
 from ..io.encode import encode_image
 from ..plugins import ParamError
-from .pipeline import (Settings, WarpError, background_colour, check_solution, load_image_and_mask, make_warper,
+from .outputs import background_colour
+from .pipeline import (Settings, WarpError, check_solution, load_image_and_mask, make_warper,
                        prefetch_engine, solve_within_budget)
 
 ANIMATED = {".gif", ".webp", ".png", ".apng"}

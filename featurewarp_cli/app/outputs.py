@@ -1,11 +1,12 @@
-"""Checks on a command's outputs: their formats, and that they name no input nor each other."""
+"""A command's outputs: their formats and background, the rendered result, and checks that they
+name no input nor each other."""
 
 from __future__ import annotations
 
 import os
 import stat
 
-from ..io import ImageError, decode, encode, formats, write
+from ..io import ImageError, colours, decode, encode, formats, write
 
 
 def format_of(path: str) -> str | None:
@@ -77,3 +78,38 @@ def write_all(outputs: list[tuple[str, bytes]]) -> None:
     except OSError as err:
         path = err.filename or next((p for p, _ in outputs if p), "")
         raise WarpError(f"cannot write {path}: {err.strerror or err}") from err
+
+
+def background_colour(text: str | None, fmt: str):
+    """(r, g, b) fill for uncovered pixels, (r, g, b, a) for a translucent one, or None
+    (transparent), for output format ``fmt`` (without alpha: a translucent colour over white)."""
+    from .pipeline import WarpError
+
+    has_alpha = formats.FORMATS[fmt].alpha
+    if text is None:
+        return None if has_alpha else (255, 255, 255)
+    try:
+        rgb = colours.parse_colour(text, alpha=True)
+    except ValueError as err:
+        raise WarpError(str(err), "--background", usage=True) from None
+    if rgb is not None and len(rgb) == 4 and not has_alpha:
+        return tuple(round(c * rgb[3] / 255 + 255 * (1 - rgb[3] / 255)) for c in rgb[:3])
+    if rgb is None and not has_alpha:
+        raise WarpError(f"{fmt} has no alpha channel; use a colour or a png, webp or tiff output",
+                        "--background", usage=True)
+    return rgb
+
+
+def rendered(warper, image, mesh, interp: str, background):
+    """The BGR(A) image through ``mesh``; a translucent (r, g, b, a) background is laid under a
+    transparent render. A gray image under a colour that is not gray is rendered in colour (the
+    fill came out as its luma)."""
+    if background is not None and len(set(background[:3])) > 1 and image.ndim == 2:
+        import cv2
+
+        image = cv2.cvtColor(image, cv2.COLOR_GRAY2BGR)
+    if background is None or len(background) == 3:
+        return warper.render(image, mesh, interp, background, order="bgr")
+    from ..render.raster import under_colour
+
+    return under_colour(warper.render(image, mesh, interp, None, order="bgr"), background)

@@ -121,9 +121,9 @@ def compare_file(settings, input: str, output: str, mask: str | None = None,
 
     from ..engine.record import LISTED_IN_REPORT
     from ..io import formats
-    from .outputs import check_distinct, write_image
-    from .pipeline import (WarpError, background_colour, check_outputs, check_solution, load_image_and_mask,
-                           make_warper, prefetch_engine, rendered, solve_within_budget)
+    from .outputs import background_colour, check_distinct, rendered, write_image
+    from .pipeline import (WarpError, check_outputs, check_solution, load_image_and_mask, make_warper,
+                           prefetch_engine, solve_within_budget)
     from .report import summary
 
     t0 = time.perf_counter()

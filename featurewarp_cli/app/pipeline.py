@@ -14,8 +14,8 @@ from dataclasses import dataclass, field, replace
 
 from .. import plugins, stages
 from ..engine.defaults import DECAY, FEATURE_WEIGHT, FORMULATION, INTERPOLATION, MODE, SCALE_PRIOR
-from ..io import ImageError, colours, decode, formats, limits, write
-from .outputs import check_distinct, encoded, format_of, write_all
+from ..io import ImageError, decode, formats, limits, write
+from .outputs import background_colour, check_distinct, encoded, format_of, rendered, write_all
 from .report import report_bytes, summary
 
 #: What :func:`prefetch_engine` imports: the engine (grid, features, fold-over guard,
@@ -102,24 +102,6 @@ class Settings:
     quality: int | None = None
     strip: bool = False
     warp_factory: object = None
-
-
-def background_colour(text: str | None, fmt: str):
-    """(r, g, b) fill for uncovered pixels, (r, g, b, a) for a translucent one, or None
-    (transparent), for output format ``fmt`` (without alpha: a translucent colour over white)."""
-    has_alpha = formats.FORMATS[fmt].alpha
-    if text is None:
-        return None if has_alpha else (255, 255, 255)
-    try:
-        rgb = colours.parse_colour(text, alpha=True)
-    except ValueError as err:
-        raise WarpError(str(err), "--background", usage=True) from None
-    if rgb is not None and len(rgb) == 4 and not has_alpha:
-        return tuple(round(c * rgb[3] / 255 + 255 * (1 - rgb[3] / 255)) for c in rgb[:3])
-    if rgb is None and not has_alpha:
-        raise WarpError(f"{fmt} has no alpha channel; use a colour or a png, webp or tiff output",
-                        "--background", usage=True)
-    return rgb
 
 
 def _writable(path: str, param: str) -> None:
@@ -378,21 +360,6 @@ def solve_within_budget(warper, warp, mode: str):
     return mesh
 
 
-def rendered(warper, image, mesh, interp: str, background):
-    """The BGR(A) image through ``mesh``; a translucent (r, g, b, a) background is laid under a
-    transparent render. A gray image under a colour that is not gray is rendered in colour (the
-    fill came out as its luma)."""
-    if background is not None and len(set(background[:3])) > 1 and image.ndim == 2:
-        import cv2
-
-        image = cv2.cvtColor(image, cv2.COLOR_GRAY2BGR)
-    if background is None or len(background) == 3:
-        return warper.render(image, mesh, interp, background, order="bgr")
-    from ..render.raster import under_colour
-
-    return under_colour(warper.render(image, mesh, interp, None, order="bgr"), background)
-
-
 def check_solution(settings: Settings, mesh, loaded: list = ()) -> None:
     """WarpError when the solve left folded triangles (unless ``allow_folds``) or, under
     ``strict``, when it or the loading (``loaded``: an empty mask) warned: nothing is written then."""
@@ -428,14 +395,20 @@ def check_outputs(settings: Settings, output: str, *extra: tuple[str | None, str
     return out_path, fmt
 
 
+def _check_grid_name(save_grid: str | None) -> None:
+    """--save-grid names one of the two forms it writes (another name silently got an npz)."""
+    if save_grid and save_grid != "-" and not save_grid.lower().endswith((".npz", ".obj")):
+        raise WarpError(f"{save_grid} names neither an .npz nor an .obj file (the two forms it writes)",
+                        "--save-grid", usage=True)
+
+
 def warp_file(settings: Settings, input: str, output: str, mask: str | None = None,
               report: str | None = None, save_grid: str | None = None, draw_grid: bool = False,
               also_read: tuple = ()) -> dict:
     """Load, warp, render and write one image (the body of ``featurewarp warp PRESET``).
 
-    Every check that needs no pixels runs before anything is decoded, and the
-    output is written atomically, so a failure leaves no partial file and an
-    existing OUTPUT untouched. OUTPUT may be INPUT.
+    Every check that needs no pixels runs before anything is decoded, and the output is written
+    atomically, so a failure leaves no partial file and an existing OUTPUT untouched. OUTPUT may be INPUT.
 
     Parameters
     ----------
@@ -449,7 +422,7 @@ def warp_file(settings: Settings, input: str, output: str, mask: str | None = No
     report : str, optional
         Where to write the JSON report.
     save_grid : str, optional
-        Where to write the mesh as ``.npz`` (``source``, ``target``, ``triangles``).
+        Where to write the mesh: ``.npz`` (``source``, ``target``, ``triangles``) or ``.obj``.
     draw_grid : bool
         Draw the deformed grid over the result.
     also_read : tuple of (path, option)
@@ -474,9 +447,7 @@ def warp_file(settings: Settings, input: str, output: str, mask: str | None = No
                                   like=input)
     check_distinct([(out_path, "OUTPUT"), (report, "--report"), (save_grid, "--save-grid")],
                    [(input, "INPUT"), (mask, "--mask"), *also_read])
-    if save_grid and save_grid != "-" and not save_grid.lower().endswith((".npz", ".obj")):
-        raise WarpError(f"{save_grid} names neither an .npz nor an .obj file (the two forms it writes)",
-                        "--save-grid", usage=True)
+    _check_grid_name(save_grid)
     background = background_colour(settings.background, fmt)
     prefetch_engine(solver=mask is not None and settings.mode != "plain")
     pending, feature_mask, warnings, (width, height) = start_loading(settings, input, mask, piped)
@@ -492,7 +463,6 @@ def warp_file(settings: Settings, input: str, output: str, mask: str | None = No
     if image.shape[:2] != (height, width):
         raise WarpError(f"{input} decodes to {image.shape[1]}x{image.shape[0]}, its header says {width}x{height}")
     mesh.record.warnings[:0] = warnings       # the loading's (an empty mask): said, reported, refused
-    warnings = list(mesh.record.warnings)
     check_solution(settings, mesh)
     result = rendered(warper, image, mesh, settings.interp, background)
     if draw_grid:
@@ -500,8 +470,7 @@ def warp_file(settings: Settings, input: str, output: str, mask: str | None = No
         result = overlay(result, mesh)
     timings.update(mesh.info["timings"])
     stages.enter("write")
-    t1 = time.perf_counter()
-    kept = None if settings.strip else getattr(pending, "header", None)
+    t1, kept = time.perf_counter(), None if settings.strip else getattr(pending, "header", None)
     outputs = [(out_path, encoded(out_path, fmt, result, background, settings.quality,
                                   getattr(kept, "icc", None), getattr(kept, "exif", None)))]
     timings["write"] = time.perf_counter() - t1
@@ -510,4 +479,5 @@ def warp_file(settings: Settings, input: str, output: str, mask: str | None = No
     if report:
         outputs.append((report, report_bytes(input, out_path, image, result, warp, mesh, timings, t0, fmt)))
     write_all(outputs)
-    return summary(settings.preset, settings.mode, input, out_path, (width, height), mesh, t0, warnings)
+    return summary(settings.preset, settings.mode, input, out_path, (width, height), mesh, t0,
+                   list(mesh.record.warnings))

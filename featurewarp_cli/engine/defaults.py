@@ -19,7 +19,7 @@ Examples
 >>> DECAY_PARAM.check(0)
 Traceback (most recent call last):
 ...
-featurewarp_cli.plugins.ParamError: decay: 0 is out of range (0 < CELLS <= 1000)
+featurewarp_cli.plugins.ParamError: decay: 0 is out of range (0.001 <= CELLS <= 1000)
 """
 
 from __future__ import annotations
