@@ -296,8 +296,6 @@ class Warp:
         return f"{type(self).__name__}({self.width}, {self.height}, {args})"
 
 
-#: A point or size parameter's parts: pixels and percentages within these (beyond, a warp's
-#: arithmetic overflows or its grid cannot follow it: ``--center 1e308,1e308``).
 #: How far (px) a shape may reach past a whole number of pixels without its canvas growing a
 #: row or column: an arc of 0.001 degrees bows 0.001 px, a handles border at the image's
 #: corners lands 4e-5 px out by rounding; either added a blank row or column.
@@ -311,6 +309,8 @@ def canvas_size(extent) -> tuple[int, int]:
     return width, height
 
 
+#: A point or size parameter's parts: pixels and percentages within these (beyond, a warp's
+#: arithmetic overflows or its grid cannot follow it: ``--center 1e308,1e308``).
 PAIR_PIXEL_LIMIT = 1e5
 PAIR_PERCENT_LIMIT = 1e3
 

@@ -247,3 +247,21 @@ def test_a_handles_map_followed_on_a_refinement_of_its_lattice_never_strays(cell
         120, 90)
     record = Deformer(120, 90, mask, cell=cell).solve(handles).record
     assert record.grid["pl_error_px"] < 1e-9 and not any("strays" in line for line in record.warnings)
+
+
+def test_a_cameras_mpo_jpeg_is_one_photo_not_several_frames(tmp_path):
+    """A camera stores previews after the photo (MPO): no "several frames" warning, which
+    --strict would refuse; an animated GIF still gets it."""
+    import io
+
+    from PIL import Image
+
+    photo = Image.fromarray(np.random.default_rng(7).integers(0, 255, (60, 80, 3), dtype=np.uint8))
+    preview = Image.fromarray(np.zeros((15, 20, 3), np.uint8))
+    photo.save(tmp_path / "cam.jpg", "MPO", save_all=True, append_images=[preview])
+    run = CliRunner().invoke(cli, ["warp", "stretch", str(tmp_path / "cam.jpg"), str(tmp_path / "o.png"),
+                                   "--sx", "1.2", "--strict"])
+    assert run.exit_code == 0 and "several frames" not in run.output, run.output
+    photo.save(tmp_path / "anim.gif", save_all=True, append_images=[preview.resize((80, 60))])
+    run = CliRunner().invoke(cli, ["warp", "stretch", str(tmp_path / "anim.gif"), str(tmp_path / "g.png"), "--sx", "1.2"])
+    assert run.exit_code == 0 and "several frames" in run.output

@@ -435,15 +435,39 @@ def test_a_jpeg_of_too_many_scans_is_refused_before_decoding(tmp_path):
 @pytest.mark.parametrize("header, samples, dtype, top", [
     (b"P6\n4 2\n3\n", bytes([0, 1, 2, 3] * 6), np.uint8, 255),
     (b"P5\n# a comment\n4 2\n15\n", bytes([0, 15, 7, 8, 1, 2, 3, 4]), np.uint8, 255),
-    (b"P6\n2 2\n1023\n", np.array([0, 1023] * 6, ">u2").tobytes(), np.uint16, 65535)])
+    (b"P6\n2 2\n1023\n", np.array([0, 1023, 512] * 4, ">u2").tobytes(), np.uint16, 65535),
+    (b"P2\n4 1\n3\n", b"0 1 2 3\n", np.uint8, 255),               # the plain forms OpenCV scales itself:
+    (b"P3\n2 1\n3\n", b"0 1 2 3 3 3\n", np.uint8, 255)])          # not a second time (all 255)
 def test_a_pnm_whose_maxval_is_not_the_types_is_scaled_to_its_full_range(header, samples, dtype, top):
     """OpenCV keeps PNM samples as stored: MAXVAL 3 came out nearly black."""
     from featurewarp_cli.io.decode import decode_image
 
     image = decode_image(header + samples, "x.pnm")
     assert image.dtype == dtype and image.min() == 0 and image.max() == top
+    assert len(np.unique(image)) > 2                                  # the levels between stay apart
 
 
 def test_a_pam_of_maxval_zero_is_refused(tmp_path):
     pam = b"P7\nWIDTH 2\nHEIGHT 2\nDEPTH 1\nMAXVAL 0\nTUPLTYPE GRAYSCALE\nENDHDR\n" + bytes(4)
     one_line(run("warp", "swirl", save_bytes(tmp_path / "z.pam", pam), tmp_path / "o.png"), 1, "MAXVAL 0")
+
+
+def test_a_tiff_whose_next_page_cannot_be_read_is_its_first_page(tmp_path):
+    """libtiff's error about a next directory past the end is not corruption of the image (its
+    pixels decode exactly): the page is warped, with the several-frames note."""
+    import io
+    import struct
+
+    import cv2
+    from PIL import Image
+
+    buffer = io.BytesIO()
+    Image.fromarray(textured()[:60, :80, :3]).save(buffer, "TIFF")
+    data = bytearray(buffer.getvalue())
+    ifd = struct.unpack_from("<I", data, 4)[0]
+    entries = struct.unpack_from("<H", data, ifd)[0]
+    struct.pack_into("<I", data, ifd + 2 + 12 * entries, len(data) + 1000)      # the next page: nowhere
+    source = save_bytes(tmp_path / "next.tif", bytes(data))
+    result = run("warp", "stretch", source, tmp_path / "o.png", "--sx", "1")
+    assert result.returncode == 0, result.stderr
+    assert np.array_equal(cv2.imread(str(tmp_path / "o.png")), cv2.imread(str(source)))

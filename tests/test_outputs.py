@@ -342,12 +342,16 @@ def test_a_gray_image_under_a_colour_background_comes_out_in_colour(tmp_path):
         assert out.shape[:2] != (60, 80) and out.ndim == len(shape) and np.array_equal(out[0, 0], corner)
 
 
-@pytest.mark.parametrize("name, channels, bits", [("o.jpg", 3, 8), ("o.bmp", 3, 8), ("o.png", 4, 16), ("o.tif", 4, 16)])
-def test_the_report_describes_the_output_as_its_format_stores_it(tmp_path, name, channels, bits):
-    """A 16-bit result written as JPEG was reported as 16-bit, an RGBA one as a 4-channel BMP."""
-    image = (np.random.default_rng(5).integers(0, 255, (60, 80, 3)) * 257).astype(np.uint16)
+@pytest.mark.parametrize("name, channels, bits, gray", [("o.jpg", 3, 8, False), ("o.bmp", 3, 8, False),
+                                                        ("o.png", 4, 16, False), ("o.tif", 4, 16, False),
+                                                        ("o.webp", 3, 8, True), ("o.gif", 3, 8, True)])
+def test_the_report_describes_the_output_as_its_format_stores_it(tmp_path, name, channels, bits, gray):
+    """A 16-bit result written as JPEG was reported as 16-bit, an RGBA one as a 4-channel BMP;
+    WebP and GIF have no gray form."""
+    image = (np.random.default_rng(5).integers(0, 255, (60, 80) if gray else (60, 80, 3)) * 257).astype(np.uint16)
     cv2.imwrite(str(tmp_path / "in.png"), image)
-    run = invoke("warp", "arc", tmp_path / "in.png", tmp_path / name, "--report", tmp_path / "r.json")
+    extra = ["--background", "white"] if gray else []
+    run = invoke("warp", "arc", tmp_path / "in.png", tmp_path / name, "--report", tmp_path / "r.json", *extra)
     assert run.exit_code == 0, run.output
     output = json.loads((tmp_path / "r.json").read_text())["output"]
     written = cv2.imread(str(tmp_path / name), cv2.IMREAD_UNCHANGED)

@@ -40,7 +40,7 @@ def test_reports_validate(tmp_path, args):
                           os.path.join(SAMPLES, "shapes_mask.png"), "--report", str(report)] + args[2:]
     assert CliRunner().invoke(cli, command).exit_code == 0
     made = json.loads(report.read_text())
-    assert made["schema"] == "featurewarp-report/2"
+    assert made["schema"] == "featurewarp-report/3"
     jsonschema.validate(made, schema("report"))
 
 

@@ -154,7 +154,6 @@ def animate_file(settings: Settings, input: str, output: str, mask: str | None, 
     prefetch_engine()
     image, feature_mask, warnings = load_image_and_mask(settings, formats.split_prefix(input)[1], mask)
     height, width = image.shape[:2]
-    check_frames_fit(settings, frames, (width, height))        # before a warp per frame is made
     if settings.strict and warnings:
         raise WarpError(f"--strict: {warnings[0]}; nothing written")
     per_frame = frame_params(settings, ranges, frames)

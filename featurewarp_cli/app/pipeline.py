@@ -290,7 +290,8 @@ def start_loading(settings: Settings, input: str, mask: str | None, data: bytes 
         return _Ready(image, header), feature_mask, warnings, (image.shape[1], image.shape[0])
     size = header.upright_size
     feature_mask = None
-    warnings = ["the input has several frames (animated or multi-page); the first is used"] if header.animated else []
+    several = header.animated and header.format != "MPO"     # a camera's JPEG: the photo, then previews
+    warnings = ["the input has several frames (animated or multi-page); the first is used"] if several else []
     if use_mask:
         try:
             feature_mask, mask_warnings = _load_mask(settings, mask, size)
@@ -360,9 +361,10 @@ def solve_within_budget(warper, warp, mode: str):
     return mesh
 
 
-def check_solution(settings: Settings, mesh, loaded: list = ()) -> None:
+def check_solution(settings: Settings, mesh) -> None:
     """WarpError when the solve left folded triangles (unless ``allow_folds``) or, under
-    ``strict``, when it or the loading (``loaded``: an empty mask) warned: nothing is written then."""
+    ``strict``, when it warned (the loading's warnings among its own: :func:`warp_file`):
+    nothing is written then."""
     folded, crossings = mesh.flips(), getattr(mesh, "crossings", 0)
     if folded and not settings.allow_folds:
         raise WarpError(f"the result has {folded} folded triangles (the warp turns the image over itself "
@@ -370,9 +372,8 @@ def check_solution(settings: Settings, mesh, loaded: list = ()) -> None:
     if crossings and not settings.allow_folds:
         raise WarpError(f"the result lays the image over itself (its border crosses itself {'once' if crossings == 1 else f'{crossings} times'}"
                         f"; a handle dragged across a pin's path does that): nothing written (--allow-folds writes it)")
-    said = [*loaded, *mesh.record.warnings]
-    if settings.strict and said:
-        raise WarpError(f"--strict: {said[0]}; nothing written")
+    if settings.strict and mesh.record.warnings:
+        raise WarpError(f"--strict: {mesh.record.warnings[0]}; nothing written")
 
 
 def check_outputs(settings: Settings, output: str, *extra: tuple[str | None, str], like: str | None = None):
@@ -479,5 +480,5 @@ def warp_file(settings: Settings, input: str, output: str, mask: str | None = No
     if report:
         outputs.append((report, report_bytes(input, out_path, image, result, warp, mesh, timings, t0, fmt)))
     write_all(outputs)
-    return summary(settings.preset, settings.mode, input, out_path, (width, height), mesh, t0,
+    return summary(settings.preset, mesh.record.mode, input, out_path, (width, height), mesh, t0,
                    list(mesh.record.warnings))

@@ -14,7 +14,7 @@ from ..engine import guard as fold_guard
 
 
 #: The report's own format version (``featurewarp schema report`` prints its JSON Schema).
-REPORT_SCHEMA = "featurewarp-report/2"
+REPORT_SCHEMA = "featurewarp-report/3"
 
 
 def image_summary(path: str, image: np.ndarray, fmt: str | None = None) -> dict:

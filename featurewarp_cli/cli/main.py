@@ -132,7 +132,7 @@ def schema_command(kind):
     """Print the JSON Schema (Draft 2020-12) of the --report file or of the handles file.
 
     Each schema has a version of its own: the report's 'schema' key
-    (featurewarp-report/2), the handles file's 'version' key (1 or 2; 2 when a point has an angle).
+    (featurewarp-report/3), the handles file's 'version' key (1 or 2; 2 when a point has an angle).
     """
     from .. import schema
 

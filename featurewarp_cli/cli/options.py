@@ -30,7 +30,8 @@ QUALITY = Param("quality", int, None, "JPEG and WebP quality (WebP becomes lossy
 PANEL_WIDTH = Param("panel_width", int, None, "Scale the panel to this many pixels across (default: every "
                     "view at the input's resolution).", min=16, max=32766, metavar="PX")
 JOBS = Param("jobs", int, 1, "Worker processes; results are byte-identical to N=1.", min=1, metavar="N")
-FRAMES = Param("frames", int, 24, "Number of frames (START and END included).", min=1, metavar="N")
+FRAMES = Param("frames", int, 24, "Number of frames (START and END included; at most 10 000).", min=1, max=10_000,
+               metavar="N")
 FPS = Param("fps", float, 12.0, "Frames per second (GIF and video players take 0.01 to 100).",
             min=0.01, max=100.0)
 MAX_RMSE = Param("max_rmse", float, None, "Pass if RMSE <= X.", min=0.0, metavar="X")

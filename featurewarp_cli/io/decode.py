@@ -20,6 +20,7 @@ import io
 import os
 import re
 import sys
+import threading
 import warnings
 from dataclasses import dataclass, field
 
@@ -42,7 +43,10 @@ MAX_JPEG_SCANS = 500
 #: What a decoder prints about data it decodes anyway, and refused: libjpeg's corrupt or missing
 #: data, and libtiff's errors (an LZW or deflate strip that fails its check decodes to garbage,
 #: 64-84 grey levels off on average) and its PackBits overruns, through OpenCV's log.
-CORRUPT = re.compile(r"^(Corrupt JPEG.*|Premature end.*)|TIFF_Error (.*)|TIFF_Warning (.*(Corrupt|Discarding).*)")
+CORRUPT = re.compile(r"^(Corrupt JPEG.*|Premature end.*)|TIFF_Error (?!TIFF\w*Directory)(.*)"
+                     r"|TIFF_Warning (.*(Corrupt|Discarding).*)")
+#: One decode at a time: OpenCV's log level and the capture of file descriptor 2 are the process's.
+_DECODING = threading.Lock()
 Image.MAX_IMAGE_PIXELS = None           # the caller's max_pixels decides, not Pillow's default
 
 # Pillow's header readers for the formats OpenCV decodes, imported one by one so that
@@ -320,14 +324,14 @@ def _opencv_decode(data: bytes, name: str) -> np.ndarray:
     """OpenCV's decoding of ``data`` as stored (depth and alpha kept); ImageError if it fails,
     or where the decoder said the data is corrupt (:data:`CORRUPT`) and decoded it anyway."""
     failure = None
-    with captured_stderr() as messages:
-        _LOGGING.setLogLevel(3)               # its warnings, where libtiff's errors reach it
+    with _DECODING, captured_stderr() as messages:
+        level = _LOGGING.setLogLevel(3)       # its warnings, where libtiff's errors reach it
         try:
             image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
         except cv2.error as err:              # OpenCV's size limit (or another assertion)
             image, failure = None, str(err)
         finally:
-            _LOGGING.setLogLevel(0)
+            _LOGGING.setLogLevel(level if isinstance(level, int) else 0)   # the level before (it returns it)
     if failure and "CV_IO_MAX_IMAGE" in failure:
         raise ImageError(f"{name} is above the limit of {opencv_limit()} pixels of the decoder "
                          "(--max-pixels)")
@@ -343,8 +347,9 @@ def _opencv_decode(data: bytes, name: str) -> np.ndarray:
 
 
 def pnm_maxval(data: bytes) -> int | None:
-    """The MAXVAL of a PGM, PPM (plain or raw) or PAM header, or None for another format."""
-    if data[:2] in (b"P2", b"P3", b"P5", b"P6"):
+    """The MAXVAL of a raw PGM or PPM, or of a PAM header; None for another format (and for the
+    plain P2 and P3, whose samples OpenCV scales to the full range itself)."""
+    if data[:2] in (b"P5", b"P6"):            # OpenCV scales the plain forms, P2 and P3, itself
         header = re.sub(rb"#[^\n\r]*", b" ", data[2:512]).split()        # comments, then numbers
         return int(header[2]) if len(header) > 2 and header[2].isdigit() else None
     if data[:2] == b"P7":

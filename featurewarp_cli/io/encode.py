@@ -51,6 +51,8 @@ def stored_form(image: np.ndarray, fmt: str) -> tuple[int, int]:
     channels = 4 if channels == 2 else channels
     if channels == 4 and not FORMATS[fmt].alpha:
         channels = 3
+    if channels == 1 and fmt in ("webp", "gif"):       # no gray form: colour (WebP), a palette (GIF)
+        channels = 3
     return channels, 8 if FORMATS[fmt].eight_bit else 8 * image.dtype.itemsize
 
 
