@@ -471,3 +471,29 @@ def test_a_tiff_whose_next_page_cannot_be_read_is_its_first_page(tmp_path):
     result = run("warp", "stretch", source, tmp_path / "o.png", "--sx", "1")
     assert result.returncode == 0, result.stderr
     assert np.array_equal(cv2.imread(str(tmp_path / "o.png")), cv2.imread(str(source)))
+
+
+@pytest.mark.parametrize("depth", [np.uint8, np.uint16])
+def test_a_tiff_with_alpha_says_so_and_reads_back_unpremultiplied(tmp_path, depth):
+    """OpenCV wrote RGBA TIFFs without ExtraSamples (the fourth sample "unspecified" to libtiff
+    and ImageMagick), and read 8-bit ones that have it (Pillow, GIMP, Photoshop) premultiplied:
+    every half-transparent colour came out at half its value."""
+    import io
+
+    from PIL import Image
+
+    from featurewarp_cli.io.decode import decode_image
+    from featurewarp_cli.io.encode import encode_image
+
+    top = np.iinfo(depth).max
+    pixels = (np.random.default_rng(8).integers(0, 256, (20, 30, 4)) * (top // 255)).astype(depth)
+    pixels[..., 3] = top // 2 + 1
+    written = encode_image(pixels, "tiff")
+    with Image.open(io.BytesIO(written)) as image:
+        assert image.tag_v2.get(338) == (2,)                  # unassociated alpha
+    level = 257 if depth == np.uint16 else 1
+    assert np.abs(decode_image(written, "ours.tif").astype(int) - pixels).max() <= level
+    if depth == np.uint8:                                     # what other programs write
+        buffer = io.BytesIO()
+        Image.fromarray(pixels[..., [2, 1, 0, 3]]).save(buffer, "TIFF")
+        assert np.abs(decode_image(buffer.getvalue(), "theirs.tif").astype(int) - pixels).max() <= 1

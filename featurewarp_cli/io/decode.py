@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import ImageError
+from . import ImageError, tiff
 from .capture import captured_stderr
 from .limits import MAX_PIXELS, check_pixels, check_size, limit_opencv_decoders, opencv_limit, size_text
 
@@ -416,6 +416,9 @@ def decode_image(data: bytes, name: str, max_pixels: int | None = MAX_PIXELS,
         raise ImageError(f"{name} has {scans} JPEG scans, above {MAX_JPEG_SCANS} (a progressive JPEG has about "
                          f"10; each scan costs a pass over the image): refused")
     image = _full_range(_opencv_decode(data, name), pnm_maxval(data), name)
+    if image.dtype == np.uint8 and image.ndim == 3 and image.shape[2] == 4 and \
+            tiff.extra_samples(data) in (tiff.ASSOCIATED, tiff.UNASSOCIATED):
+        image = tiff.unpremultiplied(image)          # libtiff's RGBA reading premultiplied it
     if image.dtype not in (np.uint8, np.uint16):
         raise ImageError(f"{name} has unsupported sample type {image.dtype}")
     check_pixels(image.shape[1], image.shape[0], name, max_pixels)

@@ -13,7 +13,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from . import ImageError
+from . import ImageError, tiff
 from .capture import captured_stderr
 from .decode import gray_alpha_to_bgra
 from .depth import to_eight_bit
@@ -114,6 +114,8 @@ def encode_image(image: np.ndarray, fmt: str, background=(255, 255, 255), qualit
         ok, buf = cv2.imencode(FORMATS[fmt].extension, image, settings)
     if not ok:
         raise ImageError(f"cannot encode the result as {fmt}")
+    if fmt == "tiff" and image.ndim == 3 and image.shape[2] == 4:
+        return tiff.with_alpha_tag(buf.tobytes())
     return buf.tobytes()
 
 
