@@ -265,3 +265,20 @@ def test_a_cameras_mpo_jpeg_is_one_photo_not_several_frames(tmp_path):
     photo.save(tmp_path / "anim.gif", save_all=True, append_images=[preview.resize((80, 60))])
     run = CliRunner().invoke(cli, ["warp", "stretch", str(tmp_path / "anim.gif"), str(tmp_path / "g.png"), "--sx", "1.2"])
     assert run.exit_code == 0 and "several frames" in run.output
+
+
+def test_a_feature_is_named_by_where_it_is_as_well_as_by_its_number():
+    """Warnings said "feature 0" and the report's components had no position: which region a
+    warning was about could not be told. Each component's ``at`` is the mean source position of
+    its nodes, and a warning names it."""
+    mask = np.zeros((120, 160), bool)
+    mask[20:40, 20:40] = True                    # top left, and a bar across the bottom right
+    mask[90:100, 80:150] = True
+    mesh = FeatureWarper(160, 120, mask).solve(load_warp("stretch")(160, 120, sx=0.3), "rigid")
+    at = sorted(tuple(c.at) for c in mesh.record.components)
+    assert np.allclose(at[0], (29.5, 29.5), atol=4) and np.allclose(at[1], (114.5, 94.5), atol=4)
+    for k, component in enumerate(mesh.record.components):
+        named = [line for line in mesh.record.warnings if line.startswith(f"feature {k} (")]
+        assert component.kept or named[0].startswith(
+            f"feature {k} ({component.quads} quads, around ({component.at[0]:.0f}, {component.at[1]:.0f})) not kept")
+    assert not all(c.kept for c in mesh.record.components)

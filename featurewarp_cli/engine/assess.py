@@ -26,11 +26,12 @@ def assess(state, target, warped, tied, unpinned, warp, record: SolveRecord, not
     figures = quality.component_figures(state.nodes, target, warped, state.triangles, state.tri_component,
                                         state.node_component, features.n_components, plain=not quick)
     counts = np.bincount(features.component[features.is_feature], minlength=features.n_components)
+    at = _centres(state.nodes, state.node_component, features.n_components)
     record.components = [
         ComponentRecord(int(counts[c]), bool(tied[c]), bool(unpinned[c]), *(float(figures[k][c]) for k in (
             "scale", "rotation_deg", "distortion", "anisotropy_worst", "anisotropy_mean",
             "plain_distortion", "plain_anisotropy_worst", "area_ratio")),
-            kept=bool(figures["anisotropy_worst"][c] <= KEPT))
+            kept=bool(figures["anisotropy_worst"][c] <= KEPT), at=at[c])
         for c in range(features.n_components)]
     if not quick:
         stretch, where = canvas.largest_stretch(target, warped, state.triangles[state.tri_component < 0])
@@ -69,3 +70,12 @@ def assess(state, target, warped, tied, unpinned, warp, record: SolveRecord, not
                                + ("; a finer --cell, or the automatic grid (within 0.5 px), follows it more "
                                   "closely" if chosen_cell else ""))
     record.warnings.extend(notes)
+
+
+def _centres(nodes: np.ndarray, node_component: np.ndarray, count: int) -> list:
+    """[x, y] per component: the mean source position of its nodes (0.1 px), None without any."""
+    on = node_component >= 0
+    weights = np.bincount(node_component[on], minlength=count).astype(np.float64)
+    sums = [np.bincount(node_component[on], nodes[on, axis], minlength=count) for axis in range(2)]
+    return [[round(float(sums[0][c] / weights[c]), 1), round(float(sums[1][c] / weights[c]), 1)]
+            if weights[c] else None for c in range(count)]

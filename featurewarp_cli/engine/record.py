@@ -38,6 +38,9 @@ class ComponentRecord:
         Its area on the canvas over its area in the source.
     kept : bool
         anisotropy_worst <= :data:`KEPT`.
+    at : list of float or None
+        Where it is in the input: the mean of its nodes' source positions, [x, y] in pixels
+        (what a warning names it by, beside its number).
     """
 
     quads: int
@@ -52,6 +55,7 @@ class ComponentRecord:
     plain_anisotropy_worst: float
     area_ratio: float
     kept: bool
+    at: list | None = None
 
 
 #: Largest anisotropy - 1 of a component's triangles for it to count as kept.
@@ -235,6 +239,11 @@ def _why(record: "SolveRecord", k: int) -> str:
     return "".join(": " + cause if i == 0 else "; " + cause for i, cause in enumerate(causes))
 
 
+def _around(component: ComponentRecord) -> str:
+    """", around (x, y)": where a component is in the input, for a warning (none unknown)."""
+    return "" if component.at is None else f", around ({component.at[0]:.0f}, {component.at[1]:.0f})"
+
+
 #: How the count of smaller features not kept points at the report (commands without one drop it).
 LISTED_IN_REPORT = "; the report lists each"
 
@@ -253,7 +262,7 @@ def warnings_for(record: "SolveRecord", source, target, warped, warp) -> list[st
                   key=lambda k: -record.components[k].quads)
     for k in sorted(lost[:MOST_LISTED]):
         c = record.components[k]
-        lines.append(f"feature {k} ({c.quads} quads) not kept: worst-triangle anisotropy "
+        lines.append(f"feature {k} ({c.quads} quads{_around(c)}) not kept: worst-triangle anisotropy "
                      f"{c.anisotropy_worst:.3f} (plain warp: {c.plain_anisotropy_worst:.3f})" + _why(record, k))
     if len(lost) > MOST_LISTED:
         rest = [record.components[k] for k in lost[MOST_LISTED:]]
