@@ -39,19 +39,16 @@ def largest_angle(radius: float, cell: float) -> float:
 
 
 class Swirl(Warp):
-    """Rotate each point about the centre by angle * (1 - d/R)^2 for d < R.
+    """Turn the picture about the centre: by the full angle at the centre, less and less
+    further out, not at all from the radius R = radius * min(width, height) on.
 
-    A positive angle turns counter-clockwise on screen (x right, y down), as ImageMagick's
-    ``-swirl`` does: its inverse map samples the source at the output position turned by
-    +angle (clockwise on screen), so the picture turns the other way; ``convert -swirl 120``
-    takes a mark above the centre to its upper left, and so does ``--angle 120`` here (before
-    issue 25 the sign was the opposite). R = radius * min(w, h). The rotation and its derivative fall to zero at R,
-    so the swirl joins the unmoved outside smoothly. Each circle about the centre
-    maps onto itself, so the map is injective for every angle. The declared range
-    (one and a half turns either way) is delivered in bounded time; a tight swirl
-    (a large angle over a small radius in pixels) that even the finest automatic
-    grid cannot follow without folds is refused, naming the radius it needs.
-    Canvas = input size.
+    A point at distance d < R turns by angle * (1 - d/R)^2, so the swirl joins the unmoved
+    outside smoothly, and each circle about the centre maps onto itself (no fold at any
+    angle). A positive angle turns the picture counter-clockwise on screen, as ImageMagick's
+    ``-swirl`` does: ``convert -swirl 120`` and ``--angle 120`` both take a mark above the
+    centre to its upper left. Up to one and a half turns either way; a tight swirl (a large
+    angle over a small radius in pixels) that even the finest automatic grid cannot follow
+    without folds is refused, naming the radius it needs. Canvas = input size.
     """
 
     name = "swirl"

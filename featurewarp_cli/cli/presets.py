@@ -76,8 +76,9 @@ def preset_command(preset, params: list, callback, doc: str) -> click.Command:
 
 
 def preset_doc(preset, intro: str = "") -> str:
-    """``intro`` followed by the preset's docstring (or its summary)."""
-    text = inspect.cleandoc(preset.__doc__ or preset.summary)
+    """``intro`` followed by the preset's docstring (or its summary), its reStructuredText
+    literals (````-swirl````) quoted as a terminal shows them ('-swirl')."""
+    text = inspect.cleandoc(preset.__doc__ or preset.summary).replace("``", "'")
     return f"{intro}\n\n{text}" if intro else text
 
 
