@@ -280,5 +280,5 @@ def test_a_feature_is_named_by_where_it_is_as_well_as_by_its_number():
     for k, component in enumerate(mesh.record.components):
         named = [line for line in mesh.record.warnings if line.startswith(f"feature {k} (")]
         assert component.kept or named[0].startswith(
-            f"feature {k} ({component.quads} quads, around ({component.at[0]:.0f}, {component.at[1]:.0f})) not kept")
+            f"feature {k} ({component.quads} quads, around ({round(component.at[0])}, {round(component.at[1])})) not kept")
     assert not all(c.kept for c in mesh.record.components)

@@ -202,7 +202,7 @@ def canvas_warnings(record: "SolveRecord") -> list[str]:
     if record.outline_departure > OUTLINE_PX:
         x, y = record.outline_departure_at
         lines.append(f"the output's outline leaves the plain warp's by up to {record.outline_departure:.0f} px "
-                     f"near ({x:.0f}, {y:.0f}): a feature cut by the border let go of it to keep its shape")
+                     f"near ({round(x)}, {round(y)}): a feature cut by the border let go of it to keep its shape")
     return lines
 
 
@@ -241,7 +241,7 @@ def _why(record: "SolveRecord", k: int) -> str:
 
 def _around(component: ComponentRecord) -> str:
     """", around (x, y)": where a component is in the input, for a warning (none unknown)."""
-    return "" if component.at is None else f", around ({component.at[0]:.0f}, {component.at[1]:.0f})"
+    return "" if component.at is None else f", around ({round(component.at[0])}, {round(component.at[1])})"
 
 
 #: How the count of smaller features not kept points at the report (commands without one drop it).
