@@ -437,7 +437,8 @@ def test_a_jpeg_of_too_many_scans_is_refused_before_decoding(tmp_path):
     (b"P5\n# a comment\n4 2\n15\n", bytes([0, 15, 7, 8, 1, 2, 3, 4]), np.uint8, 255),
     (b"P6\n2 2\n1023\n", np.array([0, 1023, 512] * 4, ">u2").tobytes(), np.uint16, 65535),
     (b"P2\n4 1\n3\n", b"0 1 2 3\n", np.uint8, 255),               # the plain forms OpenCV scales itself:
-    (b"P3\n2 1\n3\n", b"0 1 2 3 3 3\n", np.uint8, 255)])          # not a second time (all 255)
+    (b"P3\n2 1\n3\n", b"0 1 2 3 3 3\n", np.uint8, 255),           # not a second time (all 255),
+    (b"P2\n3 1\n1000\n", b"0 500 1000\n", np.uint16, 65535)])     # but only up to MAXVAL 255
 def test_a_pnm_whose_maxval_is_not_the_types_is_scaled_to_its_full_range(header, samples, dtype, top):
     """OpenCV keeps PNM samples as stored: MAXVAL 3 came out nearly black."""
     from featurewarp_cli.io.decode import decode_image
@@ -493,7 +494,29 @@ def test_a_tiff_with_alpha_says_so_and_reads_back_unpremultiplied(tmp_path, dept
         assert image.tag_v2.get(338) == (2,)                  # unassociated alpha
     level = 257 if depth == np.uint16 else 1
     assert np.abs(decode_image(written, "ours.tif").astype(int) - pixels).max() <= level
-    if depth == np.uint8:                                     # what other programs write
+    if depth == np.uint8:                                     # what other programs write, read exactly
         buffer = io.BytesIO()
         Image.fromarray(pixels[..., [2, 1, 0, 3]]).save(buffer, "TIFF")
-        assert np.abs(decode_image(buffer.getvalue(), "theirs.tif").astype(int) - pixels).max() <= 1
+        assert np.array_equal(decode_image(buffer.getvalue(), "theirs.tif"), pixels)
+        faint = pixels.copy()
+        faint[..., 3] = 3                                     # alpha 3: a division back would lose colours
+        assert np.array_equal(decode_image(encode_image(faint, "tiff"), "faint.tif"), faint)
+
+
+def test_a_16_bit_tiff_of_associated_alpha_is_read_with_straight_colours(tmp_path):
+    """Associated alpha is stored premultiplied; OpenCV's 16-bit reading keeps it so."""
+    import struct
+
+    from featurewarp_cli.io import tiff
+    from featurewarp_cli.io.decode import decode_image
+    from featurewarp_cli.io.encode import encode_image
+
+    straight = np.zeros((4, 5, 4), np.uint16)
+    straight[...] = (51400, 38550, 25700, 32768)
+    stored = straight.copy()
+    stored[..., :3] = np.rint(straight[..., :3] * (32768 / 65535)).astype(np.uint16)
+    data = bytearray(encode_image(stored, "tiff"))            # ExtraSamples 2: make it 1 (associated)
+    order, first, entries = tiff.first_directory(bytes(data))
+    at = next(first + 2 + 12 * k for k, e in enumerate(entries) if struct.unpack_from(order + "H", e)[0] == 338)
+    struct.pack_into(order + "H", data, at + 8, tiff.ASSOCIATED)
+    assert np.abs(decode_image(bytes(data), "assoc.tif").astype(int) - straight).max() <= 2

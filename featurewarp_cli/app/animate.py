@@ -157,11 +157,13 @@ def animate_file(settings: Settings, input: str, output: str, mask: str | None, 
     if settings.strict and warnings:
         raise WarpError(f"--strict: {warnings[0]}; nothing written")
     per_frame = frame_params(settings, ranges, frames)
-    warps = []
+    warps, largest = [], (0, 0)
     for params in per_frame:
         warp, warper = make_warper(Settings(**{**settings.__dict__, "params": params}), width, height,
                                    feature_mask)
         warps.append(warp)
+        largest = max(largest, tuple(warp.canvas), key=lambda size: size[0] * size[1])
+        check_frames_fit(settings, frames, largest)      # frames share the largest canvas: refused early
     if settings.cell is None:                  # one grid fine enough for every frame: one factorization
         cell = min(fidelity.auto_cell(width, height, w)[0] for w in warps)
         warper = make_warper(Settings(**{**settings.__dict__, "cell": cell}), width, height, feature_mask)[1]

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import contextlib
 import inspect
+import re
 import sys
 
 import click
@@ -77,8 +78,9 @@ def preset_command(preset, params: list, callback, doc: str) -> click.Command:
 
 def preset_doc(preset, intro: str = "") -> str:
     """``intro`` followed by the preset's docstring (or its summary), its reStructuredText
-    literals (````-swirl````) quoted as a terminal shows them ('-swirl')."""
-    text = inspect.cleandoc(preset.__doc__ or preset.summary).replace("``", "'")
+    literals and roles (````-swirl````, ``:data:`EDGE_MAX```) quoted as a terminal shows them."""
+    text = re.sub(r":\w+:`~?([^`]+)`", r"'\1'", inspect.cleandoc(preset.__doc__ or preset.summary))
+    text = text.replace("``", "'")
     return f"{intro}\n\n{text}" if intro else text
 
 

@@ -347,11 +347,13 @@ def _opencv_decode(data: bytes, name: str) -> np.ndarray:
 
 
 def pnm_maxval(data: bytes) -> int | None:
-    """The MAXVAL of a raw PGM or PPM, or of a PAM header; None for another format (and for the
-    plain P2 and P3, whose samples OpenCV scales to the full range itself)."""
-    if data[:2] in (b"P5", b"P6"):            # OpenCV scales the plain forms, P2 and P3, itself
+    """The MAXVAL of a PGM, PPM or PAM header whose samples OpenCV leaves as stored; None for
+    another format, and for a plain P2 or P3 of MAXVAL up to 255 (OpenCV scales those itself)."""
+    if data[:2] in (b"P2", b"P3", b"P5", b"P6"):
         header = re.sub(rb"#[^\n\r]*", b" ", data[2:512]).split()        # comments, then numbers
-        return int(header[2]) if len(header) > 2 and header[2].isdigit() else None
+        maxval = int(header[2]) if len(header) > 2 and header[2].isdigit() else None
+        plain = data[:2] in (b"P2", b"P3")     # OpenCV scales those itself up to 255, not beyond
+        return None if plain and maxval is not None and maxval <= 255 else maxval
     if data[:2] == b"P7":
         found = re.search(rb"\sMAXVAL\s+(\d+)", data[:1024])
         return int(found.group(1)) if found else None
@@ -416,9 +418,8 @@ def decode_image(data: bytes, name: str, max_pixels: int | None = MAX_PIXELS,
         raise ImageError(f"{name} has {scans} JPEG scans, above {MAX_JPEG_SCANS} (a progressive JPEG has about "
                          f"10; each scan costs a pass over the image): refused")
     image = _full_range(_opencv_decode(data, name), pnm_maxval(data), name)
-    if image.dtype == np.uint8 and image.ndim == 3 and image.shape[2] == 4 and \
-            tiff.extra_samples(data) in (tiff.ASSOCIATED, tiff.UNASSOCIATED):
-        image = tiff.unpremultiplied(image)          # libtiff's RGBA reading premultiplied it
+    if image.ndim == 3 and image.shape[2] == 4:
+        image = tiff.straight_alpha(image, data)     # libtiff's RGBA reading premultiplied it
     if image.dtype not in (np.uint8, np.uint16):
         raise ImageError(f"{name} has unsupported sample type {image.dtype}")
     check_pixels(image.shape[1], image.shape[0], name, max_pixels)

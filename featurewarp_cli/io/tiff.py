@@ -31,16 +31,32 @@ def first_directory(data: bytes) -> tuple[str, int, list[bytes]] | None:
     return order, first, [data[first + 2 + 12 * k:first + 14 + 12 * k] for k in range(count)]
 
 
+def _big_entries(data: bytes) -> tuple[str, list[bytes]] | None:
+    """(byte order, 20-byte entries) of a BigTIFF's first directory, or None."""
+    if data[:4] not in (b"II+\0", b"MM\0+") or len(data) < 16:
+        return None
+    order = "<" if data[:2] == b"II" else ">"
+    (first,) = struct.unpack_from(order + "Q", data, 8)
+    if first + 8 > len(data):
+        return None
+    (count,) = struct.unpack_from(order + "Q", data, first)
+    if first + 8 + 20 * count > len(data):
+        return None
+    return order, [data[first + 8 + 20 * k:first + 28 + 20 * k] for k in range(count)]
+
+
 def extra_samples(data: bytes) -> int | None:
     """The first ExtraSamples value of a TIFF's first page, or None (no such tag, not a TIFF)."""
-    found = first_directory(data)
-    if found is None:
+    found, big = first_directory(data), _big_entries(data)
+    if found is None and big is None:
         return None
-    order, _, entries = found
+    order, entries = (found[0], found[2]) if found is not None else big
+    value_at = 8 if found is not None else 12                          # where an inline value starts
     for entry in entries:
-        tag, kind, count = struct.unpack_from(order + "HHI", entry)
+        tag, kind = struct.unpack_from(order + "HH", entry)
+        count = struct.unpack_from(order + ("I" if found is not None else "Q"), entry, 4)[0]
         if tag == EXTRA_SAMPLES and kind == 3 and count >= 1:
-            return struct.unpack_from(order + "H", entry, 8)[0]      # inline: two SHORTs fit
+            return struct.unpack_from(order + "H", entry, value_at)[0]
     return None
 
 
@@ -62,11 +78,41 @@ def with_alpha_tag(data: bytes) -> bytes:
     return data[:4] + struct.pack(order + "I", start) + data[8:] + b"\0" * (start - len(data)) + directory
 
 
+def straight_alpha(image: np.ndarray, data: bytes) -> np.ndarray:
+    """OpenCV's BGRA decoding of the TIFF ``data`` with straight (unassociated) alpha: 8-bit
+    files that declare alpha were premultiplied by libtiff's RGBA reading (read again by Pillow,
+    exactly, where it gives the same size; else divided back), 16-bit ones are as stored, which
+    for associated alpha is premultiplied (divided back). Anything else: ``image`` as it is."""
+    extra = extra_samples(data)
+    if extra not in (ASSOCIATED, UNASSOCIATED) or (image.dtype == np.uint16 and extra == UNASSOCIATED):
+        return image
+    if image.dtype == np.uint8:
+        exact = _pillow_rgba(data)
+        if exact is not None and exact.shape == image.shape:
+            return exact
+    return unpremultiplied(image)
+
+
+def _pillow_rgba(data: bytes) -> np.ndarray | None:
+    """The first page as straight-alpha BGRA by Pillow, turned upright; None where it cannot."""
+    import io
+
+    from PIL import Image, ImageOps
+
+    try:
+        with Image.open(io.BytesIO(data)) as page:
+            rgba = np.asarray(ImageOps.exif_transpose(page).convert("RGBA"))
+    except Exception:  # whatever a decoder raises: the division below instead
+        return None
+    return np.ascontiguousarray(rgba[:, :, [2, 1, 0, 3]])
+
+
 def unpremultiplied(image: np.ndarray) -> np.ndarray:
-    """8-bit BGRA whose colours libtiff multiplied by their alpha, divided back (to within its
-    rounding: +-0.5 * 255 / alpha levels; where alpha is 0 the colour is gone, left 0)."""
+    """BGRA whose colours are multiplied by their alpha, divided back (to within that rounding:
+    +-0.5 * top / alpha levels; where alpha is 0 the colour is gone, left 0)."""
+    top = float(np.iinfo(image.dtype).max)
     alpha = image[:, :, 3:].astype(np.float64)
-    colour = image[:, :, :3] * np.divide(255.0, alpha, out=np.zeros_like(alpha), where=alpha > 0)
+    colour = image[:, :, :3] * np.divide(top, alpha, out=np.zeros_like(alpha), where=alpha > 0)
     out = image.copy()
-    out[:, :, :3] = np.clip(np.rint(colour), 0, 255).astype(np.uint8)
+    out[:, :, :3] = np.clip(np.rint(colour), 0, top).astype(image.dtype)
     return out
