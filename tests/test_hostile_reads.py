@@ -520,3 +520,18 @@ def test_a_16_bit_tiff_of_associated_alpha_is_read_with_straight_colours(tmp_pat
     at = next(first + 2 + 12 * k for k, e in enumerate(entries) if struct.unpack_from(order + "H", e)[0] == 338)
     struct.pack_into(order + "H", data, at + 8, tiff.ASSOCIATED)
     assert np.abs(decode_image(bytes(data), "assoc.tif").astype(int) - straight).max() <= 2
+
+
+def test_a_gray_tiff_with_alpha_keeps_its_alpha():
+    """OpenCV reads gray + alpha TIFFs as gray alone: the transparency was lost."""
+    import io
+
+    from PIL import Image
+
+    from featurewarp_cli.io.decode import decode_image
+
+    pixels = np.dstack([np.full((6, 7), 100, np.uint8), np.full((6, 7), 128, np.uint8)])
+    buffer = io.BytesIO()
+    Image.fromarray(pixels, "LA").save(buffer, "TIFF")
+    image = decode_image(buffer.getvalue(), "la.tif")
+    assert image.shape == (6, 7, 4) and np.all(image[0, 0] == (100, 100, 100, 128))

@@ -418,8 +418,7 @@ def decode_image(data: bytes, name: str, max_pixels: int | None = MAX_PIXELS,
         raise ImageError(f"{name} has {scans} JPEG scans, above {MAX_JPEG_SCANS} (a progressive JPEG has about "
                          f"10; each scan costs a pass over the image): refused")
     image = _full_range(_opencv_decode(data, name), pnm_maxval(data), name)
-    if image.ndim == 3 and image.shape[2] == 4:
-        image = tiff.straight_alpha(image, data)     # libtiff's RGBA reading premultiplied it
+    image = tiff.straight_alpha(image, data, name)   # what OpenCV's TIFF reading does to alpha
     if image.dtype not in (np.uint8, np.uint16):
         raise ImageError(f"{name} has unsupported sample type {image.dtype}")
     check_pixels(image.shape[1], image.shape[0], name, max_pixels)

@@ -12,6 +12,8 @@ import struct
 
 import numpy as np
 
+from . import ImageError
+
 #: ExtraSamples, and its values: associated (premultiplied) and unassociated alpha.
 EXTRA_SAMPLES, ASSOCIATED, UNASSOCIATED = 338, 1, 2
 
@@ -78,13 +80,22 @@ def with_alpha_tag(data: bytes) -> bytes:
     return data[:4] + struct.pack(order + "I", start) + data[8:] + b"\0" * (start - len(data)) + directory
 
 
-def straight_alpha(image: np.ndarray, data: bytes) -> np.ndarray:
-    """OpenCV's BGRA decoding of the TIFF ``data`` with straight (unassociated) alpha: 8-bit
+def straight_alpha(image: np.ndarray, data: bytes, name: str) -> np.ndarray:
+    """OpenCV's decoding of the TIFF ``data`` with its alpha, straight (unassociated): 8-bit
     files that declare alpha were premultiplied by libtiff's RGBA reading (read again by Pillow,
     exactly, where it gives the same size; else divided back), 16-bit ones are as stored, which
-    for associated alpha is premultiplied (divided back). Anything else: ``image`` as it is."""
+    for associated alpha is premultiplied (divided back); gray + alpha, whose alpha OpenCV drops
+    (and its depth), is read by Pillow at 8 bits and refused at 16. Else ``image`` as it is."""
     extra = extra_samples(data)
-    if extra not in (ASSOCIATED, UNASSOCIATED) or (image.dtype == np.uint16 and extra == UNASSOCIATED):
+    if extra not in (ASSOCIATED, UNASSOCIATED):
+        return image
+    if image.ndim == 2 or image.shape[2] < 4:
+        exact = _pillow_rgba(data)
+        if exact is None:
+            raise ImageError(f"{name} is gray with alpha that featurewarp cannot read without losing the "
+                             f"alpha and the depth (16 bits): convert it to RGBA first")
+        return exact
+    if image.dtype == np.uint16 and extra == UNASSOCIATED:
         return image
     if image.dtype == np.uint8:
         exact = _pillow_rgba(data)
