@@ -535,3 +535,22 @@ def test_a_gray_tiff_with_alpha_keeps_its_alpha():
     Image.fromarray(pixels, "LA").save(buffer, "TIFF")
     image = decode_image(buffer.getvalue(), "la.tif")
     assert image.shape == (6, 7, 4) and np.all(image[0, 0] == (100, 100, 100, 128))
+
+
+def test_pillows_own_log_lines_on_a_hostile_header_stay_off_stderr(tmp_path):
+    """A TIFF claiming 9 999 samples a pixel made Pillow log "More samples per pixel than can be
+    decoded" five times on stderr before our one line."""
+    import io
+    import struct
+
+    from PIL import Image
+
+    buffer = io.BytesIO()
+    Image.fromarray(np.zeros((4, 4, 3), np.uint8)).save(buffer, "TIFF")
+    data = bytearray(buffer.getvalue())
+    first = struct.unpack_from("<I", data, 4)[0]
+    for k in range(struct.unpack_from("<H", data, first)[0]):
+        if struct.unpack_from("<H", data, first + 2 + 12 * k)[0] == 277:          # SamplesPerPixel
+            struct.pack_into("<H", data, first + 2 + 12 * k + 8, 9999)
+    one_line(run("warp", "swirl", save_bytes(tmp_path / "spp.tif", bytes(data)), tmp_path / "o.png"), 1,
+             "cannot be decoded")

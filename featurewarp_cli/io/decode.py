@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import importlib
 import io
+import logging
 import os
 import re
 import sys
@@ -37,6 +38,9 @@ from PIL import Image  # noqa: E402
 # Silence OpenCV's own log (level 0); before 4.13 the call is cv2.setLogLevel.
 _LOGGING = getattr(cv2.utils, "logging", cv2)
 _LOGGING.setLogLevel(0)
+# Pillow logs what it makes of hostile headers ("More samples per pixel than can be decoded"):
+# without a handler Python prints it on stderr, beside our one line; the error that follows says it.
+logging.getLogger("PIL").addHandler(logging.NullHandler())
 #: Scans (SOS markers, which entropy-coded data cannot contain) a JPEG may have: each costs a pass
 #: over the image, so 10 000 of them in 376 KB took 13 s at 4 MP (libjpeg-turbo's advice: 500).
 MAX_JPEG_SCANS = 500
