@@ -516,7 +516,7 @@ def test_a_16_bit_tiff_of_associated_alpha_is_read_with_straight_colours(tmp_pat
     stored = straight.copy()
     stored[..., :3] = np.rint(straight[..., :3] * (32768 / 65535)).astype(np.uint16)
     data = bytearray(encode_image(stored, "tiff"))            # ExtraSamples 2: make it 1 (associated)
-    order, first, entries = tiff.first_directory(bytes(data))
+    order, first, entries, _ = tiff.first_directory(bytes(data))
     at = next(first + 2 + 12 * k for k, e in enumerate(entries) if struct.unpack_from(order + "H", e)[0] == 338)
     struct.pack_into(order + "H", data, at + 8, tiff.ASSOCIATED)
     assert np.abs(decode_image(bytes(data), "assoc.tif").astype(int) - straight).max() <= 2

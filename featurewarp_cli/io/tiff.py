@@ -18,47 +18,35 @@ from . import ImageError
 EXTRA_SAMPLES, ASSOCIATED, UNASSOCIATED = 338, 1, 2
 
 
-def first_directory(data: bytes) -> tuple[str, int, list[bytes]] | None:
-    """(byte order, offset, 12-byte entries) of a classic TIFF's first directory; None for
-    other data, a BigTIFF, or a directory beyond the data."""
-    if data[:4] not in (b"II*\0", b"MM\0*") or len(data) < 8:
+def first_directory(data: bytes) -> tuple[str, int, list[bytes], bool] | None:
+    """(byte order, offset, entries, big) of the first directory of a TIFF (12-byte entries) or a
+    BigTIFF (``big``: 20-byte entries); None for other data or a directory beyond the data."""
+    big = data[:4] in (b"II+\0", b"MM\0+")
+    if not (big or data[:4] in (b"II*\0", b"MM\0*")) or len(data) < 16:
         return None
     order = "<" if data[:2] == b"II" else ">"
-    (first,) = struct.unpack_from(order + "I", data, 4)
-    if first + 2 > len(data):
+    offset, count, size = ("Q", "Q", 20) if big else ("I", "H", 12)
+    (first,) = struct.unpack_from(order + offset, data, 8 if big else 4)
+    start = first + struct.calcsize(count)
+    if start > len(data):
         return None
-    (count,) = struct.unpack_from(order + "H", data, first)
-    if first + 6 + 12 * count > len(data):
+    (entries,) = struct.unpack_from(order + count, data, first)
+    if start + size * entries + struct.calcsize(offset) > len(data):
         return None
-    return order, first, [data[first + 2 + 12 * k:first + 14 + 12 * k] for k in range(count)]
-
-
-def _big_entries(data: bytes) -> tuple[str, list[bytes]] | None:
-    """(byte order, 20-byte entries) of a BigTIFF's first directory, or None."""
-    if data[:4] not in (b"II+\0", b"MM\0+") or len(data) < 16:
-        return None
-    order = "<" if data[:2] == b"II" else ">"
-    (first,) = struct.unpack_from(order + "Q", data, 8)
-    if first + 8 > len(data):
-        return None
-    (count,) = struct.unpack_from(order + "Q", data, first)
-    if first + 8 + 20 * count > len(data):
-        return None
-    return order, [data[first + 8 + 20 * k:first + 28 + 20 * k] for k in range(count)]
+    return order, first, [data[start + size * k:start + size * (k + 1)] for k in range(entries)], big
 
 
 def extra_samples(data: bytes) -> int | None:
     """The first ExtraSamples value of a TIFF's first page, or None (no such tag, not a TIFF)."""
-    found, big = first_directory(data), _big_entries(data)
-    if found is None and big is None:
+    found = first_directory(data)
+    if found is None:
         return None
-    order, entries = (found[0], found[2]) if found is not None else big
-    value_at = 8 if found is not None else 12                          # where an inline value starts
+    order, _, entries, big = found
     for entry in entries:
         tag, kind = struct.unpack_from(order + "HH", entry)
-        count = struct.unpack_from(order + ("I" if found is not None else "Q"), entry, 4)[0]
+        (count,) = struct.unpack_from(order + ("Q" if big else "I"), entry, 4)
         if tag == EXTRA_SAMPLES and kind == 3 and count >= 1:
-            return struct.unpack_from(order + "H", entry, value_at)[0]
+            return struct.unpack_from(order + "H", entry, 12 if big else 8)[0]   # inline, left-justified
     return None
 
 
@@ -67,9 +55,9 @@ def with_alpha_tag(data: bytes) -> bytes:
     alpha. The first directory is written again at the end with the tag, and the header points
     at it; nothing else moves (the old directory stays, unreferenced)."""
     found = first_directory(data)
-    if found is None:
+    if found is None or found[3]:                                     # OpenCV writes no BigTIFF
         return data
-    order, first, entries = found
+    order, first, entries, _ = found
     if any(struct.unpack_from(order + "H", entry)[0] == EXTRA_SAMPLES for entry in entries):
         return data
     entries = sorted(entries + [struct.pack(order + "HHIHH", EXTRA_SAMPLES, 3, 1, UNASSOCIATED, 0)],
