@@ -78,6 +78,14 @@ def test_node_budget_counts_the_images():
         FeatureWarper(4000, 3000, cell=1, max_nodes=100_000)
 
 
+def test_a_size_above_a_limit_never_reads_as_the_limit():
+    mib = 1 << 20
+    assert limits.size_text(37 * mib) == "37 MiB" and limits.size_text(900) == "900 bytes"
+    assert limits.size_text(10 * mib + 5000, 10 * mib) == "10.005 MiB"
+    assert limits.size_text(10 * mib + 1, 10 * mib) != limits.size_text(10 * mib)
+    assert limits.size_text(37 * mib, 10 * mib) == "37 MiB"
+
+
 def test_a_budget_refuses_the_automatic_grid_but_never_coarsens_it():
     """The memory budget only refuses: within it the grid (and so every pixel) is the same as
     without one; above it the solve is refused, not done on a coarser grid (issue 21: a

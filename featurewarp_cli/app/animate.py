@@ -81,7 +81,8 @@ def check_frames_fit(settings: Settings, frames: int, canvas: tuple[int, int]) -
 
     need = frames * canvas[0] * canvas[1] * FRAME_PIXEL_BYTES
     if settings.max_memory is not None and need > settings.max_memory:
-        raise WarpError(f"{frames} frames of {canvas[0]}x{canvas[1]} need about {size_text(need)}, above the "
+        need_text = size_text(need, settings.max_memory)
+        raise WarpError(f"{frames} frames of {canvas[0]}x{canvas[1]} need about {need_text}, above the "
                         f"memory limit of {size_text(settings.max_memory)} (--max-memory): fewer --frames, "
                         f"or a smaller image")
 

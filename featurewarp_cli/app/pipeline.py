@@ -182,7 +182,7 @@ def check_file_size(path: str, param: str, max_memory: int | None, max_pixels: i
     except OSError:
         return                                               # reading it says what is wrong
     if max_memory is not None and size > max_memory:
-        raise WarpError(f"{path} is {limits.size_text(size)}, above the memory limit of "
+        raise WarpError(f"{path} is {limits.size_text(size, max_memory)}, above the memory limit of "
                         f"{limits.size_text(max_memory)} (--max-memory)")
     if header is not None:
         try:

@@ -60,7 +60,7 @@ def _fetch(settings, job, copies: dict) -> str | None:
                     return f"{url} does not exist"
                 continue
             if settings.max_memory is not None and urls.size(url) > settings.max_memory:
-                return (f"{url} is {size_text(urls.size(url))}, above the memory limit of "
+                return (f"{url} is {size_text(urls.size(url), settings.max_memory)}, above the memory limit of "
                         f"{size_text(settings.max_memory)} (--max-memory)")
             with open(copies[url], "wb") as file:
                 file.write(urls.read(url))

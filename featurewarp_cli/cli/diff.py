@@ -102,6 +102,6 @@ def _read_within_budget(path: str, name: str):
     header = decode.read_header(data)
     if header is not None and header.width * header.height * DIFF_PIXEL_BYTES > limits.MAX_MEMORY:
         raise WarpError(f"{path} is {header.width}x{header.height}: comparing it needs about "
-                        f"{limits.size_text(header.width * header.height * DIFF_PIXEL_BYTES)}, above the "
-                        f"memory limit of {limits.size_text(limits.MAX_MEMORY)}")
+                        f"{limits.size_text(header.width * header.height * DIFF_PIXEL_BYTES, limits.MAX_MEMORY)}, "
+                        f"above the memory limit of {limits.size_text(limits.MAX_MEMORY)}")
     return read_input(path, name, limits.MAX_PIXELS, data)

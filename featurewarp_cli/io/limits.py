@@ -64,12 +64,20 @@ def parse_size(text: str) -> int:
     return int(number)
 
 
-def size_text(size: int) -> str:
-    """``size`` bytes for a message: ``1.5 GiB``, ``37 MiB``, ``900 bytes``."""
-    for unit, shift in (("GiB", 30), ("MiB", 20), ("KiB", 10)):
-        if size >= 1 << shift:
-            return f"{size / (1 << shift):.3g} {unit}"
-    return f"{size} bytes"
+def size_text(size: int, apart_from: int | None = None) -> str:
+    """``size`` bytes for a message: ``1.5 GiB``, ``37 MiB``, ``900 bytes``; with more digits
+    where three would read the same as ``apart_from`` (a limit it is compared with: "10.02 MiB,
+    above the limit of 10 MiB", not "10 MiB, above the limit of 10 MiB")."""
+    def text(value: int, digits: int) -> str:
+        for unit, shift in (("GiB", 30), ("MiB", 20), ("KiB", 10)):
+            if value >= 1 << shift:
+                return f"{value / (1 << shift):.{digits}g} {unit}"
+        return f"{value} bytes"
+    digits = 3
+    while apart_from is not None and size != apart_from and digits < 12 and \
+            text(size, digits) == text(apart_from, digits):
+        digits += 1
+    return text(size, digits)
 
 
 def node_budget(width: int, height: int, canvas: tuple[int, int], max_memory: int | None) -> int | None:
@@ -82,7 +90,8 @@ def node_budget(width: int, height: int, canvas: tuple[int, int], max_memory: in
     images = image_bytes(width, height) + canvas[0] * canvas[1] * OUTPUT_PIXEL_BYTES
     if images >= max_memory:
         raise ImageError(f"a {width}x{height} input warped onto a {canvas[0]}x{canvas[1]} canvas needs about "
-                         f"{size_text(images)}, above the memory limit of {size_text(max_memory)} (--max-memory)")
+                         f"{size_text(images, max_memory)}, above the memory limit of {size_text(max_memory)} "
+                         "(--max-memory)")
     return int((max_memory - images) // NODE_BYTES)
 
 
@@ -98,7 +107,7 @@ def check_memory(width: int, height: int, name: str, max_memory: int | None) -> 
     14 000 pixels was decoded (3.3 GB) before the memory limit refused it."""
     if max_memory is not None and image_bytes(width, height) >= max_memory:
         raise ImageError(f"{name} is {width}x{height}: decoding and warping it needs about "
-                         f"{size_text(image_bytes(width, height))}, above the memory limit of "
+                         f"{size_text(image_bytes(width, height), max_memory)}, above the memory limit of "
                          f"{size_text(max_memory)} (--max-memory)")
 
 
