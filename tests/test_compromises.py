@@ -267,6 +267,23 @@ def test_a_cameras_mpo_jpeg_is_one_photo_not_several_frames(tmp_path):
     assert run.exit_code == 0 and "several frames" in run.output
 
 
+@pytest.mark.parametrize("command", [["compare", "stretch"], ["animate", "stretch"]])
+def test_compare_and_animate_say_an_input_has_several_frames_and_strict_refuses_it(tmp_path, command):
+    """``warp`` said the first frame of an animated input was used; ``compare`` and ``animate``
+    used it silently, and their ``--strict`` wrote the file."""
+    from PIL import Image
+
+    frames = [Image.fromarray(np.full((60, 80, 3), value, np.uint8)) for value in (40, 200)]
+    frames[0].save(tmp_path / "anim.gif", save_all=True, append_images=frames[1:])
+    extra = ["--vary", "sx=1:1.5", "--frames", "2"] if command[0] == "animate" else ["--sx", "1.5"]
+    out = tmp_path / ("o.gif" if command[0] == "animate" else "o.png")
+    run = CliRunner().invoke(cli, command + [str(tmp_path / "anim.gif"), str(out)] + extra)
+    assert run.exit_code == 0 and "several frames" in run.output, run.output
+    out.unlink()
+    run = CliRunner().invoke(cli, command + [str(tmp_path / "anim.gif"), str(out), "--strict"] + extra)
+    assert run.exit_code == 1 and "several frames" in run.output and not out.exists(), run.output
+
+
 def test_a_feature_is_named_by_where_it_is_as_well_as_by_its_number():
     """Warnings said "feature 0" and the report's components had no position: which region a
     warning was about could not be told. Each component's ``at`` is the mean source position of

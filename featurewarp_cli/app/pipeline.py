@@ -166,10 +166,25 @@ def load_image_and_mask(settings: Settings, input: str, mask: str | None, data: 
     """
     use_mask = mask is not None and settings.mode != "plain"
     _check_paths(input, mask if use_mask else None)
+    if data is None and (input == "-" or os.path.isfile(input)):
+        if input != "-":
+            check_file_size(input, "INPUT", settings.max_memory, settings.max_pixels)
+        try:
+            data = decode.read_bytes(input, settings.max_memory)
+        except ImageError as err:
+            raise WarpError(str(err)) from err
     image = read_input(input, "INPUT", settings.max_pixels, data, settings.max_memory)
     height, width = image.shape[:2]
     feature_mask, warnings = _load_mask(settings, mask, (width, height)) if use_mask else (None, [])
-    return image, feature_mask, warnings
+    return image, feature_mask, frames_warning(decode.read_header(data) if data else None) + warnings
+
+
+def frames_warning(header) -> list[str]:
+    """The warning for an input of several frames, of which the first is used ([] for one frame;
+    a camera's MPO JPEG, the photo and its previews, is one)."""
+    if header is None or not header.animated or header.format == "MPO":
+        return []
+    return ["the input has several frames (animated or multi-page); the first is used"]
 
 
 def check_file_size(path: str, param: str, max_memory: int | None, max_pixels: int | None) -> None:
@@ -290,8 +305,7 @@ def start_loading(settings: Settings, input: str, mask: str | None, data: bytes 
         return _Ready(image, header), feature_mask, warnings, (image.shape[1], image.shape[0])
     size = header.upright_size
     feature_mask = None
-    several = header.animated and header.format != "MPO"     # a camera's JPEG: the photo, then previews
-    warnings = ["the input has several frames (animated or multi-page); the first is used"] if several else []
+    warnings = frames_warning(header)
     if use_mask:
         try:
             feature_mask, mask_warnings = _load_mask(settings, mask, size)
