@@ -111,6 +111,36 @@ def test_two_inputs_writing_the_same_output(runner, tmp_path):
     assert run.code == 2 and "would both write" in run.stderr and names(tmp_path / "out") == []
 
 
+def test_a_batch_never_replaces_a_file_it_reads_nor_its_summary(runner, photos, tmp_path):
+    """``--summary`` naming an input or a mask overwrote it with JSON; an --out-dir that is the
+    input's folder replaced the originals (and ``--resume`` then warped the warp again)."""
+    before = {name: (photos / name).read_bytes() for name in names(photos)}
+    for summary in (photos / "a.png", photos / "a_mask.png", tmp_path / "out" / "a.png"):
+        run = runner("batch", "swirl", photos / "a.png", "-o", tmp_path / "out", "--summary", summary)
+        assert run.code == 2 and "--summary" in run.stderr and "overwritten" in run.stderr, run.stderr
+    run = runner("batch", "swirl", photos / "a.png", "-o", photos)
+    assert run.code == 2 and "replacing its own input" in run.stderr, run.stderr
+    assert {name: (photos / name).read_bytes() for name in names(photos)} == before
+    assert names(tmp_path / "out") == []
+    run = runner("batch", "swirl", photos / "a.png", "-o", photos, "--suffix", "_sw")
+    assert run.code == 0 and "a_sw.png" in names(photos)
+
+
+def test_files_named_as_masks_and_inputs_listed_twice(runner, photos, tmp_path):
+    """A folder's other masks (``x_body_mask.png``) failed a ``photos/*.png`` batch as photos
+    without masks; an input given twice was refused with advice (--suffix) that cannot help."""
+    save(photos / "a_body_mask.png", np.zeros((40, 60), np.uint8))
+    run = runner("batch", "swirl", *sorted(photos.iterdir()), photos / "a.png", "-o", tmp_path / "out")
+    assert run.code == 0, run.stderr
+    assert names(tmp_path / "out") == ["a.png", "b.png", "c.jpg"]
+    for sub in ("x", "y"):
+        (tmp_path / sub).mkdir()
+        save(tmp_path / sub / "d.png", textured())
+    run = runner("batch", "swirl", tmp_path / "x" / "d.png", tmp_path / "y" / "d.png", "-o", tmp_path / "new",
+                 "--suffix", "_s", "--mode", "plain")
+    assert run.code == 2 and "rename one" in run.stderr and not (tmp_path / "new").exists(), run.stderr
+
+
 def test_jobs_give_byte_identical_files(photos, tmp_path):
     """Every output format, serial in this process against two spawned worker processes."""
     settings = batch.Settings("bulge", {"strength": 0.8}, background="#204060")

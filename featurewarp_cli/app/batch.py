@@ -10,6 +10,7 @@ be fsspec URLs (:mod:`featurewarp_cli.io.urls`; jobs with one run through
 from __future__ import annotations
 
 import os
+import re
 import time
 from dataclasses import dataclass, replace
 
@@ -29,8 +30,10 @@ class Job:
 
 
 def plan(inputs, out_dir: str, suffix: str = "", fmt: str | None = None,
-         mask_pattern: str | None = "{stem}_mask.png") -> list[Job]:
-    """The jobs of a batch: one per input, minus inputs that are another input's mask.
+         mask_pattern: str | None = "{stem}_mask.png", summary: str | None = None) -> list[Job]:
+    """The jobs of a batch: one per input (an input listed twice once), minus inputs that are
+    another input's mask or are named as masks by ``mask_pattern`` (the default skips every
+    ``*_mask.png``).
 
     Parameters
     ----------
@@ -44,12 +47,15 @@ def plan(inputs, out_dir: str, suffix: str = "", fmt: str | None = None,
     mask_pattern : str or None
         Mask file name with ``{stem}`` (the input's name without extension),
         relative to the input's folder unless absolute. None: no masks.
+    summary : str, optional
+        The ``--summary`` file: it may not be an input, a mask or an output.
 
     Raises
     ------
     WarpError
         An output folder that cannot be created or written, a pattern that does not
-        format, or two inputs that would write the same output.
+        format, two inputs that would write the same output, an output that would replace
+        a file the batch reads (its own input too), or a summary that would.
     """
     def mask_of(path):
         if mask_pattern is None:
@@ -64,30 +70,51 @@ def plan(inputs, out_dir: str, suffix: str = "", fmt: str | None = None,
             return _located(urls.join(urls.dirname(path), name), "--mask-pattern")
         return _located(os.path.join(os.path.dirname(path), name), "--mask-pattern")
 
-    inputs = [p for path in inputs for p in _expanded(path)]
+    inputs = list({_identity(p): p for path in inputs for p in _expanded(path)}.values())
     out_dir = _located(out_dir, "--out-dir")
-    _create(out_dir)
     masks = {_identity(mask_of(p)) for p in inputs} if mask_pattern else set()
+    named_as_mask = _mask_names(mask_pattern)
     jobs, seen = [], {}
     for path in inputs:
-        if _identity(path) in masks:
+        if _identity(path) in masks or (named_as_mask and named_as_mask.fullmatch(os.path.basename(path))):
             continue
         stem, ext = os.path.splitext(os.path.basename(path))
         name = stem + suffix + ("." + fmt if fmt else ext)
         output = urls.join(out_dir, name) if urls.is_url(out_dir) else os.path.join(out_dir, name)
         key = _identity(output)
         if key in seen:
-            raise WarpError(f"{seen[key]} and {path} would both write {output}; use --suffix or "
-                            "separate batches", usage=True)
+            raise WarpError(f"{seen[key]} and {path} would both write {output} (a --suffix is added to "
+                            "both); rename one, or run them in separate batches", usage=True)
         seen[key] = path
         jobs.append(Job(path, output, mask_of(path)))
     read = {_identity(p): p for job in jobs for p in (job.input, job.mask) if p}
     for job in jobs:
         clash = read.get(_identity(job.output))
-        if clash is not None and clash != job.input:
-            raise WarpError(f"{job.input} would be written to {job.output}, which this batch also reads "
-                            f"({clash}); use another --out-dir or --suffix", usage=True)
+        if clash is not None:
+            what = "its own input" if clash == job.input else f"a file this batch also reads ({clash})"
+            raise WarpError(f"{job.input} would be written to {job.output}, replacing {what}; use another "
+                            "--out-dir or a --suffix", usage=True)
+    if summary is not None and summary != "-":
+        key = _identity(summary)
+        role = "read by" if key in read else "an output of" if key in seen else None
+        if role is not None:
+            raise WarpError(f"{summary} is also {role} this batch; it would be overwritten", "--summary",
+                            usage=True)
+    _create(out_dir)
     return jobs
+
+
+def _mask_names(mask_pattern: str | None):
+    """A regular expression for file names ``mask_pattern`` gives to masks (any stem), or None:
+    for a pattern without a folder that adds more than an extension to the stem."""
+    if not mask_pattern or "/" in mask_pattern or os.sep in mask_pattern or "{stem}" not in mask_pattern:
+        return None
+    if not os.path.splitext(mask_pattern.replace("{stem}", ""))[0]:
+        return None                                  # "{stem}.png": every PNG would match
+    before, _, after = mask_pattern.partition("{stem}")
+    if "{" in after or "}" in after:
+        return None
+    return re.compile(re.escape(before) + ".+" + re.escape(after))
 
 
 def _located(path: str, param: str | None = "INPUT") -> str:

@@ -175,7 +175,8 @@ def batch_command(preset) -> click.Command:
                            help="Mask file of each input; {stem} is the input's name without "
                                 "extension; relative to the input's folder unless absolute. "
                                 "A missing mask fails that file. Inputs that are another "
-                                "input's mask are skipped, so 'photos/*.png' works."),
+                                "input's mask, or are named as masks by PATTERN (by default any "
+                                "*_mask.png), are skipped, so 'photos/*.png' works."),
               click.Option(["--suffix"], default="", metavar="S",
                            help="Appended to each output's stem: DIR/{stem}S.{ext}."),
               param_option(JOBS, "-j", "--jobs"),
@@ -202,7 +203,8 @@ def batch_command(preset) -> click.Command:
             from ..io.formats import format_name
 
             fmt = format_name(settings.fmt) if settings.fmt else None
-            todo = plan(inputs, out_dir, suffix, fmt, None if settings.mode == "plain" else mask_pattern)
+            todo = plan(inputs, out_dir, suffix, fmt, None if settings.mode == "plain" else mask_pattern,
+                        summary)
             failed = run_planned(settings, todo, jobs, scheduler, summary, resume, quiet, verbose)
         except WarpError as err:
             raise click_error(err) from err
