@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -78,7 +79,11 @@ def test_incomparable_images(runner, tmp_path, other, reason):
     run = runner("diff", save(tmp_path / "a.png", textured()), save(tmp_path / "b.png", other),
                  "--max-rmse", "1000", "--diff-image", tmp_path / "d.png")
     assert run.code == 1 and len(run.lines) == 1 and reason in run.stderr and run.stdout == b""
-    assert not (tmp_path / "d.png").exists()
+    assert not (tmp_path / "d.png").exists() and "d.png not written" in run.stderr
+    run = runner("diff", tmp_path / "a.png", tmp_path / "b.png", "--json")     # CI parses the failure too
+    figures = json.loads(run.stdout)
+    assert run.code == 1 and figures["within"] is False and figures["rmse"] is None
+    assert figures["failures"] == [f"cannot be compared: {reason}"]
 
 
 def test_diff_image(runner, pair, tmp_path):

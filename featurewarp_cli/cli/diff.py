@@ -22,7 +22,8 @@ from .presets import click_error
 @click.option("-q", "--quiet", is_flag=True, help="Print no metrics; only the exit status tells.")
 @click.option("--json", "as_json", is_flag=True,
               help="Print the metrics as one JSON object (rmse, psnr: null when identical, max_abs, "
-                   "pixels_off, pixels, tolerance, within, failures) instead of text.")
+                   "pixels_off, pixels, tolerance, within, failures) instead of text; images that "
+                   "cannot be compared (sizes or channel counts) give null figures and the reason.")
 def diff_command(a, b, max_rmse, min_psnr, max_pixels_off, tolerance, diff_image, quiet, as_json):
     """Compare images A and B (e.g. an output with its golden file).
 
@@ -57,7 +58,10 @@ def diff_command(a, b, max_rmse, min_psnr, max_pixels_off, tolerance, diff_image
         raise click_error(err) from err
     reason = diff.mismatch(first, second)
     if reason:
-        raise click.ClickException(f"{a} and {b} cannot be compared: {reason}")
+        if as_json and not quiet:         # a CI job parses the failure as it parses any other
+            click.echo(_as_json(a, b, None, [f"cannot be compared: {reason}"], tolerance))
+        unwritten = f"; {diff_image} not written" if diff_image else ""
+        raise click.ClickException(f"{a} and {b} cannot be compared: {reason}{unwritten}")
     result = diff.compare(first, second, tolerance)
     broken = diff.failures(result, max_rmse, min_psnr, max_pixels_off)
     if as_json and not quiet:
@@ -73,14 +77,20 @@ def diff_command(a, b, max_rmse, min_psnr, max_pixels_off, tolerance, diff_image
         raise click.ClickException(f"{a} and {b} differ beyond tolerance: {'; '.join(broken)}")
 
 
-def _as_json(a: str, b: str, result, broken: list[str]) -> str:
-    """The metrics as one JSON line (infinite PSNR, identical images, as null)."""
+def _as_json(a: str, b: str, result, broken: list[str], tolerance: float | None = None) -> str:
+    """The metrics as one JSON line (infinite PSNR, identical images, as null); ``result`` None:
+    images that cannot be compared, every figure null and ``broken`` saying why."""
     import json
     import math
 
-    return json.dumps({"a": a, "b": b, "rmse": result.rmse, "psnr": result.psnr if math.isfinite(result.psnr) else None,
-                       "max_abs": result.max_abs, "pixels_off": result.pixels_off, "pixels": result.pixels,
-                       "tolerance": result.tolerance, "within": not broken, "failures": broken})
+    if result is None:
+        figures = dict.fromkeys(("rmse", "psnr", "max_abs", "pixels_off", "pixels"), None)
+        figures["tolerance"] = tolerance
+    else:
+        figures = {"rmse": result.rmse, "psnr": result.psnr if math.isfinite(result.psnr) else None,
+                   "max_abs": result.max_abs, "pixels_off": result.pixels_off, "pixels": result.pixels,
+                   "tolerance": result.tolerance}
+    return json.dumps({"a": a, "b": b, **figures, "within": not broken, "failures": broken})
 
 
 #: Peak bytes per pixel of a diff (both images as read, their float differences, the
