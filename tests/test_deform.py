@@ -328,6 +328,23 @@ def test_an_angle_turns_the_pin_and_needs_version_2():
     assert np.isnan(old.angles).all() and "angle" in old.notes[0] and old.as_dict()["version"] == 1
 
 
+def test_a_misspelt_key_inside_a_handle_is_noted_and_errors_say_what_is_missing():
+    """``"angel": 30`` in a point dropped its rotation silently; a file without a version said
+    "version: None"; no handles at all said "one handle alone"."""
+    pins = [{"from": [40, 40], "to": [40, 40]}, {"from": [460, 320], "to": [460, 320]}]
+    typo = Handles.from_dict({"version": 2, "points": pins + [{"from": [250, 180], "to": [250, 180], "angel": 30}],
+                              "curves": [{"from": [[1, 2], [30, 4]], "to": [[1, 2], [30, 4]], "weight": 2}]}, W, H)
+    assert typo.notes == ["handles: ignoring points[2].angel (unknown to version 2)",
+                          "handles: ignoring curves[0].weight (unknown to version 2)"]
+    assert Handles.from_dict({"version": 2, "points": pins}, W, H).notes == []
+    with pytest.raises(ValueError, match=r'^version: missing; this featurewarp reads versions 1, 2 \("version": 2\)$'):
+        Handles.from_dict({}, W, H)
+    with pytest.raises(ValueError, match=r'^version: "2"; '):
+        Handles.from_dict({"version": "2"}, W, H)
+    with pytest.raises(ValueError, match="^points: none are given; at least two handles are needed"):
+        Handles.from_dict({"version": 1, "points": []}, W, H)
+
+
 def test_a_curve_that_a_feature_holds_off_target_warns():
     """Issue 23: a curve across a feature, dragged against a pinned border, warns as a point
     handle does, and the report gets how far it ended."""

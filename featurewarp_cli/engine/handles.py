@@ -102,10 +102,12 @@ class Handles:
             raise ValueError("the handles file must hold a JSON object ({\"version\": 1, \"points\": [...]})")
         version = data.get("version")
         if not (type(version) is int and version in VERSIONS):      # which schema applies, before it does
-            raise ValueError(f"version: {version!r}; this featurewarp reads versions "
-                             f"{', '.join(map(str, VERSIONS))}")
+            given = "missing" if "version" not in data else json.dumps(version)
+            raise ValueError(f"version: {given}; this featurewarp reads versions "
+                             f"{', '.join(map(str, VERSIONS))} (\"version\": {VERSION})")
         _check_shape(data)
         notes = [f"handles: ignoring the key {key!r} (unknown to version {version})" for key in data if key not in KEYS]
+        notes += _unknown_keys(data, version)
         points = data.get("points", [])
         angles = _angles(points, version, notes)
         sources = _points([p["from"] for p in points], "points[{}].from")
@@ -141,8 +143,9 @@ class Handles:
         held = len(np.unique(np.round(self.points_from, 6), axis=0)) + 2 * len(self.curves)
         held += 4 if self.border == "pinned" else 2 * len(self.border) if isinstance(self.border, dict) else 0
         if held < 2:
-            raise ValueError("at least two handles are needed (a pin counts, or a curve, or the border): "
-                             "one handle alone leaves the rotation and scale free")
+            given = "none are given" if held == 0 else "one handle alone leaves the rotation and scale free"
+            raise ValueError(f"points: {given}; at least two handles are needed (a pin counts, or a curve, "
+                             "or the border)")
 
     def as_dict(self) -> dict:
         """The JSON-ready handles file (version 1 unless a point has an ``angle``)."""
@@ -252,6 +255,21 @@ def _finite(value) -> bool:
 
 def _plain(point) -> list:
     return [float(point[0]), float(point[1])]
+
+
+#: The keys of a point handle and of a curve, by version.
+ITEM_KEYS = {"points": {1: ("from", "to"), 2: ("from", "to", "angle")}, "curves": {1: ("from", "to"), 2: ("from", "to")}}
+
+
+def _unknown_keys(data: dict, version: int) -> list[str]:
+    """Notes for the keys of point handles and curves this version does not read (a misspelt
+    ``"angel"`` would otherwise drop a rotation silently); a version-1 ``angle`` has its own."""
+    notes = []
+    for group, keys in ITEM_KEYS.items():
+        for k, item in enumerate(data.get(group, [])):
+            notes += [f"handles: ignoring {group}[{k}].{key} (unknown to version {version})"
+                      for key in item if key not in ITEM_KEYS[group][2] and key not in keys[version]]
+    return notes
 
 
 def _angles(points: list, version: int, notes: list) -> np.ndarray:
