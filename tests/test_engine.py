@@ -220,6 +220,17 @@ def test_factorization_is_reused_by_stretch(small_scene, formulation):
     assert solve_all(warper, solves, w, h)[1] == [2, 2, 2]
 
 
+def test_the_record_says_the_border_conditions_used(small_scene):
+    """The report's ``boundary`` said "slide" for a swirl, whose border nothing can slide along
+    (W leaves it in place): it is "fixed" there, "slide" where a side slides."""
+    _, mask = small_scene
+    h, w = mask.shape
+    warper = FeatureWarper(w, h, mask)
+    assert warper.solve(load_warp("swirl")(w, h, angle=90)).record.boundary == "fixed"
+    assert warper.solve(load_warp("stretch")(w, h, sx=2)).record.boundary == "slide"
+    assert FeatureWarper(w, h, mask, boundary="fixed").solve(load_warp("stretch")(w, h, sx=2)).record.boundary == "fixed"
+
+
 @pytest.mark.parametrize("formulation", FORMULATIONS)
 def test_factorization_is_reused_across_presets_and_parameters(small_scene, formulation):
     """With one grid and one border rule, every preset and parameter shares one factorization.

@@ -325,6 +325,8 @@ class FeatureWarper:
         state = self._state(grid, warped, boundary)
         self.timings["grid"] = time.perf_counter() - t0
         produced = "plain" if state.features.n_components == 0 else mode      # what the output is
+        if boundary == "slide" and (state.fixed_x & state.fixed_y).sum() == grid.boundary().sum():
+            boundary = "fixed"                  # no side W keeps straight: the border conditions used
         record = SolveRecord(produced, self.formulation, "release" if self.boundary == "release" else boundary,
                              {"cell": cell, "spacing": list(grid.spacing), "nodes": grid.n_nodes,
                               "quads": int(state.features.weight.size), "pl_error_px": error})
