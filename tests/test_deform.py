@@ -465,6 +465,21 @@ def test_a_handle_on_a_feature_carries_the_feature():
     assert mesh.record.components[0].kept
 
 
+def test_a_pinned_border_holds_when_a_handle_sits_on_a_feature_that_reaches_it():
+    """A handle on a feature touching the pinned border carried the feature, and the carried
+    feature and the pinned border pulled against each other: the border slid 22 px and the
+    canvas grew. The border holds; the handle moves its own point, with a note saying so."""
+    _, mask = scene()
+    mask = mask.copy()
+    mask[0:60, 200:260] = True                                 # a feature reaching the top border
+    deformer = Deformer(W, H, mask)
+    mesh = deformer.solve(handles_for([(230, 30), (60, 300)], [(275, 30), (60, 300)], border="pinned"))
+    border = np.flatnonzero(np.isin(mesh.source[:, 0], [-0.5, W - 0.5]) | np.isin(mesh.source[:, 1], [-0.5, H - 0.5]))
+    placed = mesh.target + np.asarray(deformer.warp.offset)
+    assert np.abs(placed[border] - mesh.source[border]).max() < 0.01 and tuple(mesh.canvas) == (W, H)
+    assert any("reaches the held border" in w for w in mesh.record.warnings)
+
+
 def test_a_handle_the_border_holds_is_reported():
     """A handle dragged out through a pinned border cannot follow: the report and a warning say so."""
     sources, targets = [(15, 180), (250, 180)], [(-40, 180), (250, 180)]

@@ -234,9 +234,12 @@ class RigidMap:
         radius = handles.radius if handles.radius is not None else default_radius(
             self.width, self.height, max(self.grid.spacing))
         sources, targets, radii = handles.constraints(self.grid, radius)
+        uncarried = []
         if self.labels is not None and len(handles.points_from):
             sources, targets, radii = carried_features(self.labels, self.grid.nodes(), handles, sources, targets,
-                                                       radii, self.decay * max(self.grid.spacing))
+                                                       radii, self.decay * max(self.grid.spacing), uncarried)
+        notes = [f"the handle at ({x:g}, {y:g}) sits on a feature that reaches the held border: it moves that "
+                 "point, not the whole feature (the border stays)" for x, y in handles.points_from[uncarried]]
         key = (sources.tobytes(), radii.tobytes())
         if key != self._key:
             self.rigid = RigidDeformer(self.grid, sources, radii)
@@ -247,7 +250,7 @@ class RigidMap:
                   "border": handles.border if isinstance(handles.border, str) else sorted(handles.border),
                   "canvas": handles.canvas, "radius": radius}
         warp = HandleWarp(self.width, self.height, self.grid, nodes, handles.canvas, values, self._embeddings)
-        warp.notes, warp.handles = list(handles.notes), handles
+        warp.notes, warp.handles = list(handles.notes) + notes, handles
         warp.capped = not self.rigid.converged
         held = np.hypot(*(self.rigid.centres(nodes) - targets).T).max()
         if held > handle_slack(self.width, self.height):
@@ -256,7 +259,8 @@ class RigidMap:
         return warp
 
 
-def carried_features(labels, nodes, handles: Handles, sources, targets, radii, band: float = 0.0):
+def carried_features(labels, nodes, handles: Handles, sources, targets, radii, band: float = 0.0,
+                     uncarried: list | None = None):
     """The constraints with every point handle that sits on a feature replaced by that feature.
 
     Dragging a point of a face moves the face: the nodes of the rigid grid inside the
@@ -269,8 +273,18 @@ def carried_features(labels, nodes, handles: Handles, sources, targets, radii, b
     at least the rho cells of the finer grid the feature-aware solve refines it into): that
     solve asks its transition band to be the feature's similarity, and a band that W
     compresses instead pulls the feature off the handle (by about the band's width).
+
+    A feature that reaches a side the handles hold (``border``: pinned, or that side's curve)
+    is not carried: the border holds, and the handle on it moves its own disc (carried, the
+    feature and the border pulled against each other and the pinned border slid by 22 px).
+    The indices of its point handles are appended to ``uncarried``.
     """
     h, w = labels.shape
+    sides = {"top", "bottom", "left", "right"} if handles.border == "pinned" else set(
+        handles.border if isinstance(handles.border, dict) else ())
+    on_side = {"top": nodes[:, 1] <= -0.5, "bottom": nodes[:, 1] >= h - 0.5,
+               "left": nodes[:, 0] <= -0.5, "right": nodes[:, 0] >= w - 0.5}
+    held_border = np.any([on_side[side] for side in sides], axis=0) if sides else np.zeros(len(nodes), bool)
     at = np.clip(np.rint(handles.points_from).astype(int), 0, [w - 1, h - 1])
     on = labels[at[:, 1], at[:, 0]]
     node_at = np.clip(np.rint(nodes).astype(int), 0, [w - 1, h - 1])
@@ -278,9 +292,14 @@ def carried_features(labels, nodes, handles: Handles, sources, targets, radii, b
     keep = np.ones(len(sources), bool)
     extra_sources, extra_targets = [], []
     for label in np.unique(on[on > 0]):
-        inside = nodes[_near_label(labels, label, band, node_at)]
+        near = _near_label(labels, label, band, node_at)
+        inside = nodes[near]
         held = np.flatnonzero(on == label)
         if len(inside) < 3:
+            continue
+        if np.any(near & held_border):
+            if uncarried is not None:
+                uncarried.extend(int(k) for k in held)
             continue
         a, b = similarity_fit(handles.points_from[held], handles.points_to[held]) if len(held) > 1 else overall
         if len(held) == 1 and np.isfinite(handles.angles[held[0]]):      # turned by its own angle
