@@ -88,6 +88,9 @@ class ComponentFit:
         Area of the component in the input, in pixels.
     bbox : tuple of int
         (x, y, width, height) of the component in the input.
+    centre : tuple of float
+        (x, y): its pixels' mean position in the input, as the report's ``at`` and the warnings'
+        "around (x, y)" place a feature (whose numbering, on the grid's quads, is its own).
     matches : int
         Keypoint matches that passed the ratio test (over every matching pass).
     inliers : int
@@ -131,6 +134,7 @@ class ComponentFit:
     label: int
     pixels: int
     bbox: tuple
+    centre: tuple = ()
     matches: int = 0
     inliers: int = 0
     linear: np.ndarray | None = None
@@ -318,7 +322,7 @@ def measure(image: np.ndarray, output: np.ndarray, mask: np.ndarray, *, min_inli
     if mask.shape[:2] != image.shape[:2]:
         raise ValueError(f"the mask is {mask.shape[1]}x{mask.shape[0]}, the image "
                          f"{image.shape[1]}x{image.shape[0]}")
-    n_labels, labels, stats, _ = cv2.connectedComponentsWithStats(
+    n_labels, labels, stats, centroids = cv2.connectedComponentsWithStats(
         (np.asarray(mask) != 0).astype(np.uint8), connectivity=8)
     largest = max(image.shape[0] * image.shape[1], output.shape[0] * output.shape[1])
     factor = min(1.0, float(np.sqrt(max_pixels / largest)))
@@ -337,7 +341,9 @@ def measure(image: np.ndarray, output: np.ndarray, mask: np.ndarray, *, min_inli
         src = src_all.subset(component[rows, cols] > 0)
         found = fit_component(gray_in, gray_out, component, src, dst, opts) if component.any() else {
             "reason": "the component vanishes at the measuring scale"}
-        fits.append(ComponentFit(label=label, pixels=area, bbox=(x, y, bw, bh), **full_size(found, factor)))
+        centre = tuple(round(float(v), 1) for v in centroids[label])
+        fits.append(ComponentFit(label=label, pixels=area, bbox=(x, y, bw, bh), centre=centre,
+                                 **full_size(found, factor)))
     return fits
 
 

@@ -13,7 +13,8 @@ import click
 def component_line(fit) -> str:
     """One line of text for a :class:`featurewarp_cli.app.measure.ComponentFit`."""
     x, y, w, h = fit.bbox
-    where = f"component {fit.label} ({fit.pixels} px, {w}x{h} at {x},{y})"
+    where = (f"component {fit.label} ({fit.pixels} px around ({fit.centre[0]:.0f}, {fit.centre[1]:.0f}), "
+             f"{w}x{h} at {x},{y})")
     if fit.distortion is None:
         return f"{where}: not measured: {fit.reason}"
     mirrored = ", mirrored" if fit.reflected else ""
