@@ -70,6 +70,23 @@ def test_two_outputs_on_stdout_are_refused(picture):
     assert run.exit_code == 2 and "stdout" in run.output
 
 
+def test_dev_stdout_and_dev_stderr_are_written_where_the_shell_points_them(picture, tmp_path):
+    """/dev/stdout and /dev/stderr were opened anew and the file the shell redirected them to was
+    replaced: ``>> log`` lost the log. They are this process's descriptors, written as they
+    stand; and '-' with /dev/stdout (one stream) is refused as two stdouts are."""
+    log, errors = tmp_path / "log.bin", tmp_path / "err.log"
+    log.write_bytes(b"earlier line\n")
+    errors.write_bytes(b"earlier line\n")
+    command = " ".join([*CLI, "warp", "stretch", str(picture), "/dev/stdout", "--format", "png",
+                        "--report", "/dev/stderr"])
+    run = subprocess.run(f"{command} >> {log} 2>> {errors}", shell=True, timeout=60)
+    assert run.returncode == 0
+    assert log.read_bytes().startswith(b"earlier line\n\x89PNG")
+    assert errors.read_bytes().startswith(b"earlier line\n{") and b'"preset": "stretch"' in errors.read_bytes()
+    run = invoke("warp", "stretch", picture, "/dev/stdout", "--format", "png", "--report", "-")
+    assert run.exit_code == 2 and "only one output can go to stdout" in run.output
+
+
 @pytest.mark.parametrize("option", ["--report", "--save-grid"])
 def test_an_output_naming_an_input_is_refused(picture, option):
     before = picture.read_bytes()

@@ -35,10 +35,16 @@ def check_distinct(outputs: list[tuple[str | None, str]], inputs: list[tuple[str
     written), and at most one of them is stdout. Devices and FIFOs may repeat."""
     from .pipeline import WarpError
 
+    from ..io.write import descriptor_of
+
     named = [(p, o) for p, o in outputs if p]
-    if sum(p == "-" for p, _ in named) > 1:
-        raise WarpError(f"only one output can go to stdout ('-'): {', '.join(o for p, o in named if p == '-')}",
-                        usage=True)
+    streams = {}
+    for path, option in named:                # '-', /dev/stdout, /dev/fd/1: one stream
+        streams.setdefault(descriptor_of(path), []).append(option)
+    for descriptor, options in streams.items():
+        if descriptor is not None and len(options) > 1:
+            where = "stdout ('-')" if descriptor == 1 else f"descriptor {descriptor}"
+            raise WarpError(f"only one output can go to {where}: {', '.join(options)}", usage=True)
     files = [(p, o, _identity(p)) for p, o in named if p != "-"]
     sources = [(p, o, _identity(p)) for p, o in inputs if p and p != "-"]
     for k, (path, option, ident) in enumerate(files):

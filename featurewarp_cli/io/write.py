@@ -13,14 +13,19 @@ Where an output goes, by what its path is now:
   the target. Where the file system has no ``O_TMPFILE``, a hidden temporary file
   is used instead and removed on failure and on SIGTERM or SIGINT.
 - a symbolic link: followed, so its target is replaced as above and the link stays.
+- ``/dev/stdout``, ``/dev/stderr``, ``/dev/fd/N``, ``/proc/self/fd/N``: this process's own
+  descriptor, written where it stands (a shell's ``>> log`` appends, ``> file`` is not
+  truncated again): it is never opened anew, which would truncate or replace the file the
+  shell redirected it to (:func:`descriptor_of`).
 - anything else that exists (a FIFO, a character device such as ``/dev/null`` or a
-  terminal, ``/dev/stdout``, ``/dev/fd/N``): opened and written directly, never replaced.
+  terminal): opened and written directly, never replaced.
 - ``-``: standard output.
 """
 
 from __future__ import annotations
 
 import errno
+import fcntl
 import os
 import stat
 import sys
@@ -39,8 +44,9 @@ class Staged:
     ----------
     path : str
         Where the output goes, as the user named it.
-    kind : {'file', 'direct', 'stdout'}
-        Replaced atomically; written directly (device, FIFO); standard output.
+    kind : {'file', 'direct', 'descriptor', 'stdout'}
+        Replaced atomically; written directly (device, FIFO); written to this process's
+        ``descriptor`` (``/dev/stderr``, ``/dev/fd/N``); standard output.
     target : str
         The file to replace (``path`` with symbolic links followed), for ``file``.
     fd : int or None
@@ -48,7 +54,9 @@ class Staged:
     temp : str or None
         The hidden temporary file holding them where ``O_TMPFILE`` is not available.
     data : bytes or None
-        The bytes themselves, for ``direct`` and ``stdout``.
+        The bytes themselves, for ``direct``, ``descriptor`` and ``stdout``.
+    descriptor : int or None
+        This process's descriptor the bytes go to, for ``descriptor`` (never closed here).
     """
 
     path: str
@@ -57,6 +65,7 @@ class Staged:
     fd: int | None = None
     temp: str | None = None
     data: bytes | None = None
+    descriptor: int | None = None
 
 
 def _mode_for(target: str) -> int:
@@ -132,9 +141,31 @@ def stage(path: str, data: bytes) -> Staged:
     return staged
 
 
+def descriptor_of(path: str) -> int | None:
+    """The descriptor of this process that ``path`` names: 1 for ``-`` and ``/dev/stdout``, 2 for
+    ``/dev/stderr``, N for ``/dev/fd/N`` and ``/proc/self/fd/N`` (or this process's id for
+    self); None for any other path."""
+    if path == "-":
+        return 1
+    name = os.path.abspath(path)
+    streams = {"/dev/stdin": 0, "/dev/stdout": 1, "/dev/stderr": 2}
+    if name in streams:
+        return streams[name]
+    parts = name.split("/")
+    own = ("self", "thread-self", str(os.getpid()))
+    if len(parts) == 4 and parts[1:3] == ["dev", "fd"] and parts[3].isdigit():
+        return int(parts[3])
+    if len(parts) == 5 and parts[1] == "proc" and parts[2] in own and parts[3] == "fd" and parts[4].isdigit():
+        return int(parts[4])
+    return None
+
+
 def _stage(path: str, data: bytes) -> Staged:
     if path == "-":
         return Staged(path, "stdout", data=data)
+    descriptor = descriptor_of(path)
+    if descriptor is not None:
+        return Staged(path, "descriptor", data=data, descriptor=descriptor)
     mode = _mode_of(path)
     if mode is not None and not stat.S_ISREG(mode):
         if stat.S_ISDIR(mode):
@@ -161,7 +192,7 @@ def commit(outputs: list[Staged]) -> None:
     discarded). Streams (devices, FIFOs, stdout) are written first, files linked into place
     last, so a device that fails (``/dev/full``) leaves every file as it was."""
     try:
-        for output in sorted(outputs, key=lambda o: o.kind not in ("direct", "stdout")):
+        for output in sorted(outputs, key=lambda o: o.kind not in ("direct", "stdout", "descriptor")):
             _commit_one(output)
     finally:
         discard(outputs)
@@ -212,6 +243,14 @@ def _commit_one(output: Staged) -> None:
             raise OSError(9, "standard output is closed") from None
     elif output.kind == "direct":
         _write_direct(output.target, output.data)
+    elif output.kind == "descriptor":
+        for stream in (sys.stdout, sys.stderr):          # what Python buffered for it goes first
+            if stream is not None and not stream.closed:
+                stream.flush()
+        try:
+            _write_all(output.descriptor, output.data)
+        except OSError as err:
+            raise OSError(err.errno, err.strerror, output.path) from None
     elif output.fd is not None:
         temp = os.path.join(os.path.dirname(output.target), f"{TEMP_PREFIX}{os.getpid()}-{id(output)}.tmp")
         _PENDING.add(temp)
@@ -297,6 +336,15 @@ def check_writable(path: str) -> None:
     Writability of a folder is probed by creating and removing a temporary file, which is
     also right for root and for read-only file systems.
     """
+    descriptor = descriptor_of(path)
+    if descriptor is not None:
+        try:
+            flags = fcntl.fcntl(descriptor, fcntl.F_GETFL)
+        except OSError:
+            raise ValueError(f"{path}: descriptor {descriptor} is not open") from None
+        if flags & os.O_ACCMODE == os.O_RDONLY:
+            raise ValueError(f"{path}: descriptor {descriptor} is not open for writing")
+        return
     mode = _mode_of(path)
     if mode is not None and stat.S_ISDIR(mode):
         raise ValueError(f"{path} is a directory")
