@@ -119,3 +119,22 @@ def test_strict_refuses_an_empty_mask_before_any_frame(files, tmp_path):
               "--vary", "angle=0:90", "--frames", "3", "--strict")
     assert out.code == 1 and "--strict: the mask marks no feature" in out.stderr
     assert not (tmp_path / "e.gif").exists()
+
+
+def test_no_frame_replaces_the_mask_and_a_sequence_is_written_all_or_nothing(files, tmp_path):
+    """An OUTPUT (or a sequence's frame) naming the mask replaced it with exit 0; a directory in
+    the way of frame 2 failed with a raw ValueError after frames 0 and 1 were replaced; a
+    200-million-digit frame number was a 200 MB error line after every frame was made."""
+    mask = tmp_path / "f-0001.png"
+    mask.write_bytes((files / "mask.png").read_bytes())
+    before = mask.read_bytes()
+    for output in (mask, tmp_path / "f-%04d.png"):
+        out = run("swirl", str(files / "in.png"), str(output), "-m", str(mask), "--vary", "angle=0:90", "--frames", "3")
+        assert out.code == 2 and "is also --mask" in out.stderr and mask.read_bytes() == before, out.stderr
+    (tmp_path / "h-0002.png").mkdir()
+    (tmp_path / "h-0000.png").write_bytes(b"old")
+    out = run("swirl", str(files / "in.png"), str(tmp_path / "h-%04d.png"), "--vary", "angle=0:90", "--frames", "4")
+    assert out.code == 2 and "h-0002.png is a directory" in out.stderr and "ValueError" not in out.stderr
+    assert (tmp_path / "h-0000.png").read_bytes() == b"old"
+    out = run("swirl", str(files / "in.png"), str(tmp_path / "o-%0200000000d.png"), "--vary", "angle=0:90")
+    assert out.code == 2 and "longer than a file system allows" in out.stderr and len(out.stderr) < 300

@@ -399,3 +399,15 @@ def test_save_grid_names_one_of_the_two_forms_it_writes(picture, tmp_path):
     run = invoke("warp", "stretch", picture, tmp_path / "o.png", "--save-grid", tmp_path / "g.txt")
     assert run.exit_code == 2 and "neither an .npz nor an .obj" in run.output
     assert list(tmp_path.glob("[og].*")) == []
+
+
+def test_an_encoders_temporary_file_is_removed_by_the_signal_handlers_too(tmp_path):
+    """animate's GIF/WebP/video encoders write a named temporary file: it was not known to the
+    SIGINT/SIGTERM handlers, and an interrupted run left a hidden file of up to 50 MB."""
+    with write.temporary_file(str(tmp_path), ".gif") as path:
+        assert os.path.exists(path) and os.path.basename(path).startswith(write.TEMP_PREFIX)
+        write.remove_pending()                   # what the handlers do
+        assert not os.path.exists(path)
+    with write.temporary_file(str(tmp_path), ".gif") as path:
+        pass
+    assert not os.path.exists(path) and os.listdir(tmp_path) == []

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import os
 import re
-import tempfile
 import time
 from dataclasses import replace
 
@@ -150,8 +149,7 @@ def animate_file(settings: Settings, input: str, output: str, mask: str | None, 
     """
     t0 = time.perf_counter()
     kind = output_kind(output)
-    if kind != "sequence":
-        write.check_writable(output)
+    check_output_paths(output_paths(output, kind, frames), formats.split_prefix(input)[1], mask)
     prefetch_engine()
     image, feature_mask, warnings = load_image_and_mask(settings, formats.split_prefix(input)[1], mask)
     height, width = image.shape[:2]
@@ -199,21 +197,43 @@ def animate_file(settings: Settings, input: str, output: str, mask: str | None, 
             "flipped_triangles": flips, "seconds": time.perf_counter() - t0, "warnings": warnings + lines}
 
 
-def write_frames(output: str, kind: str, frames: list[np.ndarray], fps: float) -> None:
-    """Write ``frames`` atomically: each frame of a sequence as :func:`featurewarp_cli.io.encode.encode_image` PNG
-    bytes, an animation or video as OpenCV encodes it into a temporary file, whose bytes
-    :func:`featurewarp_cli.io.write.write_atomic` then puts in place."""
-    if kind == "sequence":
-        for index, frame in enumerate(frames):
-            path = output % index
+def output_paths(output: str, kind: str, frames: int) -> list[str]:
+    """The files an animation writes: one, or a sequence's ``frames`` names (a usage error for a
+    name longer than a file system allows, before anything is made: ``%0200000000d``)."""
+    if kind != "sequence":
+        return [output]
+    widths = [int(width or 0) for width in re.findall(r"%0?(\d*)d", os.path.basename(output))]
+    if max(widths, default=0) > 255 or len(os.fsencode(output % max(frames - 1, 0))) > 4096 or \
+            len(os.fsencode(os.path.basename(output % max(frames - 1, 0)))) > 255:
+        raise WarpError(f"{output[:80]}{'...' if len(output) > 80 else ''}: its frames' names would be longer "
+                        "than a file system allows (255 bytes a name)", "OUTPUT", usage=True)
+    return [output % index for index in range(frames)]
+
+
+def check_output_paths(paths: list[str], input: str, mask: str | None) -> None:
+    """Usage error unless every frame file can be written and none is INPUT or the mask (a
+    sequence's frame named like the mask replaced it) or another frame."""
+    from .outputs import check_distinct
+
+    for path in paths:                    # a sequence's names differ by their numbers
+        try:
             write.check_writable(path)
-            write.write_atomic(path, encode_image(frame, "png"))
+        except ValueError as err:
+            raise WarpError(str(err), "OUTPUT", usage=True) from None
+        check_distinct([(path, "OUTPUT")], [(input, "INPUT"), (mask, "--mask")])
+
+
+def write_frames(output: str, kind: str, frames: list[np.ndarray], fps: float) -> None:
+    """Write ``frames`` all or nothing: a sequence's frames as :func:`featurewarp_cli.io.encode.encode_image`
+    PNG bytes, staged together (:func:`featurewarp_cli.io.write.write_outputs`); an animation or
+    video as OpenCV encodes it into a hidden temporary file (removed on a signal too), whose
+    bytes are then put in place."""
+    if kind == "sequence":
+        write.write_outputs([(output % index, encode_image(frame, "png")) for index, frame in enumerate(frames)])
         return
     directory = os.path.dirname(os.path.abspath(output))
     ext = os.path.splitext(output)[1].lower()
-    fd, tmp = tempfile.mkstemp(prefix=".featurewarp-", suffix=ext, dir=directory)
-    os.close(fd)
-    try:
+    with write.temporary_file(directory, ext) as tmp:
         if kind == "animation":
             animation = cv2.Animation()
             animation.frames = frames
@@ -230,6 +250,3 @@ def write_frames(output: str, kind: str, frames: list[np.ndarray], fps: float) -
             raise WarpError(f"OpenCV could not write {output}")
         with open(tmp, "rb") as encoded:         # renamed into place with the usual permissions
             write.write_atomic(output, encoded.read())
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)

@@ -24,6 +24,7 @@ Where an output goes, by what its path is now:
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import fcntl
 import os
@@ -327,6 +328,20 @@ def remove_pending() -> None:
     for path in list(_PENDING):
         remove_quietly(path)
     _PENDING.clear()
+
+
+@contextlib.contextmanager
+def temporary_file(directory: str, suffix: str = ""):
+    """The path of a new hidden temporary file in ``directory`` (for an encoder that writes only to
+    a named file), removed on leaving and by the signal handlers (:func:`remove_pending`)."""
+    fd, path = tempfile.mkstemp(prefix=TEMP_PREFIX, suffix=suffix, dir=directory)
+    os.close(fd)
+    _PENDING.add(path)
+    try:
+        yield path
+    finally:
+        remove_quietly(path)
+        _PENDING.discard(path)
 
 
 def check_writable(path: str) -> None:
