@@ -85,10 +85,13 @@ def test_plain_mode_needs_no_masks(runner, tmp_path):
 @pytest.mark.parametrize("args, words", [
     (["--out-dir", "{tmp}/a-file/out"], ["--out-dir", "cannot create"]),
     (["--out-dir", "{tmp}/out", "--mask-pattern", "{nope}.png"], ["--mask-pattern", "nope"]),
+    (["--out-dir", "{tmp}/out", "--mask-pattern", "{stem.__class__}"], ["--mask-pattern", "only field"]),
+    (["--out-dir", "{tmp}/out", "--mask-pattern", "{stem:>99999999}"], ["--mask-pattern", "only field"]),
     (["--out-dir", "{tmp}/out", "--jobs", "0"], ["--jobs", "out of range (1 <= N)"]),
     (["--out-dir", "{tmp}/out", "--angle", "inf"], ["--angle", "finite"]),
     (["--out-dir", "{tmp}/out", "--background", "transparent", "--format", "bmp"], []),
-], ids=["out-dir under a file", "bad pattern", "no jobs", "inf angle", "transparent bmp"])
+], ids=["out-dir under a file", "bad pattern", "attribute in pattern", "format spec in pattern", "no jobs",
+        "inf angle", "transparent bmp"])
 def test_usage_errors(runner, photos, tmp_path, args, words):
     (tmp_path / "a-file").write_text("")
     run = runner("batch", "swirl", photos / "a.png", *[a.replace("{tmp}", str(tmp_path)) for a in args])
@@ -122,6 +125,10 @@ def test_a_batch_never_replaces_a_file_it_reads_nor_its_summary(runner, photos, 
     assert run.code == 2 and "replacing its own input" in run.stderr, run.stderr
     assert {name: (photos / name).read_bytes() for name in names(photos)} == before
     assert names(tmp_path / "out") == []
+    run = runner("batch", "swirl", photos / "a_mask.png", "-o", tmp_path / "out", "--summary", photos / "a_mask.png")
+    assert run.code == 2 and "--summary" in run.stderr and (photos / "a_mask.png").read_bytes() == before["a_mask.png"]
+    run = runner("batch", "swirl", photos / "a_mask.png", "-o", tmp_path / "out")
+    assert run.code == 2 and "no input left to warp" in run.stderr
     run = runner("batch", "swirl", photos / "a.png", "-o", photos, "--suffix", "_sw")
     assert run.code == 0 and "a_sw.png" in names(photos)
 

@@ -57,20 +57,21 @@ def plan(inputs, out_dir: str, suffix: str = "", fmt: str | None = None,
         format, two inputs that would write the same output, an output that would replace
         a file the batch reads (its own input too), or a summary that would.
     """
+    if mask_pattern is not None and re.search(r"[{}]", mask_pattern.replace("{stem}", "")):
+        shown = mask_pattern if len(mask_pattern) <= 80 else mask_pattern[:80] + "..."
+        raise WarpError(f"{shown!r} is not a valid pattern: {{stem}} is its only field (braces "
+                        "otherwise are not allowed)", "--mask-pattern", usage=True)
+
     def mask_of(path):
         if mask_pattern is None:
             return None
-        stem = os.path.splitext(os.path.basename(path))[0]
-        try:
-            name = mask_pattern.format(stem=stem)
-        except (KeyError, IndexError, ValueError) as err:
-            raise WarpError(f"{mask_pattern!r} is not a valid pattern ({err!r}); use {{stem}}",
-                            "--mask-pattern", usage=True) from None
+        name = mask_pattern.replace("{stem}", os.path.splitext(os.path.basename(path))[0])
         if urls.is_url(path):
             return _located(urls.join(urls.dirname(path), name), "--mask-pattern")
         return _located(os.path.join(os.path.dirname(path), name), "--mask-pattern")
 
     inputs = list({_identity(p): p for path in inputs for p in _expanded(path)}.values())
+    given = {_identity(p) for p in inputs}                  # skipped ones too: --summary may not name them
     out_dir = _located(out_dir, "--out-dir")
     masks = {_identity(mask_of(p)) for p in inputs} if mask_pattern else set()
     named_as_mask = _mask_names(mask_pattern)
@@ -96,10 +97,13 @@ def plan(inputs, out_dir: str, suffix: str = "", fmt: str | None = None,
                             "--out-dir or a --suffix", usage=True)
     if summary is not None and summary != "-":
         key = _identity(summary)
-        role = "read by" if key in read else "an output of" if key in seen else None
+        role = "read by" if key in read or key in given or key in masks else "an output of" if key in seen else None
         if role is not None:
             raise WarpError(f"{summary} is also {role} this batch; it would be overwritten", "--summary",
                             usage=True)
+    if inputs and not jobs:
+        raise WarpError("no input left to warp: every INPUT is a mask (another input's, or named as one "
+                        "by --mask-pattern)", usage=True)
     _create(out_dir)
     return jobs
 

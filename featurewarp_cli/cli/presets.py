@@ -173,7 +173,7 @@ def batch_command(preset) -> click.Command:
               click.Option(["--mask-pattern"], default="{stem}_mask.png", show_default=True,
                            metavar="PATTERN",
                            help="Mask file of each input; {stem} is the input's name without "
-                                "extension; relative to the input's folder unless absolute. "
+                                "extension (its only field); relative to the input's folder unless absolute. "
                                 "A missing mask fails that file. Inputs that are another "
                                 "input's mask, or are named as masks by PATTERN (by default any "
                                 "*_mask.png), are skipped, so 'photos/*.png' works."),
