@@ -554,3 +554,27 @@ def test_pillows_own_log_lines_on_a_hostile_header_stay_off_stderr(tmp_path):
             struct.pack_into("<H", data, first + 2 + 12 * k + 8, 9999)
     one_line(run("warp", "swirl", save_bytes(tmp_path / "spp.tif", bytes(data)), tmp_path / "o.png"), 1,
              "cannot be decoded")
+
+
+def test_a_png_whose_metadata_pillow_refuses_is_still_measured_before_decoding(tmp_path):
+    """A zTXt chunk over Pillow's text limit made the header unreadable, the size checks were
+    skipped, and a 422 KB file was decoded to 432 MB under --max-memory 100M: the size comes
+    from IHDR, which is at a fixed place."""
+    import struct
+    import zlib
+
+    from featurewarp_cli.io import decode
+
+    def chunk(kind, data):
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+
+    width = height = 4000
+    rows = zlib.compress(b"\0" * (1 + 3 * width) * height, 9)
+    text = chunk(b"zTXt", b"Comment\0\0" + zlib.compress(b"A" * (2 << 20), 9))
+    data = (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0)) + text
+            + chunk(b"IDAT", rows) + chunk(b"IEND", b""))
+    header = decode.read_header(data)
+    assert (header.format, header.width, header.height) == ("PNG", width, height)
+    (tmp_path / "sneaky.png").write_bytes(data)
+    one_line(run("warp", "swirl", tmp_path / "sneaky.png", tmp_path / "o.png", "--max-memory", "20M"), 1,
+             "4000x4000", "--max-memory")
