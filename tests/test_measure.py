@@ -156,6 +156,11 @@ def test_measure_command_bad_input(runner, tmp_path, astronaut):
     assert missing.code == 2 and len(missing.lines) == 1 and "does not exist" in missing.stderr
     wrong = runner("measure", tmp_path / "in.png", tmp_path / "in.png", "-m", tmp_path / "small.png")
     assert wrong.code == 2 and len(wrong.lines) == 1 and "the mask is 10x10" in wrong.stderr
+    # the pixel and memory limits of warp (three 400 MP bombs decoded to 4.4 GB, with no limit)
+    big = runner("measure", tmp_path / "in.png", tmp_path / "in.png", "-m", tmp_path / "in.png", "--max-pixels", "1000")
+    assert big.code == 1 and len(big.lines) == 1 and "--max-pixels" in big.stderr
+    big = runner("measure", tmp_path / "in.png", tmp_path / "in.png", "-m", tmp_path / "in.png", "--max-memory", "1K")
+    assert big.code == 1 and len(big.lines) == 1 and "--max-memory" in big.stderr
 
 
 def swirled(image: np.ndarray, degrees: float) -> np.ndarray:

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import click
 
+from .options import max_memory_option, max_pixels_option
+
 
 def component_line(fit) -> str:
     """One line of text for a :class:`featurewarp_cli.app.measure.ComponentFit`."""
@@ -25,13 +27,13 @@ def component_line(fit) -> str:
             f"{fit.rms_px:.2f} px, covering {100 * fit.coverage:.0f} %{local}")
 
 
-@click.command("measure")
+@click.command("measure", params=[max_pixels_option(), max_memory_option()])
 @click.argument("input", type=click.Path(dir_okay=False, allow_dash=True))
 @click.argument("output", type=click.Path(dir_okay=False, allow_dash=True))
 @click.option("-m", "--mask", required=True, type=click.Path(dir_okay=False, allow_dash=True),
               metavar="PATH", help="The feature mask INPUT was warped with (as for warp).")
 @click.option("--json", "as_json", is_flag=True, help="Print machine-readable JSON.")
-def measure_command(input, output, mask, as_json):
+def measure_command(input, output, mask, as_json, max_pixels, max_memory):
     """Measure how each masked region of INPUT came out in OUTPUT.
 
     SIFT keypoints inside each connected component of the mask are matched with
@@ -54,9 +56,13 @@ def measure_command(input, output, mask, as_json):
 
     if [input, output, mask].count("-") > 1:
         raise click.UsageError("only one of INPUT, OUTPUT and --mask can be '-' (stdin)")
+
+    def read(path, param):                 # the pixel and memory limits, as for warp
+        return read_input(path, param, max_pixels, None, max_memory)
+
     try:
-        image, result = read_input(input, "INPUT", None), read_input(output, "OUTPUT", None)
-        feature_mask = mask_from_image(read_input(mask, "--mask", None))
+        image, result = read(input, "INPUT"), read(output, "OUTPUT")
+        feature_mask = mask_from_image(read(mask, "--mask"))
     except WarpError as err:
         raise click_error(err) from err
     try:

@@ -95,6 +95,21 @@ def limit_decoders(ctx, param, value):
     return value
 
 
+def max_pixels_option() -> click.Option:
+    """``--max-pixels``: the decoders' limit on an image's pixels."""
+    return click.Option(["--max-pixels"], callback=limit_decoders, **declared(MAX_PIXELS_PARAM))
+
+
+def max_memory_option() -> click.Option:
+    """``--max-memory``: the memory budget, which refuses work and never changes a result."""
+    return click.Option(["--max-memory"], type=ByteSize(), default=limits.MAX_MEMORY, metavar="SIZE",
+                        help="Refuse, before allocating, work whose images and grid would need more "
+                             "memory than SIZE (bytes, or with K, M, G, T); it never makes the grid "
+                             f"coarser (the same command gives the same result on any machine). "
+                             f"[default: half of this machine's memory, "
+                             f"{limits.MAX_MEMORY / 2**30:.1f}G]")
+
+
 def engine_options() -> list[click.Option]:
     """Options ``warp``, ``batch``, ``compare`` and ``animate`` share (built fresh for each command)."""
     return [
@@ -145,17 +160,12 @@ def engine_options() -> list[click.Option]:
         click.Option(["--format", "fmt"], type=click.Choice(FORMAT_NAMES, case_sensitive=False),
                      help="Output format; overrides the extension (needed for '-' unless a "
                           "prefix such as png:- is given)."),
-        click.Option(["--max-pixels"], callback=limit_decoders, **declared(MAX_PIXELS_PARAM)),
+        max_pixels_option(),
         param_option(QUALITY),
         click.Option(["--strip"], is_flag=True,
                      help="Drop the input's ICC colour profile and EXIF (kept by default, EXIF with "
                           "its orientation reset, for JPEG, PNG, WebP and TIFF output)."),
-        click.Option(["--max-memory"], type=ByteSize(), default=limits.MAX_MEMORY, metavar="SIZE",
-                     help="Refuse, before allocating, work whose images and grid would need more "
-                          "memory than SIZE (bytes, or with K, M, G, T); it never makes the grid "
-                          f"coarser (the same command gives the same result on any machine). "
-                          f"[default: half of this machine's memory, "
-                          f"{limits.MAX_MEMORY / 2**30:.1f}G]"),
+        max_memory_option(),
         click.Option(["--allow-folds"], is_flag=True,
                      help="Write a result even if triangles are still folded over (they never are "
                           "within the presets' declared ranges); without it that is an error."),
