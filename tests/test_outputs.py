@@ -411,3 +411,18 @@ def test_an_encoders_temporary_file_is_removed_by_the_signal_handlers_too(tmp_pa
     with write.temporary_file(str(tmp_path), ".gif") as path:
         pass
     assert not os.path.exists(path) and os.listdir(tmp_path) == []
+
+
+def test_a_signal_while_a_library_message_is_captured_is_still_said():
+    """Decoding captures fd 2 (libpng's messages): "stopped by SIGINT" went into the capture and a
+    run stopped during a decode ended with exit 130 and nothing said. A second signal during the
+    handler (a double Ctrl-C) changes nothing."""
+    script = ("import os, signal\n"
+              "from featurewarp_cli.cli.main import stop_on_signal\n"
+              "from featurewarp_cli.io.capture import captured_stderr\n"
+              "signal.signal(signal.SIGINT, stop_on_signal)\n"
+              "with captured_stderr():\n"
+              "    os.kill(os.getpid(), signal.SIGINT); os.kill(os.getpid(), signal.SIGINT)\n"
+              "    import time; time.sleep(5)\n")
+    run = subprocess.run([sys.executable, "-c", script], capture_output=True, timeout=60)
+    assert run.returncode == 130 and run.stderr.decode() == "featurewarp: stopped by SIGINT\n", run.stderr

@@ -179,19 +179,36 @@ def one_line_warning(message, category, filename, lineno, file=None, line=None):
     click.echo(f"featurewarp: warning: {message} ({os.path.basename(filename)}:{lineno})", err=True)
 
 
+def _release_semaphores() -> None:
+    """Unlink the semaphores of this process's worker pools as their finalizers would at a normal
+    exit: exiting at once, Python's resource tracker warned about each one ("leaked semaphore
+    objects") after "stopped by SIGINT"."""
+    util, synchronize = sys.modules.get("multiprocessing.util"), sys.modules.get("multiprocessing.synchronize")
+    cleanup = getattr(getattr(synchronize, "SemLock", None), "_cleanup", None)
+    for finalizer in list(getattr(util, "_finalizer_registry", {}).values()):
+        if cleanup is not None and getattr(finalizer, "_callback", None) is cleanup:
+            try:
+                finalizer()
+            except Exception:             # already unlinked: nothing left to release
+                pass
+
+
 def stop_on_signal(signum, frame) -> None:
     """SIGTERM or SIGINT: remove this run's temporary files, stop worker processes, exit at once
     (128 + the signal's number). Outputs not yet put in place never appear: they wait in
     unnamed files or in temporary ones removed here."""
-    from ..io import write
+    for other in (signal.SIGTERM, signal.SIGINT):     # a second signal must not re-enter this
+        signal.signal(other, signal.SIG_IGN)
+    from ..io import capture, write
 
     write.remove_pending()
-    import multiprocessing
-
-    for child in multiprocessing.active_children():
-        child.kill()
+    processes = sys.modules.get("multiprocessing")    # none started if it was never imported;
+    if getattr(processes, "active_children", None):   # half imported when the signal came: none either
+        for child in processes.active_children():
+            child.kill()
+        _release_semaphores()
     try:
-        os.write(2, f"featurewarp: stopped by {signal.Signals(signum).name}\n".encode())
+        os.write(capture.real_stderr(), f"featurewarp: stopped by {signal.Signals(signum).name}\n".encode())
     except OSError:
         pass
     os._exit(128 + signum)

@@ -25,11 +25,13 @@ def captured_stderr():
         yield lines
         return
     with _scratch() as tmp:
+        _SAVED.append(saved)
         os.dup2(tmp.fileno(), 2)
         try:
             yield lines
         finally:
             os.dup2(saved, 2)
+            _SAVED.remove(saved)
             os.close(saved)
             tmp.seek(0)
             printed = [line for line in tmp.read().decode(errors="replace").splitlines() if line.strip()]
@@ -37,6 +39,17 @@ def captured_stderr():
             if ours and sys.stderr is not None:
                 sys.stderr.write("".join(line + "\n" for line in ours))
             lines.extend(line for line in printed if not line.startswith("featurewarp:"))
+
+
+#: The descriptors stderr was saved to by the captures running now (fd 2 is the process's, so
+#: one list for every thread): the first is the real stderr.
+_SAVED: list[int] = []
+
+
+def real_stderr() -> int:
+    """The descriptor of the real stderr, also while a capture holds fd 2 (a signal handler's
+    "stopped by SIGINT" written to fd 2 then went into the capture and was lost)."""
+    return _SAVED[0] if _SAVED else 2
 
 
 def _scratch():
