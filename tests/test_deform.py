@@ -341,6 +341,7 @@ def test_a_misspelt_key_inside_a_handle_is_noted_and_errors_say_what_is_missing(
         Handles.from_dict({}, W, H)
     with pytest.raises(ValueError, match=r'^version: "2"; '):
         Handles.from_dict({"version": "2"}, W, H)
+    assert Handles.from_dict({"version": 2.0, "points": pins}, W, H).notes == []      # as the schema reads it
     with pytest.raises(ValueError, match="^points: none are given; at least two handles are needed"):
         Handles.from_dict({"version": 1, "points": []}, W, H)
 
@@ -529,5 +530,5 @@ def test_handles_from_stdin(tmp_path):
                                                                                   "to": [w - 1, h]}]}).encode()
     run = command("deform", image, tmp_path / "o.png", "-m", mask, "--handles", "-", input=data)
     assert run.returncode == 0, run.stderr
-    both = command("deform", "-", tmp_path / "p.png", "--handles", "-", input=data)
-    assert both.returncode == 2 and b"stdin" in both.stderr
+    both = command("deform", "-", tmp_path / "p.png", "--handles", "-", input=open(image, "rb").read())
+    assert both.returncode == 2 and b"stdin holds the image" in both.stderr, both.stderr   # not "not valid JSON"

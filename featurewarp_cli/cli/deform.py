@@ -141,14 +141,14 @@ def deform_command() -> click.Command:
 
         if handles is None and not move and not pin:
             raise click.UsageError("give the handles: --handles H.json, or --move X,Y:X2,Y2 with --pin X,Y")
+        if handles == "-" and input == "-":   # before stdin is read as the handles
+            raise click.BadParameter("cannot be '-' when INPUT is '-' (stdin holds the image)",
+                                     param_hint="'--handles'")
         data = load_handles(handles)
         kwargs.update(boundary=None, grow_past_edge=False)
         settings, quiet, verbose = settings_from(Deform, kwargs)
         from ..engine.deform import handles_factory
 
-        if handles == "-" and input == "-":
-            raise click.BadParameter("cannot be '-' when INPUT is '-' (stdin holds the image)",
-                                     param_hint="'--handles'")
         merged = merged_handles(data, move, pin, canvas)
         factory = handles_factory(merged, settings.decay)
         settings = replace(settings, warp_factory=named_places(factory, merged, move, pin, handles))

@@ -101,6 +101,8 @@ class Handles:
         if not isinstance(data, dict):
             raise ValueError("the handles file must hold a JSON object ({\"version\": 1, \"points\": [...]})")
         version = data.get("version")
+        if type(version) is float and version in VERSIONS:         # 1.0: the schema's enum takes it too
+            version = int(version)
         if not (type(version) is int and version in VERSIONS):      # which schema applies, before it does
             given = "missing" if "version" not in data else json.dumps(version)
             raise ValueError(f"version: {given}; this featurewarp reads versions "
