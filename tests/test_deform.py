@@ -507,7 +507,8 @@ def test_deformer_api_checks_its_input():
     ({"version": 1, "points": [{"from": [5, 5], "to": [5, 5]}, {"from": [9, 9], "to": [1e308, 3]}]}, "image sizes"),
     ({"version": 1, "points": [{"from": [5, 5], "to": [5, 5]}, {"from": [9, 10 ** 400], "to": [1, 3]}]}, "finite"),
     ({"version": True, "points": []}, "version"),
-    ({"version": 1.0, "points": []}, "version"),
+    ({"version": 1.5, "points": []}, "version"),
+    ({"version": 1.0, "points": []}, "none are given"),         # 1.0 is version 1, as the schema reads it
     ({"version": 1, "points": [{"from": [5, 5], "to": [5, 5]}, {"from": [5.2, 5], "to": [9, 9]}]}, "apart"),
 ])
 def test_hostile_handles(data, message):

@@ -578,3 +578,15 @@ def test_a_png_whose_metadata_pillow_refuses_is_still_measured_before_decoding(t
     (tmp_path / "sneaky.png").write_bytes(data)
     one_line(run("warp", "swirl", tmp_path / "sneaky.png", tmp_path / "o.png", "--max-memory", "20M"), 1,
              "4000x4000", "--max-memory")
+
+
+def test_a_result_larger_than_the_output_format_holds_is_refused_before_the_work(tmp_path):
+    """A stretch of a wide strip failed after the solve with "cannot encode the result as png":
+    each format's largest side is checked once the canvas is known, before anything is decoded."""
+    import cv2
+
+    cv2.imwrite(str(tmp_path / "wide.png"), np.zeros((1, 40000), np.uint8))
+    one_line(run("warp", "stretch", tmp_path / "wide.png", tmp_path / "o.webp", "--sx", "0.5"), 2,
+             "20000x1", "webp holds at most 16383")
+    assert not (tmp_path / "o.webp").exists()
+    assert run("warp", "stretch", tmp_path / "wide.png", tmp_path / "o.png", "--sx", "0.3").returncode == 0

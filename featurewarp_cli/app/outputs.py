@@ -29,6 +29,17 @@ def _identity(path: str):
     return (info.st_dev, info.st_ino) if stat.S_ISREG(info.st_mode) else None
 
 
+def check_encodable(canvas, fmt: str) -> None:
+    """Usage error, before any work, for a canvas larger than ``fmt``'s encoder writes (a stretch
+    of a wide strip failed after the solve: "cannot encode the result as png")."""
+    from .pipeline import WarpError
+
+    largest = formats.FORMATS[fmt].largest_side
+    if largest is not None and max(canvas) > largest:
+        raise WarpError(f"the result would be {canvas[0]}x{canvas[1]} pixels; {fmt} holds at most {largest} a "
+                        "side (another --format, or a smaller result)", "OUTPUT", usage=True)
+
+
 def check_distinct(outputs: list[tuple[str | None, str]], inputs: list[tuple[str | None, str]]) -> None:
     """Usage error unless the outputs ((path, option) pairs; the first is OUTPUT) name neither an
     input nor each other, OUTPUT = INPUT excepted (the input is read before anything is

@@ -15,7 +15,7 @@ from dataclasses import dataclass, field, replace
 from .. import plugins, stages
 from ..engine.defaults import DECAY, FEATURE_WEIGHT, FORMULATION, INTERPOLATION, MODE, SCALE_PRIOR
 from ..io import ImageError, decode, formats, limits, write
-from .outputs import background_colour, check_distinct, encoded, format_of, rendered, write_all
+from .outputs import background_colour, check_distinct, check_encodable, encoded, format_of, rendered, write_all
 from .report import report_bytes, summary
 
 #: What :func:`prefetch_engine` imports: the engine (grid, features, fold-over guard,
@@ -252,9 +252,11 @@ class _Decoding:
         return self._image
 
 
-def _piped(settings: Settings, input: str, output: str) -> tuple[Settings, bytes | None]:
+def _piped(settings: Settings, input: str, output: str, mask: str | None) -> tuple[Settings, bytes | None]:
     """For ``- -`` without --format: settings with stdin's own format, and stdin's bytes (read
-    now); else (settings, None)."""
+    now); else (settings, None). A usage error for INPUT and the mask both on stdin."""
+    if mask == "-" and input == "-":
+        raise WarpError("cannot be '-' when INPUT is '-' (stdin holds the image)", "--mask", usage=True)
     if not (input == output == "-" and settings.fmt is None):
         return settings, None
     try:
@@ -455,9 +457,7 @@ def warp_file(settings: Settings, input: str, output: str, mask: str | None = No
     """
     t0 = time.perf_counter()
     input = formats.split_prefix(input)[1]
-    if mask == "-" and input == "-":
-        raise WarpError("cannot be '-' when INPUT is '-' (stdin holds the image)", "--mask", usage=True)
-    settings, piped = _piped(settings, input, output)
+    settings, piped = _piped(settings, input, output, mask)
     out_path, fmt = check_outputs(settings, output, (report, "--report"), (save_grid, "--save-grid"),
                                   like=input)
     check_distinct([(out_path, "OUTPUT"), (report, "--report"), (save_grid, "--save-grid")],
@@ -468,6 +468,7 @@ def warp_file(settings: Settings, input: str, output: str, mask: str | None = No
     pending, feature_mask, warnings, (width, height) = start_loading(settings, input, mask, piped)
     timings = {"load": time.perf_counter() - t0}
     warp, warper = make_warper(settings, width, height, feature_mask)    # the canvas and the budget, undecoded
+    check_encodable(warp.canvas, fmt)
     pending.start()
     try:
         mesh = solve_within_budget(warper, warp, settings.mode)

@@ -325,9 +325,7 @@ class FeatureWarper:
         state = self._state(grid, warped, boundary)
         self.timings["grid"] = time.perf_counter() - t0
         produced = "plain" if state.features.n_components == 0 else mode      # what the output is
-        if boundary == "slide" and (state.fixed_x & state.fixed_y).sum() == grid.boundary().sum():
-            boundary = "fixed"                  # no side W keeps straight: the border conditions used
-        record = SolveRecord(produced, self.formulation, "release" if self.boundary == "release" else boundary,
+        record = SolveRecord(produced, self.formulation, _border_used(self.boundary, boundary, state),
                              {"cell": cell, "spacing": list(grid.spacing), "nodes": grid.n_nodes,
                               "quads": int(state.features.weight.size), "pl_error_px": error})
         tied = unpinned = np.zeros(state.features.n_components, bool)
@@ -479,6 +477,16 @@ class FeatureWarper:
         if mesh.record is not None:
             mesh.record.timings["render"] = time.perf_counter() - t0
         return arrays.finish(out, channels, dtype) if order == "rgb" else out
+
+
+def _border_used(asked: str | None, boundary: str, state: _GridState) -> str:
+    """The border conditions a solve used (the report's ``boundary``): ``release`` when ``asked``;
+    ``slide`` where a side W keeps straight let its nodes slide, else ``fixed`` (a swirl asks
+    for slide and holds every border node)."""
+    if asked == "release":
+        return "release"
+    held = state.fixed_x & state.fixed_y
+    return "fixed" if boundary == "slide" and held.sum() == state.grid.boundary().sum() else boundary
 
 
 def _smallest_scale(jac: np.ndarray, features, prior: np.ndarray) -> np.ndarray:

@@ -316,6 +316,8 @@ def _png_header(data: bytes) -> Header | None:
     if not data.startswith(b"\x89PNG\r\n\x1a\n") or data[12:16] != b"IHDR" or len(data) < 24:
         return None
     width, height = int.from_bytes(data[16:20], "big"), int.from_bytes(data[20:24], "big")
+    if not (width and height):
+        return None                                  # no pixels: the decoder says so
     return Header("PNG", width, height, 1, _png_chunk(data, b"acTL") is not None)
 
 

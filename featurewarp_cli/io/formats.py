@@ -16,16 +16,17 @@ class Format(NamedTuple):
     extension: str      #: the extension OpenCV's encoder is chosen by
     alpha: bool         #: stores an alpha channel
     eight_bit: bool     #: stores 8-bit samples only (16-bit results are scaled down)
+    largest_side: int | None = None     #: the encoder's limit on a side, in pixels (None: none in reach)
 
 
 #: Output formats by canonical name.
 FORMATS = {
-    "png": Format(".png", alpha=True, eight_bit=False),
-    "jpg": Format(".jpg", alpha=False, eight_bit=True),
-    "webp": Format(".webp", alpha=True, eight_bit=True),
+    "png": Format(".png", alpha=True, eight_bit=False, largest_side=1_000_000),     # libpng's user limit
+    "jpg": Format(".jpg", alpha=False, eight_bit=True, largest_side=65_500),        # libjpeg's
+    "webp": Format(".webp", alpha=True, eight_bit=True, largest_side=16_383),
     "tiff": Format(".tiff", alpha=True, eight_bit=False),
     "bmp": Format(".bmp", alpha=False, eight_bit=True),
-    "gif": Format(".gif", alpha=False, eight_bit=True),      # one static frame, OpenCV's palette
+    "gif": Format(".gif", alpha=False, eight_bit=True, largest_side=65_535),  # one static frame, OpenCV's palette
 }
 #: Other spellings of the format names (also accepted as file extensions).
 ALIASES = {"jpeg": "jpg", "tif": "tiff"}
