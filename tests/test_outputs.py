@@ -279,6 +279,22 @@ def test_icc_and_exif_are_kept_and_strip_drops_them(tmp_path):
         assert "icc_profile" not in image.info and not len(image.getexif())
 
 
+def test_an_exif_block_larger_than_a_jpeg_holds_is_left_out_with_a_warning(tmp_path):
+    """A PNG's 70 kB EXIF failed the whole run after the solve when written as JPEG ("EXIF data
+    is too long"): it is left out, the warning says so, and PNG keeps it."""
+    from PIL import Image
+
+    exif = Image.Exif()
+    exif[0x010E] = "A" * 70000
+    source = tmp_path / "big-exif.png"
+    Image.fromarray(np.random.default_rng(4).integers(0, 255, (40, 60, 3), np.uint8)).save(source, exif=exif.tobytes())
+    run = invoke("warp", "swirl", source, tmp_path / "o.jpg", "--angle", "60")
+    assert run.exit_code == 0 and "is more than a JPEG holds" in run.output and (tmp_path / "o.jpg").exists()
+    assert invoke("warp", "swirl", source, tmp_path / "o.png", "--angle", "60").exit_code == 0
+    with Image.open(tmp_path / "o.png") as image:
+        assert len(image.getexif()[0x010E]) == 70000
+
+
 def test_quality_sets_the_jpeg_tables_and_makes_webp_lossy(tmp_path):
     """--quality 80: the JPEG's quantization tables are libjpeg's for 80 (what identify's %Q
     reads back) and the file is smaller; WebP becomes lossy."""

@@ -40,6 +40,15 @@ def check_encodable(canvas, fmt: str) -> None:
                         "side (another --format, or a smaller result)", "OUTPUT", usage=True)
 
 
+def check_grid_name(save_grid: str | None) -> None:
+    """--save-grid names one of the two forms it writes (another name silently got an npz)."""
+    from .pipeline import WarpError
+
+    if save_grid and save_grid != "-" and not save_grid.lower().endswith((".npz", ".obj")):
+        raise WarpError(f"{save_grid} names neither an .npz nor an .obj file (the two forms it writes)",
+                        "--save-grid", usage=True)
+
+
 def check_distinct(outputs: list[tuple[str | None, str]], inputs: list[tuple[str | None, str]]) -> None:
     """Usage error unless the outputs ((path, option) pairs; the first is OUTPUT) name neither an
     input nor each other, OUTPUT = INPUT excepted (the input is read before anything is
@@ -66,6 +75,23 @@ def check_distinct(outputs: list[tuple[str | None, str]], inputs: list[tuple[str
             if ident == other_ident:
                 raise WarpError(f"{path} is also {other_option} ({other}); it would be overwritten",
                                 option, usage=True)
+
+
+#: The most EXIF bytes a JPEG holds (one APP1 segment, as Pillow writes it).
+JPEG_EXIF_BYTES = 65533
+
+
+def kept_metadata(strip: bool, header, fmt: str, warnings: list) -> tuple[bytes | None, bytes | None]:
+    """(ICC profile, EXIF) of the input ``header`` to write with the output: none with ``strip``;
+    an EXIF block larger than a JPEG holds is left out, with a warning appended to ``warnings``
+    (the whole run failed after the solve: "EXIF data is too long")."""
+    kept = None if strip else header
+    icc, exif = getattr(kept, "icc", None), getattr(kept, "exif", None)
+    if fmt == "jpg" and exif and len(exif) > JPEG_EXIF_BYTES:
+        warnings.append(f"the input's EXIF ({len(exif)} bytes) is more than a JPEG holds ({JPEG_EXIF_BYTES}): "
+                        "left out")
+        exif = None
+    return icc, exif
 
 
 def encoded(out_path: str, fmt: str, image, background, quality: int | None = None, icc: bytes | None = None,

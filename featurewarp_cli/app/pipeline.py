@@ -15,7 +15,8 @@ from dataclasses import dataclass, field, replace
 from .. import plugins, stages
 from ..engine.defaults import DECAY, FEATURE_WEIGHT, FORMULATION, INTERPOLATION, MODE, SCALE_PRIOR
 from ..io import ImageError, decode, formats, limits, write
-from .outputs import background_colour, check_distinct, check_encodable, encoded, format_of, rendered, write_all
+from .outputs import (background_colour, check_distinct, check_encodable, check_grid_name, encoded, format_of,
+                      kept_metadata, rendered, write_all)
 from .report import report_bytes, summary
 
 #: What :func:`prefetch_engine` imports: the engine (grid, features, fold-over guard,
@@ -412,13 +413,6 @@ def check_outputs(settings: Settings, output: str, *extra: tuple[str | None, str
     return out_path, fmt
 
 
-def _check_grid_name(save_grid: str | None) -> None:
-    """--save-grid names one of the two forms it writes (another name silently got an npz)."""
-    if save_grid and save_grid != "-" and not save_grid.lower().endswith((".npz", ".obj")):
-        raise WarpError(f"{save_grid} names neither an .npz nor an .obj file (the two forms it writes)",
-                        "--save-grid", usage=True)
-
-
 def warp_file(settings: Settings, input: str, output: str, mask: str | None = None,
               report: str | None = None, save_grid: str | None = None, draw_grid: bool = False,
               also_read: tuple = ()) -> dict:
@@ -462,7 +456,7 @@ def warp_file(settings: Settings, input: str, output: str, mask: str | None = No
                                   like=input)
     check_distinct([(out_path, "OUTPUT"), (report, "--report"), (save_grid, "--save-grid")],
                    [(input, "INPUT"), (mask, "--mask"), *also_read])
-    _check_grid_name(save_grid)
+    check_grid_name(save_grid)
     background = background_colour(settings.background, fmt)
     prefetch_engine(solver=mask is not None and settings.mode != "plain")
     pending, feature_mask, warnings, (width, height) = start_loading(settings, input, mask, piped)
@@ -486,9 +480,9 @@ def warp_file(settings: Settings, input: str, output: str, mask: str | None = No
         result = overlay(result, mesh)
     timings.update(mesh.info["timings"])
     stages.enter("write")
-    t1, kept = time.perf_counter(), None if settings.strip else getattr(pending, "header", None)
-    outputs = [(out_path, encoded(out_path, fmt, result, background, settings.quality,
-                                  getattr(kept, "icc", None), getattr(kept, "exif", None)))]
+    t1, (icc, exif) = time.perf_counter(), kept_metadata(settings.strip, getattr(pending, "header", None), fmt,
+                                                        mesh.record.warnings)
+    outputs = [(out_path, encoded(out_path, fmt, result, background, settings.quality, icc, exif))]
     timings["write"] = time.perf_counter() - t1
     if save_grid:
         outputs.append((save_grid, mesh.to_obj() if save_grid.lower().endswith(".obj") else mesh.to_npz()))
