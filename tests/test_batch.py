@@ -138,7 +138,8 @@ def test_files_named_as_masks_and_inputs_listed_twice(runner, photos, tmp_path):
     without masks; an input given twice was refused with advice (--suffix) that cannot help."""
     save(photos / "a_body_mask.png", np.zeros((40, 60), np.uint8))
     run = runner("batch", "swirl", *sorted(photos.iterdir()), photos / "a.png", "-o", tmp_path / "out")
-    assert run.code == 0, run.stderr
+    assert run.code == 0 and run.stderr.startswith("featurewarp: skipped 1 input(s) named as masks"), run.stderr
+    assert "a_body_mask.png" in run.stderr and len(run.lines) == 1
     assert names(tmp_path / "out") == ["a.png", "b.png", "c.jpg"]
     for sub in ("x", "y"):
         (tmp_path / sub).mkdir()

@@ -30,7 +30,8 @@ class Job:
 
 
 def plan(inputs, out_dir: str, suffix: str = "", fmt: str | None = None,
-         mask_pattern: str | None = "{stem}_mask.png", summary: str | None = None) -> list[Job]:
+         mask_pattern: str | None = "{stem}_mask.png", summary: str | None = None,
+         named_masks: list | None = None) -> list[Job]:
     """The jobs of a batch: one per input (an input listed twice once), minus inputs that are
     another input's mask or are named as masks by ``mask_pattern`` (the default skips every
     ``*_mask.png``).
@@ -49,6 +50,9 @@ def plan(inputs, out_dir: str, suffix: str = "", fmt: str | None = None,
         relative to the input's folder unless absolute. None: no masks.
     summary : str, optional
         The ``--summary`` file: it may not be an input, a mask or an output.
+    named_masks : list, optional
+        Gets the inputs skipped for their names alone (no input is theirs: a stray mask, or a
+        photo named like one), for the command to say so.
 
     Raises
     ------
@@ -57,10 +61,7 @@ def plan(inputs, out_dir: str, suffix: str = "", fmt: str | None = None,
         format, two inputs that would write the same output, an output that would replace
         a file the batch reads (its own input too), or a summary that would.
     """
-    if mask_pattern is not None and re.search(r"[{}]", mask_pattern.replace("{stem}", "")):
-        shown = mask_pattern if len(mask_pattern) <= 80 else mask_pattern[:80] + "..."
-        raise WarpError(f"{shown!r} is not a valid pattern: {{stem}} is its only field (braces "
-                        "otherwise are not allowed)", "--mask-pattern", usage=True)
+    named_as_mask = _mask_names(mask_pattern)
 
     def mask_of(path):
         if mask_pattern is None:
@@ -74,10 +75,13 @@ def plan(inputs, out_dir: str, suffix: str = "", fmt: str | None = None,
     given = {_identity(p) for p in inputs}                  # skipped ones too: --summary may not name them
     out_dir = _located(out_dir, "--out-dir")
     masks = {_identity(mask_of(p)) for p in inputs} if mask_pattern else set()
-    named_as_mask = _mask_names(mask_pattern)
     jobs, seen = [], {}
     for path in inputs:
-        if _identity(path) in masks or (named_as_mask and named_as_mask.fullmatch(os.path.basename(path))):
+        if _identity(path) in masks:
+            continue
+        if named_as_mask and named_as_mask.fullmatch(os.path.basename(path)):
+            if named_masks is not None:
+                named_masks.append(path)
             continue
         stem, ext = os.path.splitext(os.path.basename(path))
         name = stem + suffix + ("." + fmt if fmt else ext)
@@ -88,6 +92,18 @@ def plan(inputs, out_dir: str, suffix: str = "", fmt: str | None = None,
                             "both); rename one, or run them in separate batches", usage=True)
         seen[key] = path
         jobs.append(Job(path, output, mask_of(path)))
+    _check_overwrites(jobs, summary, given | masks)
+    if inputs and not jobs:
+        raise WarpError("no input left to warp: every INPUT is a mask (another input's, or named as one "
+                        "by --mask-pattern)", usage=True)
+    _create(out_dir)
+    return jobs
+
+
+def _check_overwrites(jobs: list[Job], summary: str | None, also_read: set) -> None:
+    """Usage error for an output that would replace a file the batch reads (its own input too),
+    or a ``summary`` that would replace one of those, an output, or ``also_read`` (identities of
+    the inputs skipped as masks, and the masks)."""
     read = {_identity(p): p for job in jobs for p in (job.input, job.mask) if p}
     for job in jobs:
         clash = read.get(_identity(job.output))
@@ -97,27 +113,27 @@ def plan(inputs, out_dir: str, suffix: str = "", fmt: str | None = None,
                             "--out-dir or a --suffix", usage=True)
     if summary is not None and summary != "-":
         key = _identity(summary)
-        role = "read by" if key in read or key in given or key in masks else "an output of" if key in seen else None
+        written = {_identity(job.output) for job in jobs}
+        role = "read by" if key in read or key in also_read else "an output of" if key in written else None
         if role is not None:
             raise WarpError(f"{summary} is also {role} this batch; it would be overwritten", "--summary",
                             usage=True)
-    if inputs and not jobs:
-        raise WarpError("no input left to warp: every INPUT is a mask (another input's, or named as one "
-                        "by --mask-pattern)", usage=True)
-    _create(out_dir)
-    return jobs
 
 
 def _mask_names(mask_pattern: str | None):
     """A regular expression for file names ``mask_pattern`` gives to masks (any stem), or None:
-    for a pattern without a folder that adds more than an extension to the stem."""
+    for a pattern without a folder that adds more than an extension to the stem. A usage error
+    for a pattern with a field other than ``{stem}`` (no ``str.format``: it ran attribute
+    lookups and a 100 MB field width)."""
+    if mask_pattern is not None and re.search(r"[{}]", mask_pattern.replace("{stem}", "")):
+        shown = mask_pattern if len(mask_pattern) <= 80 else mask_pattern[:80] + "..."
+        raise WarpError(f"{shown!r} is not a valid pattern: {{stem}} is its only field (braces "
+                        "otherwise are not allowed)", "--mask-pattern", usage=True)
     if not mask_pattern or "/" in mask_pattern or os.sep in mask_pattern or "{stem}" not in mask_pattern:
         return None
     if not os.path.splitext(mask_pattern.replace("{stem}", ""))[0]:
         return None                                  # "{stem}.png": every PNG would match
     before, _, after = mask_pattern.partition("{stem}")
-    if "{" in after or "}" in after:
-        return None
     return re.compile(re.escape(before) + ".+" + re.escape(after))
 
 

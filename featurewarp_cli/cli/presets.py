@@ -203,8 +203,12 @@ def batch_command(preset) -> click.Command:
             from ..io.formats import format_name
 
             fmt = format_name(settings.fmt) if settings.fmt else None
+            named_masks = []
             todo = plan(inputs, out_dir, suffix, fmt, None if settings.mode == "plain" else mask_pattern,
-                        summary)
+                        summary, named_masks)
+            if named_masks and not quiet:
+                say(f"featurewarp: skipped {len(named_masks)} input(s) named as masks by --mask-pattern with no "
+                    f"input of their own: {', '.join(named_masks[:3])}{', ...' if len(named_masks) > 3 else ''}")
             failed = run_planned(settings, todo, jobs, scheduler, summary, resume, quiet, verbose)
         except WarpError as err:
             raise click_error(err) from err
