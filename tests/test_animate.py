@@ -138,3 +138,9 @@ def test_no_frame_replaces_the_mask_and_a_sequence_is_written_all_or_nothing(fil
     assert (tmp_path / "h-0000.png").read_bytes() == b"old"
     out = run("swirl", str(files / "in.png"), str(tmp_path / "o-%0200000000d.png"), "--vary", "angle=0:90")
     assert out.code == 2 and "longer than a file system allows" in out.stderr and len(out.stderr) < 300
+    source = tmp_path / "g-0001.png"                       # a frame named like INPUT: refused too
+    source.write_bytes((files / "in.png").read_bytes())
+    out = run("swirl", str(source), str(tmp_path / "g-%04d.png"), "--vary", "angle=0:90", "--frames", "3")
+    assert out.code == 2 and "is also INPUT" in out.stderr and source.read_bytes() == (files / "in.png").read_bytes()
+    out = run("stretch", str(files / "in.png"), str(tmp_path / "wide.webp"), "--vary", "sx=70:80", "--frames", "2")
+    assert out.code == 2 and "webp holds at most 16383" in out.stderr and not (tmp_path / "wide.webp").exists()

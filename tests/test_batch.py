@@ -141,6 +141,9 @@ def test_files_named_as_masks_and_inputs_listed_twice(runner, photos, tmp_path):
     assert run.code == 0 and run.stderr.startswith("featurewarp: skipped 1 input(s) named as masks"), run.stderr
     assert "a_body_mask.png" in run.stderr and len(run.lines) == 1
     assert names(tmp_path / "out") == ["a.png", "b.png", "c.jpg"]
+    scene(photos, "gas_mask.png")                        # a photo named like a mask, with its own mask
+    run = runner("batch", "swirl", photos / "gas_mask.png", "-o", tmp_path / "gas")
+    assert run.code == 0 and names(tmp_path / "gas") == ["gas_mask.png"], run.stderr
     for sub in ("x", "y"):
         (tmp_path / sub).mkdir()
         save(tmp_path / sub / "d.png", textured())

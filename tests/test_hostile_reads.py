@@ -590,3 +590,5 @@ def test_a_result_larger_than_the_output_format_holds_is_refused_before_the_work
              "20000x1", "webp holds at most 16383")
     assert not (tmp_path / "o.webp").exists()
     assert run("warp", "stretch", tmp_path / "wide.png", tmp_path / "o.png", "--sx", "0.3").returncode == 0
+    one_line(run("compare", "stretch", tmp_path / "wide.png", tmp_path / "c.webp", "--sx", "0.3"), 2,
+             "webp holds at most 16383")

@@ -105,10 +105,10 @@ def test_a_failed_report_leaves_an_existing_output_as_it_was(picture, tmp_path, 
     output.write_bytes(b"precious")
     staging = write._stage_file
 
-    def full_disk(path, target, data):
+    def full_disk(path, target, data, named=False):
         if path.endswith(".json"):
             raise OSError(28, "No space left on device", path)
-        return staging(path, target, data)
+        return staging(path, target, data, named)
 
     monkeypatch.setattr(write, "_stage_file", full_disk)
     run = invoke("warp", "stretch", picture, output, "--report", tmp_path / "r.json", "--save-grid",
@@ -279,6 +279,53 @@ def test_icc_and_exif_are_kept_and_strip_drops_them(tmp_path):
         assert "icc_profile" not in image.info and not len(image.getexif())
 
 
+def test_descriptor_paths_are_ascii_numbers_of_this_process():
+    assert write.descriptor_of("/dev/stdout") == 1 and write.descriptor_of("/dev/stderr") == 2
+    assert write.descriptor_of("/dev/fd/5") == 5 and write.descriptor_of("/proc/self/fd/7") == 7
+    assert write.descriptor_of(f"/proc/{os.getpid()}/fd/3") == 3 and write.descriptor_of("-") == 1
+    for other in ("/dev/fd/\u0661", "/dev/fd/\u00b2", "/dev/fd/99999999999999999999", "/proc/1/fd/1",
+                  "/dev/fd/", "out.png", "/dev/null"):
+        assert write.descriptor_of(other) is None, other
+
+
+def test_an_inherited_non_blocking_descriptor_is_written_whole(tmp_path):
+    """A parent may leave stdout non-blocking: the write waited for nothing and failed after
+    64 KiB with EAGAIN when the reader was slow."""
+    import fcntl
+
+    reading, writing = os.pipe()
+    fcntl.fcntl(writing, fcntl.F_SETFL, fcntl.fcntl(writing, fcntl.F_GETFL) | os.O_NONBLOCK)
+    data, got = os.urandom(1 << 20), []
+
+    def reader():
+        time.sleep(0.3)
+        while chunk := os.read(reading, 1 << 16):
+            got.append(chunk)
+
+    thread = threading.Thread(target=reader)
+    thread.start()
+    try:
+        write.commit([write.stage(f"/dev/fd/{writing}", data)])
+    finally:
+        os.close(writing)
+        thread.join()
+        os.close(reading)
+    assert b"".join(got) == data
+
+
+def test_many_outputs_wait_in_closed_files(tmp_path, monkeypatch):
+    """Each staged output held an open descriptor until the commit: an 1100-frame sequence ran out
+    of them (ulimit -n 1024) after every frame was made."""
+    counts = []
+    commit = write.commit
+    monkeypatch.setattr(write, "commit", lambda staged: (counts.append(len(os.listdir("/proc/self/fd"))),
+                                                         commit(staged)))
+    before = len(os.listdir("/proc/self/fd"))
+    write.write_outputs([(str(tmp_path / f"f{k}.png"), b"x" * k) for k in range(write.OPEN_STAGED + 20)])
+    assert counts[0] <= before + 2 and len(os.listdir(tmp_path)) == write.OPEN_STAGED + 20
+    assert (tmp_path / "f7.png").read_bytes() == b"x" * 7
+
+
 def test_an_exif_block_larger_than_a_jpeg_holds_is_left_out_with_a_warning(tmp_path):
     """A PNG's 70 kB EXIF failed the whole run after the solve when written as JPEG ("EXIF data
     is too long"): it is left out, the warning says so, and PNG keeps it."""
@@ -293,6 +340,8 @@ def test_an_exif_block_larger_than_a_jpeg_holds_is_left_out_with_a_warning(tmp_p
     assert invoke("warp", "swirl", source, tmp_path / "o.png", "--angle", "60").exit_code == 0
     with Image.open(tmp_path / "o.png") as image:
         assert len(image.getexif()[0x010E]) == 70000
+    run = invoke("warp", "swirl", source, tmp_path / "s.jpg", "--angle", "60", "--strict")
+    assert run.exit_code == 1 and "JPEG holds" in run.output and not (tmp_path / "s.jpg").exists()
 
 
 def test_quality_sets_the_jpeg_tables_and_makes_webp_lossy(tmp_path):
@@ -435,10 +484,15 @@ def test_a_signal_while_a_library_message_is_captured_is_still_said():
     handler (a double Ctrl-C) changes nothing."""
     script = ("import os, signal\n"
               "from featurewarp_cli.cli.main import stop_on_signal\n"
+              "from featurewarp_cli.io import write\n"
               "from featurewarp_cli.io.capture import captured_stderr\n"
               "signal.signal(signal.SIGINT, stop_on_signal)\n"
+              "removed = write.remove_pending\n"
+              "def again():                      # a second signal while the handler works\n"
+              "    os.kill(os.getpid(), signal.SIGINT); removed()\n"
+              "write.remove_pending = again\n"
               "with captured_stderr():\n"
-              "    os.kill(os.getpid(), signal.SIGINT); os.kill(os.getpid(), signal.SIGINT)\n"
+              "    os.kill(os.getpid(), signal.SIGINT)\n"
               "    import time; time.sleep(5)\n")
     run = subprocess.run([sys.executable, "-c", script], capture_output=True, timeout=60)
     assert run.returncode == 130 and run.stderr.decode() == "featurewarp: stopped by SIGINT\n", run.stderr

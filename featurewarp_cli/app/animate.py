@@ -21,7 +21,7 @@ from ..io.colours import parse_colour
 from ..io.depth import to_eight_bit
 from ..io.encode import encode_image
 from ..plugins import ParamError
-from .outputs import background_colour
+from .outputs import background_colour, check_encodable
 from .pipeline import (Settings, WarpError, check_solution, load_image_and_mask, make_warper,
                        prefetch_engine, solve_within_budget)
 
@@ -173,6 +173,8 @@ def animate_file(settings: Settings, input: str, output: str, mask: str | None, 
     alpha = kind != "video" and background is None
     canvas = (max(w.canvas[0] for w in warps), max(w.canvas[1] for w in warps))
     check_frames_fit(settings, frames, canvas)
+    if kind != "video":                       # refused before any frame is made, not after
+        check_encodable(canvas, formats.format_name(os.path.splitext(output)[1]) or "png")
     fill = (0, 0, 0, 0) if alpha else tuple(background[::-1]) + (255,)
     rendered, flips, said = [], 0, []
     for index, warp in enumerate(warps):
@@ -220,7 +222,7 @@ def check_output_paths(paths: list[str], input: str, mask: str | None) -> None:
             write.check_writable(path)
         except ValueError as err:
             raise WarpError(str(err), "OUTPUT", usage=True) from None
-        check_distinct([(path, "OUTPUT")], [(input, "INPUT"), (mask, "--mask")])
+        check_distinct([(path, "OUTPUT")], [(input, "INPUT"), (mask, "--mask")], output_may_be_input=False)
 
 
 def write_frames(output: str, kind: str, frames: list[np.ndarray], fps: float) -> None:

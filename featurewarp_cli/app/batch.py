@@ -33,8 +33,8 @@ def plan(inputs, out_dir: str, suffix: str = "", fmt: str | None = None,
          mask_pattern: str | None = "{stem}_mask.png", summary: str | None = None,
          named_masks: list | None = None) -> list[Job]:
     """The jobs of a batch: one per input (an input listed twice once), minus inputs that are
-    another input's mask or are named as masks by ``mask_pattern`` (the default skips every
-    ``*_mask.png``).
+    another input's mask or are named as masks by ``mask_pattern`` and have no mask of their own
+    (the default skips a stray ``*_mask.png``).
 
     Parameters
     ----------
@@ -51,8 +51,8 @@ def plan(inputs, out_dir: str, suffix: str = "", fmt: str | None = None,
     summary : str, optional
         The ``--summary`` file: it may not be an input, a mask or an output.
     named_masks : list, optional
-        Gets the inputs skipped for their names alone (no input is theirs: a stray mask, or a
-        photo named like one), for the command to say so.
+        Gets the inputs skipped for their names alone (named as masks, with no input of theirs
+        and no mask of their own: a stray mask), for the command to say so.
 
     Raises
     ------
@@ -79,8 +79,8 @@ def plan(inputs, out_dir: str, suffix: str = "", fmt: str | None = None,
     for path in inputs:
         if _identity(path) in masks:
             continue
-        if named_as_mask and named_as_mask.fullmatch(os.path.basename(path)):
-            if named_masks is not None:
+        if named_as_mask and named_as_mask.fullmatch(os.path.basename(path)) and not _exists(mask_of(path)):
+            if named_masks is not None:           # a photo named like a mask with a mask of its own is warped
                 named_masks.append(path)
             continue
         stem, ext = os.path.splitext(os.path.basename(path))
@@ -95,7 +95,7 @@ def plan(inputs, out_dir: str, suffix: str = "", fmt: str | None = None,
     _check_overwrites(jobs, summary, given | masks)
     if inputs and not jobs:
         raise WarpError("no input left to warp: every INPUT is a mask (another input's, or named as one "
-                        "by --mask-pattern)", usage=True)
+                        "by --mask-pattern with no mask of its own)", usage=True)
     _create(out_dir)
     return jobs
 
@@ -118,6 +118,11 @@ def _check_overwrites(jobs: list[Job], summary: str | None, also_read: set) -> N
         if role is not None:
             raise WarpError(f"{summary} is also {role} this batch; it would be overwritten", "--summary",
                             usage=True)
+
+
+def _exists(path: str) -> bool:
+    """Whether a file (or an object at a URL) is there."""
+    return urls.isfile(path) if urls.is_url(path) else os.path.isfile(path)
 
 
 def _mask_names(mask_pattern: str | None):

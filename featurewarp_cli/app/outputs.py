@@ -49,18 +49,18 @@ def check_grid_name(save_grid: str | None) -> None:
                         "--save-grid", usage=True)
 
 
-def check_distinct(outputs: list[tuple[str | None, str]], inputs: list[tuple[str | None, str]]) -> None:
+def check_distinct(outputs: list[tuple[str | None, str]], inputs: list[tuple[str | None, str]],
+                   output_may_be_input: bool = True) -> None:
     """Usage error unless the outputs ((path, option) pairs; the first is OUTPUT) name neither an
-    input nor each other, OUTPUT = INPUT excepted (the input is read before anything is
-    written), and at most one of them is stdout. Devices and FIFOs may repeat."""
+    input nor each other, OUTPUT = INPUT excepted where ``output_may_be_input`` (the input is
+    read before anything is written), and at most one of them is stdout. Devices and FIFOs may
+    repeat."""
     from .pipeline import WarpError
-
-    from ..io.write import descriptor_of
 
     named = [(p, o) for p, o in outputs if p]
     streams = {}
     for path, option in named:                # '-', /dev/stdout, /dev/fd/1: one stream
-        streams.setdefault(descriptor_of(path), []).append(option)
+        streams.setdefault(write.descriptor_of(path), []).append(option)
     for descriptor, options in streams.items():
         if descriptor is not None and len(options) > 1:
             where = "stdout ('-')" if descriptor == 1 else f"descriptor {descriptor}"
@@ -70,8 +70,8 @@ def check_distinct(outputs: list[tuple[str | None, str]], inputs: list[tuple[str
     for k, (path, option, ident) in enumerate(files):
         if ident is None:
             continue
-        for other, other_option, other_ident in files[:k] + [s for s in sources
-                                                            if not (k == 0 and s[1] == "INPUT")]:
+        exempt = k == 0 and output_may_be_input
+        for other, other_option, other_ident in files[:k] + [s for s in sources if not (exempt and s[1] == "INPUT")]:
             if ident == other_ident:
                 raise WarpError(f"{path} is also {other_option} ({other}); it would be overwritten",
                                 option, usage=True)

@@ -70,6 +70,19 @@ def tint(image: np.ndarray, mask: np.ndarray | None, strength: float = 0.45) -> 
     return out
 
 
+#: A panel's caption bar height and the gap between its views, in pixels.
+CAPTION_BAR, GAP = 28, 8
+
+
+def panel_size(sizes: list[tuple[int, int]], width: int | None = None) -> tuple[int, int]:
+    """(width, height) of the :func:`labelled_panel` of views of these (width, height) sizes."""
+    natural = sum(w for w, _ in sizes)
+    scale = 1.0 if width is None else max(1, width - GAP * (len(sizes) - 1)) / natural
+    edges = np.round(np.cumsum([0] + [w for w, _ in sizes]) * scale).astype(int)
+    height = max(max(1, round(h * scale)) for _, h in sizes)
+    return int(np.maximum(np.diff(edges), 1).sum()) + GAP * (len(sizes) - 1), height + CAPTION_BAR
+
+
 def labelled_panel(images: list[np.ndarray], labels: list[str], width: int | None = None) -> np.ndarray:
     """Side-by-side panel of ``images``, each with a caption bar.
 
@@ -81,7 +94,7 @@ def labelled_panel(images: list[np.ndarray], labels: list[str], width: int | Non
     -------
     (H, W, 3) uint8 ndarray
     """
-    bar, gap = 28, 8
+    bar, gap = CAPTION_BAR, GAP
     images = [as_bgr8(image) for image in images]
     natural = sum(image.shape[1] for image in images)
     scale = 1.0 if width is None else max(1, width - gap * (len(images) - 1)) / natural
@@ -121,7 +134,7 @@ def compare_file(settings, input: str, output: str, mask: str | None = None,
 
     from ..engine.record import LISTED_IN_REPORT
     from ..io import formats
-    from .outputs import background_colour, check_distinct, rendered, write_image
+    from .outputs import background_colour, check_distinct, check_encodable, rendered, write_image
     from .pipeline import (WarpError, check_outputs, check_solution, load_image_and_mask, make_warper,
                            prefetch_engine, solve_within_budget)
     from .report import summary
@@ -136,6 +149,7 @@ def compare_file(settings, input: str, output: str, mask: str | None = None,
     image, feature_mask, warnings = load_image_and_mask(settings, input, mask)
     height, width = image.shape[:2]
     warp, warper = make_warper(settings, width, height, feature_mask)
+    check_encodable(panel_size([(width, height)] + [tuple(warp.canvas)] * 3, panel_width), fmt)
     tiles, labels = [tint(image, feature_mask)], ["input + mask"]
     for mode in ("plain", "rigid", "similarity"):
         mesh = solve_within_budget(warper, warp, mode)

@@ -27,7 +27,8 @@ def component_line(fit) -> str:
             f"{fit.rms_px:.2f} px, covering {100 * fit.coverage:.0f} %{local}")
 
 
-@click.command("measure", params=[max_pixels_option(), max_memory_option()])
+@click.command("measure", params=[max_pixels_option(), max_memory_option(
+    "an image that would need more memory than SIZE (bytes, or with K, M, G, T) once decoded")])
 @click.argument("input", type=click.Path(dir_okay=False, allow_dash=True))
 @click.argument("output", type=click.Path(dir_okay=False, allow_dash=True))
 @click.option("-m", "--mask", required=True, type=click.Path(dir_okay=False, allow_dash=True),

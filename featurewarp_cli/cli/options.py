@@ -100,13 +100,12 @@ def max_pixels_option() -> click.Option:
     return click.Option(["--max-pixels"], callback=limit_decoders, **declared(MAX_PIXELS_PARAM))
 
 
-def max_memory_option() -> click.Option:
-    """``--max-memory``: the memory budget, which refuses work and never changes a result."""
+def max_memory_option(what: str = "work whose images and grid would need more memory than SIZE (bytes, or "
+                                  "with K, M, G, T); it never makes the grid coarser (the same command gives "
+                                  "the same result on any machine)") -> click.Option:
+    """``--max-memory``: the memory budget, which refuses ``what`` and never changes a result."""
     return click.Option(["--max-memory"], type=ByteSize(), default=limits.MAX_MEMORY, metavar="SIZE",
-                        help="Refuse, before allocating, work whose images and grid would need more "
-                             "memory than SIZE (bytes, or with K, M, G, T); it never makes the grid "
-                             f"coarser (the same command gives the same result on any machine). "
-                             f"[default: half of this machine's memory, "
+                        help=f"Refuse, before allocating, {what}. [default: half of this machine's memory, "
                              f"{limits.MAX_MEMORY / 2**30:.1f}G]")
 
 

@@ -175,8 +175,8 @@ def batch_command(preset) -> click.Command:
                            help="Mask file of each input; {stem} is the input's name without "
                                 "extension (its only field); relative to the input's folder unless absolute. "
                                 "A missing mask fails that file. Inputs that are another "
-                                "input's mask, or are named as masks by PATTERN (by default any "
-                                "*_mask.png), are skipped, so 'photos/*.png' works."),
+                                "input's mask, or are named as masks by PATTERN (by default *_mask.png) "
+                                "and have no mask of their own, are skipped, so 'photos/*.png' works."),
               click.Option(["--suffix"], default="", metavar="S",
                            help="Appended to each output's stem: DIR/{stem}S.{ext}."),
               param_option(JOBS, "-j", "--jobs"),
@@ -207,8 +207,9 @@ def batch_command(preset) -> click.Command:
             todo = plan(inputs, out_dir, suffix, fmt, None if settings.mode == "plain" else mask_pattern,
                         summary, named_masks)
             if named_masks and not quiet:
-                say(f"featurewarp: skipped {len(named_masks)} input(s) named as masks by --mask-pattern with no "
-                    f"input of their own: {', '.join(named_masks[:3])}{', ...' if len(named_masks) > 3 else ''}")
+                listed = ", ".join(named_masks[:3]) + (", ..." if len(named_masks) > 3 else "")
+                say(f"featurewarp: skipped {len(named_masks)} input(s) named as masks by --mask-pattern, with no "
+                    f"input of theirs and no mask of their own: {listed}")
             failed = run_planned(settings, todo, jobs, scheduler, summary, resume, quiet, verbose)
         except WarpError as err:
             raise click_error(err) from err

@@ -234,12 +234,12 @@ class RigidMap:
         radius = handles.radius if handles.radius is not None else default_radius(
             self.width, self.height, max(self.grid.spacing))
         sources, targets, radii = handles.constraints(self.grid, radius)
-        uncarried = []
+        uncarried, band = [], self.decay * max(self.grid.spacing)
         if self.labels is not None and len(handles.points_from):
             sources, targets, radii = carried_features(self.labels, self.grid.nodes(), handles, sources, targets,
-                                                       radii, self.decay * max(self.grid.spacing), uncarried)
-        notes = [f"the handle at ({x:g}, {y:g}) sits on a feature that reaches the held border: it moves that "
-                 "point, not the whole feature (the border stays)" for x, y in handles.points_from[uncarried]]
+                                                       radii, band, uncarried)
+        notes = [f"the handle at ({x:g}, {y:g}) sits on a feature within {band:.0f} px of the held border: it moves "
+                 "that point, not the whole feature (the border stays)" for x, y in handles.points_from[uncarried]]
         key = (sources.tobytes(), radii.tobytes())
         if key != self._key:
             self.rigid = RigidDeformer(self.grid, sources, radii)
@@ -274,9 +274,10 @@ def carried_features(labels, nodes, handles: Handles, sources, targets, radii, b
     solve asks its transition band to be the feature's similarity, and a band that W
     compresses instead pulls the feature off the handle (by about the band's width).
 
-    A feature that reaches a side the handles hold (``border``: pinned, or that side's curve)
-    is not carried: the border holds, and the handle on it moves its own disc (carried, the
-    feature and the border pulled against each other and the pinned border slid by 22 px).
+    A feature whose band reaches a side the handles hold (``border``: pinned, or that side's
+    curve) is not carried: the border holds, and the handle on it moves its own disc (carried,
+    the band's border nodes and the pinned border pulled against each other and the border
+    slid by 22 px).
     The indices of its point handles are appended to ``uncarried``.
     """
     h, w = labels.shape

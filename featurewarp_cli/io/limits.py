@@ -88,7 +88,7 @@ def node_budget(width: int, height: int, canvas: tuple[int, int], max_memory: in
     if max_memory is None:
         return None
     images = image_bytes(width, height) + canvas[0] * canvas[1] * OUTPUT_PIXEL_BYTES
-    if images >= max_memory:
+    if images > max_memory:
         raise ImageError(f"a {width}x{height} input warped onto a {canvas[0]}x{canvas[1]} canvas needs about "
                          f"{size_text(images, max_memory)}, above the memory limit of {size_text(max_memory)} "
                          "(--max-memory)")
@@ -105,7 +105,7 @@ def check_memory(width: int, height: int, name: str, max_memory: int | None) -> 
     """Raise ImageError, before decoding, if a ``width`` x ``height`` input alone needs more
     than ``max_memory`` bytes (:func:`image_bytes`; None: no limit). A 4 KB AVIF of 14 000 x
     14 000 pixels was decoded (3.3 GB) before the memory limit refused it."""
-    if max_memory is not None and image_bytes(width, height) >= max_memory:
+    if max_memory is not None and image_bytes(width, height) > max_memory:
         raise ImageError(f"{name} is {width}x{height}: decoding and warping it needs about "
                          f"{size_text(image_bytes(width, height), max_memory)}, above the memory limit of "
                          f"{size_text(max_memory)} (--max-memory)")

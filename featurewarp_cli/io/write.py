@@ -28,6 +28,7 @@ import contextlib
 import errno
 import fcntl
 import os
+import re
 import stat
 import sys
 import tempfile
@@ -85,6 +86,20 @@ def _write_all(fd: int, data: bytes) -> None:
         view = view[os.write(fd, view):]
 
 
+def _write_waiting(fd: int, data: bytes) -> None:
+    """All of ``data`` to an inherited descriptor, waiting while it would block: the shell or a
+    parent (node, some CI runners) may have left it non-blocking, and its file description is
+    theirs too, so it is not changed."""
+    import select
+
+    view = memoryview(data)
+    while view:
+        try:
+            view = view[os.write(fd, view):]
+        except BlockingIOError:
+            select.select([], [fd], [])
+
+
 def _write_stream(stream, data: bytes) -> None:
     """All of ``data`` to a binary stream, then flushed: unbuffered (``PYTHONUNBUFFERED``), stdout
     is a raw file whose ``write`` may take part of it (a full disk, a pipe closed early) and
@@ -98,12 +113,13 @@ def _write_stream(stream, data: bytes) -> None:
     stream.flush()
 
 
-def _stage_file(path: str, target: str, data: bytes) -> Staged:
-    """The bytes of a regular-file output in an unnamed file (else a hidden one) beside ``target``."""
+def _stage_file(path: str, target: str, data: bytes, named: bool = False) -> Staged:
+    """The bytes of a regular-file output in an unnamed file (else, or when ``named``, a hidden
+    closed one) beside ``target``."""
     directory = os.path.dirname(target) or "."
     mode = _mode_for(target)
     try:
-        fd = os.open(directory, os.O_TMPFILE | os.O_WRONLY | os.O_CLOEXEC, mode)
+        fd = None if named else os.open(directory, os.O_TMPFILE | os.O_WRONLY | os.O_CLOEXEC, mode)
     except (AttributeError, OSError):
         fd = None
     if fd is not None:
@@ -131,9 +147,10 @@ def _stage_file(path: str, target: str, data: bytes) -> Staged:
 STAGE_DELAY_VARIABLE = "FEATUREWARP_TEST_STAGE_DELAY"
 
 
-def stage(path: str, data: bytes) -> Staged:
-    """Get ``data`` ready to go to ``path`` (see the module's docstring); OSError on failure."""
-    staged = _stage(path, data)
+def stage(path: str, data: bytes, named: bool = False) -> Staged:
+    """Get ``data`` ready to go to ``path`` (see the module's docstring; ``named``: a regular
+    file waits in a hidden named file, closed, not in an open unnamed one); OSError on failure."""
+    staged = _stage(path, data, named)
     delay = os.environ.get(STAGE_DELAY_VARIABLE)
     if delay:
         import time
@@ -154,14 +171,14 @@ def descriptor_of(path: str) -> int | None:
         return streams[name]
     parts = name.split("/")
     own = ("self", "thread-self", str(os.getpid()))
-    if len(parts) == 4 and parts[1:3] == ["dev", "fd"] and parts[3].isdigit():
-        return int(parts[3])
-    if len(parts) == 5 and parts[1] == "proc" and parts[2] in own and parts[3] == "fd" and parts[4].isdigit():
-        return int(parts[4])
+    number = parts[-1] if re.fullmatch(r"[0-9]{1,9}", parts[-1]) else None       # ASCII digits only
+    if number and (parts[1:-1] == ["dev", "fd"] or (len(parts) == 5 and parts[1] == "proc" and parts[2] in own
+                                                    and parts[3] == "fd")):
+        return int(number)
     return None
 
 
-def _stage(path: str, data: bytes) -> Staged:
+def _stage(path: str, data: bytes, named: bool = False) -> Staged:
     if path == "-":
         return Staged(path, "stdout", data=data)
     descriptor = descriptor_of(path)
@@ -172,7 +189,7 @@ def _stage(path: str, data: bytes) -> Staged:
         if stat.S_ISDIR(mode):
             raise IsADirectoryError(21, "Is a directory", path)
         return Staged(path, "direct", path, data=data)
-    return _stage_file(path, _replaced(path), data)
+    return _stage_file(path, _replaced(path), data, named)
 
 
 def _mode_of(path: str) -> int | None:
@@ -249,7 +266,7 @@ def _commit_one(output: Staged) -> None:
             if stream is not None and not stream.closed:
                 stream.flush()
         try:
-            _write_all(output.descriptor, output.data)
+            _write_waiting(output.descriptor, output.data)
         except OSError as err:
             raise OSError(err.errno, err.strerror, output.path) from None
     elif output.fd is not None:
@@ -294,12 +311,17 @@ def discard(outputs: list[Staged]) -> None:
             output.temp = None
 
 
+#: Outputs of one command beyond which each waits in a closed hidden file instead of an open
+#: unnamed one (a 1100-frame sequence ran out of descriptors under ``ulimit -n 1024``).
+OPEN_STAGED = 16
+
+
 def write_outputs(items: list[tuple[str, bytes]]) -> None:
     """Stage every (path, bytes), then commit them all; nothing changes if staging fails."""
-    staged = []
+    staged, named = [], len(items) > OPEN_STAGED
     try:
         for path, data in items:
-            staged.append(stage(path, data))
+            staged.append(stage(path, data, named))
     except BaseException:
         discard(staged)
         raise
