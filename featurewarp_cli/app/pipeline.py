@@ -460,7 +460,7 @@ def warp_file(settings: Settings, input: str, output: str, mask: str | None = No
     background = background_colour(settings.background, fmt)
     prefetch_engine(solver=mask is not None and settings.mode != "plain")
     pending, feature_mask, warnings, (width, height) = start_loading(settings, input, mask, piped)
-    icc, exif = kept_metadata(settings.strip, pending.header, fmt, warnings)      # said, and refused by --strict
+    icc, exif = kept_metadata(settings.strip, getattr(pending, "header", None), fmt, warnings)   # --strict sees it
     timings = {"load": time.perf_counter() - t0}
     warp, warper = make_warper(settings, width, height, feature_mask)    # the canvas and the budget, undecoded
     check_encodable(warp.canvas, fmt)
