@@ -175,10 +175,18 @@ def test_undo_and_redo_from_the_keyboard(page):
     settled(driver)
 
 
-def test_alt_drag_turns_around_a_pin_and_the_file_keeps_the_angle(page):
+def test_alt_drag_turns_around_a_pin_and_the_file_keeps_the_angle(tmp_path, browser):  # noqa: F811
+    """Its own editor: a page reloaded after Save goes on from the saved handles."""
+    with editor_in(tmp_path, browser, "-m", MASK, "--handles", "h.json") as overlay:
+        _turn_a_pin_and_save(browser, overlay, tmp_path)
+        browser.refresh()
+        settled(browser)
+        assert js(browser, "featurewarp.handles.points.length") == 2       # as saved after the delete
+
+
+def _turn_a_pin_and_save(driver, overlay, folder):
     from selenium.webdriver.common.keys import Keys
 
-    driver, overlay, folder = page
     add_pins(driver, overlay, [(60, 470), (450, 470), (250, 250)])
     before = js(driver, "document.getElementById('gl').toDataURL()")
     scale = js(driver, "featurewarp.view.scale")
@@ -197,6 +205,8 @@ def test_alt_drag_turns_around_a_pin_and_the_file_keeps_the_angle(page):
     click_at(driver, overlay, (250, 250), keys=(Keys.ALT,))            # Alt-click on it: deleted
     assert js(driver, "featurewarp.handles.points.length") == 2
     settled(driver)
+    driver.find_element("id", "save").click()
+    wait_for(driver, "return featurewarp.saved && featurewarp.saved.handles.points.length == 2")
 
 
 def test_shift_click_and_box_select_then_arrow_keys_nudge(page):

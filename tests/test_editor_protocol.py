@@ -172,3 +172,69 @@ def test_a_failed_export_leaves_the_handles_file_and_the_output_as_they_were(tmp
             session.export({"handles": crossing})
         for path in (out, handles):
             assert (path.read_bytes() == b"SENTINEL") if existed else not path.exists()
+
+
+def _raw(server, text: bytes, timeout=5.0) -> bytes:
+    """Send raw bytes on one connection to ``server``; everything it answers until it closes."""
+    import socket
+
+    port = int(server.url.split(":")[2].split("/")[0])
+    with socket.create_connection(("127.0.0.1", port), timeout=timeout) as connection:
+        connection.sendall(text)
+        answer = b""
+        while chunk := connection.recv(65536):
+            answer += chunk
+    return answer
+
+
+def test_refused_and_cut_short_requests_answer_json_and_leave_no_body_behind(session, monkeypatch):
+    """A refused POST left its body unread on the kept-alive connection (taken as the next
+    request line); Content-Length "²" got no answer at all; a body shorter than its length was
+    a 500 after the socket timeout; a 5000-digit number quoted CPython's digit limit."""
+    from featurewarp_cli.app import editor
+
+    monkeypatch.setattr(editor.EditorHandler, "timeout", 1.0)
+    server = EditorServer(session, 0)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    port, token = server.url.split(":")[2].split("/")[0], server.url.split("token=")[1]
+    head = f"Host: 127.0.0.1:{port}\r\nContent-Type: application/json\r\n"
+    try:
+        body = b'{"a":1}'
+        follow = f"GET /state?token={token} HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\n\r\n".encode()
+        for path in (f"/nope?token={token}", "/solve?token=wrong"):
+            answer = _raw(server, f"POST {path} HTTP/1.1\r\n{head}Content-Length: 7\r\n\r\n".encode() + body + follow)
+            assert answer.count(b"HTTP/1.1") == 1 and b'"error"' in answer, answer   # closed, not smuggled
+        answer = _raw(server, f"POST /save?token={token} HTTP/1.1\r\n{head}Content-Length: \u00b2\r\n\r\n{{}}"
+                      .encode("latin-1"))
+        assert answer.startswith(b"HTTP/1.1 400") and b"Content-Length 1 to" in answer
+        answer = _raw(server, f"POST /save?token={token} HTTP/1.1\r\n{head}Content-Length: 30\r\n\r\n".encode()
+                      + b'{"handles":1}')
+        assert answer.startswith(b"HTTP/1.1 408") and b"ended before its Content-Length" in answer
+        huge = b'{"handles": {"version": 1, "points": [{"from": [' + b"9" * 5000 + b', 2], "to": [1, 2]}]}}'
+        answer = _raw(server, f"POST /save?token={token} HTTP/1.1\r\n{head}Content-Length: {len(huge)}\r\n"
+                      "Connection: close\r\n\r\n".encode() + huge)
+        assert answer.startswith(b"HTTP/1.1 400") and b"a number is too long" in answer and b"sys." not in answer
+    finally:
+        server.shutdown()
+        server.server_close()
+
+
+def test_saved_handles_are_what_a_reloaded_page_starts_from_and_exports_run_one_at_a_time(tmp_path):
+    """/state gave the start-up handles after a Save (a reload then saved them over the file);
+    two Exports at once could leave the handles file of one beside the image of the other."""
+    session = EditorSession(Settings("deform"), IMAGE, MASK, str(tmp_path / "h.json"), str(tmp_path / "out.png"))
+    turned = {"version": 1, "points": PINS + [{"from": [130, 60], "to": [150, 60]}]}
+    session.save({"handles": turned})
+    assert session.state()["handles"] == json.loads((tmp_path / "h.json").read_text())
+    other = {"version": 1, "points": PINS + [{"from": [130, 60], "to": [110, 80]}]}
+    exports = [threading.Thread(target=session.export, args=({"handles": h},)) for h in (turned, other)]
+    held = session.files.acquire()
+    for thread in exports:
+        thread.start()
+    time.sleep(0.2)
+    assert held and not (tmp_path / "out.png").exists()           # both wait for the one holding the files
+    session.files.release()
+    for thread in exports:
+        thread.join()
+    written = json.loads((tmp_path / "h.json").read_text())
+    assert written["points"][2]["to"] in ([150, 60], [110, 80]) and session.state()["handles"] == written

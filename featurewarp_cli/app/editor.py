@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import hmac
 import json
+import re
 import secrets
 import socket
 import struct
@@ -174,27 +175,30 @@ class EditorHandler(BaseHTTPRequestHandler):
 
     def do_POST(self):
         origin = self.headers.get("Origin")
-        if not self._allowed() or (origin is not None and origin not in {f"http://{h}" for h in self.server.hosts}):
-            return self._send(403, b"forbidden", "text/plain")         # a page of another site
-        route = urlsplit(self.path).path
-        session = self.server.session
+        route, session = urlsplit(self.path).path, self.server.session
         calls = {"/solve": self._solve, "/save": session.save, "/export": session.export, "/mask": session.set_mask,
                  "/density": session.set_density}
-        if route not in calls:
-            return self._send(404, b"not found", "text/plain")
+        refused = (403, "forbidden") if not self._allowed() or (
+            origin is not None and origin not in {f"http://{h}" for h in self.server.hosts}) else \
+            (404, "not found") if route not in calls else None                  # 403: a page of another site
         length = self.headers.get("Content-Length", "")
-        if (not self.headers.get("Content-Type", "").startswith("application/json") or not length.isdigit()
-                or not 0 < int(length) <= MAX_BODY):
-            self.close_connection = True
-            return self._json(400, {"error": "expected a JSON body (Content-Type: application/json, "
-                                             f"Content-Length 1 to {MAX_BODY})"})
+        if refused is None and (not self.headers.get("Content-Type", "").startswith("application/json")
+                                or not re.fullmatch(r"[0-9]{1,9}", length) or not 0 < int(length) <= MAX_BODY):
+            refused = (400, "expected a JSON body (Content-Type: application/json, "
+                            f"Content-Length 1 to {MAX_BODY})")
+        if refused is not None:
+            self.close_connection = True              # its body unread: never taken for the next request
+            return self._json(refused[0], {"error": refused[1]})
         try:
             data = self.rfile.read(int(length))
             self._deadline.cancel()
-            body = json.loads(data)
-            if not isinstance(body, dict):
-                raise ValueError("a JSON object is expected")
+            if len(data) < int(length):
+                raise TimeoutError
+            body = _parsed(data)
             result = calls[route](body)
+        except TimeoutError:
+            self.close_connection = True
+            return self._json(408, {"error": "the body ended before its Content-Length"})
         except RecursionError:
             return self._json(400, {"error": "the JSON body is nested too deeply"})
         except json.JSONDecodeError as err:
@@ -213,3 +217,16 @@ class EditorHandler(BaseHTTPRequestHandler):
         status, positions = self.server.session.solve(body)
         header = json.dumps(status).encode()
         return struct.pack("<I", len(header)) + header + b" " * (-(4 + len(header)) % 4) + positions
+
+
+def _parsed(data: bytes) -> dict:
+    """The JSON object of a request body (ValueError saying what is wrong with it)."""
+    try:
+        body = json.loads(data)
+    except json.JSONDecodeError:
+        raise
+    except ValueError as err:                 # CPython's digit limit: a number of thousands of digits
+        raise ValueError("the body is not valid JSON (a number is too long)") from err
+    if not isinstance(body, dict):
+        raise ValueError("a JSON object is expected")
+    return body

@@ -97,6 +97,7 @@ class EditorSession:
         self.initial = ({"version": 1, "points": [], "curves": [], "border": "free", "canvas": "fit"}
                         if handles is None else self._checked({"handles": handles}, self.notes))
         self.lock, self._seen = threading.Lock(), threading.Lock()
+        self.files = threading.Lock()          # one Save or Export at a time: its files and command agree
         self.newest = {}
         self._build()
 
@@ -226,13 +227,15 @@ class EditorSession:
         first); return what was written, and the content of what had nowhere to go."""
         data = self._checked(body)
         answer = {"saved": self.handles_path, "handles": data, "mask_saved": None}
-        if self.handles_path:
-            write.write_atomic(self.handles_path, (json.dumps(data, indent=2) + "\n").encode())
-        if self.painted:
-            if self.mask_out:
-                answer["mask_saved"] = self._write_mask()
-            else:
-                answer["mask_png"] = base64.b64encode(_png(self._mask_image())).decode()
+        with self.files:
+            if self.handles_path:
+                write.write_atomic(self.handles_path, (json.dumps(data, indent=2) + "\n").encode())
+                self.initial = data                   # a reloaded page goes on from what was saved
+            if self.painted:
+                if self.mask_out:
+                    answer["mask_saved"] = self._write_mask()
+                else:
+                    answer["mask_png"] = base64.b64encode(_png(self._mask_image())).decode()
         return answer
 
     def _write_mask(self) -> str:
@@ -252,11 +255,13 @@ class EditorSession:
         settings = replace(self.settings, mode=mode, warp_factory=handles_factory(data, self.settings.decay))
         if self.density != "normal":
             settings = replace(settings, cell=self.cell)
-        with _restored_on_failure([handles_path] + ([self.mask_out] if self.painted else [])):
+        with self.files, _restored_on_failure([handles_path] + ([self.mask_out] if self.painted else [])):
             write.write_atomic(handles_path, (json.dumps(data, indent=2) + "\n").encode())
             mask = self._write_mask() if self.painted else self.mask
             summary = warp_file(settings, self.input, self.output_path, mask,
                                 also_read=((handles_path, "--handles"),))
+            if handles_path == self.handles_path:
+                self.initial = data
         command = ["featurewarp", "deform", self.input, self.output_path] + (["-m", mask] if mask else [])
         command += ["--handles", handles_path] + (["--mode", mode] if mode != "similarity" else [])
         command += options_given(settings)
@@ -327,7 +332,10 @@ def _decode_mask(data, size: tuple[int, int]) -> np.ndarray:
     width, height = struct.unpack(">II", raw[16:24])          # before decoding: no bomb gets decoded
     if (width, height) != tuple(size):
         raise ValueError(f"png: the mask is {width}x{height}; the page's texture is {size[0]}x{size[1]}")
-    image = cv2.imdecode(np.frombuffer(raw, np.uint8), cv2.IMREAD_GRAYSCALE)
+    from ..io.capture import captured_stderr
+
+    with captured_stderr():                   # libpng's complaints: the 400 says it, not the terminal
+        image = cv2.imdecode(np.frombuffer(raw, np.uint8), cv2.IMREAD_GRAYSCALE)
     if image is None or image.shape != (height, width):
         raise ValueError("png: cannot decode the mask")
     return image

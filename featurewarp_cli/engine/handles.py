@@ -365,8 +365,8 @@ def _check_shape(data: dict) -> None:
     jsonschema checks about 5 000 points a second (a file of 150 000 point handles took 26 s,
     one curve of 100 000 points over a minute), so it sees every list whose items all have
     the right shape cut to its first items; this plain pass takes well under a second for
-    the largest file read (16 MiB). A list with any item of another shape stays whole, and
-    the schema names that item at its true index.
+    the largest file read (16 MiB). A list with any item of another shape (an ``angle`` that
+    is no number too) stays whole, and the schema names that item at its true index.
     """
     from .. import schema
 
@@ -377,7 +377,7 @@ def _check_shape(data: dict) -> None:
     view = dict(data)
     points = data.get("points")
     if type(points) is list and all(type(p) is dict and _plain_point(p.get("from")) and _plain_point(p.get("to"))
-                                    for p in points):
+                                    and type(p.get("angle", 0)) in (int, float) for p in points):
         view["points"] = points[:1]
     curves = data.get("curves")
     if type(curves) is list and all(type(c) is dict and _plain_line(c.get("from")) and _plain_line(c.get("to"))
