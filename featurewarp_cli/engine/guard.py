@@ -16,8 +16,9 @@ from . import barrier, injectivity, system
 from .grid import signed_areas
 
 #: The guard untangles windows around the folds, reaching these many times the largest fold's
-#: extent beyond it (at least WINDOW_MIN_MARGIN quads), in at most WINDOW_ITERATIONS steps each, then
-#: the first with the ground around the tied features it reaches; else the whole grid.
+#: extent beyond it (at least WINDOW_MIN_MARGIN quads), in at most WINDOW_ITERATIONS steps each,
+#: then the first with the ground around the tied features it reaches; else the whole grid. A
+#: window that opens its folds converges the barrier there, as does one around crushed ones.
 WINDOW_MARGINS = (0.5, 1.0)
 WINDOW_MIN_MARGIN = 8
 WINDOW_ITERATIONS = 150
@@ -190,7 +191,9 @@ def guard(problem: Problem, x: np.ndarray, record: GuardRecord) -> np.ndarray | 
     if ok and problem.preview and windowed:   # a preview: the window's minimum, in bounded time
         return x
     if ok:
-        record.converged = True           # the whole grid's run says it, from the untangled start
+        # A window's minimum holds the rest at the least-squares solution (up to 27 px from the
+        # energy's minimum at 12 MP): it only starts the whole grid's, whose run says converged.
+        record.converged = True
         return _converge_grid(problem, problem.systems, problem.rhs, problem.offset, problem.tied, x, floor, record)[0]
     return None if problem.preview else _release(problem, x, floor, record)
 
@@ -234,14 +237,12 @@ def _untangled(problem, start, floor, record):
 
 def _converged(problem, x, floor, record):
     """(positions, windowed): ``x`` (no folds) as it is where no triangle is below its floor
-    (windowed None: x is the energy's minimum), or for a full solve (False: :func:`guard`
-    converges the whole grid); a preview's moved to the minimum in a window around its crushed
-    triangles (True), or not at all where that window would not be much smaller (False)."""
+    (windowed None: x is the energy's minimum); else moved to the barrier energy's minimum in
+    a window around its crushed triangles (windowed True), or not at all where that window
+    would not be much smaller than the grid (False); :func:`guard` converges the whole grid."""
     crushed = injectivity.grid_areas(problem.grid, x) < floor
     if not crushed.any():
         return x, None
-    if not problem.preview:
-        return x, False
     window = _window(problem, problem.rhs, problem.offset, problem.tied, x, crushed, WINDOW_MIN_MARGIN)
     if window is None:
         return x, False
@@ -368,9 +369,9 @@ def _converge_grid(problem, systems, rhs, offset, tied, x, floor, record, max_st
 def _untangle_window(problem: Problem, rhs, offset, tied, x, floor, margin_factor: float, record,
                      around_ties: bool = False):
     """:func:`injectivity.untangle` on a window around the folded or crushed triangles (below
-    half their floor), for a preview converged there once nothing is folded (a full solve
-    converges the whole grid from it: the same minimum, 11 % faster at 12 MP): the nodes within
-    ``margin_factor`` times the largest fold's extent, the rest held (:func:`_window`).
+    half their floor), converged there (:meth:`Window.converge`) once nothing is folded: the
+    nodes within ``margin_factor`` times the largest fold's extent of them, everything else
+    held (with ``around_ties``, the ground around the tied features they reach: :func:`_window`).
 
     Returns
     -------
@@ -391,7 +392,7 @@ def _untangle_window(problem: Problem, rhs, offset, tied, x, floor, margin_facto
                                              max_iterations=WINDOW_ITERATIONS, settle=False)
     x = x.copy()
     x[window.nodes] = moved
-    if problem.preview and not injectivity.flipped(moved, window.triangles).any():
+    if not injectivity.flipped(moved, window.triangles).any():
         x[window.nodes] = window.converge(x, floor, record)
     return x, iterations, int(window.quads.size)
 
