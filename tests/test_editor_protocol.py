@@ -172,6 +172,11 @@ def test_a_failed_export_leaves_the_handles_file_and_the_output_as_they_were(tmp
             session.export({"handles": crossing})
         for path in (out, handles):
             assert (path.read_bytes() == b"SENTINEL") if existed else not path.exists()
+    handles.unlink(missing_ok=True)
+    handles.symlink_to(tmp_path / "nowhere.json")              # dangling: the restore leaves it a link
+    with pytest.raises(WarpError, match="nothing written"):
+        EditorSession(Settings("deform"), IMAGE, MASK, None, str(out)).export({"handles": crossing})
+    assert handles.is_symlink() and not (tmp_path / "nowhere.json").exists()
 
 
 def _raw(server, text: bytes, timeout=5.0) -> bytes:

@@ -283,14 +283,16 @@ def _restored_on_failure(paths: list):
     """Files put back as they were (or removed, where there was none) when the block fails: an
     Export that fails leaves every existing file as it was, the handles and mask it wrote first
     (for the command it prints) included."""
+    paths = [os.path.realpath(path) for path in paths]      # a link's target is what gets written
     before = {path: Path(path).read_bytes() if os.path.isfile(path) else None for path in paths}
+    absent = {path for path in paths if not os.path.lexists(path)}
     try:
         yield
     except BaseException:
         for path, data in before.items():
-            if data is None:
+            if path in absent:
                 write.remove_quietly(path)
-            else:
+            elif data is not None:              # a FIFO, a device or a dangling link stays as it is
                 write.write_atomic(path, data)
         raise
 
