@@ -15,6 +15,7 @@ import os
 import subprocess
 import sys
 from dataclasses import dataclass
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -128,10 +129,10 @@ def test_warp_writes_the_declared_canvas(runner, tmp_path):
 
 def test_output_may_be_the_input(runner, tmp_path):
     image, mask = scene(tmp_path)
-    before = open(image, "rb").read()
+    before = Path(image).read_bytes()
     run = runner("warp", "swirl", image, image, "--mask", mask, "--angle", "60")
     assert run.code == 0, run.stderr
-    after = open(image, "rb").read()
+    after = Path(image).read_bytes()
     assert after != before and decoded(after).shape == decoded(before).shape
     assert sorted(os.listdir(tmp_path)) == ["in.png", "in_mask.png"]
 
@@ -151,7 +152,7 @@ def test_report_is_written(runner, tmp_path):
 def test_stdin_to_stdout_equals_files(runner, tmp_path):
     image, mask = scene(tmp_path)
     files = runner("warp", "swirl", image, tmp_path / "out.png", "-m", mask)
-    piped = runner("warp", "swirl", "-", "png:-", "-m", mask, "--verbose", input=open(image, "rb").read())
+    piped = runner("warp", "swirl", "-", "png:-", "-m", mask, "--verbose", input=Path(image).read_bytes())
     assert files.code == piped.code == 0
     assert piped.stdout == (tmp_path / "out.png").read_bytes()
     assert "48x36" in piped.stderr                       # the summary goes to stderr, not stdout
@@ -174,7 +175,7 @@ def test_prefix_names_the_format_of_a_file(runner, tmp_path):
 
 def test_mask_from_stdin(runner, tmp_path):
     image, mask = scene(tmp_path)
-    run = runner("warp", "swirl", image, "-", "--format", "png", "-m", "-", input=open(mask, "rb").read())
+    run = runner("warp", "swirl", image, "-", "--format", "png", "-m", "-", input=Path(mask).read_bytes())
     reference = runner("warp", "swirl", image, "png:-", "-m", mask)
     assert run.code == 0 and run.stdout == reference.stdout
 
@@ -343,7 +344,7 @@ def test_python_dash_m_and_console_script(tmp_path):
 
 def test_real_pipe_end_to_end(tmp_path):
     image, mask = scene(tmp_path)
-    run = command("warp", "arc", "-", "png:-", "-m", mask, "--angle", "90", input=open(image, "rb").read())
+    run = command("warp", "arc", "-", "png:-", "-m", mask, "--angle", "90", input=Path(image).read_bytes())
     assert run.returncode == 0 and run.stderr == b""
     assert run.stdout[:8] == b"\x89PNG\r\n\x1a\n"
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -531,5 +532,5 @@ def test_handles_from_stdin(tmp_path):
                                                                                   "to": [w - 1, h]}]}).encode()
     run = command("deform", image, tmp_path / "o.png", "-m", mask, "--handles", "-", input=data)
     assert run.returncode == 0, run.stderr
-    both = command("deform", "-", tmp_path / "p.png", "--handles", "-", input=open(image, "rb").read())
+    both = command("deform", "-", tmp_path / "p.png", "--handles", "-", input=Path(image).read_bytes())
     assert both.returncode == 2 and b"stdin holds the image" in both.stderr, both.stderr   # not "not valid JSON"

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -97,7 +98,7 @@ def test_diff_image(runner, pair, tmp_path):
 
 
 def test_stdin_and_errors(runner, pair, tmp_path):
-    run = runner("diff", "-", pair[0], input=open(pair[0], "rb").read())
+    run = runner("diff", "-", pair[0], input=Path(pair[0]).read_bytes())
     assert run.code == 0
     assert runner("diff", "-", "-").code == 2
     missing = runner("diff", pair[0], tmp_path / "nope.png")

@@ -10,6 +10,7 @@ import json
 import re
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -52,7 +53,7 @@ def test_an_endless_stream_on_stdin_is_refused_at_once(tmp_path, scene, device, 
 
 def test_a_stream_longer_than_the_budget_is_refused_while_read(tmp_path, scene):
     image, _ = scene
-    data = open(image, "rb").read() + bytes(24 << 20)
+    data = Path(image).read_bytes() + bytes(24 << 20)
     result = run("warp", "swirl", "-", tmp_path / "o.png", "--max-memory", "16M", input=data)
     one_line(result, 1, "stdin", "--max-memory")
     assert not (tmp_path / "o.png").exists()
@@ -80,7 +81,7 @@ def test_values_that_overflow_are_usage_errors(tmp_path, scene, option, value):
 
 def test_a_stream_on_stdin_still_works(tmp_path, scene):
     image, mask = scene
-    result = run("warp", "swirl", "-", tmp_path / "o.png", "-m", mask, input=open(image, "rb").read())
+    result = run("warp", "swirl", "-", tmp_path / "o.png", "-m", mask, input=Path(image).read_bytes())
     assert result.returncode == 0, result.stderr.decode()
     assert (tmp_path / "o.png").stat().st_size > 0
 

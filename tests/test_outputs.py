@@ -47,7 +47,7 @@ def test_a_fifo_output_delivers_the_whole_image(picture, tmp_path):
     fifo = tmp_path / "pipe"
     os.mkfifo(fifo)
     received = []
-    reader = threading.Thread(target=lambda: received.append(open(fifo, "rb").read()))
+    reader = threading.Thread(target=lambda: received.append(Path(fifo).read_bytes()))
     reader.start()
     run = subprocess.run([*CLI, "warp", "stretch", str(picture), f"png:{fifo}", "--sx", "1.5"], timeout=60)
     reader.join(10)
