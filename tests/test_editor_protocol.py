@@ -232,13 +232,17 @@ def test_saved_handles_are_what_a_reloaded_page_starts_from_and_exports_run_one_
     session.save({"handles": turned})
     assert session.state()["handles"] == json.loads((tmp_path / "h.json").read_text())
     other = {"version": 1, "points": PINS + [{"from": [130, 60], "to": [110, 80]}]}
-    exports = [threading.Thread(target=session.export, args=({"handles": h},)) for h in (turned, other)]
+    saved = (tmp_path / "h.json").read_bytes()
+    calls = [threading.Thread(target=session.export, args=({"handles": h},)) for h in (turned, other)]
+    calls.append(threading.Thread(target=session.save, args=({"handles": other},)))
     held = session.files.acquire()
-    for thread in exports:
+    for thread in calls:
         thread.start()
-    time.sleep(0.2)
-    assert held and not (tmp_path / "out.png").exists()           # both wait for the one holding the files
+    time.sleep(0.3)
+    assert held and not (tmp_path / "out.png").exists()           # all wait for the one holding the files
+    assert (tmp_path / "h.json").read_bytes() == saved
     session.files.release()
+    exports = calls
     for thread in exports:
         thread.join()
     written = json.loads((tmp_path / "h.json").read_text())

@@ -283,18 +283,32 @@ def test_descriptor_paths_are_ascii_numbers_of_this_process():
     assert write.descriptor_of("/dev/stdout") == 1 and write.descriptor_of("/dev/stderr") == 2
     assert write.descriptor_of("/dev/fd/5") == 5 and write.descriptor_of("/proc/self/fd/7") == 7
     assert write.descriptor_of(f"/proc/{os.getpid()}/fd/3") == 3 and write.descriptor_of("-") == 1
-    for other in ("/dev/fd/\u0661", "/dev/fd/\u00b2", "/dev/fd/99999999999999999999", "/proc/1/fd/1",
+    for other in ("/dev/fd/\u0661", "/dev/fd/\u00b2", "/dev/fd/99999999999999999999", "/proc/1/fd/1", "/dev/fd/01",
                   "/dev/fd/", "out.png", "/dev/null"):
         assert write.descriptor_of(other) is None, other
 
 
-def test_an_inherited_non_blocking_descriptor_is_written_whole(tmp_path):
+@pytest.mark.parametrize("target", ["/dev/fd/N", "-", "/dev/fd/1500"])
+def test_an_inherited_non_blocking_descriptor_is_written_whole(tmp_path, monkeypatch, target):
     """A parent may leave stdout non-blocking: the write waited for nothing and failed after
-    64 KiB with EAGAIN when the reader was slow."""
+    64 KiB with EAGAIN when the reader was slow ('-' too; and select() refused descriptors
+    from 1024 on)."""
     import fcntl
+    import io
+    import resource
 
     reading, writing = os.pipe()
+    if target == "/dev/fd/1500":
+        soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+        if max(soft, hard if hard != resource.RLIM_INFINITY else 4096) <= 1500:
+            pytest.skip("no descriptor 1500 allowed here")
+        resource.setrlimit(resource.RLIMIT_NOFILE, (max(soft, 1501), hard))
+        os.dup2(writing, 1500)
+        os.close(writing)
+        writing = 1500
     fcntl.fcntl(writing, fcntl.F_SETFL, fcntl.fcntl(writing, fcntl.F_GETFL) | os.O_NONBLOCK)
+    if target == "-":
+        monkeypatch.setattr(sys, "stdout", io.TextIOWrapper(io.BufferedWriter(io.FileIO(writing, "w", closefd=False))))
     data, got = os.urandom(1 << 20), []
 
     def reader():
@@ -305,11 +319,13 @@ def test_an_inherited_non_blocking_descriptor_is_written_whole(tmp_path):
     thread = threading.Thread(target=reader)
     thread.start()
     try:
-        write.commit([write.stage(f"/dev/fd/{writing}", data)])
+        write.commit([write.stage(target.replace("N", str(writing)), data)])
     finally:
         os.close(writing)
         thread.join()
         os.close(reading)
+        if target == "/dev/fd/1500":
+            resource.setrlimit(resource.RLIMIT_NOFILE, (soft, hard))
     assert b"".join(got) == data
 
 

@@ -94,6 +94,9 @@ def output_kind(path: str) -> str:
         except (TypeError, ValueError):
             raise WarpError(f"{path}: a numbered sequence's name holds one %d field (such as %04d), and %% for "
                             f"a percent sign", "OUTPUT", usage=True) from None
+        if os.path.splitext(path)[1].lower() != ".png":       # its frames are PNG files
+            raise WarpError(f"{path}: a numbered sequence is of PNG frames; end its name in .png", "OUTPUT",
+                            usage=True)
         return "sequence"
     ext = os.path.splitext(path)[1].lower()
     if ext in ANIMATED:
@@ -213,8 +216,9 @@ def output_paths(output: str, kind: str, frames: int) -> list[str]:
 
 
 def check_output_paths(paths: list[str], input: str, mask: str | None) -> None:
-    """Usage error unless every frame file can be written and none is INPUT or the mask (a
-    sequence's frame named like the mask replaced it) or another frame."""
+    """Usage error unless every frame file can be written and none is the mask (a sequence's
+    frame named like it replaced it) or, in a sequence, INPUT (one animation file may be INPUT,
+    as warp's OUTPUT may: it is read first)."""
     from .outputs import check_distinct
 
     for path in paths:                    # a sequence's names differ by their numbers
@@ -222,7 +226,7 @@ def check_output_paths(paths: list[str], input: str, mask: str | None) -> None:
             write.check_writable(path)
         except ValueError as err:
             raise WarpError(str(err), "OUTPUT", usage=True) from None
-        check_distinct([(path, "OUTPUT")], [(input, "INPUT"), (mask, "--mask")], output_may_be_input=False)
+        check_distinct([(path, "OUTPUT")], [(input, "INPUT"), (mask, "--mask")], output_may_be_input=len(paths) == 1)
 
 
 def write_frames(output: str, kind: str, frames: list[np.ndarray], fps: float) -> None:

@@ -191,14 +191,14 @@ class EditorHandler(BaseHTTPRequestHandler):
             return self._json(refused[0], {"error": refused[1]})
         try:
             data = self.rfile.read(int(length))
-            self._deadline.cancel()
-            if len(data) < int(length):
-                raise TimeoutError
-            body = _parsed(data)
-            result = calls[route](body)
         except TimeoutError:
+            data = b""
+        self._deadline.cancel()
+        if len(data) < int(length):
             self.close_connection = True
             return self._json(408, {"error": "the body ended before its Content-Length"})
+        try:
+            result = calls[route](_parsed(data))
         except RecursionError:
             return self._json(400, {"error": "the JSON body is nested too deeply"})
         except json.JSONDecodeError as err:

@@ -230,7 +230,7 @@ class EditorSession:
         with self.files:
             if self.handles_path:
                 write.write_atomic(self.handles_path, (json.dumps(data, indent=2) + "\n").encode())
-                self.initial = data                   # a reloaded page goes on from what was saved
+                self.initial, self.notes = data, []   # a reloaded page goes on from what was saved
             if self.painted:
                 if self.mask_out:
                     answer["mask_saved"] = self._write_mask()
@@ -261,7 +261,7 @@ class EditorSession:
             summary = warp_file(settings, self.input, self.output_path, mask,
                                 also_read=((handles_path, "--handles"),))
             if handles_path == self.handles_path:
-                self.initial = data
+                self.initial, self.notes = data, []
         command = ["featurewarp", "deform", self.input, self.output_path] + (["-m", mask] if mask else [])
         command += ["--handles", handles_path] + (["--mode", mode] if mode != "similarity" else [])
         command += options_given(settings)

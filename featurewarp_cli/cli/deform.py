@@ -63,7 +63,8 @@ def load_handles(path: str | None) -> dict | None:
     try:
         data = json.loads(text)
     except (ValueError, UnicodeDecodeError, RecursionError) as err:
-        reason = "nested too deeply" if isinstance(err, RecursionError) else str(err)
+        reason = "nested too deeply" if isinstance(err, RecursionError) else str(err) if isinstance(
+            err, (json.JSONDecodeError, UnicodeDecodeError)) else "a number is too long"   # CPython's digit limit
         raise click.BadParameter(f"{name} is not valid JSON ({reason})", param_hint="'--handles'") from None
     if not isinstance(data, dict):
         raise click.BadParameter(f"{name} must hold a JSON object ({{\"version\": 1, \"points\": [...]}})",

@@ -285,7 +285,10 @@ def _angles(points: list, version: int, notes: list) -> np.ndarray:
             notes.append(f"handles: ignoring points[{k}].angle (version 2 reads it; this file says version 1)")
             continue
         if not _finite(point["angle"]):
-            raise ValueError(f"points[{k}].angle: expected a finite number of degrees, got {point['angle']!r}")
+            from .. import schema
+
+            raise ValueError(f"points[{k}].angle: expected a finite number of degrees, got "
+                             f"{schema.shown(point['angle'])}")
         angles[k] = math.radians(point["angle"])
     return angles
 

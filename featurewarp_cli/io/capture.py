@@ -6,16 +6,31 @@ import contextlib
 import os
 import sys
 import tempfile
+import threading
+
+
+#: One capture at a time in the process: fd 2 is the process's, and two threads' captures that
+#: ended out of order left stderr pointing at a deleted capture for good (an editor's /mask
+#: decode beside an Export's). Reentrant: a capture inside a capture of the same thread.
+_ONE_AT_A_TIME = threading.RLock()
 
 
 @contextlib.contextmanager
 def captured_stderr():
-    """Collect what is printed on file descriptor 2 while the block runs.
+    """Collect what is printed on file descriptor 2 while the block runs (one block at a time
+    in the process).
 
     Yields a list that holds the printed lines once the block has finished. Our own
     notices (lines starting with ``featurewarp:``, which another thread may print
     meanwhile) are shown afterwards instead of being collected.
     """
+    with _ONE_AT_A_TIME:
+        with _captured() as lines:
+            yield lines
+
+
+@contextlib.contextmanager
+def _captured():
     lines: list[str] = []
     if sys.stderr is not None:
         sys.stderr.flush()                                          # our own messages stay visible

@@ -10,8 +10,9 @@ Where an output goes, by what its path is now:
 - a regular file, or nothing yet: replaced atomically. The bytes wait in an unnamed
   file (``O_TMPFILE``) in the target's folder, so an interrupted run leaves nothing
   behind, even under SIGKILL; at commit it gets a hidden name and is renamed over
-  the target. Where the file system has no ``O_TMPFILE``, a hidden temporary file
-  is used instead and removed on failure and on SIGTERM or SIGINT.
+  the target. Where the file system has no ``O_TMPFILE``, or a command has more than
+  :data:`OPEN_STAGED` outputs, a hidden temporary file is used instead and removed on
+  failure and on SIGTERM or SIGINT.
 - a symbolic link: followed, so its target is replaced as above and the link stays.
 - ``/dev/stdout``, ``/dev/stderr``, ``/dev/fd/N``, ``/proc/self/fd/N``: this process's own
   descriptor, written where it stands (a shell's ``>> log`` appends, ``> file`` is not
@@ -27,6 +28,7 @@ from __future__ import annotations
 import contextlib
 import errno
 import fcntl
+import io
 import os
 import re
 import stat
@@ -92,12 +94,15 @@ def _write_waiting(fd: int, data: bytes) -> None:
     theirs too, so it is not changed."""
     import select
 
-    view = memoryview(data)
+    view, waiting = memoryview(data), None
     while view:
         try:
             view = view[os.write(fd, view):]
         except BlockingIOError:
-            select.select([], [fd], [])
+            if waiting is None:               # poll, not select: any descriptor number
+                waiting = select.poll()
+                waiting.register(fd, select.POLLOUT)
+            waiting.poll()
 
 
 def _write_stream(stream, data: bytes) -> None:
@@ -171,7 +176,7 @@ def descriptor_of(path: str) -> int | None:
         return streams[name]
     parts = name.split("/")
     own = ("self", "thread-self", str(os.getpid()))
-    number = parts[-1] if re.fullmatch(r"[0-9]{1,9}", parts[-1]) else None       # ASCII digits only
+    number = parts[-1] if re.fullmatch(r"0|[1-9][0-9]{0,8}", parts[-1]) else None   # as the kernel names them
     if number and (parts[1:-1] == ["dev", "fd"] or (len(parts) == 5 and parts[1] == "proc" and parts[2] in own
                                                     and parts[3] == "fd")):
         return int(number)
@@ -256,9 +261,15 @@ def _open_fifo(path: str) -> int:
 def _commit_one(output: Staged) -> None:
     if output.kind == "stdout":
         try:
-            _write_stream(sys.stdout.buffer, output.data)
+            stream = sys.stdout.buffer
+            sys.stdout.flush()
+            fd = stream.fileno()              # a descriptor: written whole, waiting if non-blocking
+        except io.UnsupportedOperation:       # no descriptor (a test's BytesIO): the stream itself
+            _write_stream(stream, output.data)
+            return
         except (AttributeError, ValueError):
             raise OSError(9, "standard output is closed") from None
+        _write_waiting(fd, output.data)
     elif output.kind == "direct":
         _write_direct(output.target, output.data)
     elif output.kind == "descriptor":
@@ -313,7 +324,7 @@ def discard(outputs: list[Staged]) -> None:
 
 #: Outputs of one command beyond which each waits in a closed hidden file instead of an open
 #: unnamed one (a 1100-frame sequence ran out of descriptors under ``ulimit -n 1024``).
-OPEN_STAGED = 16
+OPEN_STAGED = 256
 
 
 def write_outputs(items: list[tuple[str, bytes]]) -> None:
