@@ -302,6 +302,31 @@ class Warp:
 CANVAS_SLACK = 0.01
 
 
+class CheckedWarp:
+    """``warp`` whose every call is checked against the :class:`Warp` contract: (N, 2) finite
+    canvas positions for (N, 2) points. A preset that broke it gave an internal error deep in
+    the solve (``cannot unpack non-iterable NoneType``) or, for NaN, a mesh with NaN nodes and
+    no word. Its attributes are the warp's."""
+
+    def __init__(self, warp):
+        self.warp = warp
+
+    def __getattr__(self, name):
+        return getattr(self.warp, name)
+
+    def __call__(self, points):
+        import numpy as np
+
+        out = np.asarray(self.warp(points))
+        name = getattr(self.warp, "name", type(self.warp).__name__)
+        if out.shape != np.shape(points):
+            raise ValueError(f"{name}: the warp returned an array of shape {out.shape} for {np.shape(points)} "
+                             "points; (N, 2) canvas positions are expected")
+        if not np.all(np.isfinite(out)):
+            raise ValueError(f"{name}: the warp returned positions that are not finite (inf or NaN)")
+        return out
+
+
 def canvas_size(extent) -> tuple[int, int]:
     """The canvas (width, height) that holds a shape ``extent`` (width, height) pixels across,
     within :data:`CANVAS_SLACK`."""

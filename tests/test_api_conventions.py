@@ -185,3 +185,84 @@ def test_a_parameter_error_crosses_process_boundaries_whole():
     err = pickle.loads(pickle.dumps(ParamError("angle", "171 is out of range when `where` is lower", ("where",))))
     assert err.render(option_flag) == "--angle: 171 is out of range when --where is lower"
     assert str(err) == "angle: 171 is out of range when where is lower"
+
+
+def test_array_dtypes_masks_and_orders_the_api_takes():
+    """int8/int16 wrapped on return (opaque alpha -1), float16 came back black, an int64 0/255
+    mask marked nothing, order="RGB" was silently BGR, a quick solve's info held NaN."""
+    import json
+    import warnings as warning_filters
+
+    import numpy as np
+
+    from featurewarp_cli import FeatureWarper, load_warp, warp
+
+    image = np.random.default_rng(0).integers(0, 256, (48, 64, 3), dtype=np.uint8)
+    mask = np.zeros((48, 64), bool)
+    mask[15:30, 20:40] = True
+    with warning_filters.catch_warnings():
+        warning_filters.simplefilter("ignore")
+        small = warp((image // 2).astype(np.int8), mask, "swirl", angle=90)
+        assert small.dtype == np.int8 and small.min() >= 0
+        assert warp(image.astype(np.int16), mask, "arc", angle=90)[24, 32, 3] == np.iinfo(np.int16).max
+        half = warp((image / 255).astype(np.float16), mask, "swirl", angle=90)
+        assert half.dtype == np.float16 and abs(float(half.mean()) - float(image.mean()) / 255) < 0.05
+    warper = FeatureWarper(64, 48, mask.astype(np.int64) * 255)
+    assert warper.mask.sum() == mask.sum()
+    mesh = warper.solve(load_warp("arc")(64, 48, angle=90))
+    assert tuple(warper.render(image, mesh, background="red", order="bgr")[0, 0]) == (0, 0, 255)
+    with pytest.raises(ValueError, match="order must be"):
+        warper.render(image, mesh, order="RGB")
+    quick = warper.solve(load_warp("swirl")(64, 48, angle=90), quick=True)
+    json.dumps(quick.info, allow_nan=False)
+
+
+def test_a_preset_that_breaks_the_warp_contract_is_named():
+    import numpy as np
+
+    from featurewarp_cli import FeatureWarper
+    from featurewarp_cli.plugins import Warp
+
+    class Endless(Warp):
+        name = "endless"
+
+        def forward(self, points):
+            out = points * 1.0
+            out[points[:, 0] > 40] = np.inf
+            return out
+
+    class Flat(Warp):
+        name = "flat"
+
+        def forward(self, points):
+            return points[:, :1]
+
+    for broken, message in ((Endless, "endless: .* not finite"), (Flat, r"flat: .* shape \(\d+, 1\)")):
+        with pytest.raises(ValueError, match=message):
+            FeatureWarper(64, 48).solve(broken(64, 48))
+
+
+def test_the_deformer_moves_turned_handles_and_a_full_solve_has_no_history():
+    """move() dropped each handle's angle; a full solve started the rigid map from the last one,
+    so the same handles gave other bytes after another solve."""
+    import numpy as np
+
+    from featurewarp_cli import Deformer
+
+    mask = np.zeros((120, 160), bool)
+    mask[40:80, 60:100] = True
+    turned = {"version": 2, "canvas": "input", "points": [{"from": [10, 10], "to": [10, 10]},
+              {"from": [150, 110], "to": [150, 110]}, {"from": [80, 60], "to": [85, 60], "angle": 30}]}
+    deformer = Deformer(160, 120, mask)
+    first = deformer.solve(turned)
+    moved = deformer.move([[10, 10], [150, 110], [85, 60]])
+    assert deformer.handles.as_dict()["points"][2]["angle"] == 30
+    np.testing.assert_allclose(moved.target, first.target, atol=1e-9)
+    with pytest.raises(ValueError, match="3 points"):
+        deformer.move([[1, 2], [3, 4]])
+    pins = [{"from": [5, 110], "to": [5, 110]}, {"from": [150, 110], "to": [150, 110]}]
+    def dragged(x, y):
+        return {"version": 1, "points": pins + [{"from": [30, 10], "to": [x, y]}]}
+    reused = Deformer(160, 120, mask)
+    reused.solve(dragged(60, 4))
+    np.testing.assert_array_equal(reused.solve(dragged(40, 8)).target, Deformer(160, 120, mask).solve(dragged(40, 8)).target)

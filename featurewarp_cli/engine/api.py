@@ -21,9 +21,10 @@ def warp(image: np.ndarray, mask: np.ndarray | None, preset: str, *, mode: str =
         Grey, grey + alpha, RGB or RGBA; uint8, uint16, bool, integers, or floats in
         [0, 1] (returned in the same dtype; see :mod:`featurewarp_cli.engine.arrays`).
     mask : (h, w) ndarray or None
-        Feature pixels: bool as is; integers at or above 128/255 of their maximum; floats >= 0.5.
+        Feature pixels: bool as is; a 0/1 mask its 1s; other integers >= 128 (32896 for
+        uint16); floats >= 0.5. A mask that marks nothing gives a warning (a plain warp).
     preset : str
-        Registered preset name ('stretch', 'arc', 'swirl', 'bulge', or a plugin's).
+        A preset's name: one of the 14 built in (``featurewarp warps`` lists them) or a plugin's.
     mode, cell, feature_weight, decay, formulation, boundary, scale_prior, grow_past_edge
         See :class:`FeatureWarper`.
     interp : {'nearest', 'linear', 'cubic', 'lanczos'}
@@ -45,6 +46,12 @@ def warp(image: np.ndarray, mask: np.ndarray | None, preset: str, *, mode: str =
     ------
     featurewarp_cli.FeatureWarpWarning
         With ``strict``: the first thing the solve could not do, as an error.
+    featurewarp_cli.plugins.UnknownPreset
+        No preset has that name (a LookupError; its message lists the closest).
+    featurewarp_cli.plugins.ParamError
+        A preset parameter out of its range or of the wrong type (a ValueError).
+    ValueError
+        An image, mask or option the API does not take.
 
     Warns
     -----
@@ -62,8 +69,11 @@ def warp(image: np.ndarray, mask: np.ndarray | None, preset: str, *, mode: str =
                            formulation=formulation, boundary=boundary, scale_prior=scale_prior,
                            grow_past_edge=grow_past_edge)
     mesh = warper.solve(w, mode)
-    if strict and mesh.record.warnings:
-        raise FeatureWarpWarning(mesh.record.warnings[0])
-    for line in mesh.record.warnings:
+    lines = list(mesh.record.warnings)
+    if mask is not None and not warper.mask.any() and mode != "plain":
+        lines.insert(0, "the mask marks no feature (no value >= 128, nor a 1 of a 0/1 mask): plain warp")
+    if strict and lines:
+        raise FeatureWarpWarning(lines[0])
+    for line in lines:
         warnings.warn(line, FeatureWarpWarning, stacklevel=2)
     return warper.render(image, mesh, interp, background)

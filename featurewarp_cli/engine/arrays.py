@@ -9,12 +9,12 @@ Rules
 - Channels: 1 (grey), 2 (grey + alpha), 3 (RGB) or 4 (RGBA); anything else is a
   ValueError. A grey image stays grey.
 - Samples: uint8 and uint16 as they are; bool, other integers (values must fit
-  uint16) and floats in [0, 1] (scikit-image's convention, rendered at 16 bits and
-  returned in the input's float dtype).
+  uint16; returned clipped to their type) and floats in [0, 1] (scikit-image's convention,
+  rendered at 16 bits and returned in the input's float dtype, float16 included).
 - Background: None (uncovered pixels transparent: alpha is added where needed), an
   (r, g, b) tuple of 0..255 integers, or colour text (``"white"``, ``"#ff8800"``).
-- Mask (as on the command line): bool as it is; integers at or above 128/255 of their
-  type's maximum (128 for uint8); floats at or above 0.5.
+- Mask (as on the command line): bool as it is; a 0/1 mask marks its 1s; other integers at
+  or above 128 (32896 for uint16); floats at or above 0.5.
 """
 
 from __future__ import annotations
@@ -30,7 +30,10 @@ def background_rgb(background) -> tuple[int, int, int] | None:
         from ..io.colours import parse_colour
 
         return parse_colour(background)
-    values = tuple(background)
+    try:
+        values = tuple(background)
+    except TypeError:
+        values = ()
     if len(values) != 3 or not all(isinstance(v, (int, np.integer)) and 0 <= v <= 255 for v in values):
         raise ValueError(f"background must be (r, g, b) with integers 0..255, a colour name or None, "
                          f"not {background!r}")
@@ -49,7 +52,7 @@ def prepare(image: np.ndarray, background) -> tuple[np.ndarray, tuple | None, np
     elif np.issubdtype(dtype, np.floating):
         if not np.all(np.isfinite(image)) or image.min(initial=0) < 0 or image.max(initial=0) > 1:
             raise ValueError("a float image must hold values in [0, 1]")
-        samples = np.round(image * 65535.0).astype(np.uint16)
+        samples = np.round(image.astype(np.float64) * 65535.0).astype(np.uint16)   # float16 overflows
     elif dtype in (np.uint8, np.uint16):
         samples = image
     elif np.issubdtype(dtype, np.integer):
@@ -75,15 +78,16 @@ def finish(out: np.ndarray, channels: int, dtype: np.dtype) -> np.ndarray:
     if np.issubdtype(dtype, np.floating):
         scale = 65535.0 if out.dtype == np.uint16 else 255.0
         return (out / scale).astype(dtype)
-    if dtype not in (np.uint8, np.uint16):
-        return out.astype(dtype)
+    if dtype not in (np.uint8, np.uint16):                  # int8's opaque alpha and fills: its largest
+        return np.minimum(out, np.iinfo(dtype).max).astype(dtype)
     return out
 
 
 def mask_array(mask, shape: tuple[int, int]) -> np.ndarray | None:
     """The mask rule of the API and the command line: bool as is; integers whose largest value is
     1 (a 0/1 mask, as ``cv2.threshold(..., 1, ...)`` gives) mark their 1s, other integers mark
-    values at or above 128/255 of their type's maximum (128 for uint8, 32896 for uint16); floats
+    values at or above 128 (32896 for uint16: 128/255 of its range; an int64 0/255 mask, as
+    ``mask.astype(int) * 255`` gives, marked nothing at 128/255 of its type's maximum); floats
     mark values at or above 0.5."""
     if mask is None:
         return None
@@ -96,7 +100,7 @@ def mask_array(mask, shape: tuple[int, int]) -> np.ndarray | None:
     if np.issubdtype(mask.dtype, np.integer):
         if mask.size and mask.max() == 1 and mask.min() >= 0:
             return mask == 1
-        return mask >= 128 * int(np.iinfo(mask.dtype).max) / 255        # as the command line: 128, 32896
+        return mask >= (32896 if mask.dtype == np.uint16 else 128)    # as the command line; int64 0/255 too
     if np.issubdtype(mask.dtype, np.floating):
         return mask >= 0.5
     raise ValueError(f"mask dtype {mask.dtype} is not supported")

@@ -228,9 +228,10 @@ class RigidMap:
         self._last = None
         self._embeddings = {}
 
-    def deformation(self, handles: Handles) -> HandleWarp:
+    def deformation(self, handles: Handles, warm: bool = True) -> HandleWarp:
         """The map W of ``handles``, a preset-like warp (factoring anew only when the handles'
-        sources changed; a fold the handles ask for is noted in its ``notes``)."""
+        sources changed; a fold the handles ask for is noted in its ``notes``); ``warm``: from
+        the last map (a drag's updates), else from the similarity step, whatever came before."""
         radius = handles.radius if handles.radius is not None else default_radius(
             self.width, self.height, max(self.grid.spacing))
         sources, targets, radii = handles.constraints(self.grid, radius)
@@ -244,7 +245,7 @@ class RigidMap:
         if key != self._key:
             self.rigid = RigidDeformer(self.grid, sources, radii)
             self._key, self._last = key, None
-        nodes = self.rigid.deform(targets, start=self._last, steps=self.rigid_steps)
+        nodes = self.rigid.deform(targets, start=self._last if warm else None, steps=self.rigid_steps)
         self._last = nodes
         values = {"points": len(handles.points_from), "curves": len(handles.curves),
                   "border": handles.border if isinstance(handles.border, str) else sorted(handles.border),
@@ -386,7 +387,7 @@ class Deformer:
             raise TypeError(f"handles must be Handles or a handles dict, not {type(handles).__name__}")
         self.handles = handles
         factored = self.rigid.rigid
-        self.warp = self.rigid.deformation(handles)
+        self.warp = self.rigid.deformation(handles, warm=drag or self.quick)     # a full solve: no history
         same_set = factored is not None and self.rigid.rigid is factored     # the handles' sources unchanged
         mesh = self.warper.solve(self.warp, mode or self.mode, quick=self.quick, drag=drag, keep_ties=same_set)
         mesh.record.warnings.extend(self.warp.review(mesh, self.quick))
@@ -397,10 +398,13 @@ class Deformer:
         nothing is factored again."""
         if self.handles is None:
             raise ValueError("move() moves the handles of the last solve(): call solve() first")
-        targets = np.asarray(targets, dtype=np.float64).reshape(self.handles.points_from.shape)
+        targets = np.asarray(targets, dtype=np.float64)
+        if targets.size != self.handles.points_from.size:
+            raise ValueError(f"targets: {len(self.handles.points_from)} points (x, y) expected, "
+                             f"got an array of shape {targets.shape}")
         data = self.handles.as_dict()
-        data["points"] = [{"from": a, "to": [float(x), float(y)]} for a, (x, y) in
-                          zip([p["from"] for p in data["points"]], targets)]
+        for point, (x, y) in zip(data["points"], targets.reshape(-1, 2)):
+            point["to"] = [float(x), float(y)]                 # its angle stays (a turned handle)
         return self.solve(Handles.from_dict(data, self.warper.width, self.warper.height), mode)
 
 

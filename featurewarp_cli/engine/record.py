@@ -151,7 +151,8 @@ class SolveRecord:
         guard = self.guard
         return {
             "mode": self.mode, "formulation": self.formulation, "boundary": self.boundary,
-            "grid": dict(self.grid), "solver": self.solver,
+            "grid": {key: None if isinstance(value, float) and value != value else value      # NaN: not measured
+                     for key, value in self.grid.items()}, "solver": self.solver,
             "components": [asdict(c) for c in self.components],
             "features_kept": self.features_kept,
             "background_stretch": self.background_stretch,

@@ -20,9 +20,8 @@ the factorization: the system matrix depends on the grid and the mask only.
 >>> warper.factorizations
 1
 
-The automatic cell follows the warp's curvature: a swirl by 180 degrees needs a
-finer grid, factored in turn. A sliding border (stretch's) holds x and y at
-different nodes: one factorization per coordinate, shared by every stretch.
+The automatic cell follows the warp's curvature: a swirl by 180 degrees needs a finer grid,
+factored in turn. A sliding border (stretch's): one factorization per coordinate.
 
 >>> mesh = warper.solve(load_warp("swirl")(160, 120, angle=180))
 >>> warper.factorizations
@@ -42,6 +41,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .. import stages
+from ..plugins import CheckedWarp
 from . import arrays, attempts, components, fidelity, injectivity, plain_bound, scale_search, system, targets
 from . import features as feat
 from .defaults import (BOUNDARIES, DECAY, DECAY_PARAM, FEATURE_WEIGHT, FEATURE_WEIGHT_PARAM, FORMULATION,
@@ -309,7 +309,7 @@ class FeatureWarper:
         self.timings = {}
         stages.enter("grid")
         t0 = time.perf_counter()
-        lattice = getattr(warp, "lattice", None)           # a warp linear on a grid's triangles
+        warp, lattice = CheckedWarp(warp), getattr(warp, "lattice", None)   # lattice: W linear on its triangles
         if quick:
             cell, error = (self.cell or fidelity.auto_cell(self.width, self.height, None)[0]), float("nan")
         elif self.cell is None:
@@ -453,8 +453,7 @@ class FeatureWarper:
             dtype, grey staying grey.
         mesh : Mesh
         interp : {'nearest', 'linear', 'cubic', 'lanczos'}
-            'nearest' copies source values only (label maps, pixel art), so it also turns
-            ``antialias`` off.
+            'nearest' copies source values only (label maps, pixel art), so it also turns ``antialias`` off.
         background : (r, g, b) of 0..255, colour text, or None
             Fill where no source pixel lands; None: transparent (alpha added where needed).
         antialias : bool
@@ -470,8 +469,11 @@ class FeatureWarper:
             raise ValueError(f"image is {image.shape[1]}x{image.shape[0]}, warper is for {self.width}x{self.height}")
         stages.enter("render")
         t0 = time.perf_counter()
-        channels = 1 if image.ndim == 2 else image.shape[2]
-        samples, fill, dtype = arrays.prepare(image, background) if order == "rgb" else (image, background, None)
+        if order not in ("rgb", "bgr"):
+            raise ValueError(f"order must be 'rgb' or 'bgr', not {order!r}")
+        channels, text = 1 if image.ndim == 2 else image.shape[2], isinstance(background, str)
+        samples, fill, dtype = arrays.prepare(image, background) if order == "rgb" else (
+            image, arrays.background_rgb(background) if text else background, None)
         out = raster.render(samples, mesh.source, mesh.target, mesh.triangles, mesh.canvas, interp, fill,
                             antialias=antialias and interp != "nearest")       # nearest: source values only
         if mesh.record is not None:
