@@ -157,8 +157,8 @@ class FeatureWarper:
                  scale_prior: float = SCALE_PRIOR, max_nodes: int | None = None, grow_past_edge: bool = False):
         if boundary not in (None,) + BOUNDARIES:
             raise ValueError(f"boundary must be one of {', '.join(BOUNDARIES)}, not {boundary!r}")
-        if mask is not None and mask.shape != (height, width):
-            raise ValueError(f"mask is {mask.shape[1]}x{mask.shape[0]}, image is {width}x{height}")
+        if mask is not None and np.shape(mask)[:2] != (height, width):     # a list too
+            raise ValueError(f"mask is {'x'.join(map(str, np.shape(mask)[1::-1]))}, image is {width}x{height}")
         for param, value in ((FEATURE_WEIGHT_PARAM, feature_weight), (DECAY_PARAM, decay),
                              (SCALE_PRIOR_PARAM, scale_prior)):
             try:
@@ -167,8 +167,8 @@ class FeatureWarper:
                 raise ValueError(f"{param.name}: {str(err).split(': ', 1)[-1]}") from None
         if formulation not in FORMULATIONS:
             raise ValueError(f"formulation must be one of {', '.join(FORMULATIONS)}, not {formulation!r}")
-        if cell is not None and not (cell >= 1 and math.isfinite(cell)):
-            raise ValueError(f"cell must be at least 1 px, not {cell}")
+        if cell is not None and not (isinstance(cell, (int, float, np.number)) and cell >= 1 and math.isfinite(cell)):
+            raise ValueError(f"cell must be a number of pixels, at least 1, not {cell!r}")
         if cell is not None and max_nodes is not None:
             nodes = Grid.for_image(width, height, cell).n_nodes
             if nodes > max_nodes:
