@@ -544,12 +544,16 @@ def test_the_api_speaks_rgb_and_keeps_dtype_and_grey():
 
 
 def test_one_mask_rule_in_the_api():
-    """bool as is; integers at or above 128/255 of their maximum (as the CLI); floats at or above 0.5."""
+    """bool as is; integers at or above 128 (as the CLI reads 8-bit masks; 32896 for uint16, 64
+    for int8: 128/255 of their range); floats at or above 0.5."""
     from featurewarp_cli.engine.arrays import mask_array
 
     values = np.array([[0, 127, 128, 255]], np.uint8)
     assert mask_array(values, (1, 4)).tolist() == [[False, False, True, True]]
     assert mask_array(values.astype(np.uint16) * 257, (1, 4)).tolist() == [[False, False, True, True]]
+    for kind in (np.int32, np.int64, np.uint32):                     # 0/255 masks as numpy makes them
+        assert mask_array(values.astype(kind), (1, 4)).tolist() == [[False, False, True, True]]
+    assert mask_array(np.array([[0, 63, 64, 127]], np.int8), (1, 4)).tolist() == [[False, False, True, True]]
     assert mask_array(np.array([[0.2, 0.5]]), (1, 2)).tolist() == [[False, True]]
 
 

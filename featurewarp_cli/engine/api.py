@@ -71,7 +71,7 @@ def warp(image: np.ndarray, mask: np.ndarray | None, preset: str, *, mode: str =
     mesh = warper.solve(w, mode)
     lines = list(mesh.record.warnings)
     if mask is not None and not warper.mask.any() and mode != "plain":
-        lines.insert(0, "the mask marks no feature (no value >= 128, nor a 1 of a 0/1 mask): plain warp")
+        lines.insert(0, "the mask marks no feature (see the mask rule of featurewarp_cli.engine.arrays): plain warp")
     if strict and lines:
         raise FeatureWarpWarning(lines[0])
     for line in lines:

@@ -14,7 +14,7 @@ Rules
 - Background: None (uncovered pixels transparent: alpha is added where needed), an
   (r, g, b) tuple of 0..255 integers, or colour text (``"white"``, ``"#ff8800"``).
 - Mask (as on the command line): bool as it is; a 0/1 mask marks its 1s; other integers at
-  or above 128 (32896 for uint16); floats at or above 0.5.
+  or above 128 (32896 for uint16, 64 for int8); floats at or above 0.5.
 """
 
 from __future__ import annotations
@@ -78,17 +78,19 @@ def finish(out: np.ndarray, channels: int, dtype: np.dtype) -> np.ndarray:
     if np.issubdtype(dtype, np.floating):
         scale = 65535.0 if out.dtype == np.uint16 else 255.0
         return (out / scale).astype(dtype)
-    if dtype not in (np.uint8, np.uint16):                  # int8's opaque alpha and fills: its largest
-        return np.minimum(out, np.iinfo(dtype).max).astype(dtype)
+    if dtype not in (np.uint8, np.uint16):
+        if np.iinfo(dtype).max < 65535:                     # int8's, int16's opaque alpha and fills: their largest
+            out = np.minimum(out, np.iinfo(dtype).max)
+        return out.astype(dtype)
     return out
 
 
 def mask_array(mask, shape: tuple[int, int]) -> np.ndarray | None:
     """The mask rule of the API and the command line: bool as is; integers whose largest value is
     1 (a 0/1 mask, as ``cv2.threshold(..., 1, ...)`` gives) mark their 1s, other integers mark
-    values at or above 128 (32896 for uint16: 128/255 of its range; an int64 0/255 mask, as
-    ``mask.astype(int) * 255`` gives, marked nothing at 128/255 of its type's maximum); floats
-    mark values at or above 0.5."""
+    values at or above 128 (32896 for uint16, 64 for int8: 128/255 of their range; an int64
+    0/255 mask, as ``mask.astype(int) * 255`` gives, marked nothing at 128/255 of its type's
+    maximum); floats mark values at or above 0.5."""
     if mask is None:
         return None
     mask = np.asarray(mask)
@@ -100,7 +102,8 @@ def mask_array(mask, shape: tuple[int, int]) -> np.ndarray | None:
     if np.issubdtype(mask.dtype, np.integer):
         if mask.size and mask.max() == 1 and mask.min() >= 0:
             return mask == 1
-        return mask >= (32896 if mask.dtype == np.uint16 else 128)    # as the command line; int64 0/255 too
+        top = int(np.iinfo(mask.dtype).max)
+        return mask >= (32896 if mask.dtype == np.uint16 else 128 if top >= 255 else 128 * top / 255)
     if np.issubdtype(mask.dtype, np.floating):
         return mask >= 0.5
     raise ValueError(f"mask dtype {mask.dtype} is not supported")
