@@ -271,7 +271,11 @@ class Warp:
         known = {p.name for p in self.params}
         unknown = set(values) - known
         if unknown:
-            raise ValueError(f"{self.name}: unknown parameter(s) {', '.join(sorted(unknown))}")
+            import difflib
+
+            near = [m for name in sorted(unknown) for m in difflib.get_close_matches(name, sorted(known), 1)]
+            hint = f" (did you mean {', '.join(f'`{m}`' for m in near)}?)" if near else ""
+            raise ParamError(tuple(sorted(unknown)), f"{self.name} has no such parameter{hint}", mentions=tuple(near))
         self.width, self.height = int(width), int(height)
         self.values = {p.name: p.check(values.get(p.name, p.default)) for p in self.params}
         self.offset = (0.0, 0.0)

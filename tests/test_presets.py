@@ -324,9 +324,12 @@ def test_param_names_with_underscores_become_dashed_options():
 
 @pytest.mark.parametrize("preset", plugins.names())
 def test_unknown_parameter_names_raise(preset):
-    """An unknown parameter name is a ValueError that names it and the preset."""
-    with pytest.raises(ValueError, match=rf"{preset}: unknown parameter\(s\) bogus"):
+    """An unknown parameter name is a ParamError (a ValueError) that names it and the preset,
+    and the parameter it is closest to."""
+    with pytest.raises(plugins.ParamError, match=rf"bogus: {preset} has no such parameter"):
         load_warp(preset)(W, H, bogus=1)
+    with pytest.raises(plugins.ParamError, match=r"angel: swirl has no such parameter \(did you mean angle\?\)"):
+        load_warp("swirl")(W, H, angel=1)
 
 
 @pytest.mark.parametrize("size", [(0, 10), (10, 0), (-5, 5)])
