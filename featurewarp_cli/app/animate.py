@@ -208,8 +208,8 @@ def output_paths(output: str, kind: str, frames: int) -> list[str]:
     if kind != "sequence":
         return [output]
     widths = [int(width or 0) for width in re.findall(r"%0?(\d*)d", os.path.basename(output))]
-    if max(widths, default=0) > 255 or len(os.fsencode(output % max(frames - 1, 0))) > 4096 or \
-            len(os.fsencode(os.path.basename(output % max(frames - 1, 0)))) > 255:
+    last = "" if max(widths, default=0) > 255 else output % max(frames - 1, 0)      # formatted when bounded
+    if not last or len(os.fsencode(last)) > 4096 or len(os.fsencode(os.path.basename(last))) > 255:
         raise WarpError(f"{output[:80]}{'...' if len(output) > 80 else ''}: its frames' names would be longer "
                         "than a file system allows (255 bytes a name)", "OUTPUT", usage=True)
     return [output % index for index in range(frames)]
@@ -221,11 +221,15 @@ def check_output_paths(paths: list[str], input: str, mask: str | None) -> None:
     as warp's OUTPUT may: it is read first)."""
     from .outputs import check_distinct
 
+    probed = set()
     for path in paths:                    # a sequence's names differ by their numbers
+        folder = os.path.dirname(os.path.abspath(path))
         try:
-            write.check_writable(path)
+            if folder not in probed or os.path.lexists(path):    # a folder is probed once, not per frame
+                write.check_writable(path)
         except ValueError as err:
             raise WarpError(str(err), "OUTPUT", usage=True) from None
+        probed.add(folder)
         check_distinct([(path, "OUTPUT")], [(input, "INPUT"), (mask, "--mask")], output_may_be_input=len(paths) == 1)
 
 

@@ -329,9 +329,12 @@ def _decode_mask(data, size: tuple[int, int]) -> np.ndarray:
         raw = base64.b64decode(data[len(prefix):], validate=True)
     except (binascii.Error, ValueError):
         raise ValueError("png: not valid base64") from None
-    if raw[:8] != b"\x89PNG\r\n\x1a\n" or raw[12:16] != b"IHDR" or len(raw) < 24:
+    from ..io.decode import png_size
+
+    found = png_size(raw)                                      # before decoding: no bomb gets decoded
+    if found is None:
         raise ValueError("png: not a PNG")
-    width, height = struct.unpack(">II", raw[16:24])          # before decoding: no bomb gets decoded
+    width, height = found
     if (width, height) != tuple(size):
         raise ValueError(f"png: the mask is {width}x{height}; the page's texture is {size[0]}x{size[1]}")
     from ..io.capture import captured_stderr

@@ -259,19 +259,16 @@ def _plain(point) -> list:
     return [float(point[0]), float(point[1])]
 
 
-#: The keys of a point handle and of a curve, by version.
-ITEM_KEYS = {"points": {1: ("from", "to"), 2: ("from", "to", "angle")}, "curves": {1: ("from", "to"), 2: ("from", "to")}}
+#: The keys of a point handle and of a curve (version 2's; version 1 is without ``angle``).
+ITEM_KEYS = {"points": ("from", "to", "angle"), "curves": ("from", "to")}
 
 
 def _unknown_keys(data: dict, version: int) -> list[str]:
-    """Notes for the keys of point handles and curves this version does not read (a misspelt
-    ``"angel"`` would otherwise drop a rotation silently); a version-1 ``angle`` has its own."""
-    notes = []
-    for group, keys in ITEM_KEYS.items():
-        for k, item in enumerate(data.get(group, [])):
-            notes += [f"handles: ignoring {group}[{k}].{key} (unknown to version {version})"
-                      for key in item if key not in ITEM_KEYS[group][2] and key not in keys[version]]
-    return notes
+    """Notes for the keys of point handles and curves no version reads (a misspelt ``"angel"``
+    would otherwise drop a rotation silently); a version-1 ``angle`` has its own."""
+    return [f"handles: ignoring {group}[{k}].{key} (unknown to version {version})"
+            for group, keys in ITEM_KEYS.items() for k, item in enumerate(data.get(group, []))
+            for key in item if key not in keys]
 
 
 def _angles(points: list, version: int, notes: list) -> np.ndarray:

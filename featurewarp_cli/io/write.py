@@ -83,15 +83,9 @@ def _mode_for(target: str) -> int:
 
 
 def _write_all(fd: int, data: bytes) -> None:
-    view = memoryview(data)
-    while view:
-        view = view[os.write(fd, view):]
-
-
-def _write_waiting(fd: int, data: bytes) -> None:
-    """All of ``data`` to an inherited descriptor, waiting while it would block: the shell or a
-    parent (node, some CI runners) may have left it non-blocking, and its file description is
-    theirs too, so it is not changed."""
+    """All of ``data`` to ``fd``, waiting while it would block: an inherited descriptor may have
+    been left non-blocking by the shell or a parent (node, some CI runners), and its file
+    description is theirs too, so it is not changed."""
     import select
 
     view, waiting = memoryview(data), None
@@ -269,7 +263,7 @@ def _commit_one(output: Staged) -> None:
             return
         except (AttributeError, ValueError):
             raise OSError(9, "standard output is closed") from None
-        _write_waiting(fd, output.data)
+        _write_all(fd, output.data)
     elif output.kind == "direct":
         _write_direct(output.target, output.data)
     elif output.kind == "descriptor":
@@ -277,7 +271,7 @@ def _commit_one(output: Staged) -> None:
             if stream is not None and not stream.closed:
                 stream.flush()
         try:
-            _write_waiting(output.descriptor, output.data)
+            _write_all(output.descriptor, output.data)
         except OSError as err:
             raise OSError(err.errno, err.strerror, output.path) from None
     elif output.fd is not None:
