@@ -233,8 +233,9 @@ class Param:
 class Warp:
     """Base class of a preset warp: a vectorized map of source points.
 
-    Subclasses set ``name``, ``summary``, ``params`` and implement ``_setup``
-    (derive constants and the canvas) and ``forward``.
+    Subclasses set ``name``, ``summary``, ``params`` (and optionally ``example`` and
+    ``boundary``) and implement ``_setup`` (derive constants and the canvas) and
+    ``forward``. The first paragraph of the subclass's docstring is its ``--help``.
 
     Parameters
     ----------
@@ -257,6 +258,11 @@ class Warp:
     name: ClassVar[str] = ""
     summary: ClassVar[str] = ""
     params: ClassVar[tuple[Param, ...]] = ()
+    #: The preset's own options in one example for ``--help`` (``--angle 120``); the help
+    #: builds the whole command line around it. Empty: no example. The help's text is the
+    #: first paragraph of the class docstring (or ``summary``): what the preset does and what
+    #: its options mean, for a user; later paragraphs (the maths) are left out of it.
+    example: ClassVar[str] = ""
     #: Default border handling: 'slide' lets nodes move along every side that W
     #: maps onto an axis-parallel straight line, unless W leaves the whole border
     #: in place (all sides of a stretch; none of a swirl or bulge, whose border

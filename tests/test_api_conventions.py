@@ -148,8 +148,8 @@ NAMED = [
      "--angle: 171 is out of range when --where is lower (at most 150)"),
     ("perspective", {"tl": "60%,60%"}, "tl/tr/br/bl: the quadrilateral is concave at tl",
      "--tl/--tr/--br/--bl: the quadrilateral is concave at --tl"),
-    ("cylinder", {"distance": 1.5}, "angle: 120 degrees wraps cylinder too close to its silhouette seen from "
-     "distance 1.5", "--angle: 120 degrees wraps cylinder too close to its silhouette seen from --distance 1.5"),
+    ("cylinder", {"distance": 1.5}, "angle: 120 degrees wraps the cylinder too close to its silhouette seen from "
+     "distance 1.5", "--angle: 120 degrees wraps the cylinder too close to its silhouette seen from --distance 1.5"),
     ("stretch", {"size": "0x10"}, "size: the width 0 is out of range (1 <= PX <= 65535)",
      "--size: the width 0 is out of range (1 <= PX <= 65535)"),
     ("stretch", {"feature_weight": 0}, "feature_weight: 0 is out of range (0 < W <= 10000)",

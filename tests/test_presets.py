@@ -391,3 +391,42 @@ def test_a_shape_a_hair_past_whole_pixels_gets_no_blank_row():
     column blank."""
     assert load_warp("arc")(512, 512, angle=0.001).canvas == (512, 512)
     assert load_warp("arc")(512, 512, angle=1).canvas[1] > 512          # 0.2 px: a row of its own
+
+
+@pytest.mark.parametrize("preset", plugins.names())
+def test_preset_help_is_for_users_with_an_example(preset):
+    """A preset's --help is its docstring's first paragraph (the maths stays out of it) and one
+    example line of each command; the --boundary default shown is the preset's own."""
+    from click.testing import CliRunner
+
+    from featurewarp_cli.cli.main import cli
+    from featurewarp_cli.cli.presets import preset_doc
+
+    warp = plugins.load(preset)
+    for command in ("warp", "compare", "batch"):
+        text = preset_doc(warp, "", command)
+        assert f"featurewarp {command} {preset} " in text.split("Example:")[1]
+        for internal in ("Jacobian", "EDGE_MAX", "MIN_SQUEEZE", "ParamError", "ValueError", "tests/", "``"):
+            assert internal not in text, (command, internal)
+    shown = CliRunner().invoke(cli, ["warp", preset, "--help"]).output
+    assert f"[default for {preset}: {warp.boundary}]" in " ".join(shown.split())
+
+
+def test_a_plugin_without_docstring_or_example_is_helped_by_its_summary():
+    from featurewarp_cli.cli.presets import preset_doc
+
+    class Ripple(plugins.Warp):
+        name, summary = "ripple", "Ripple the image."
+
+    class Wave(plugins.Warp):
+        """Wave it, --height PX high.
+
+        Maths for developers."""
+
+        name, summary, example = "wave", "A wave.", "--height 4"
+        params = (Param("height", float, 2.0, "Height in pixels.", metavar="PX"),)
+
+    assert preset_doc(Ripple) == "Ripple the image."
+    assert preset_doc(Wave, "Intro.", "animate") == ("Intro.\n\nWave it, --height PX high.\n\n\b\nExample:\n  "
+                                                     "featurewarp animate wave in.png out.gif -m mask.png "
+                                                     "--vary height=0:4 --frames 24")

@@ -195,8 +195,8 @@ def test_cylinder_keeps_columns_and_foreshortens_towards_the_silhouette():
 
 
 @pytest.mark.parametrize("name,params,message", [
-    ("cylinder", {"distance": 1.5}, "angle: 120 degrees wraps cylinder too close to its silhouette seen from distance 1.5"),
-    ("sphere", {"angle": 120, "distance": 2}, "angle: 120 degrees wraps sphere"),
+    ("cylinder", {"distance": 1.5}, "angle: 120 degrees wraps the cylinder too close to its silhouette seen from distance 1.5"),
+    ("sphere", {"angle": 120, "distance": 2}, "angle: 120 degrees wraps the sphere"),
     ("arc", {"where": "lower", "angle": 171}, "angle: 171 is out of range when where is lower"),
     ("shell", {"side": "middle"}, "side: 'middle' is not one of lower, upper"),
     ("arch", {"bend": 101}, "bend: 101 is out of range"),

@@ -18,7 +18,11 @@ EDGE_MAX = 150.0
 
 
 class Arc(Warp):
-    """Bend the image into a ring sector spanning --angle degrees.
+    """Bend the image into a ring sector spanning --angle degrees (up to 360: a full ring),
+    its top edge outside, as ImageMagick's -distort Arc; the canvas is the sector's bounding
+    box. --where lower (upper) keeps the columns vertical and bows only the bottom (top)
+    edge into a circular arc of --angle degrees, at most 150: the design tools' Arc Lower
+    (Arc Upper).
 
     Columns become rays, rows become arcs; the top edge lies on the outer arc
     and the sector is symmetric about the vertical. The middle row keeps its
@@ -39,6 +43,7 @@ class Arc(Warp):
     name = "arc"
     summary = ("Arc (ImageMagick, Photoshop): a ring sector; --where lower or upper: Arc Lower, "
                "Arc Upper (one edge bows).")
+    example = "--angle 120"
     params = (
         Param("angle", float, 90.0, "Angle the sector spans, in degrees (--where lower or upper: the "
               f"bowed edge's arc, at most {EDGE_MAX:g}).", min=0, min_open=True, max=360, metavar="DEG"),

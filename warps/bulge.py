@@ -8,7 +8,11 @@ from featurewarp_cli.plugins import Param, Warp, centre, resolve_pair
 
 
 class Bulge(Warp):
-    """Radial map d -> R * g(d / R) inside radius R, identity outside.
+    """Magnify the centre (--strength S above 0: 0.5 shows it 1.5x as large) or pinch it
+    (S below 0), fading smoothly to no change at --radius (a fraction of the shorter side)
+    around --center (default: the image's centre). The canvas is the input's size.
+
+    A radial map d -> R * g(d / R) inside radius R, identity outside.
 
     g(t) = t * (1 + S (1 - t)**2): g(0) = 0, g(1) = 1, g'(1) = 1 (smooth at R) and
     g'(0) = 1 + S (the magnification at the centre). g' > 0 on [0, 1], so the map
@@ -18,6 +22,7 @@ class Bulge(Warp):
     name = "bulge"
     summary = ("Fisheye, Bulge, Pinch (Photoshop's Fisheye style and Pinch filter): magnify (S > 0) or "
                "pinch (S < 0) the centre, smooth at the radius.")
+    example = "--strength 0.8"
     params = (
         Param("strength", float, 0.5,
               "Centre magnification minus 1 (0.5: 1.5x). Injective only for -1 < S < 3, hence the range.",

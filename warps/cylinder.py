@@ -56,12 +56,16 @@ def check_view(warp, cos_at, angle, distance, top):
         return
     seen = "seen from afar" if distance is None else f"seen from `distance` {distance:g}"
     limit = largest_angle(cos_at, distance, top)
-    raise ParamError("angle", f"{angle:g} degrees wraps {warp.name} too close to its silhouette {seen} "
+    raise ParamError("angle", f"{angle:g} degrees wraps the {warp.name} too close to its silhouette {seen} "
                               f"(at most {math.floor(limit * 10) / 10:g} here)", mentions=("distance",))
 
 
 class Cylinder(Warp):
-    """Wrap the image around a cylinder (axis vertical, or horizontal) over --angle degrees.
+    """Wrap the image around a cylinder seen from the front, like a label on a can: it covers
+    --angle degrees of the cylinder (up to 160), whose --axis is vertical (the width wraps)
+    or horizontal (the height wraps). --distance F views it in perspective from F radii
+    away (default: orthographic, from afar); a closer view refuses an angle that reaches
+    too near its silhouette, naming the largest it allows. The canvas is the bounding box.
 
     R = w / angle (the width keeps its length on the cylinder); a column at offset x from
     the middle sits at phi = x / R from the viewer. Seen orthographically it lands at
@@ -79,6 +83,7 @@ class Cylinder(Warp):
     name = "cylinder"
     summary = "Wrap around a cylinder seen from the front (a label on a can, a mug); orthographic or perspective."
     boundary = "fixed"
+    example = "--angle 150"
     params = (
         Param("angle", float, 120.0, "Angle of the cylinder the image covers, in degrees.",
               min=0, min_open=True, max=160, metavar="DEG"),

@@ -10,7 +10,12 @@ from .common import Style
 
 
 class Fish(Style):
-    """Scale each column's height about the middle row by ``1 - g sin(pi u)``, u = x / (w/2).
+    """Swell the left half into a body and narrow the right half into a tail: at --bend 50
+    the body is up to 1.25x as tall and the tail 0.75x (on a landscape image; a portrait
+    one swells less); a negative bend swaps them. --hdistort and --vdistort (percent) add a
+    keystone. The canvas is the bounding box.
+
+    Each column's height is scaled about the middle row by ``1 - g sin(pi u)``, u = x / (w/2).
 
     ``g = (b/2) min(1, w / h)``. The left half (u < 0) swells into the body, the right half
     narrows into the tail, the ends and the middle keep their height. Columns stay
@@ -23,6 +28,7 @@ class Fish(Style):
     name = "fish"
     summary = "Fish (Photoshop, Illustrator): a swelling body on the left, a narrowing tail on the right."
     params = Style.params
+    example = "--bend 30"
 
     def _shape(self, d):
         u = d[:, 0] / self.half[0]

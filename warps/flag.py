@@ -12,7 +12,12 @@ from .common import Style
 
 
 class Flag(Style):
-    """Shift each column by ``b w / (2 pi n) sin(pi n (1 + u))``, u = x / (w/2) in -1..1.
+    """Make the columns ride --waves full sine periods up and down (1: Flag; 2 or more: Wave),
+    the ends level; --bend sets the height in percent (at 100 the steepest slope is 45
+    degrees, whatever the number of waves). --hdistort and --vdistort (percent) add a
+    keystone. The canvas is the bounding box.
+
+    Each column is shifted by ``b w / (2 pi n) sin(pi n (1 + u))``, u = x / (w/2) in -1..1.
 
     n = --waves full periods across the image; the ends stay level. A shear ``(x, y) ->
     (x, y + g(x))``: Jacobian determinant 1, one-to-one for every bend and every n. The
@@ -21,6 +26,7 @@ class Flag(Style):
 
     name = "flag"
     summary = "Flag (--waves 1) and Wave (--waves 2 or more) of Photoshop and Illustrator: columns ride a sine."
+    example = "--bend 30 --waves 2"
     params = Style.params + (
         Param("waves", int, 1, "Full sine periods across the image (1: Flag; 2 or more: Wave).",
               min=1, max=12, metavar="N"),

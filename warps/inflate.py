@@ -8,7 +8,11 @@ from .common import Style
 
 
 class Inflate(Style):
-    """Offsets (x, y) from the centre -> ``(x (1 + s (1 - v^2)), y (1 + t (1 - u^2)))``.
+    """Swell the image like a cushion: at --bend 50 each side bulges out at its middle by 11 %
+    of the image's shorter side (22 % at 100); a negative bend pinches the sides in.
+    --hdistort and --vdistort (percent) add a keystone. The canvas is the bounding box.
+
+    Offsets (x, y) from the centre -> ``(x (1 + s (1 - v^2)), y (1 + t (1 - u^2)))``.
 
     u = x / (w/2), v = y / (h/2), both in -1..1: rows grow most in the middle row, columns
     in the middle column. Inflate has ``s = 0.45 b m / w``, ``t = 0.45 b m / h``, m = min(w,
@@ -26,6 +30,7 @@ class Inflate(Style):
     name = "inflate"
     summary = "Inflate (Photoshop, Illustrator): swell like a cushion (negative bend: pinch)."
     params = Style.params
+    example = "--bend 40"
     #: (s, t) per unit bend, on a square image
     gains = (0.45, 0.45)
 

@@ -80,13 +80,14 @@ def check_quadrilateral(quad: np.ndarray) -> None:
 
 
 class Perspective(Warp):
-    """Projective map (homography) of the image's corners onto --tl, --tr, --br, --bl.
+    """Move the image's four corners to --tl, --tr, --br and --bl, the rest following in
+    perspective (corner pinning). Each is X,Y from the image's top-left corner, in pixels or
+    percentages of its size; a corner not given takes its default (10%,0% 90%,0% 100%,100%
+    0%,100%: the image tilted back a little). The quadrilateral must be convex, in the
+    image's order, its angles 5 to 170 degrees and its sides at least 5 % of the image. The
+    canvas is its bounding box, so only the shape matters, not where it is.
 
-    Corners are measured from the image's top-left corner (pixels or percentages of its
-    size); an unset corner stays put (the defaults tilt the image back a little). The
-    canvas is the quadrilateral's bounding box, so only the shape matters, not where it is.
-
-    One-to-one: write ``W(p) = (a(p), b(p)) / c(p)`` with a, b, c affine. The corners must
+    A projective map (homography) of the image's corners onto the four points. One-to-one: write ``W(p) = (a(p), b(p)) / c(p)`` with a, b, c affine. The corners must
     make a convex quadrilateral in the image's order (:func:`check_quadrilateral`, else a
     ParamError naming the problem). Then c has one sign at the four corners (checked
     too): were it to change sign on the rectangle, W would send part of it beyond the line
@@ -99,6 +100,7 @@ class Perspective(Warp):
 
     name = "perspective"
     summary = "Perspective (corner pinning, Distort > Perspective): the four corners go to four points."
+    example = "--tl 20%,5% --tr 85%,0%"
     params = (_corner("tl", ("10%", "0%")), _corner("tr", ("90%", "0%")), _corner("br", ("100%", "100%")),
               _corner("bl", ("0%", "100%")))
 

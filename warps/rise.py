@@ -10,7 +10,12 @@ from .common import Style
 
 
 class Rise(Style):
-    """Shift each column up by ``b w / pi sin(pi u / 2)``, u = x / (w/2) in -1..1.
+    """Make the image climb from left to right along a sine: the middle column stays, the
+    right end rises and the left end falls, each by 0.16 of the image's width at --bend 50
+    (0.32 at 100); a negative bend descends. --hdistort and --vdistort (percent) add a
+    keystone. The canvas is the bounding box.
+
+    Each column is shifted up by ``b w / pi sin(pi u / 2)``, u = x / (w/2) in -1..1.
 
     The middle column stays, the right end rises and the left end falls (positive bend).
     A shear ``(x, y) -> (x, y - g(x))``: Jacobian determinant 1, one-to-one for every bend;
@@ -20,6 +25,7 @@ class Rise(Style):
     name = "rise"
     summary = "Rise (Photoshop, Illustrator): the image climbs from left to right along a sine."
     params = Style.params
+    example = "--bend 30"
 
     def _shape(self, d):
         u = d[:, 0] / self.half[0]

@@ -10,7 +10,11 @@ from .common import Style, bounds
 
 
 class Shell(Style):
-    """Bow one side (--side lower: the bottom; upper: the top) and narrow it, the other side straight.
+    """Bow one side out and narrow it, the other side straight: --side lower (the bottom,
+    Shell Lower) or upper (the top, Shell Upper). At --bend 50 the side bows out by an eighth
+    of the image's width (at most 0.45 of its height) and narrows by up to a quarter; a
+    negative bend pulls it in and widens it. --hdistort and --vdistort (percent) add a
+    keystone. The canvas is the bounding box.
 
     Described for ``lower`` (``upper`` is its mirror image top to bottom, which keeps every
     property). Two steps, each one-to-one:
@@ -29,6 +33,7 @@ class Shell(Style):
 
     name = "shell"
     summary = "Shell Lower and Shell Upper (Photoshop, Illustrator): one side bows out and narrows."
+    example = "--side upper --bend 40"
     params = Style.params + (
         Param("side", str, "lower", "The side that bows: lower (Shell Lower) or upper (Shell Upper).",
               metavar="SIDE", choices=("lower", "upper")),

@@ -13,7 +13,11 @@ from .cylinder import DISTANCE, check_view, scale
 
 
 class Sphere(Warp):
-    """Lay the image on a sphere, its longer side over --angle degrees of a great circle.
+    """Lay the image on a sphere seen from the front (a ball, a globe), its longer side over
+    --angle degrees of a great circle (up to 120). --distance F views it in perspective from
+    F radii away (default: orthographic, from afar); a closer view refuses an angle that
+    reaches too near its silhouette, naming the largest it allows. The canvas is the
+    bounding box.
 
     R = max(w, h) / angle. An offset (x, y) from the middle becomes longitude x / R and
     latitude y / R, the point ``P = R (cos b sin l, sin b, cos b cos l)`` (z towards the
@@ -32,6 +36,7 @@ class Sphere(Warp):
     name = "sphere"
     summary = "Wrap onto a sphere seen from the front (a ball, a globe; Spherize); orthographic or perspective."
     boundary = "fixed"
+    example = "--angle 100 --distance 4"
     params = (
         Param("angle", float, 90.0, "Angle of a great circle the image's longer side covers, in degrees.",
               min=0, min_open=True, max=120, metavar="DEG"),

@@ -10,14 +10,16 @@ from featurewarp_cli.plugins import Param, ParamError, Warp, resolve_pair
 
 
 class Stretch(Warp):
-    """Scale x by sx and y by sy; the canvas is round(w*sx) x round(h*sy).
+    """Scale the image to a new size or aspect ratio: --sx and --sy are factors (2, or 200%:
+    twice as wide), --width and --height the target size in pixels, --size WxH both at once
+    (pixels or percentages: 1920x1080, 150%x100%). The canvas is round(w*sx) x round(h*sy).
 
-    --width / --height name the target size in pixels instead of a factor; --size WxH both
-    at once (pixels or percentages).
+    x is scaled by sx and y by sy, the pixel-edge extent exactly onto the canvas's.
     """
 
     name = "stretch"
     summary = "Non-uniform scale to a new size or aspect ratio."
+    example = "--sx 1.5"
 
     params = (
         Param("sx", float, 1.0, "Horizontal scale factor, or a percentage (150%).", min=0, min_open=True, max=100,

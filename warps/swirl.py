@@ -39,10 +39,13 @@ def largest_angle(radius: float, cell: float) -> float:
 
 
 class Swirl(Warp):
-    """Turn the picture about the centre: by the full angle at the centre, less and less
-    further out, not at all from the radius R = radius * min(width, height) on.
+    """Turn the picture about --center (default: the image's centre) by --angle degrees
+    there, less and less further out, not at all from --radius on (a fraction of the shorter
+    side: 0.5 reaches the nearer edges). A positive angle turns counter-clockwise on screen,
+    as ImageMagick's -swirl; at most 540 either way (a large angle over a radius of few
+    pixels is refused, naming the radius it needs). The canvas is the input's size.
 
-    A point at distance d < R turns by angle * (1 - d/R)^2, so the swirl joins the unmoved
+    The radius in pixels is R = radius * min(width, height). A point at distance d < R turns by angle * (1 - d/R)^2, so the swirl joins the unmoved
     outside smoothly, and each circle about the centre maps onto itself (no fold at any
     angle). A positive angle turns the picture counter-clockwise on screen, as ImageMagick's
     ``-swirl`` does: ``convert -swirl 120`` and ``--angle 120`` both take a mark above the
@@ -54,6 +57,7 @@ class Swirl(Warp):
     name = "swirl"
     summary = ("Swirl, Twist (Photoshop's Twist style and Twirl filter, ImageMagick -swirl): turn the "
                "centre by an angle, fading smoothly to zero at a radius.")
+    example = "--angle 120"
     params = (
         Param("angle", float, 90.0, "Rotation at the centre in degrees (positive: counter-clockwise "
               "on screen, as ImageMagick's -swirl), at most one and a half turns either way; a large "

@@ -115,6 +115,12 @@ def named_places(make, merged: dict, moves, pins, source: str | None):
     return named
 
 
+#: What ``--strict`` also refuses in ``deform``: the handles' own warnings.
+STRICT_DEFORM = ("; and the handles' warnings: a handle or curve that ends far from its target, a fold the "
+                 "handles ask for, an image shrunk to under 1 % of its area or off the canvas, a handles file's "
+                 "unknown key or version-1 angle, a handle on a feature it cannot carry")
+
+
 def deform_command() -> click.Command:
     """``featurewarp deform INPUT OUTPUT --handles H.json``."""
     params = input_output_mask(MASK_HELP) + [
@@ -135,7 +141,7 @@ def deform_command() -> click.Command:
         click.Option(["--save-grid"], type=click.Path(dir_okay=False), metavar="PATH.npz|PATH.obj",
                      help="Save the solved mesh (as for warp)."),
         click.Option(["--grid", "draw_grid"], is_flag=True, help="Draw the deformed grid over the result."),
-    ] + [o for o in engine_options() if o.name not in ("boundary", "grow_past_edge")]
+    ] + [o for o in engine_options(strict_also=STRICT_DEFORM) if o.name not in ("boundary", "grow_past_edge")]
 
     def callback(input, output, mask, handles, move, pin, canvas, report, save_grid, draw_grid, **kwargs):
         from .options import settings_from

@@ -109,8 +109,36 @@ def max_memory_option(what: str = "work whose images and grid would need more me
                              f"{limits.MAX_MEMORY / 2**30:.1f}G]")
 
 
-def engine_options() -> list[click.Option]:
-    """Options ``warp``, ``batch``, ``compare`` and ``animate`` share (built fresh for each command)."""
+#: What ``--strict`` refuses: any warning; these are the ones a warp can have (README, ``--strict``).
+STRICT = ("a feature not kept (relaxed to avoid fold-overs or moved towards the plain warp), every feature "
+          "moved towards it, streaks, blank canvas or an outline beyond the plain warp's, an output that "
+          "equals the input (the mask covers what the warp moves), a grid more than 0.5 px from the warp, "
+          "a mask that marks nothing (a plain warp), an input of several frames of which the first is used")
+#: The presets' default border conditions, for a command that does not name its preset.
+BOUNDARY_DEFAULTS = ("slide for stretch, arc, swirl, bulge and perspective (so fixed wherever they keep no "
+                     "side straight and axis-parallel: swirl, bulge, arc); fixed for arch, flag, fish, rise, "
+                     "inflate, squeeze, shell, cylinder and sphere")
+
+
+def boundary_option(preset=None) -> click.Option:
+    """``--boundary``; its default is ``preset``'s own (``Warp.boundary``), resolved by the engine."""
+    own = getattr(preset, "boundary", "slide")
+    default = (f"[default for {preset.name}: {own}]" if preset is not None else
+               f"Default: the preset's own: {BOUNDARY_DEFAULTS}.")
+    return click.Option(
+        ["--boundary"], type=click.Choice(defaults.BOUNDARIES),
+        help="fixed: border nodes stay where the warp puts them (the paper). slide: on a side the warp maps "
+             "onto an axis-parallel straight line they may slide along it, so features cut by that side keep "
+             "their shape and the canvas stays exact; other sides stay fixed. Either way the outline is the "
+             "warp's: a feature cut by a border it cannot follow as one similarity (an arc's curved side) "
+             "gives way, and a warning says so. release: the preset's own conditions, but such a feature "
+             "keeps its shape and lets go of that border (the outline leaves the warp's there). The report's "
+             f"'boundary' says what was used. {default}")
+
+
+def engine_options(preset=None, strict_also: str = "") -> list[click.Option]:
+    """Options ``warp``, ``batch``, ``compare`` and ``animate`` share (built fresh for each command):
+    ``--boundary`` shows ``preset``'s default, ``--strict`` lists ``strict_also`` after :data:`STRICT`."""
     return [
         click.Option(["--mode"], type=click.Choice(defaults.MODES), default=defaults.MODE, show_default=True,
                      help="similarity: features rotate and scale uniformly with the warp; "
@@ -122,17 +150,7 @@ def engine_options() -> list[click.Option]:
                      show_default=True,
                      help="exact: each feature moves as one similarity, held exactly; paper: the "
                           "paper's soft per-quad targets (w_F-weighted), for comparison."),
-        click.Option(["--boundary"], type=click.Choice(defaults.BOUNDARIES),
-                     help="fixed: border nodes stay where the warp puts them (the paper). slide: "
-                          "on a side the warp maps onto an axis-parallel straight line they may "
-                          "slide along it, so features cut by the border keep their shape and the "
-                          "canvas stays exact. Default: slide (for stretch; it amounts to fixed for "
-                          "swirl and bulge, whose border stays put, and for arc, whose sides are "
-                          "curves and oblique rays). Either way the outline is the warp's: a "
-                          "feature cut by a border it cannot follow as one similarity (an arc's "
-                          "curved side) gives way, and a warning says so. release: the preset's "
-                          "own, but such a feature keeps its shape and lets go of that border "
-                          "(the outline leaves the warp's there)."),
+        boundary_option(preset),
         param_option(defaults.SCALE_PRIOR_PARAM),
         click.Option(["--grow-past-edge"], is_flag=True,
                      help="Similarity mode: where the background would streak (stretched over "
@@ -143,12 +161,8 @@ def engine_options() -> list[click.Option]:
                           "cannot be done (no room, folds, rigid mode), nothing grows and a "
                           "warning says why."),
         click.Option(["--strict"], is_flag=True,
-                     help="Exit 1 and write nothing when the run warns: a feature could not be "
-                          "kept (relaxed to avoid fold-overs or moved towards the plain warp), "
-                          "every feature moved towards it, streaks, blank canvas or an outline "
-                          "beyond the plain warp's, the mask keeps the output from following a "
-                          "warp that moves pixels, a handle could not follow (deform) (each is "
-                          "otherwise a warning)."),
+                     help=f"Exit 1 and write nothing if the run has any warning (each is otherwise "
+                          f"printed and the output written): {STRICT}{strict_also}."),
         click.Option(["--background"], metavar="COLOR",
                      help="Fill where no source pixel lands: #rrggbb or #rgb, a colour name, rgb(r,g,b), "
                           "hsl(h,s%,l%), rgba(r,g,b,a) or #rrggbbaa (translucent), or transparent. "

@@ -12,6 +12,7 @@ from __future__ import annotations
 import contextlib
 import inspect
 import re
+import shlex
 import sys
 
 import click
@@ -76,11 +77,46 @@ def preset_command(preset, params: list, callback, doc: str) -> click.Command:
                          short_help=preset.summary, no_args_is_help=True)
 
 
-def preset_doc(preset, intro: str = "") -> str:
-    """``intro`` followed by the preset's docstring (or its summary), its reStructuredText
-    literals and roles (````-swirl````, ``:data:`EDGE_MAX```) quoted as a terminal shows them."""
-    text = re.sub(r":\w+:`~?([^`]+)`", r"'\1'", inspect.cleandoc(preset.__doc__ or preset.summary))
-    text = text.replace("``", "'")
+#: Each command's example line, around a preset's ``example`` options (``animate``: ``{vary}``).
+EXAMPLES = {
+    "warp": "featurewarp warp {name} in.png out.png -m mask.png {options}",
+    "compare": "featurewarp compare {name} in.png panel.png -m mask.png {options}",
+    "batch": "featurewarp batch {name} photos/*.png --out-dir out {options}",
+    "animate": "featurewarp animate {name} in.png out.gif -m mask.png {options} --frames 24",
+}
+
+
+def animated(preset, options: list[str]) -> list[str] | None:
+    """``options`` with the first numeric one, ``--NAME VALUE``, turned into ``--vary
+    NAME=START:VALUE`` (START 0 where the range allows it, else the default); None if none is numeric."""
+    numeric = {p.cli_name: p for p in preset.params if p.type in (int, float)}
+    for i, flag in enumerate(options[:-1]):
+        param = numeric.get(flag[2:]) if flag.startswith("--") else None
+        if param is None:
+            continue
+        try:
+            start = param.check(0)
+        except plugins.ParamError:
+            start = param.default
+        if start is None:
+            continue
+        return options[:i] + ["--vary", f"{param.name}={start:g}:{options[i + 1]}"] + options[i + 2:]
+    return None
+
+
+def preset_doc(preset, intro: str = "", command: str = "warp") -> str:
+    """A preset command's help: ``intro``, what the preset does (the first paragraph of its
+    docstring, else its summary; the rest is for developers), and one example line of
+    ``command`` built from the preset's ``example``. reStructuredText literals and roles
+    (````-swirl````, ``:data:`EDGE_MAX```) are quoted as a terminal shows them."""
+    text = inspect.cleandoc(preset.__doc__ or "").split("\n\n")[0] or preset.summary
+    text = re.sub(r":\w+:`~?([^`]+)`", r"'\1'", text).replace("``", "'")
+    options = shlex.split(getattr(preset, "example", "") or "")
+    if options and command == "animate":
+        options = animated(preset, options)
+    if options:
+        line = EXAMPLES[command].format(name=preset.name, options=shlex.join(options))
+        text += f"\n\n\b\nExample:\n  {line}"
     return f"{intro}\n\n{text}" if intro else text
 
 
@@ -88,17 +124,20 @@ def warp_command(preset) -> click.Command:
     """``featurewarp warp PRESET INPUT OUTPUT``."""
     params = input_output_mask(MASK_HELP) + [
         click.Option(["--report"], type=click.Path(dir_okay=False), metavar="PATH",
-                     help="Write a JSON report: sizes, grid, feature components (scale, "
-                          "rotation, residual from a similarity), background deviation from "
-                          "the warp, triangle area ratios, fold-overs before and after the "
-                          "guard, solver, seconds per stage."),
+                     help="Write a JSON report of what the run did and how well: features_kept, "
+                          "each feature component (scale, rotation, distortion, kept), "
+                          "background_stretch, blank canvas and outline against the plain warp, "
+                          "the warnings, the grid, fold-overs before and after the guard, the "
+                          "solver, seconds per stage. Its JSON Schema: 'featurewarp schema "
+                          "report'; its fields: README, 'The report'."),
         click.Option(["--save-grid"], type=click.Path(dir_okay=False), metavar="PATH.npz|PATH.obj",
                      help="Save the mapping: arrays source (N x 2 source pixel positions of "
                           "the grid nodes), target (N x 2 on the output canvas), triangles "
-                          "(M x 3 node indices, counter-clockwise in source coordinates); "
+                          "(M x 3 node indices, of positive signed area in source pixel "
+                          "coordinates, x right and y down: clockwise as seen on screen); "
                           ".obj: a textured mesh."),
         click.Option(["--grid", "draw_grid"], is_flag=True, help="Draw the deformed grid over the result."),
-    ] + engine_options()
+    ] + engine_options(preset)
 
     def callback(input, output, mask, report, save_grid, draw_grid, **kwargs):
         settings, quiet, verbose = settings_from(preset, kwargs)
@@ -192,7 +231,7 @@ def batch_command(preset) -> click.Command:
                                 "for stdout."),
               click.Option(["--resume"], is_flag=True,
                            help="Skip files whose output exists and is newer than their input and mask.")
-              ] + engine_options()
+              ] + engine_options(preset, "; a file with a warning then fails, the others are still written")
 
     def callback(inputs, out_dir, mask_pattern, suffix, jobs, scheduler, summary, resume, **kwargs):
         from ..app.batch import plan
@@ -217,7 +256,7 @@ def batch_command(preset) -> click.Command:
             raise click.ClickException(f"{failed} of {len(todo)} files failed")
 
     intro = f"Warp every INPUT with {preset.name} into --out-dir, each with its own mask."
-    return preset_command(preset, params, callback, preset_doc(preset, intro))
+    return preset_command(preset, params, callback, preset_doc(preset, intro, "batch"))
 
 
 def compare_command(preset) -> click.Command:
@@ -225,7 +264,7 @@ def compare_command(preset) -> click.Command:
     params = input_output_mask("Feature mask (as for warp).") + [
         click.Option(["--grid", "draw_grid"], is_flag=True, help="Draw the deformed grid over the three results."),
         param_option(PANEL_WIDTH),
-    ] + [o for o in engine_options() if o.name != "mode"]
+    ] + [o for o in engine_options(preset, "; a warning of either view refuses the panel") if o.name != "mode"]
 
     def callback(input, output, mask, draw_grid, panel_width, **kwargs):
         from ..app.panel import compare_file
@@ -242,7 +281,7 @@ def compare_command(preset) -> click.Command:
 
     intro = (f"Write one labelled panel: input with the mask tinted | plain | rigid | similarity "
              f"({preset.name}).")
-    return preset_command(preset, params, callback, preset_doc(preset, intro))
+    return preset_command(preset, params, callback, preset_doc(preset, intro, "compare"))
 
 
 def animate_command(preset) -> click.Command:
@@ -252,7 +291,7 @@ def animate_command(preset) -> click.Command:
                      help="A numeric option of the preset to vary linearly over the frames, "
                           "e.g. angle=0:360 (repeat for several)."),
         param_option(FRAMES), param_option(FPS),
-    ] + [o for o in engine_options() if o.name != "fmt"]
+    ] + [o for o in engine_options(preset, "; a warning of any frame refuses the animation") if o.name != "fmt"]
 
     def callback(input, output, mask, vary, frames, fps, **kwargs):
         from ..app.animate import animate_file, parse_vary
@@ -276,7 +315,7 @@ def animate_command(preset) -> click.Command:
     intro = (f"Animate {preset.name}: vary its options over frames, factoring once. OUTPUT: .gif, "
              f".webp or .png (animated), .mp4 or .avi (video), or a numbered PNG sequence "
              f"such as out-%04d.png.")
-    return preset_command(preset, params, callback, preset_doc(preset, intro))
+    return preset_command(preset, params, callback, preset_doc(preset, intro, "animate"))
 
 
 class PresetGroup(click.Group):
