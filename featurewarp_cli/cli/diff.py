@@ -21,8 +21,8 @@ from .presets import click_error
               help="Write A in faded gray with the pixels off in red.")
 @click.option("-q", "--quiet", is_flag=True, help="Print no metrics; only the exit status tells.")
 @click.option("--json", "as_json", is_flag=True,
-              help="Print the metrics as one JSON object (rmse, psnr: null when identical, max_abs, "
-                   "pixels_off, pixels, tolerance, within, failures) instead of text; images that "
+              help="Print the metrics as one JSON object (a, b: the two paths; rmse, psnr: null when "
+                   "identical, max_abs, pixels_off, pixels, tolerance, within, failures) instead of text; images that "
                    "cannot be compared (sizes or channel counts) give null figures and the reason.")
 def diff_command(a, b, max_rmse, min_psnr, max_pixels_off, tolerance, diff_image, quiet, as_json):
     """Compare images A and B (e.g. an output with its golden file).
@@ -32,6 +32,10 @@ def diff_command(a, b, max_rmse, min_psnr, max_pixels_off, tolerance, diff_image
     included. Exit 0 within tolerance, 1 beyond it or when the sizes or channel
     counts differ. Without --max-rmse, --min-psnr or --max-pixels-off the images
     must match within --tolerance everywhere. One of A and B may be '-' (stdin).
+
+    \b
+    Example:
+      featurewarp diff out.png golden.png --max-rmse 0.5 --diff-image diff.png
     """
     quiet = quiet or bool(click.get_current_context().meta.get("featurewarp.quiet"))
     from ..app import diff

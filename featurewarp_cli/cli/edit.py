@@ -8,10 +8,12 @@ import sys
 
 import click
 
+from ..plugins import Param
 from .deform import Deform, load_handles
-from .options import engine_options
+from .options import engine_options, param_option
 from .presets import MASK_HELP, click_error
 
+PORT = Param("port", int, 0, "Port on 127.0.0.1 (0: a free one).", min=0, max=65535, metavar="N")
 KEEP = {"mode", "cell", "feature_weight", "decay", "scale_prior", "background", "interp", "fmt", "max_pixels",
         "max_memory", "allow_folds", "quality", "strip", "quiet", "verbose"}
 
@@ -83,8 +85,7 @@ def edit_command() -> click.Command:
         click.Option(["--save-mask"], type=click.Path(dir_okay=False), metavar="PATH",
                      help="Where Save and Export write a mask painted in the page (default: beside -o, "
                           "or beside --handles, as NAME.mask.png)."),
-        click.Option(["--port"], type=click.IntRange(0, 65535), default=0, show_default=True,
-                     help="Port on 127.0.0.1 (0: a free one)."),
+        param_option(PORT),
         click.Option(["--no-browser"], is_flag=True, help="Print the URL only; do not open a browser."),
     ] + [o for o in engine_options() if o.name in KEEP]
 

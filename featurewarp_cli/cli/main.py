@@ -14,6 +14,7 @@ from __future__ import annotations
 import os
 import signal
 import sys
+import textwrap
 import warnings
 
 import click
@@ -67,7 +68,8 @@ def cli(ctx, debug, quiet, verbose):
 
 
 @cli.group(cls=PresetGroup, context_settings={"help_option_names": ["-h", "--help"]},
-           subcommand_metavar="PRESET INPUT OUTPUT [OPTIONS]")
+           subcommand_metavar="PRESET INPUT OUTPUT [OPTIONS]",
+           short_help="Warp INPUT with PRESET into OUTPUT, masked features kept.")
 def warp():
     """Warp INPUT with PRESET into OUTPUT, keeping masked features in shape.
 
@@ -75,11 +77,16 @@ def warp():
     ImageMagick-style prefix (png:out.bin) or --format. '-' as INPUT reads stdin,
     '-' as OUTPUT writes stdout. Run 'featurewarp warp PRESET --help' for a preset's
     own options.
+
+    \b
+    Example:
+      featurewarp warp swirl photo.jpg out.jpg -m mask.png --angle 120 --report report.json
     """
 
 
 @cli.group(cls=BatchGroup, context_settings={"help_option_names": ["-h", "--help"]},
-           subcommand_metavar="PRESET INPUT... --out-dir DIR [OPTIONS]")
+           subcommand_metavar="PRESET INPUT... --out-dir DIR [OPTIONS]",
+           short_help="Warp many images with PRESET, each with its own mask.")
 def batch():
     """Warp many images with PRESET, each with its mask, into one folder.
 
@@ -97,16 +104,25 @@ def batch():
                              a scheduler file, or local:N
       --summary FILE         one JSON line per file ('-': stdout)
       --resume               skip outputs newer than their input and mask
+
+    \b
+    Example:
+      featurewarp batch swirl photos/*.jpg --out-dir out --jobs 2 --angle 90
     """
 
 
 @cli.group(cls=CompareGroup, context_settings={"help_option_names": ["-h", "--help"]},
-           subcommand_metavar="PRESET INPUT OUTPUT [OPTIONS]")
+           subcommand_metavar="PRESET INPUT OUTPUT [OPTIONS]",
+           short_help="One panel: input and mask | plain | rigid | similarity.")
 def compare():
     """Show what featurewarp does: input with the mask tinted | plain | rigid | similarity.
 
     One factorization serves the three warps. Run 'featurewarp compare PRESET --help'
     for the options.
+
+    \b
+    Example:
+      featurewarp compare arc photo.jpg panel.png -m mask.png --angle 120 --grid
     """
 
 
@@ -116,7 +132,14 @@ def animate():
     """Animate a preset: vary its options over frames, factoring once.
 
     Writes an animated GIF, WebP or PNG, an MP4/AVI video, or a numbered PNG
-    sequence (out-%04d.png). A progress bar is shown when stderr is a terminal.
+    sequence (out-%04d.png). --vary NAME=START:END varies a numeric option of the
+    preset (repeatable), --frames N and --fps F set the frames. A progress bar is
+    shown when stderr is a terminal. Run 'featurewarp animate PRESET --help' for
+    the options (the preset's and warp's).
+
+    \b
+    Example:
+      featurewarp animate swirl photo.jpg swirl.gif -m mask.png --vary angle=0:180 --frames 24
     """
 
 
@@ -126,23 +149,34 @@ cli.add_command(diff_command)
 cli.add_command(measure_command)
 
 
-@cli.command("schema")
+@cli.command("schema", short_help="Print the JSON Schema of the report or the handles file.")
 @click.argument("kind", type=click.Choice(["report", "handles"]))
 def schema_command(kind):
     """Print the JSON Schema (Draft 2020-12) of the --report file or of the handles file.
 
     Each schema has a version of its own: the report's 'schema' key
     (featurewarp-report/3), the handles file's 'version' key (1 or 2; 2 when a point has an angle).
+
+    \b
+    Example:
+      featurewarp schema report > report.schema.json
     """
     from .. import schema
 
     click.echo(schema.text(kind), nl=False)
 
 
-@cli.command("warps")
+@cli.command("warps", short_help="List the presets with their options, defaults and ranges.")
 @click.option("--json", "as_json", is_flag=True, help="Print machine-readable JSON.")
 def list_warps(as_json):
-    """List every registered preset with its options, defaults and ranges."""
+    """List every registered preset with its options, defaults and ranges.
+
+    Each preset's border default (--boundary) is listed too.
+
+    \b
+    Example:
+      featurewarp warps --json
+    """
     for name, value in plugins.shadowing():
         say(f"featurewarp: warning: a plugin registers the built-in name {name!r} ({value}); the built-in is used")
     entries = []
@@ -152,7 +186,8 @@ def list_warps(as_json):
         except plugins.UnknownPreset as err:
             entries.append({"name": name, "broken": str(err), "params": []})
             continue
-        entries.append({"name": name, "summary": preset.summary, "params": [p.as_dict() for p in preset.params]})
+        entries.append({"name": name, "summary": preset.summary, "boundary": getattr(preset, "boundary", "slide"),
+                        "params": [p.as_dict() for p in preset.params]})
     if as_json:
         import json
 
@@ -163,11 +198,11 @@ def list_warps(as_json):
             click.echo(f"{entry['name']}  (broken: {entry['broken']})\n")
             continue
         click.echo(f"{entry['name']}  {entry['summary']}")
-        preset = plugins.load(entry["name"])
-        for p in preset.params:
-            click.echo(f"  --{p.cli_name:<10} {p.type_name:<6} default {p.default_text():<6} "
-                       f"{p.range_text():<18} {p.help}")
-        click.echo()
+        for p in plugins.load(entry["name"]).params:     # None: the help says what it means
+            default = "" if p.default is None else f"default: {p.default_text()}; "
+            click.echo(f"  --{p.cli_name} {p.metavar}  [{default}{p.range_text()}]")
+            click.echo(textwrap.fill(p.help, 96, initial_indent=" " * 6, subsequent_indent=" " * 6))
+        click.echo(f"  (--boundary default: {entry['boundary']})\n")
 
 
 def one_line_warning(message, category, filename, lineno, file=None, line=None):

@@ -33,7 +33,10 @@ def component_line(fit) -> str:
 @click.argument("output", type=click.Path(dir_okay=False, allow_dash=True))
 @click.option("-m", "--mask", required=True, type=click.Path(dir_okay=False, allow_dash=True),
               metavar="PATH", help="The feature mask INPUT was warped with (as for warp).")
-@click.option("--json", "as_json", is_flag=True, help="Print machine-readable JSON.")
+@click.option("--json", "as_json", is_flag=True,
+              help="Print machine-readable JSON: input, output, mask, worst_distortion and per component "
+                   "its figures (label, pixels, bbox, centre, distortion, scale, rotation, rms_px, "
+                   "local_p90, explained, ...; null where not measured, with the reason).")
 def measure_command(input, output, mask, as_json, max_pixels, max_memory):
     """Measure how each masked region of INPUT came out in OUTPUT.
 
@@ -41,14 +44,21 @@ def measure_command(input, output, mask, as_json, max_pixels, max_memory):
     the output's (RANSAC keeps the true matches), and the affine map input ->
     output that fits all locally consistent matches best (least squares) is the
     component's: the image's counterpart of the report's distortion. Printed per
-    component: distortion = sigma_max/sigma_min - 1 of its linear part (0: the
-    shape is kept, 1: stretched 2x along one axis), scale, rotation (degrees,
-    clockwise), the RANSAC matches and the share of the component they span; then
-    the 90th percentile of the distortion of local fits (around each match) and
-    the share of locally consistent matches the component's map explains (below
-    100 %: the region was bent, not moved as one map). A component with
-    too few matches is reported as not measured, with the reason. One of INPUT,
-    OUTPUT and MASK may be '-' (stdin).
+    component, after its size and place ('around (x, y)', as the report's 'at'):
+    distortion = sigma_max/sigma_min - 1 of its linear part (0: the shape is kept,
+    1: stretched 2x along one axis), scale, rotation (degrees, clockwise on
+    screen), the matches the map was fitted to out of all matches, rms (their
+    root mean square distance from the map, in output pixels: large for a bent
+    region) and the share of the component they span; where enough matches are
+    locally consistent, also the 90th percentile of the distortion of local fits
+    (around each match) and the share of those matches the component's map
+    explains (below 100 %: the region was bent, not moved as one map). A
+    component with too few matches is reported as not measured, with the
+    reason. One of INPUT, OUTPUT and MASK may be '-' (stdin).
+
+    \b
+    Example:
+      featurewarp measure photo.png out.png -m mask.png --json
     """
     from ..app import measure
     from ..app.pipeline import WarpError, read_input
