@@ -30,8 +30,10 @@ bulge_ARGS   := --strength 0.8
 # cells fills the gaps between the coins, which then move as one piece, and the extra
 # width lands in the 15 px margin at the left (background stretched 15x; the report's
 # background_stretch says so); with half a cell the gaps take it (7x). At fish's bend 50
-# the narrowing tail squeezes the astronaut's head to the plain warp; at 30 it is kept; at
-# inflate's 50 the shuttle model beside the top edge gives way a little; at 40 it is kept.
+# the fold-over guard relaxes the astronaut's head, patch and shuttle model (blend 0.64,
+# three warning lines); at 30 all three are kept. Inflate's 50 keeps them too now (the
+# shuttle's mask stops short of the top edge, so the frame does not cut it); 40 stays from
+# when it did not.
 coins_MASK := samples/coins_whole_mask.png
 coins-stretch_ARGS  := --sx 1.6 --decay 0.5
 coins-arc_ARGS      := --angle 25

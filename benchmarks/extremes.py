@@ -5,7 +5,8 @@ or on 1 MP photos with three kinds of mask.
     python benchmarks/extremes.py            # a table; a row fails when a run takes over 60 s,
                                              # 2 GB, leaves folds, or fails other than by a
                                              # one-line refusal
-    python benchmarks/extremes.py --1mp      # README's bound: 30 s CPU at 1 MP (not kept by all)
+    python benchmarks/extremes.py --1mp      # README's bound: 30 s CPU at 1 MP, which every row
+                                             # keeps (README, Limits: the slowest 22.5 s)
                                              # (1024x1024 and 1155x866), the slowest rows last
 """
 
