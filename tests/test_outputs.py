@@ -475,6 +475,18 @@ def test_a_gray_image_is_written_as_gif():
     assert np.array_equal(decoded, gray)                 # 256 grays: exact
 
 
+def test_a_colour_gif_takes_an_adaptive_palette():
+    """OpenCV's GIF encoder took a fixed palette: a smooth photo came back 20 levels off on
+    average, with bright yellow bands where it was gray."""
+    from featurewarp_cli.io.encode import encode_image
+
+    y, x = np.mgrid[0:64, 0:96]
+    image = np.dstack([150 + x // 3, 140 + y // 3, 130 + (x + y) // 6]).astype(np.uint8)   # grays, BGR
+    decoded = cv2.imdecode(np.frombuffer(encode_image(image, "gif"), np.uint8), cv2.IMREAD_COLOR)
+    error = np.abs(decoded.astype(int) - image).max(axis=2)
+    assert error.mean() < 3 and error.max() < 16
+
+
 def test_save_grid_names_one_of_the_two_forms_it_writes(picture, tmp_path):
     """Any other name silently got an .npz archive."""
     run = invoke("warp", "stretch", picture, tmp_path / "o.png", "--save-grid", tmp_path / "g.txt")

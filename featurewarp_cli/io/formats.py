@@ -26,7 +26,7 @@ FORMATS = {
     "webp": Format(".webp", alpha=True, eight_bit=True, largest_side=16_383),
     "tiff": Format(".tiff", alpha=True, eight_bit=False),
     "bmp": Format(".bmp", alpha=False, eight_bit=True),
-    "gif": Format(".gif", alpha=False, eight_bit=True, largest_side=65_535),  # one static frame, OpenCV's palette
+    "gif": Format(".gif", alpha=False, eight_bit=True, largest_side=65_535),  # one static frame, an adaptive palette (Pillow)
 }
 #: Other spellings of the format names (also accepted as file extensions).
 ALIASES = {"jpeg": "jpg", "tif": "tiff"}
