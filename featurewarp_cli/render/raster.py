@@ -9,6 +9,9 @@ where the warp shrinks the image and feathers the mesh's silhouette (see
 :func:`resample` are the two halves without antialiasing, kept for callers that
 want the map itself.
 
+An image with alpha that is not wholly opaque is resampled premultiplied (its colour times
+its alpha, 16-bit), so that the colour under transparent pixels stays out of the edges.
+
 Each pixel centre inside a deformed triangle gets the affine interpolation of
 that triangle's source corners. Shared edges are computed identically by both
 triangles, so there are no cracks; where two triangles claim a pixel (an edge
@@ -162,6 +165,7 @@ class _BandRenderer:
         self.out_channels = 1 if out.ndim == 2 else out.shape[2]
         self.pyramid = Pyramid(image)
         self.scratch = _Scratch()
+        self.premultiplied = False
 
     def __call__(self, y0: int) -> bool:
         height, width = self.out.shape[:2]
@@ -175,6 +179,8 @@ class _BandRenderer:
         self._sample(bx, by, aatri, marked, band, flat)
         if marked:
             filter_band(self.pyramid, foot, aatri, bx, by, flat, self.scratch)
+        if self.premultiplied:
+            straighten(flat)
         return True if coverage is None else self._apply_coverage(coverage, flat, y0)
 
     def _rasterize(self, y0: int, y1: int, width: int):
@@ -306,6 +312,7 @@ def render(image: np.ndarray, source: np.ndarray, target: np.ndarray, triangles:
     if image.dtype not in (np.uint8, np.uint16):
         raise ValueError(f"image must be uint8 or uint16, not {image.dtype}")
     width, height = (int(c) for c in canvas)
+    given, (image, straight) = image.dtype, premultiplied(image) if interp != "nearest" else (image, True)
     with ThreadPoolExecutor(1) as helper:       # the silhouette's setup beside the triangles'
         silhouette = helper.submit(Silhouette, source, target, triangles) if antialias else None
         tris = Triangles(source, target, triangles, (width, height))
@@ -323,6 +330,7 @@ def render(image: np.ndarray, source: np.ndarray, target: np.ndarray, triangles:
     fill = None if background is None else np.array(fill_value(background, out), dtype=np.float64)
     rows = max(1, min(height, (band_pixels or BAND_PIXELS) // max(width, 1)))
     bands = _BandRenderer(image, tris, silhouette, out, interp, fill, rows, holes, antialias)
+    bands.premultiplied = not straight
     starts = range(0, height, rows)
     workers = min(threads if threads is not None else THREADS, len(starts))
     if workers > 1:
@@ -336,7 +344,35 @@ def render(image: np.ndarray, source: np.ndarray, target: np.ndarray, triangles:
         out = add_alpha(out)
         for y0, pixels in holes.items():
             out.reshape(-1, 4)[y0 * width + pixels] = 0
-    return out
+    return cv2.convertScaleAbs(out, alpha=1 / 257) if out.dtype != given else out
+
+
+def _opaque(image: np.ndarray) -> bool:
+    """Whether a BGRA image's alpha is its dtype's largest value everywhere."""
+    return bool(np.all(image[:, :, 3] == np.iinfo(image.dtype).max))
+
+
+def premultiplied(image: np.ndarray) -> tuple[np.ndarray, bool]:
+    """(``image`` with its colour multiplied by its alpha, so that resampling weighs a pixel's
+    colour by how opaque it is (the colour under alpha 0, often black or a painter's leftovers,
+    then counts for nothing: straight alpha drew it into the edges of cut-outs as a dark or
+    coloured fringe). An 8-bit BGRA image that is not wholly opaque becomes 16-bit (times 257,
+    so that colours at low alpha keep their precision), a 16-bit one stays 16-bit; whether it
+    is left as it was: other images are (True). :func:`straighten` undoes it."""
+    if image.ndim != 3 or image.shape[2] != 4 or _opaque(image):
+        return image, True
+    wide = image.astype(np.uint16) * np.uint16(257) if image.dtype == np.uint8 else image.copy()
+    alpha = np.ascontiguousarray(wide[:, :, 3])
+    colour = cv2.multiply(np.ascontiguousarray(wide[:, :, :3]), cv2.merge([alpha] * 3), scale=1 / 65535)
+    return np.concatenate([colour, alpha[:, :, None]], axis=2), False
+
+
+def straighten(flat: np.ndarray) -> None:
+    """Divide premultiplied 16-bit BGRA pixels ((n, 4), in place) by their alpha (:func:`premultiplied`):
+    0 where the alpha is, clipped where an interpolation's overshoot left the colour above it."""
+    alpha = flat[:, 3:].astype(np.float32)
+    colour = flat[:, :3] * (np.float32(65535) / np.maximum(alpha, 1))
+    flat[:, :3] = np.where(alpha > 0, np.minimum(np.rint(colour), 65535), 0)
 
 
 # --------------------------------------------------------------------------- resample
