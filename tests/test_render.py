@@ -609,3 +609,12 @@ def test_an_opaque_rgba_image_renders_as_it_did():
     a = warp(rgba, None, "bulge", background=(0, 0, 0))
     b = warp(colour, None, "bulge", background=(0, 0, 0))
     assert np.array_equal(a[..., :3], b)
+
+
+def test_alpha_is_added_only_where_some_pixel_is_not_opaque():
+    """A swirl centred half a pixel off the middle gave an alpha channel that was 255 everywhere
+    (silhouette pixels whose coverage rounded to opaque): RGB one way, RGBA the other, and
+    ``featurewarp diff`` refused to compare the two."""
+    image = np.random.default_rng(3).integers(0, 255, (H, W, 3), np.uint8)
+    for centre in ((W / 2, H / 2), ((W - 1) / 2, (H - 1) / 2)):
+        assert warp(image, None, "swirl", angle=90, center=centre).shape == (H, W, 3)

@@ -259,11 +259,11 @@ class _BandRenderer:
                 return True
             flat[partial] = np.rint(values * cov + self.fill[None, :] * (1.0 - cov)).astype(dtype)
             return True
-        if self.out_channels == 4:
+        if self.out_channels == 4:          # opaque still where every alpha rounds to the top
             alpha = flat[partial, 3].astype(np.float64)
             flat[partial, 3] = np.rint(alpha * cov[:, 0]).astype(dtype)
             flat[partial[cov[:, 0] <= 0]] = 0
-            return False
+            return bool(np.all(flat[partial, 3] == np.iinfo(dtype).max))
         flat[partial[cov[:, 0] <= 0]] = 0             # no alpha (yet): uncovered pixels become 0
         if self.holes is not None:
             self.holes[y0] = partial
