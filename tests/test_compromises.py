@@ -299,3 +299,18 @@ def test_a_feature_is_named_by_where_it_is_as_well_as_by_its_number():
         assert component.kept or named[0].startswith(
             f"feature {k} ({component.quads} quads, around ({round(component.at[0])}, {round(component.at[1])})) not kept")
     assert not all(c.kept for c in mesh.record.components)
+
+
+@pytest.mark.parametrize("preset, params, still", [
+    ("stretch", {}, True),                                     # its 1 x 1 defaults
+    ("swirl", {"center": (5000, 5000)}, True),                 # centred far off the image
+    ("bulge", {"strength": 0.0}, True),
+    ("bulge", {"strength": 0.05}, False),
+])
+def test_a_warp_that_moves_nothing_says_so(preset, params, still):
+    """Such a warp was written silently, reported with every feature kept, and passed --strict."""
+    mask = np.zeros((60, 80), bool)
+    mask[20:40, 30:50] = True
+    mesh = FeatureWarper(80, 60, mask).solve(load_warp(preset)(80, 60, **params))
+    said = [w for w in mesh.record.warnings if "moves no pixel" in w]
+    assert bool(said) == still, mesh.record.warnings

@@ -9,6 +9,9 @@ from .record import KEPT, ComponentRecord, SolveRecord, warnings_for
 
 #: Features (quads holding a mask pixel) covering more than this share of the grid get a warning.
 MASK_COVERAGE = 0.9
+#: A result whose nodes all stay within this many pixels of where they were, on the input's own
+#: canvas, is said to move nothing (``stretch`` at its 1 x 1 defaults, a swirl centred far off).
+STILL_PX = 0.01
 
 
 def assess(state, target, warped, tied, unpinned, warp, record: SolveRecord, notes: list,
@@ -62,6 +65,10 @@ def assess(state, target, warped, tied, unpinned, warp, record: SolveRecord, not
             record.warnings.append(f"the mask's features cover {100 * coverage:.0f} % of the grid: little background "
                                    f"is left to take the warp (is the mask inverted, or a JPEG whose "
                                    f"noise crosses the threshold?)")
+    if not quick and tuple(warp.canvas) == (state.grid.width, state.grid.height) and \
+            np.max(np.abs(target - state.nodes), initial=0.0) <= STILL_PX:
+        record.warnings.append(f"the warp moves no pixel by more than {STILL_PX:g} px: the output is the input "
+                               f"(are the preset's options at their identity, or its centre far off the image?)")
     error = record.grid.get("pl_error_px", 0.0)
     if not quick and error > fidelity.MAX_PL_ERROR:          # NaN (a preview's grid) is not above
         chosen = "the given cell's grid" if chosen_cell else "the finest automatic grid (800 000 nodes at most)"
