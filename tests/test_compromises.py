@@ -4,6 +4,8 @@ let go; ``--strict`` refuses each with nothing written, and ``compare`` says its
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from click.testing import CliRunner
@@ -314,3 +316,23 @@ def test_a_warp_that_moves_nothing_says_so(preset, params, still):
     mesh = FeatureWarper(80, 60, mask).solve(load_warp(preset)(80, 60, **params))
     said = [w for w in mesh.record.warnings if "moves no pixel" in w]
     assert bool(said) == still, mesh.record.warnings
+
+
+def test_a_frame_cut_feature_that_gives_way_leaves_the_others_exact():
+    """Under fish (fixed border) the helmet, cut by two edges, cannot keep its shape and goes
+    back to the plain warp's; untying it alone was refused because its minimum left a triangle
+    under half its floor, though the result it replaced was thinner still (0.35 and 0.34 of
+    the floor at 1 MP). Then every node moved to W: the head, which nothing had
+    stopped from keeping its shape, came out as sheared as under the plain warp (1.107)."""
+    import cv2
+
+    from featurewarp_cli.engine.record import KEPT
+
+    samples = Path(__file__).resolve().parent.parent / "samples"
+    mask = cv2.resize(cv2.imread(str(samples / "astronaut_helmet_mask.png"), cv2.IMREAD_GRAYSCALE), (560, 560),
+                      interpolation=cv2.INTER_LINEAR) >= 128
+    mesh = FeatureWarper(560, 560, mask).solve(load_warp("fish")(560, 560), "similarity")
+    head, helmet = mesh.record.components
+    assert head.anisotropy_worst <= KEPT < head.plain_anisotropy_worst
+    assert helmet.anisotropy_worst <= helmet.plain_anisotropy_worst * (1 + 1e-6)
+    assert mesh.record.guard.degraded_components == [1]

@@ -274,11 +274,11 @@ def _release(problem: Problem, x, floor, record: GuardRecord):
 
 
 def blend_search(problem: Problem, released: np.ndarray, floor, record: GuardRecord, margin=None, origin=None,
-                 steps: int = BLEND_STEPS):
+                 steps: int = BLEND_STEPS, thinnest: float = RELEASE_THINNEST):
     """Untie the components ``released`` and converge the barrier's energy with their targets
     blended ``s`` of their own and ``1 - s`` of W's, for the largest s whose minimum passes
     ``margin`` (positions -> float, <= 0 passes; default ``problem.margin``, else anything),
-    combined with a triangle thinner than :data:`RELEASE_THINNEST` of its floor failing.
+    combined with a triangle thinner than ``thinnest`` of its floor (:data:`RELEASE_THINNEST`) failing.
 
     A path of minima, each converged from the one before, so every point is injective:
     - the least-squares solution is affine in s (the targets enter the right-hand side only):
@@ -299,7 +299,7 @@ def blend_search(problem: Problem, released: np.ndarray, floor, record: GuardRec
     from .plain_bound import furthest_move, thinnest_margin      # it imports this module
 
     blend = np.isin(problem.features.component, released) & problem.features.is_constrained
-    margin = thinnest_margin(problem, floor, margin or problem.margin or (lambda points: -1.0), RELEASE_THINNEST)
+    margin = thinnest_margin(problem, floor, margin or problem.margin or (lambda points: -1.0), thinnest)
 
     def constants(s):
         edges = np.where(blend[:, None, None], s * problem.edges + (1.0 - s) * problem.warp_edges, problem.edges)

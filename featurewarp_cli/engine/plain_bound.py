@@ -14,7 +14,7 @@ import numpy as np
 
 from . import barrier, injectivity, quality
 from .grid import signed_areas
-from .guard import Problem, blend_search
+from .guard import RELEASE_THINNEST, Problem, blend_search
 from .injectivity import grid_areas, max_step
 from .roots import bracketed_root
 
@@ -217,9 +217,10 @@ def no_worse_than_plain(state, x: np.ndarray, warped: np.ndarray, record, proble
         x, record.plain_blend = fixed
         record.degraded_components = [int(c) for c in offending if c >= 0]
         return x
-    if problem is not None:
-        found = blend_search(problem, offending, floor, record,
-                             margin=release_margin(state, warped, margin), origin=x, steps=0)
+    if problem is not None:     # RELEASE_THINNEST of the floor, or of x's thinnest where x is thinner
+        thinnest = RELEASE_THINNEST * min(1.0, float(np.min(grid_areas(state.grid, x) / floor)))
+        found = blend_search(problem, offending, floor, record, margin=release_margin(state, warped, margin),
+                             origin=x, steps=0, thinnest=thinnest)
         if found is not None:
             best, blend = found
             best, taper = (best, 1.0) if ok(best) else _tapered_fix(state, best, warped, margin, floor)
