@@ -99,17 +99,17 @@ def test_empty_mask_gives_the_plain_warp(textured_bgr, formulation, preset):
     assert warper.factorizations == 0
 
 
-@pytest.mark.parametrize("preset", ["stretch", "swirl"])
-def test_api_warp_with_empty_mask_equals_plain_mode(textured_bgr, blob_mask, preset):
+@pytest.mark.parametrize("preset, params", [("stretch", {"sx": 1.3}), ("swirl", {})])
+def test_api_warp_with_empty_mask_equals_plain_mode(textured_bgr, blob_mask, preset, params):
     """api.warp: empty mask == no mask == plain mode with a real mask, byte for byte; a mask that
     marks nothing is said (an int64 0/255 mask marked nothing, silently: it marks its 255s now)."""
     from featurewarp_cli import FeatureWarpWarning
 
     with pytest.warns(FeatureWarpWarning, match="the mask marks no feature"):
-        empty = warp(textured_bgr, np.zeros((120, 160), bool), preset)
+        empty = warp(textured_bgr, np.zeros((120, 160), bool), preset, **params)
     assert FeatureWarper(160, 120, blob_mask.astype(np.int64) * 255).mask.sum() == blob_mask.sum()
-    np.testing.assert_array_equal(empty, warp(textured_bgr, None, preset))
-    np.testing.assert_array_equal(empty, warp(textured_bgr, blob_mask, preset, mode="plain"))
+    np.testing.assert_array_equal(empty, warp(textured_bgr, None, preset, **params))
+    np.testing.assert_array_equal(empty, warp(textured_bgr, blob_mask, preset, mode="plain", **params))
 
 
 def on_border(source, width, height):

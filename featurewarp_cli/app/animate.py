@@ -15,6 +15,7 @@ import cv2
 import numpy as np
 
 from ..engine import fidelity
+from ..engine.assess import STILL
 from ..engine.record import LISTED_IN_REPORT
 from ..io import formats, write
 from ..io.colours import parse_colour
@@ -179,12 +180,16 @@ def animate_file(settings: Settings, input: str, output: str, mask: str | None, 
     if kind != "video":                       # refused before any frame is made, not after
         check_encodable(canvas, formats.format_name(os.path.splitext(output)[1]) or "png")
     fill = (0, 0, 0, 0) if alpha else tuple(background[::-1]) + (255,)
-    rendered, flips, said = [], 0, []
+    rendered, flips, said, still = [], 0, [], 0
     for index, warp in enumerate(warps):
         mesh = solve_within_budget(warper, warp, settings.mode)
         flips += mesh.info["flipped_triangles"]
         check_solution(replace(settings, strict=False), mesh)
-        said.extend((index, line.replace(LISTED_IN_REPORT, "")) for line in mesh.record.warnings)   # no report
+        lines = [line.replace(LISTED_IN_REPORT, "") for line in mesh.record.warnings]   # no report
+        still += any(line.startswith(STILL) for line in lines)      # a frame at rest: said once, for all
+        said.extend((index, line) for line in lines if not line.startswith(STILL))
+        if still == frames:
+            said.append((index, "no frame moves a pixel: every frame is the input"))
         if settings.strict and said:          # nothing is written before every frame is solved
             raise WarpError(f"--strict: frame {said[0][0]}: {said[0][1]}; nothing written")
         frame = to_bgr(warper.render(image, mesh, settings.interp, background, order="bgr"), alpha)

@@ -12,6 +12,8 @@ MASK_COVERAGE = 0.9
 #: A result whose nodes all stay within this many pixels of where they were, on the input's own
 #: canvas, is said to move nothing (``stretch`` at its 1 x 1 defaults, a swirl centred far off).
 STILL_PX = 0.01
+#: How that warning begins (an animation's frames say it once for all of them).
+STILL = "the warp moves no pixel"
 
 
 def assess(state, target, warped, tied, unpinned, warp, record: SolveRecord, notes: list,
@@ -67,7 +69,7 @@ def assess(state, target, warped, tied, unpinned, warp, record: SolveRecord, not
                                    f"noise crosses the threshold?)")
     if not quick and tuple(warp.canvas) == (state.grid.width, state.grid.height) and \
             np.max(np.abs(target - state.nodes), initial=0.0) <= STILL_PX:
-        record.warnings.append(f"the warp moves no pixel by more than {STILL_PX:g} px: the output is the input "
+        record.warnings.append(f"{STILL} by more than {STILL_PX:g} px: the output is the input "
                                f"(are the preset's options at their identity, or its centre far off the image?)")
     error = record.grid.get("pl_error_px", 0.0)
     if not quick and error > fidelity.MAX_PL_ERROR:          # NaN (a preview's grid) is not above
