@@ -344,7 +344,10 @@ def test_palette_png(runner, tmp_path, transparent):
     assert run.code == 0, run.stderr
     out = decode.read_image(str(tmp_path / "o.png"))
     assert out.shape[2] == (4 if transparent else 3)
-    assert np.array_equal(out[:, :, :3], palette[index][:, :, ::-1])
+    shown = index != 3 if transparent else np.ones(index.shape, bool)   # resampled premultiplied: 0 under alpha 0
+    assert np.array_equal(out[:, :, :3][shown], palette[index][:, :, ::-1][shown])
+    if transparent:
+        assert (out[:, :, 3][~shown] == 0).all() and (out[:, :, 3][shown] == 255).all()
 
 
 def test_sixteen_bit_mask(runner, tmp_path):
