@@ -318,6 +318,39 @@ def test_a_warp_that_moves_nothing_says_so(preset, params, still):
     assert bool(said) == still, mesh.record.warnings
 
 
+def test_a_mask_that_marks_nothing_says_what_it_read(tmp_path):
+    """A mask painted pure red was read as empty with "no pixel >= 128", though every painted
+    pixel was 255 in red: its gray is 76. The message now gives the brightest gray it read."""
+    import cv2
+
+    cv2.imwrite(str(tmp_path / "in.png"), np.random.default_rng(3).integers(0, 255, (60, 80, 3), dtype=np.uint8))
+    red = np.zeros((60, 80, 3), np.uint8)
+    red[20:40, 30:50, 2] = 255
+    cv2.imwrite(str(tmp_path / "red.png"), red)
+    cv2.imwrite(str(tmp_path / "dim.png"), red[:, :, 2] // 3)
+    for mask, said in (("red.png", "its brightest pixel is 76, as colour is read as its gray"),
+                       ("dim.png", "its brightest pixel is 85)")):
+        run = CliRunner().invoke(cli, ["warp", "swirl", str(tmp_path / "in.png"), str(tmp_path / "o.png"),
+                                       "-m", str(tmp_path / mask)])
+        assert run.exit_code == 0 and said in run.output, run.output
+
+
+def test_a_mask_drawn_on_the_stored_pixels_of_a_turned_photo_is_told_why_it_does_not_fit(tmp_path):
+    """A phone JPEG stored 80x60 with EXIF orientation 6 is 60x80 upright; a mask drawn on the
+    stored pixels got "mask is 80x60 but the image is 60x80" with no word of the orientation."""
+    import cv2
+    from PIL import Image
+
+    exif = Image.Exif()
+    exif[0x0112] = 6
+    Image.fromarray(np.random.default_rng(3).integers(0, 255, (60, 80, 3), dtype=np.uint8)).save(
+        tmp_path / "in.jpg", exif=exif.tobytes())
+    cv2.imwrite(str(tmp_path / "m.png"), np.full((60, 80), 255, np.uint8))
+    run = CliRunner().invoke(cli, ["warp", "swirl", str(tmp_path / "in.jpg"), str(tmp_path / "o.png"),
+                                   "-m", str(tmp_path / "m.png")])
+    assert run.exit_code == 2 and "mask is 80x60 but the image is 60x80 (upright, as its EXIF orientation" in run.output
+
+
 def test_a_frame_cut_feature_that_gives_way_leaves_the_others_exact():
     """Under fish (fixed border) the helmet, cut by two edges, cannot keep its shape and goes
     back to the plain warp's; untying it alone was refused because its minimum left a triangle

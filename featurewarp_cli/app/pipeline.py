@@ -212,14 +212,19 @@ def _load_mask(settings: Settings, mask: str, size: tuple[int, int]):
     width, height = size
     if mask != "-" and os.path.isfile(mask):
         check_file_size(mask, "--mask", settings.max_memory, settings.max_pixels)
-    feature_mask = decode.mask_from_image(read_input(mask, "--mask", settings.max_pixels,
-                                                     max_bytes=settings.max_memory))
+    pixels = read_input(mask, "--mask", settings.max_pixels, max_bytes=settings.max_memory)
+    feature_mask = decode.mask_from_image(pixels)
     if feature_mask.shape != (height, width):
+        turned = " (upright, as its EXIF orientation turns it: draw the mask on the image as viewers show it)" \
+            if feature_mask.shape == (width, height) else ""
         raise WarpError(f"mask is {feature_mask.shape[1]}x{feature_mask.shape[0]} but the "
-                        f"image is {width}x{height}", "--mask", usage=True)
+                        f"image is {width}x{height}{turned}", "--mask", usage=True)
     warnings = []
     if not feature_mask.any():
-        warnings.append("the mask marks no feature (no pixel >= 128, nor a 1 of a 0/1 mask): plain warp")
+        brightest, colour = decode.brightest_gray(pixels)
+        warnings.append(f"the mask marks no feature (a feature is gray 128 or more, or a 1 of a 0/1 mask; its brightest "
+                        f"pixel is {brightest}{', as colour is read as its gray: pure red is 76' if colour else ''})"
+                        f": plain warp")
     return feature_mask, warnings
 
 

@@ -456,6 +456,14 @@ def read_image(path: str, max_pixels: int | None = MAX_PIXELS, max_bytes: int | 
     return decode_image(read_bytes(path, max_bytes), "stdin" if path == "-" else path, max_pixels, max_bytes)
 
 
+def brightest_gray(image: np.ndarray) -> tuple[int, bool]:
+    """(the brightest gray of a mask image on the 0..255 scale, whether it is in colour): what
+    :func:`mask_from_image` compares with 128, for a message about a mask that marks nothing."""
+    colour = image.ndim == 3 and image.shape[2] >= 3
+    gray = cv2.cvtColor(image[:, :, :3], cv2.COLOR_BGR2GRAY) if colour else image.reshape(image.shape[:2] + (-1,))[:, :, 0]
+    return round(float(gray.max(initial=0)) * 255 / np.iinfo(gray.dtype).max), colour
+
+
 def mask_from_image(image: np.ndarray) -> np.ndarray:
     """Boolean feature mask: gray value >= 128 of the mask composited over black; a mask whose
     largest sample is 1 (a 0/1 mask, in one channel or in colour) marks its 1s, as the API
