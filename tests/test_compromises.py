@@ -369,3 +369,14 @@ def test_a_frame_cut_feature_that_gives_way_leaves_the_others_exact():
     assert head.anisotropy_worst <= KEPT < head.plain_anisotropy_worst
     assert helmet.anisotropy_worst <= helmet.plain_anisotropy_worst * (1 + 1e-6)
     assert mesh.record.guard.degraded_components == [1]
+
+
+def test_compare_says_when_it_has_no_mask_and_a_warp_at_rest_once(tmp_path):
+    """Without --mask the three views were the plain warp, labelled as featurewarp's, in silence."""
+    import cv2
+
+    cv2.imwrite(str(tmp_path / "in.png"), np.random.default_rng(3).integers(0, 255, (60, 80, 3), dtype=np.uint8))
+    run = CliRunner().invoke(cli, ["compare", "swirl", str(tmp_path / "in.png"), str(tmp_path / "o.png")])
+    assert run.exit_code == 0 and "no --mask: the rigid and similarity views are the plain warp" in run.output
+    run = CliRunner().invoke(cli, ["compare", "stretch", str(tmp_path / "in.png"), str(tmp_path / "p.png")])
+    assert run.output.count("moves no pixel") == 1 and "all views: the warp moves no pixel" in run.output

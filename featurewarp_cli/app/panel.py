@@ -132,6 +132,7 @@ def compare_file(settings, input: str, output: str, mask: str | None = None,
     import time
     from dataclasses import replace
 
+    from ..engine.assess import STILL
     from ..engine.record import LISTED_IN_REPORT
     from ..io import formats
     from .outputs import background_colour, check_distinct, check_encodable, rendered, write_image
@@ -150,13 +151,16 @@ def compare_file(settings, input: str, output: str, mask: str | None = None,
     height, width = image.shape[:2]
     warp, warper = make_warper(settings, width, height, feature_mask)
     check_encodable(panel_size([(width, height)] + [tuple(warp.canvas)] * 3, panel_width), fmt)
-    tiles, labels = [tint(image, feature_mask)], ["input + mask"]
+    tiles, labels = [tint(image, feature_mask)], ["input + mask" if feature_mask is not None else "input"]
+    if mask is None:
+        warnings.append("no --mask: the rigid and similarity views are the plain warp (--mask marks the features "
+                        "they keep)")
     for mode in ("plain", "rigid", "similarity"):
         mesh = solve_within_budget(warper, warp, mode)
         check_solution(replace(settings, strict=False), mesh)
-        for line in mesh.record.warnings:         # the grid is every view's: its stray said once, unprefixed
+        for line in mesh.record.warnings:         # the grid's and the warp's own: said once, for all views
             line = line.replace(LISTED_IN_REPORT, "")     # compare writes no report
-            if "strays up to" not in line:
+            if "strays up to" not in line and not line.startswith(STILL):
                 warnings.append(f"{mode} view: {line}")
             elif mode == "plain":
                 warnings.append(f"all views: {line}")
