@@ -5,12 +5,30 @@ for notices (``-q``). Imports nothing at module level."""
 from __future__ import annotations
 
 _listeners: list = []
+_current = [None]
 
 
 def enter(name: str) -> None:
     """Announce that the stage ``name`` (grid, factor, solve, guard, render, write ...) begins."""
+    _current[0] = name
     for listener in _listeners:
         listener(name)
+
+
+class within:
+    """``with within(name):`` the stage ``name`` for the block, then the one it interrupted
+    again (a factorization that the fold guard's release asks for is not the rest of the guard)."""
+
+    def __init__(self, name: str):
+        self.name, self.before = name, None
+
+    def __enter__(self):
+        self.before = _current[0]
+        enter(self.name)
+
+    def __exit__(self, *exc):
+        if self.before is not None:
+            enter(self.before)
 
 
 def listen(listener) -> None:

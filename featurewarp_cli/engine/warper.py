@@ -232,9 +232,9 @@ class FeatureWarper:
                     for axis, fixed in enumerate(ties.border_fixed(*(border or (state.fixed_x, state.fixed_y))))]
         key = b"".join(u.astype(np.int32).tobytes() for u in unknowns)
         if key not in state.systems:
-            stages.enter("factor")
             t0 = time.perf_counter()
-            state.systems[key] = AxisSystems(state.normal, *unknowns)
+            with stages.within("factor"):
+                state.systems[key] = AxisSystems(state.normal, *unknowns)
             self.factorizations += state.systems[key].factorizations
             self.timings["factor"] = self.timings.get("factor", 0.0) + time.perf_counter() - t0
         state.systems_by_ties[memo] = state.systems[key]
