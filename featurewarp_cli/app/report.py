@@ -94,6 +94,7 @@ def build_report(input_path, output_path, image, result, warp, mesh, timings, fm
             "feature_blend": info.get("feature_blend", 1.0),
             "release": {"blend_steps": fold_guard.BLEND_STEPS, "thinnest": fold_guard.RELEASE_THINNEST,
                         "trial_steps": fold_guard.TRIAL_STEPS, "cut": info.get("release_cut", False)},
+            "fallback": info.get("fallback", False),
             "plain_blend": info.get("plain_blend", 1.0),
             "degraded_components": info.get("degraded_components", []),
             "barrier": {"safe_fraction": barrier.SAFE_FRACTION, "stiffness": barrier.STIFFNESS,
