@@ -37,6 +37,7 @@ def test_identical_images(runner, pair):
 def test_different_images_fail_by_default(runner, pair):
     run = runner("diff", *pair)
     assert run.code == 1 and len(run.lines) == 1 and "differ beyond tolerance" in run.stderr
+    assert "with no limit given, none may" in run.stderr and "allowed (--max-pixels-off)" not in run.stderr
     m = metrics(run)
     assert m["max_abs_diff"] == "10" and m["pixels_off"] == "12"
     assert float(m["rmse"]) == pytest.approx(math.sqrt(12 * 100 / (48 * 36 * 3)), rel=1e-5)

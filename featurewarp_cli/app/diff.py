@@ -112,14 +112,18 @@ def failures(c: Comparison, max_rmse=None, min_psnr=None, max_pixels_off=None) -
     With no limit given the images must match within ``c.tolerance`` everywhere
     (``max_pixels_off`` = 0).
     """
-    if max_rmse is None and min_psnr is None and max_pixels_off is None:
+    exact = max_rmse is None and min_psnr is None and max_pixels_off is None
+    if exact:
         max_pixels_off = 0
     broken = []
     if max_rmse is not None and c.rmse > max_rmse:
         broken.append(f"rmse {c.rmse:.6g} > {max_rmse:g} (--max-rmse)")
     if min_psnr is not None and c.psnr < min_psnr:
         broken.append(f"psnr {c.psnr:.6g} dB < {min_psnr:g} (--min-psnr)")
-    if max_pixels_off is not None and c.pixels_off > max_pixels_off:
+    if exact and c.pixels_off:
+        broken.append(f"{c.pixels_off} pixels differ by more than {c.tolerance:g} (with no limit given, none may: "
+                      f"--max-rmse, --min-psnr or --max-pixels-off set one)")
+    elif max_pixels_off is not None and c.pixels_off > max_pixels_off:
         broken.append(f"{c.pixels_off} pixels differ by more than {c.tolerance:g}, at most "
                       f"{max_pixels_off} allowed (--max-pixels-off)")
     return broken
