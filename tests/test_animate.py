@@ -144,3 +144,27 @@ def test_no_frame_replaces_the_mask_and_a_sequence_is_written_all_or_nothing(fil
     assert out.code == 2 and "is also INPUT" in out.stderr and source.read_bytes() == (files / "in.png").read_bytes()
     out = run("stretch", str(files / "in.png"), str(tmp_path / "wide.webp"), "--vary", "sx=70:80", "--frames", "2")
     assert out.code == 2 and "webp holds at most 16383" in out.stderr and not (tmp_path / "wide.webp").exists()
+
+
+def test_a_sub_pixel_automatic_cell_is_the_animations_grid(files, monkeypatch):
+    """The finest automatic cell over the frames went back in as a given --cell, refused below
+    1 px: a swirl 540 on a 256 px image stopped with "cell must be ... at least 1, not
+    0.9999999999999997", a cell the user never gave (the rule's own may be sub-pixel)."""
+    from featurewarp_cli.engine import fidelity
+
+    rule = fidelity.auto_cell
+    monkeypatch.setattr(fidelity, "auto_cell", lambda w, h, warp=None: (min(rule(w, h, warp)[0], 0.75), 0.0))
+    out = run("swirl", str(files / "in.png"), str(files / "sub.png"), "-m", str(files / "mask.png"),
+              "--vary", "angle=0:30", "--frames", "2", "-v")
+    assert out.code == 0, out.stderr
+
+
+def test_the_automatic_cells_ladder_is_exact():
+    """4 px / sqrt(2)^4 came out 1 - 3e-16: below the 1 px a given --cell must reach."""
+    from featurewarp_cli import load_warp
+    from featurewarp_cli.engine import fidelity
+
+    cell = fidelity.auto_cell(256, 256, load_warp("swirl")(256, 256, angle=540))[0]
+    rung = round(2 * np.log2(fidelity.base_cell(256, 256) / cell))
+    assert cell == fidelity.base_cell(256, 256) * 2.0 ** -(rung // 2) / np.sqrt(2.0) ** (rung % 2)
+    assert rung % 2 or cell == fidelity.base_cell(256, 256) / 2 ** (rung // 2)

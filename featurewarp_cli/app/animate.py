@@ -169,8 +169,8 @@ def animate_file(settings: Settings, input: str, output: str, mask: str | None, 
         check_frames_fit(settings, frames, largest)      # frames share the largest canvas: refused early
     if settings.cell is None:                  # one grid fine enough for every frame: one factorization
         cell = min(fidelity.auto_cell(width, height, w)[0] for w in warps)
-        warper = make_warper(Settings(**{**settings.__dict__, "cell": cell}), width, height, feature_mask)[1]
-        warper.cell_chosen_automatically = True
+        warper = make_warper(settings, width, height, feature_mask)[1]
+        warper.cell, warper.cell_chosen_automatically = cell, True     # sub-pixel too, as the rule's own
     fmt = "png" if kind != "video" else "bmp"
     background = background_colour(settings.background, fmt) if kind != "video" else (
         parse_colour(settings.background) if settings.background else (255, 255, 255))

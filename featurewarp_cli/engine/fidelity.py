@@ -173,16 +173,17 @@ def auto_cell(width: int, height: int, warp=None) -> tuple[float, float]:
     error : float
         Piecewise-linear error at that cell in pixels (nan without a warp).
     """
-    cell = base_cell(width, height)
+    base = cell = base_cell(width, height)
     if warp is None:
         return cell, float("nan")
     smallest = min(_cell_for_nodes(width, height, MAX_NODES), cell)
     lattice = getattr(warp, "lattice", None)
     ok, error = follows(grid_for(width, height, cell, lattice), warp)
+    rung = 0                   # the cell is base / sqrt(2)^rung, with even rungs exact (4 px -> 1 px, not 1 - 3e-16)
     while not ok and cell / math.sqrt(2.0) >= smallest:
         # The error scales with the cell's square: skip rungs that cannot suffice.
-        rungs = max(1, math.floor(math.log(max(error, 1e-9) / MAX_PL_ERROR, 2.0)))
-        cell = max(cell / math.sqrt(2.0) ** rungs, smallest)
+        rung += max(1, math.floor(math.log(max(error, 1e-9) / MAX_PL_ERROR, 2.0)))
+        cell = max(base * 2.0 ** -(rung // 2) / math.sqrt(2.0) ** (rung % 2), smallest)
         ok, error = follows(grid_for(width, height, cell, lattice), warp)
     return cell, error
 
