@@ -140,3 +140,16 @@ def test_images_too_thin_for_features_warp_without_them(size):
     mesh = warper.solve(load_warp("arc")(w, h, angle=360))
     assert mesh.flips() == 0
     assert any("too thin" in line for line in mesh.record.warnings)
+
+
+def test_a_compare_panel_is_held_to_the_limits_before_any_work(tmp_path):
+    """--panel-width scaled the views up with no check: 12000 px across wrote a 36 MP panel
+    at 385 MB with --max-memory 60M; at its old minimum (16) it gave 28 px in silence."""
+    cv2.imwrite(str(tmp_path / "in.png"), np.random.default_rng(3).integers(0, 255, (60, 80, 3), np.uint8))
+    base = ["compare", "swirl", str(tmp_path / "in.png"), str(tmp_path / "o.png")]
+    one_line_error(run(*base, "--panel-width", "12000", "--max-memory", "60M"), 1,
+                   "panel needs about", "--max-memory")
+    one_line_error(run(*base, "--panel-width", "12000", "--max-pixels", "100000"), 1, "the panel", "--max-pixels")
+    one_line_error(run(*base, "--panel-width", "16"), 2, "28 <= PX")
+    assert not (tmp_path / "o.png").exists()
+    assert run(*base, "--panel-width", "28", "-q").code == 0 and cv2.imread(str(tmp_path / "o.png")).shape[1] == 28

@@ -83,6 +83,27 @@ def panel_size(sizes: list[tuple[int, int]], width: int | None = None) -> tuple[
     return int(np.maximum(np.diff(edges), 1).sum()) + GAP * (len(sizes) - 1), height + CAPTION_BAR
 
 
+def check_panel(settings, size: tuple[int, int], fmt: str) -> None:
+    """WarpError before any work where the panel (``size``) is more than ``fmt`` holds, more
+    pixels than ``--max-pixels`` or more bytes than ``--max-memory`` allows (the panel and the
+    three views it is made of, in 8-bit BGR, twice: a --panel-width far above the views'
+    width scales them up)."""
+    from ..io import ImageError, limits
+    from .outputs import check_encodable
+    from .pipeline import WarpError
+
+    check_encodable(size, fmt)
+    try:
+        limits.check_pixels(*size, "the panel", settings.max_pixels)
+    except ImageError as err:
+        raise WarpError(str(err)) from None
+    need = size[0] * size[1] * 3 * 2
+    if settings.max_memory is not None and need > settings.max_memory:
+        raise WarpError(f"the {size[0]}x{size[1]} panel needs about {limits.size_text(need, settings.max_memory)}, "
+                        f"above the memory limit of {limits.size_text(settings.max_memory)} (--max-memory; a smaller "
+                        f"--panel-width)")
+
+
 def labelled_panel(images: list[np.ndarray], labels: list[str], width: int | None = None) -> np.ndarray:
     """Side-by-side panel of ``images``, each with a caption bar.
 
@@ -135,7 +156,7 @@ def compare_file(settings, input: str, output: str, mask: str | None = None,
     from ..engine.assess import STILL
     from ..engine.record import LISTED_IN_REPORT
     from ..io import formats
-    from .outputs import background_colour, check_distinct, check_encodable, rendered, write_image
+    from .outputs import background_colour, check_distinct, rendered, write_image
     from .pipeline import (WarpError, check_outputs, check_solution, load_image_and_mask, make_warper,
                            prefetch_engine, solve_within_budget)
     from .report import summary
@@ -150,7 +171,7 @@ def compare_file(settings, input: str, output: str, mask: str | None = None,
     image, feature_mask, warnings = load_image_and_mask(settings, input, mask)
     height, width = image.shape[:2]
     warp, warper = make_warper(settings, width, height, feature_mask)
-    check_encodable(panel_size([(width, height)] + [tuple(warp.canvas)] * 3, panel_width), fmt)
+    check_panel(settings, panel_size([(width, height)] + [tuple(warp.canvas)] * 3, panel_width), fmt)
     tiles, labels = [tint(image, feature_mask)], ["input + mask" if feature_mask is not None else "input"]
     if mask is None:
         warnings.append("no --mask: the rigid and similarity views are the plain warp (--mask marks the features "

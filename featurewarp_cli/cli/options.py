@@ -28,7 +28,7 @@ MAX_PIXELS_PARAM = Param("max_pixels", int, limits.MAX_PIXELS,
 QUALITY = Param("quality", int, None, "JPEG and WebP quality (WebP becomes lossy when it is given; "
                 "default: JPEG 95, WebP lossless); other formats ignore it.", min=1, max=100, metavar="N")
 PANEL_WIDTH = Param("panel_width", int, None, "Scale the panel to this many pixels across (default: every "
-                    "view at the input's resolution).", min=16, max=32766, metavar="PX")
+                    "view at the input's resolution).", min=28, max=32766, metavar="PX")   # 4 views of 1 px, 3 gaps
 JOBS = Param("jobs", int, 1, "Worker processes; results are byte-identical to N=1.", min=1, metavar="N")
 FRAMES = Param("frames", int, 24, "Number of frames (START and END included; at most 10 000).", min=1, max=10_000,
                metavar="N")
