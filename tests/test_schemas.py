@@ -42,12 +42,15 @@ def test_reports_validate(tmp_path, args):
     made = json.loads(report.read_text())
     assert made["schema"] == "featurewarp-report/3"
     jsonschema.validate(made, schema("report"))
-    for part, key in (("quality", "background_rms_px"), ("params", next(iter(made["params"]), None))):
-        if key is not None:                      # the figures are typed: a text in their place fails
-            wrong = json.loads(json.dumps(made))
-            wrong[part][key] = {"not": "a figure"}
-            with pytest.raises(jsonschema.ValidationError):
-                jsonschema.validate(wrong, schema("report"))
+    wrong = json.loads(json.dumps(made))       # the figures are typed: a text in their place fails
+    wrong["quality"]["background_rms_px"] = "a figure"
+    with pytest.raises(jsonschema.ValidationError):
+        jsonschema.validate(wrong, schema("report"))
+    for item in wrong["components"]["items"][:1]:
+        wrong["quality"] = made["quality"]
+        item["anisotropy_worst"] = "a figure"
+        with pytest.raises(jsonschema.ValidationError):
+            jsonschema.validate(wrong, schema("report"))
 
 
 def test_handles_files_validate_and_bad_ones_do_not():
