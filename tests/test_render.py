@@ -46,8 +46,11 @@ def images(textured_bgr):
 @pytest.mark.parametrize("interp", ["linear", "cubic", "lanczos"])
 @pytest.mark.parametrize("with_mask", [False, True])
 def test_identity_stretch_reproduces_the_image(textured_bgr, blob_mask, interp, with_mask):
-    """stretch sx = sy = 1 gives back the input (max abs difference <= 1 on uint8)."""
-    out = warp(textured_bgr, blob_mask if with_mask else None, "stretch", sx=1, sy=1, interp=interp)
+    """stretch sx = sy = 1 gives back the input (max abs difference <= 1 on uint8), and says it moved nothing."""
+    from featurewarp_cli import FeatureWarpWarning
+
+    with pytest.warns(FeatureWarpWarning, match="moves no pixel"):
+        out = warp(textured_bgr, blob_mask if with_mask else None, "stretch", sx=1, sy=1, interp=interp)
     assert out.shape == textured_bgr.shape and out.dtype == np.uint8
     assert np.abs(out.astype(int) - textured_bgr).max() <= 1
 
@@ -174,8 +177,11 @@ def test_output_keeps_dtype_and_channels(images, blob_mask, kind, depth, preset,
 @pytest.mark.parametrize("depth", ["uint8", "uint16"])
 def test_sixteen_bit_keeps_its_low_bits(images, depth):
     """A 16-bit image is resampled in 16 bits (not through 8 bits): identity keeps it within 1 step."""
+    from featurewarp_cli import FeatureWarpWarning
+
     image = images[(depth, "bgr")]
-    out = warp(image, None, "stretch", interp="linear")
+    with pytest.warns(FeatureWarpWarning, match="moves no pixel"):
+        out = warp(image, None, "stretch", interp="linear")
     assert np.abs(out.astype(np.int64) - image).max() <= 1
     if depth == "uint16":
         assert np.count_nonzero(out % 257) > 0.5 * out.size
