@@ -534,3 +534,15 @@ def test_handles_from_stdin(tmp_path):
     assert run.returncode == 0, run.stderr
     both = command("deform", "-", tmp_path / "p.png", "--handles", "-", input=Path(image).read_bytes())
     assert both.returncode == 2 and b"stdin holds the image" in both.stderr, both.stderr   # not "not valid JSON"
+
+
+def test_a_pinned_border_that_gives_way_says_so():
+    """A handle dragged past a pinned border carried the border 91 px out of the frame; the
+    only word was that the handles were held short, as though the border had held."""
+    handles = Handles.from_dict({"version": 1, "points": [{"from": [64, 64], "to": [150, 64]}],
+                                 "border": "pinned"}, 128, 128)
+    warp = RigidMap(128, 128).deformation(handles)
+    assert any("the pinned border gives way by up to" in note for note in warp.notes), warp.notes
+    calm = Handles.from_dict({"version": 1, "points": [{"from": [64, 64], "to": [70, 64]}],
+                              "border": "pinned"}, 128, 128)
+    assert not any("gives way" in note for note in RigidMap(128, 128).deformation(calm).notes)

@@ -393,7 +393,8 @@ def check_solution(settings: Settings, mesh) -> None:
                         f"there); nothing written (--allow-folds writes it anyway)")
     if crossings and not settings.allow_folds:
         raise WarpError(f"the result lays the image over itself (its border crosses itself {'once' if crossings == 1 else f'{crossings} times'}"
-                        f"; a handle dragged across a pin's path does that): nothing written (--allow-folds writes it)")
+                        f"; handles dragged across each other or a pin's path, or turned far, do that): nothing written "
+                        f"(--allow-folds writes it)")
     if settings.strict and mesh.record.warnings:
         raise WarpError(f"--strict: {mesh.record.warnings[0]}; nothing written")
 

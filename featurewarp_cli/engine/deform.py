@@ -257,6 +257,13 @@ class RigidMap:
         if held > handle_slack(self.width, self.height):
             warp.notes.append(f"the handles ask for a fold; they are held as far as the image can follow "
                               f"without one (up to {held:.0f} px from their targets)")
+        if handles.border == "pinned":
+            edge = np.zeros((self.grid.ny, self.grid.nx), bool)
+            edge[[0, -1], :] = edge[:, [0, -1]] = True
+            moved = float(np.hypot(*(nodes - self.grid.nodes())[edge.ravel()].T).max())
+            if moved > handle_slack(self.width, self.height):
+                warp.notes.append(f"the pinned border gives way by up to {moved:.0f} px where the handles pull "
+                                  f"it past itself (it holds only as hard as a handle)")
         return warp
 
 
