@@ -152,8 +152,8 @@ NAMED = [
      "distance 1.5", "--angle: 120 degrees wraps the cylinder too close to its silhouette seen from --distance 1.5"),
     ("stretch", {"size": "0x10"}, "size: the width 0 is out of range (1 <= PX <= 65535)",
      "--size: the width 0 is out of range (1 <= PX <= 65535)"),
-    ("stretch", {"feature_weight": 0}, "feature_weight: 0 is out of range (0 < W <= 10000)",
-     "Invalid value for '--feature-weight': 0 is out of range (0 < W <= 10000)"),
+    ("stretch", {"feature_weight": 0}, "feature_weight: 0 is out of range (0.0001 <= W <= 10000)",
+     "Invalid value for '--feature-weight': 0 is out of range (0.0001 <= W <= 10000)"),
 ]
 
 

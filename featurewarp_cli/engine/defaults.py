@@ -63,9 +63,10 @@ CELL_PARAM = Param(
 FEATURE_WEIGHT_PARAM = Param(
     "feature_weight", float, FEATURE_WEIGHT,
     "w_F: each side of the feature equations is multiplied by W, so their squared error "
-    "counts W^2 times. Up to 10 000: beyond, W^2 outweighs the background's equations by "
-    "more than double precision can keep apart.",
-    min=0.0, min_open=True, max=1e4, metavar="W")
+    "counts W^2 times. From 0.0001 to 10 000: beyond either end, W^2 and the background's "
+    "equations are further apart than double precision can keep (below, the paper "
+    "formulation's system cannot be factored: a feature's inner nodes lose their equations).",
+    min=1e-4, max=1e4, metavar="W")
 DECAY_PARAM = Param(
     "decay", float, DECAY,
     "Width of the band around features where the weight falls smoothly from W to 1 "
