@@ -50,6 +50,13 @@ def option_flag(name: str) -> str:
     return "--" + name.replace("_", "-")
 
 
+def number_text(number: float) -> str:
+    """A number as short as it reads back exactly: 100.0000001 stays so (``:g`` showed 100, out
+    of a range that ends at 100), 100.0 is 100."""
+    text = repr(float(number))
+    return text[:-2] if text.endswith(".0") else text
+
+
 class ParamError(ValueError):
     """A refused parameter value, naming the parameters as its caller names them.
 
@@ -181,7 +188,7 @@ class Param:
         too_low = self.min is not None and (number < self.min or (self.min_open and number == self.min))
         too_high = self.max is not None and (number > self.max or (self.max_open and number == self.max))
         if too_low or too_high:
-            shown = str(value).strip() if self.type is int else f"{number:g}"
+            shown = str(value).strip() if self.type is int else number_text(number)
             raise ParamError(self.name, f"{shown} is out of range ({self.range_text()})")
         return number
 

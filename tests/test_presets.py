@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+import cv2
 import numpy as np
 import pytest
 
@@ -430,3 +431,20 @@ def test_a_plugin_without_docstring_or_example_is_helped_by_its_summary():
     assert preset_doc(Wave, "Intro.", "animate") == ("Intro.\n\nWave it, --height PX high.\n\n\b\nExample:\n  "
                                                      "featurewarp animate wave in.png out.gif -m mask.png "
                                                      "--vary height=0:4 --frames 24")
+
+
+@pytest.mark.parametrize("args, shown", [
+    (["stretch", "--sx", "100.0000001"], "100.0000001 is out of range (0 < F <= 100)"),
+    (["arc", "--where", "lower", "--angle", "150.0000001"], "150.0000001 is out of range when --where is lower"),
+    (["cylinder", "--distance", "1.0000001", "--angle", "1"], "from --distance 1.0000001 (at most 0.03"),
+])
+def test_a_refused_value_is_shown_as_given(tmp_path, args, shown):
+    """Rounded to six digits, the value read as inside its range (100 is out of range (<= 100)),
+    and the cylinder's largest angle at a close view came out 'at most 0'."""
+    from click.testing import CliRunner
+
+    from featurewarp_cli.cli.main import cli
+
+    cv2.imwrite(str(tmp_path / "in.png"), np.zeros((40, 50, 3), np.uint8))
+    run = CliRunner().invoke(cli, ["warp", args[0], str(tmp_path / "in.png"), str(tmp_path / "o.png"), *args[1:]])
+    assert run.exit_code == 2 and shown in run.output, run.output

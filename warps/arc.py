@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-from featurewarp_cli.plugins import Param, ParamError, Warp, canvas_size
+from featurewarp_cli.plugins import Param, ParamError, Warp, canvas_size, number_text
 
 from .common import fit_canvas
 
@@ -73,7 +73,7 @@ class Arc(Warp):
 
     def _setup_edge(self, angle):
         if angle > EDGE_MAX:
-            raise ParamError("angle", f"{angle:g} is out of range when `where` is {self.where} (at most {EDGE_MAX:g})",
+            raise ParamError("angle", f"{number_text(angle)} is out of range when `where` is {self.where} (at most {EDGE_MAX:g})",
                              mentions=("where",))
         half = max(math.radians(angle), 1e-9) / 2.0
         self.radius = self.width / (2.0 * math.sin(half))      # the circle through the edge's ends

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from featurewarp_cli.plugins import Param, ParamError, Warp, centre
+from featurewarp_cli.plugins import Param, ParamError, Warp, centre, number_text
 
 from .common import fit_canvas
 
@@ -47,17 +47,28 @@ def largest_angle(cos_at, distance, top):
     """
     angles = np.linspace(0.0, top, 20001)[1:]
     ok = squeeze(cos_at(np.radians(angles)), distance) >= MIN_SQUEEZE - 1e-12
+    if not ok.any():                          # below the first step: on a log scale down to 1e-9 of it
+        angles = np.geomspace(angles[0] * 1e-9, angles[0], 2001)
+        ok = squeeze(cos_at(np.radians(angles)), distance) >= MIN_SQUEEZE - 1e-12
     return float(angles[ok].max()) if ok.any() else 0.0
+
+
+def _at_most(limit: float) -> str:
+    """``limit`` rounded down to two significant digits, one decimal at least: a bound that holds."""
+    if not limit > 0:
+        return "no angle here: view it from further"
+    scale = 10.0 ** max(1, 1 - math.floor(math.log10(limit)))
+    return f"at most {math.floor(limit * scale) / scale:g} here"
 
 
 def check_view(warp, cos_at, angle, distance, top):
     """ParamError naming ``angle`` when ``angle`` wraps too close to the silhouette."""
     if squeeze(cos_at(math.radians(angle)), distance) >= MIN_SQUEEZE - 1e-12:
         return
-    seen = "seen from afar" if distance is None else f"seen from `distance` {distance:g}"
+    seen = "seen from afar" if distance is None else f"seen from `distance` {number_text(distance)}"
     limit = largest_angle(cos_at, distance, top)
     raise ParamError("angle", f"{angle:g} degrees wraps the {warp.name} too close to its silhouette {seen} "
-                              f"(at most {math.floor(limit * 10) / 10:g} here)", mentions=("distance",))
+                              f"({_at_most(limit)})", mentions=("distance",))
 
 
 class Cylinder(Warp):

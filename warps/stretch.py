@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from featurewarp_cli.plugins import Param, ParamError, Warp, resolve_pair
+from featurewarp_cli.plugins import Param, ParamError, Warp, number_text, resolve_pair
 
 
 class Stretch(Warp):
@@ -37,7 +37,7 @@ class Stretch(Warp):
             size_w, size_h = resolve_pair(size, self.width, self.height)
             for value, name in ((size_w, "width"), (size_h, "height")):
                 if not 1 <= math.floor(value + 0.5) <= 65535:
-                    raise ParamError("size", f"the {name} {value:g} is out of range (1 <= PX <= 65535)")
+                    raise ParamError("size", f"the {name} {number_text(value)} is out of range (1 <= PX <= 65535)")
             width, height = math.floor(size_w + 0.5), math.floor(size_h + 0.5)
         # Half-up rounding (Python's round() goes to even: 160.5 -> 160).
         out_w = width if width is not None else max(1, math.floor(self.width * sx + 0.5))
