@@ -275,7 +275,7 @@ def test_declared_ranges_match_the_advertised_limits(preset):
     ("swirl", "radius", 0, "radius: 0 is out of range (0.001 <= F <= 10)"),
     ("swirl", "radius", 10.5, "radius: 10.5 is out of range"),
     ("arc", "angle", 0, "angle: 0 is out of range (0 < DEG <= 360)"),
-    ("arc", "angle", 360.0001, "angle: 360 is out of range"),
+    ("arc", "angle", 360.0001, "angle: 360.0001 is out of range"),
     ("arc", "angle", -30, "angle: -30 is out of range"),
     ("bulge", "strength", 3, "strength: 3 is out of range (-0.95 <= S <= 2.95)"),
     ("bulge", "strength", -1, "strength: -1 is out of range"),
