@@ -546,3 +546,14 @@ def test_a_pinned_border_that_gives_way_says_so():
     calm = Handles.from_dict({"version": 1, "points": [{"from": [64, 64], "to": [70, 64]}],
                               "border": "pinned"}, 128, 128)
     assert not any("gives way" in note for note in RigidMap(128, 128).deformation(calm).notes)
+
+
+def test_a_fitted_canvas_is_held_to_65535_a_side_as_the_presets_are():
+    """deform wrote a 65536 px wide PNG where every preset refuses more than 65535."""
+    from featurewarp_cli.engine.deform import HandleWarp
+
+    grid = Grid.for_image(8, 4, 4)
+    nodes = grid.nodes() * [65535 / 7.5, 1.0]
+    with pytest.raises(ValueError, match="x4 pixels \\(at most 65535 a side"):
+        HandleWarp(8, 4, grid, nodes)
+    assert HandleWarp(8, 4, grid, nodes, canvas="input").canvas == (8, 4)

@@ -102,6 +102,9 @@ class HandleWarp:
             lo, hi = nodes.min(axis=0), nodes.max(axis=0)
             self.canvas = canvas_size(hi - lo)
             self.offset = (float(lo[0] + 0.5), float(lo[1] + 0.5))
+            if max(self.canvas) > 65535:                 # as the presets' (warps.common.fit_canvas)
+                raise ValueError(f"deform: the result would be {self.canvas[0]}x{self.canvas[1]} pixels (at most "
+                                 f"65535 a side; the canvas 'input' keeps the input's size)")
         self.nodes = nodes - np.asarray(self.offset)
         self._embeddings = {} if embeddings is None else embeddings
         self.notes = []
