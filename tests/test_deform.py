@@ -557,3 +557,17 @@ def test_a_fitted_canvas_is_held_to_65535_a_side_as_the_presets_are():
     with pytest.raises(ValueError, match="x4 pixels \\(at most 65535 a side"):
         HandleWarp(8, 4, grid, nodes)
     assert HandleWarp(8, 4, grid, nodes, canvas="input").canvas == (8, 4)
+
+
+def test_a_cell_coarser_than_the_handles_grid_is_reported_as_the_one_used(tmp_path):
+    """--cell 64 was left for the handles' 4 px grid, and the report said 64."""
+    from click.testing import CliRunner
+
+    from featurewarp_cli.cli.main import cli
+
+    cv2.imwrite(str(tmp_path / "in.png"), np.random.default_rng(2).integers(0, 255, (64, 80, 3), np.uint8))
+    run = CliRunner().invoke(cli, ["deform", str(tmp_path / "in.png"), str(tmp_path / "o.png"), "--pin", "5,5",
+                                   "--move", "60,40:66,44", "--cell", "64", "--report", str(tmp_path / "r.json")])
+    assert run.exit_code == 0, run.output
+    grid = json.loads((tmp_path / "r.json").read_text())["grid"]
+    assert grid["cell"] == max(grid["spacing"]) < 64
