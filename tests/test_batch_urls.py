@@ -7,14 +7,20 @@ from __future__ import annotations
 import importlib.util
 import json
 import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time
 import uuid
 
 import fsspec
+import numpy as np
 import pytest
 
 from featurewarp_cli.app import batch
 from featurewarp_cli.io import urls
-from test_cli import runner, scene  # noqa: F401  (fixture)
+from test_cli import runner, save, scene, square_mask, textured  # noqa: F401  (fixture)
 
 MEMORY = fsspec.filesystem("memory")
 
@@ -158,3 +164,61 @@ def test_resume_without_times_runs_again(tmp_path, bucket, monkeypatch):
     assert batch.up_to_date(job)
     monkeypatch.setattr(urls, "modified", lambda url: None)                # a store that does not say
     assert not batch.up_to_date(job)
+
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+@pytest.mark.parametrize("jobs", ["1", "2"])
+def test_a_signal_leaves_no_copies_of_url_inputs(tmp_path, jobs):
+    """SIGINT while URL jobs run: each left its copies of the photo and mask in /tmp/featurewarp-*
+    (the command and its --jobs workers exit at once)."""
+    (tmp_path / "photos").mkdir()
+    for i in range(6):                                  # big enough that a job lasts a while
+        save(tmp_path / "photos" / f"p{i}.png", np.roll(textured((640, 480)), 7 * i, axis=1))
+        save(tmp_path / "photos" / f"p{i}_mask.png", square_mask((640, 480)))
+    temp = tmp_path / "tmp"
+    temp.mkdir()
+    process = subprocess.Popen([sys.executable, "-m", "featurewarp_cli", "batch", "swirl",
+                                f"simplecache::{(tmp_path / 'photos').as_uri()}/*.png", "-o", str(tmp_path / "out"),
+                                "--angle", "120", "-j", jobs], stderr=subprocess.PIPE,
+                               env={**os.environ, "TMPDIR": str(temp), "PYTHONPATH": ROOT})
+
+    def copies():
+        return [name for name in os.listdir(temp) if name.startswith("featurewarp-")]
+
+    try:
+        deadline = time.monotonic() + 60
+        while not copies():
+            assert time.monotonic() < deadline and process.poll() is None, "no job started"
+            time.sleep(0.002)
+        process.send_signal(signal.SIGINT)
+        _, stderr = process.communicate(timeout=60)
+    finally:
+        process.kill()
+    assert (process.returncode, stderr) == (130, b"featurewarp: stopped by SIGINT\n")
+    assert copies() == []
+
+
+def test_copies_a_killed_process_left_are_removed_by_the_next_url_job(runner, tmp_path, bucket, monkeypatch):
+    """A worker killed with SIGKILL leaves its copies; the next URL job on the machine removes those
+    of processes that are gone, once a minute old (a folder of a live process, or a young one, stays)."""
+    from featurewarp_cli.app import remote
+
+    temp = tmp_path / "tmp"
+    temp.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(temp))
+    monkeypatch.setattr(remote, "_swept", False)
+    gone = int(subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True,
+                              check=True).stdout)
+    folders = {name: temp / (remote._folder_prefix(pid) + "x1") for name, pid in
+               (("stale", gone), ("live", os.getpid()))}
+    folders["young"] = temp / (remote._folder_prefix(gone) + "x2")
+    for name, folder in folders.items():
+        (folder / "input").mkdir(parents=True)
+        (folder / "input" / "a.png").write_bytes(b"private photo")
+        if name != "young":
+            os.utime(folder, (time.time() - 120,) * 2)
+    run = runner("batch", "swirl", f"memory://{bucket}/photos/a.png", "-o", tmp_path / "out", "--angle", "60")
+    assert run.code == 0, run.stderr
+    assert sorted(os.listdir(temp)) == sorted(folders[name].name for name in ("live", "young"))

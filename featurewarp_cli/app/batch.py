@@ -205,8 +205,10 @@ def _worker_setup() -> None:
 
     def stop(signum, frame):
         from ..io.write import remove_pending
+        from .remote import remove_copies
 
         remove_pending()
+        remove_copies([os.getpid()])
         os._exit(128 + signum)
 
     signal.signal(signal.SIGTERM, stop)

@@ -6,12 +6,23 @@ output is written there, and only a complete output is put to its URL
 (:func:`featurewarp_cli.io.urls.put`: all or nothing). Messages name the URLs, never the
 copies. ``--resume`` compares the stores' modification times where they report them; where
 one does not, the job runs again.
+
+The copies wait in a folder named ``featurewarp-HOST-PID-*`` in the temporary folder, removed
+when the job ends, by the command's SIGINT and SIGTERM handlers (for itself and the batch
+workers it stops: :func:`remove_copies`), and, where a process was killed outright (SIGKILL,
+the kernel's out-of-memory killer), by the next URL job on that machine once the folder is a
+minute old (:func:`remove_stale`).
 """
 
 from __future__ import annotations
 
+import glob
 import os
+import re
+import shutil
+import socket
 import tempfile
+import time
 
 from ..io import urls
 from ..io.limits import size_text
@@ -27,7 +38,9 @@ def run_url_job(settings, job, run_local) -> tuple[str | None, dict | None]:
     URL when written. Returns (error or None, summary or None) naming the URLs; never raises."""
     from .batch import Job
 
-    with tempfile.TemporaryDirectory(prefix="featurewarp-") as folder:
+    remove_stale()
+    folder = tempfile.mkdtemp(prefix=_folder_prefix(os.getpid()))
+    try:
         copies = {}
         for url, role in ((job.input, "input"), (job.mask, "mask"), (job.output, "output")):
             if urls.is_url(url):
@@ -45,7 +58,57 @@ def run_url_job(settings, job, run_local) -> tuple[str | None, dict | None]:
                     urls.put(job.output, file.read())
             except (OSError, ValueError, NotImplementedError) as err:
                 error, summary = f"cannot write {job.output}: {_reason(err)}", None
-    return _named(error, copies), _named(summary, copies)
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+    return named(error, copies), named(summary, copies)
+
+
+#: Seconds before a folder of copies whose process is gone is removed by another process.
+STALE_SECONDS = 60
+_swept = False
+
+
+def _folder_prefix(pid: int | str) -> str:
+    """``featurewarp-HOST-PID-``: the name of process ``pid``'s folders of copies starts so."""
+    return f"featurewarp-{re.sub(r'[^A-Za-z0-9.]', '_', socket.gethostname())[:64]}-{pid}-"
+
+
+def _folders(pid: int | str | None = None) -> list[str]:
+    """This machine's folders of copies: process ``pid``'s, or every process's."""
+    prefix = glob.escape(_folder_prefix("@")).replace("@", "*" if pid is None else str(pid))
+    return glob.glob(os.path.join(glob.escape(tempfile.gettempdir()), prefix + "*"))
+
+
+def remove_copies(pids) -> None:
+    """Remove the folders of copies of the processes ``pids`` (signal handlers: this process and
+    the batch workers it has stopped)."""
+    for pid in pids:
+        for folder in _folders(pid):
+            shutil.rmtree(folder, ignore_errors=True)
+
+
+def remove_stale() -> None:
+    """Once per process: remove this machine's folders of copies whose process is gone and that
+    are older than STALE_SECONDS (a worker killed with SIGKILL leaves its copies behind)."""
+    global _swept
+    if _swept:
+        return
+    _swept = True
+    start = len(_folder_prefix("")) - 1
+    for folder in _folders():
+        pid = os.path.basename(folder)[start:].partition("-")[0]
+        try:
+            os.kill(int(pid), 0)
+            continue                                   # its process runs
+        except ProcessLookupError:
+            pass
+        except (ValueError, OverflowError, OSError):  # another user's, or not a pid
+            continue
+        try:
+            if time.time() - os.stat(folder).st_mtime >= STALE_SECONDS:
+                shutil.rmtree(folder, ignore_errors=True)
+        except OSError:
+            pass
 
 
 def _fetch(settings, job, copies: dict) -> str | None:
@@ -73,12 +136,12 @@ def _reason(err: Exception) -> str:
     return getattr(err, "strerror", None) or str(err) or type(err).__name__
 
 
-def _named(value, copies: dict):
+def named(value, copies: dict):
     """``value`` (a message, or a summary: its input, output and warnings) with each local
     copy's path replaced by its URL."""
     if isinstance(value, dict):
-        return {**value, "input": _named(value["input"], copies), "output": _named(value["output"], copies),
-                "warnings": [_named(warning, copies) for warning in value["warnings"]]}
+        return {**value, "input": named(value["input"], copies), "output": named(value["output"], copies),
+                "warnings": [named(warning, copies) for warning in value["warnings"]]}
     for url, path in copies.items():
         value = value.replace(path, url) if value else value
     return value

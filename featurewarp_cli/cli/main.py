@@ -237,11 +237,19 @@ def stop_on_signal(signum, frame) -> None:
     from ..io import capture, write
 
     write.remove_pending()
+    stopped = [os.getpid()]
     processes = sys.modules.get("multiprocessing")    # none started if it was never imported;
     if getattr(processes, "active_children", None):   # half imported when the signal came: none either
-        for child in processes.active_children():
+        children = processes.active_children()
+        for child in children:
             child.kill()
+        for child in children:                        # dead before their copies are removed
+            child.join(1)
+            stopped.append(child.pid)
         _release_semaphores()
+    remote = sys.modules.get("featurewarp_cli.app.remote")
+    if remote is not None:                            # a batch's copies of URL inputs (its workers' too)
+        remote.remove_copies(stopped)
     try:
         os.write(capture.real_stderr(), f"featurewarp: stopped by {signal.Signals(signum).name}\n".encode())
     except OSError:
