@@ -197,3 +197,23 @@ def test_run_job_never_raises(tmp_path):
 def test_a_missing_out_dir_is_created(runner, photos, tmp_path):
     run = runner("batch", "swirl", photos / "a.png", "-o", tmp_path / "new" / "deeper", "--mode", "plain")
     assert run.code == 0 and names(tmp_path / "new" / "deeper") == ["a.png"]
+
+
+def test_a_batch_reads_no_stdin_and_names_a_failed_file_once(runner, photos, tmp_path):
+    """'-' was looked for as a file ('-: - does not exist'); a missing input was named twice."""
+    run = runner("batch", "swirl", "-", "-o", tmp_path / "out", input=(photos / "a.png").read_bytes())
+    assert run.code == 2 and len(run.lines) == 1 and "a batch reads no stdin" in run.stderr, run.stderr
+    run = runner("batch", "swirl", photos / "a.png", photos / "ghost.png", "-o", tmp_path / "out")
+    assert run.code == 1
+    assert run.lines == [f"featurewarp: error: {photos / 'ghost.png'} does not exist",
+                         "featurewarp: error: 1 of 2 files failed"]
+
+
+def test_a_summary_that_cannot_be_written_is_named_and_stops_the_batch(runner, photos, tmp_path):
+    """--summary /dev/full: 'OSError: [Errno 28] No space left on device', naming no file."""
+    run = runner("batch", "swirl", photos / "a.png", photos / "b.png", photos / "c.jpg", "-o", tmp_path / "out",
+                 "--summary", "/dev/full")
+    assert run.code == 1
+    assert run.lines == ["featurewarp: error: --summary: cannot write /dev/full (No space left on device); the batch "
+                         "was stopped"]
+    assert names(tmp_path / "out") == ["a.png"]

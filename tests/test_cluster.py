@@ -2,21 +2,31 @@
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
+import logging
 import os
 import signal
+import socket
+import subprocess
+import sys
 import threading
 import time
+from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 
 import cv2
 import numpy as np
 import pytest
 from click.testing import CliRunner
 
+import featurewarp_cli
 from featurewarp_cli.app import batch
 from featurewarp_cli.cli.main import cli
+from test_cli import Runner
 
-SAMPLES = os.path.join(os.path.dirname(__file__), os.pardir, "samples")
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+SAMPLES = os.path.join(ROOT, "samples")
 
 
 @pytest.fixture(scope="module")
@@ -28,10 +38,10 @@ def cluster():
     local.close()
 
 
-def make_inputs(folder, count: int):
+def make_inputs(folder, count: int, size=(96, 72)):
     """``count`` small images (the shapes sample, each shifted) with their masks."""
-    image = cv2.resize(cv2.imread(os.path.join(SAMPLES, "shapes.png")), (96, 72), interpolation=cv2.INTER_AREA)
-    mask = cv2.resize(cv2.imread(os.path.join(SAMPLES, "shapes_mask.png"), 0), (96, 72),
+    image = cv2.resize(cv2.imread(os.path.join(SAMPLES, "shapes.png")), size, interpolation=cv2.INTER_AREA)
+    mask = cv2.resize(cv2.imread(os.path.join(SAMPLES, "shapes_mask.png"), 0), size,
                       interpolation=cv2.INTER_NEAREST)
     os.makedirs(folder, exist_ok=True)
     paths = []
@@ -43,6 +53,23 @@ def make_inputs(folder, count: int):
     return paths
 
 
+@contextlib.contextmanager
+def dask_log():
+    """What Dask's log handler writes while the block runs. Outside pytest, Dask gives its logger
+    a handler on stderr that keeps the records to itself; under pytest (whose handlers the root
+    logger has) it gives none, so one is put in its place here."""
+    logger = logging.getLogger("distributed")
+    caught = io.StringIO()
+    handler, propagate = logging.StreamHandler(caught), logger.propagate
+    logger.addHandler(handler)
+    logger.propagate = False
+    try:
+        yield caught
+    finally:
+        logger.removeHandler(handler)
+        logger.propagate = propagate
+
+
 def summary_lines(path):
     with open(path) as f:
         return [json.loads(line) for line in f]
@@ -50,7 +77,8 @@ def summary_lines(path):
 
 def test_a_killed_worker_costs_nothing(tmp_path, cluster):
     """40 jobs on 2 workers, one killed mid-run: every output written once, the same bytes as the
-    local batch, the summary complete, exit 0."""
+    local batch, the summary complete, exit 0, and none of Dask's log lines ("Restarting worker")
+    on stderr."""
     from distributed import Client
 
     inputs = make_inputs(tmp_path / "in", 40)
@@ -74,11 +102,14 @@ def test_a_killed_worker_costs_nothing(tmp_path, cluster):
 
     killer = threading.Thread(target=kill_one_worker)
     killer.start()
-    result = CliRunner().invoke(cli, ["batch", "swirl", *inputs, "--out-dir", str(cluster_dir), "--angle", "120",
-                                      "--scheduler", cluster.scheduler_address,
-                                      "--summary", str(tmp_path / "summary.jsonl")])
+    with dask_log() as logged:
+        result = CliRunner().invoke(cli, ["batch", "swirl", *inputs, "--out-dir", str(cluster_dir), "--angle", "120",
+                                          "--scheduler", cluster.scheduler_address,
+                                          "--summary", str(tmp_path / "summary.jsonl")])
     killer.join()
     assert result.exit_code == 0, result.output
+    said = logged.getvalue()                   # this process's nanny, as the worker died mid-run:
+    assert "killed by signal 9" not in said and "Restarting worker" not in said, said
     assert killed and killed[0] < 40, killed                 # the worker died mid-run
     assert sorted(os.listdir(cluster_dir)) == sorted(os.listdir(local_dir))       # nothing half-written
     for name in os.listdir(local_dir):
@@ -120,9 +151,9 @@ def test_summary_and_resume_locally(tmp_path):
     ("tcp://127.0.0.1:9", 1, "cannot reach the Dask scheduler"),
 ])
 def test_bad_schedulers_are_one_line_errors(tmp_path, monkeypatch, scheduler, code, words):
-    from featurewarp_cli.app import cluster as cluster_module
+    from featurewarp_cli.app import scheduler as scheduler_module
 
-    monkeypatch.setattr(cluster_module, "CONNECT_TIMEOUT", 2)
+    monkeypatch.setattr(scheduler_module, "CONNECT_TIMEOUT", 2)
     inputs = make_inputs(tmp_path / "in", 1)
     result = CliRunner().invoke(cli, ["batch", "swirl", *inputs, "--out-dir", str(tmp_path), "--scheduler", scheduler])
     assert result.exit_code == code, result.output
@@ -151,3 +182,299 @@ def test_the_memory_budget_is_the_whole_batchs(tmp_path):
     assert CliRunner().invoke(cli, args).exit_code == 0
     split = CliRunner().invoke(cli, args + ["--jobs", "4", "--out-dir", str(tmp_path / "out4")])
     assert split.exit_code == 1 and "--max-memory" in split.output
+
+
+def featurewarp(*args) -> list[str]:
+    """The command line of ``featurewarp ARGS`` in a fresh process, from this source tree."""
+    return [sys.executable, "-m", "featurewarp_cli", *map(str, args)]
+
+
+def fresh_env() -> dict:
+    return {**os.environ, "PYTHONPATH": ROOT}
+
+
+def wait_for(condition, seconds: float = 60) -> None:
+    deadline = time.monotonic() + seconds
+    while not condition():
+        assert time.monotonic() < deadline, "waited too long"
+        time.sleep(0.005)
+
+
+def invoke(*args):
+    """``featurewarp batch swirl ARGS`` as the console script runs it (one-line errors on stderr)."""
+    return Runner()("batch", "swirl", *args)
+
+
+def test_relative_paths_are_resolved_where_the_command_runs(tmp_path, cluster, monkeypatch):
+    """The workers' working folder is not the command's: relative INPUT, masks and --out-dir are
+    sent absolute (they failed, or were written into the worker's folder with status ok), and
+    messages and the summary name them as given."""
+    make_inputs(tmp_path / "in", 2)
+    os.rename(tmp_path / "in" / "img01_mask.png", tmp_path / "in" / "other_mask.png")
+    monkeypatch.chdir(tmp_path)
+    result = invoke("in/img00.png", "in/img01.png", "--out-dir", "rel_out", "--angle", "120",
+                    "--scheduler", cluster.scheduler_address, "--summary", "s.jsonl")
+    assert result.code == 1, result.stderr
+    assert os.listdir(tmp_path / "rel_out") == ["img00.png"]
+    assert "featurewarp: error: in/img01.png: --mask: in/img01_mask.png does not exist" in result.stderr
+    lines = {line["job"]: line for line in summary_lines(tmp_path / "s.jsonl")}
+    assert (lines[0]["input"], lines[0]["mask"], lines[0]["output"], lines[0]["status"]) == (
+        "in/img00.png", "in/img00_mask.png", "rel_out/img00.png", "ok")
+    assert lines[1]["error"] == "--mask: in/img01_mask.png does not exist"
+
+
+class _SilentHTTP(BaseHTTPRequestHandler):
+    def log_message(self, *args):
+        pass
+
+
+@pytest.fixture
+def not_schedulers():
+    """Addresses that answer but are no Dask scheduler: an HTTP server, and a service that speaks
+    first (as SSH does)."""
+    http = ThreadingHTTPServer(("127.0.0.1", 0), _SilentHTTP)
+    banner = socket.create_server(("127.0.0.1", 0))
+
+    def greet():
+        while True:
+            try:
+                peer, _ = banner.accept()
+            except OSError:
+                return
+            peer.sendall(b"SSH-2.0-OpenSSH_9.6p1\r\n")
+            threading.Timer(5, peer.close).start()
+
+    threading.Thread(target=http.serve_forever, daemon=True).start()
+    threading.Thread(target=greet, daemon=True).start()
+    yield {"http": f"tcp://127.0.0.1:{http.server_address[1]}", "banner": f"127.0.0.1:{banner.getsockname()[1]}"}
+    http.shutdown()
+    banner.close()
+
+
+def test_what_is_not_a_scheduler_fails_in_one_line_within_the_timeout(tmp_path, monkeypatch, cluster, not_schedulers):
+    """The dashboard's port (an HTTP server) kept the command waiting forever; an SSH banner was read
+    as a frame length (a MemoryError); a worker's address is not its scheduler's."""
+    from distributed import Client
+
+    from featurewarp_cli.app import scheduler as scheduler_module
+
+    monkeypatch.setattr(scheduler_module, "CONNECT_TIMEOUT", 2)
+    inputs = make_inputs(tmp_path / "in", 1)
+    with Client(cluster.scheduler_address, set_as_default=False) as client:
+        worker = next(iter(client.scheduler_info()["workers"]))
+    cases = [(not_schedulers["http"], "is not a Dask scheduler"), (not_schedulers["banner"], "is not a Dask scheduler"),
+             (worker, "is a Dask worker, not the scheduler")]
+    for address, words in cases:
+        results = []
+        started = time.monotonic()
+        args = ["batch", "swirl", *map(str, inputs), "--out-dir", str(tmp_path / "out"), "--scheduler", address]
+        attempt = threading.Thread(target=lambda: results.append(CliRunner().invoke(cli, args)), daemon=True)
+        attempt.start()
+        attempt.join(15)
+        assert results, f"{address}: still waiting after 15 s"
+        assert time.monotonic() - started < 5
+        assert results[0].exit_code == 1 and words in results[0].output, results[0].output
+        assert results[0].output.count("\n") == 1 and address in results[0].output
+
+
+@pytest.mark.parametrize("content, words", [
+    ("{}", "is not a Dask scheduler file"),
+    ("", "is not a Dask scheduler file"),
+    ('{"address": "tls://127.0.0.1:1"}', "tls:// needs Dask's TLS settings"),
+    ('{"address": "ucx://127.0.0.1:1"}', "ucx:// is not supported"),
+    ('{"address": "tcp://"}', "is not a scheduler address"),
+])
+def test_malformed_scheduler_files_are_usage_errors(tmp_path, content, words):
+    (tmp_path / "bad.json").write_text(content)
+    inputs = make_inputs(tmp_path / "in", 1)
+    result = invoke(*inputs, "--out-dir", tmp_path / "out", "--scheduler", tmp_path / "bad.json")
+    assert result.code == 2 and words in result.stderr and result.stderr.count("\n") == 1, result.stderr
+    assert "Error" not in result.stderr.replace("Invalid value", "")       # no exception's name
+
+
+@pytest.mark.parametrize("value, words", [
+    ("tls://127.0.0.1:1", "tls:// needs Dask's TLS settings"),
+    ("ucx://127.0.0.1:1", "ucx:// is not supported"),
+    ("tcp://", "is not a scheduler address"),
+    ("", "names no scheduler"),
+    ("sched_noext", "no such scheduler file"),
+    ("{tmp}", "is a folder, not a scheduler file"),
+])
+def test_malformed_scheduler_values_are_usage_errors_before_anything_is_written(tmp_path, value, words):
+    """Every value that cannot name a scheduler is exit 2 (a malformed address was exit 1), and no
+    --out-dir is created."""
+    inputs = make_inputs(tmp_path / "in", 1)
+    result = invoke(*inputs, "--out-dir", tmp_path / "out", "--scheduler", value.replace("{tmp}", str(tmp_path)))
+    assert result.code == 2 and words in result.stderr and result.stderr.count("\n") == 1, result.stderr
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_scheduler_file_is_known_by_its_content_not_its_name(tmp_path, cluster):
+    inputs = make_inputs(tmp_path / "in", 1)
+    for name in ("sched.info", "SCHED.JSON"):
+        (tmp_path / name).write_text(json.dumps({"type": "Scheduler", "address": cluster.scheduler_address}))
+        result = invoke(*inputs, "--out-dir", tmp_path / name.replace(".", "-"), "--scheduler", tmp_path / name)
+        assert result.code == 0, result.stderr
+
+
+@pytest.mark.parametrize("scheduler", ["local:0", "tcp://127.0.0.1:9", "memory"])
+def test_a_run_that_cannot_start_leaves_the_summary_as_it_was(tmp_path, monkeypatch, cluster, scheduler):
+    """The summary was emptied before --scheduler was checked or the cluster reached."""
+    from featurewarp_cli.app import scheduler as scheduler_module
+
+    monkeypatch.setattr(scheduler_module, "CONNECT_TIMEOUT", 2)
+    summary = tmp_path / "keep.jsonl"
+    summary.write_text('{"job": 0, "status": "failed"}\n' * 3)
+    inputs = make_inputs(tmp_path / "in", 2)
+    if scheduler == "memory":
+        inputs, scheduler = ["memory://featurewarp-test/a.png"], cluster.scheduler_address
+    result = invoke(*inputs, "--out-dir", tmp_path / "out", "--scheduler", scheduler, "--summary", summary)
+    assert result.code in (1, 2) and "--scheduler" in result.stderr, result.stderr
+    assert summary.read_text() == '{"job": 0, "status": "failed"}\n' * 3
+
+
+def test_jobs_and_scheduler_exclude_each_other(tmp_path, cluster):
+    inputs = make_inputs(tmp_path / "in", 1)
+    for jobs in ("4", "1"):
+        result = invoke(*inputs, "--out-dir", tmp_path / "out", "--scheduler", cluster.scheduler_address, "-j", jobs)
+        assert result.code == 2 and "--jobs and --scheduler exclude each other" in result.stderr
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_signal_stops_the_cluster_jobs_and_the_summary_keeps_what_finished(tmp_path, cluster):
+    """SIGINT: the jobs running on the workers went on writing after the command had exited, and
+    the files finished before the signal were missing from the summary."""
+    inputs = make_inputs(tmp_path / "in", 12, size=(640, 480))
+    out = tmp_path / "out"
+    process = subprocess.Popen(featurewarp("batch", "swirl", *inputs, "--out-dir", out, "--angle", "120",
+                                           "--scheduler", cluster.scheduler_address, "--summary", tmp_path / "s.jsonl"),
+                               stderr=subprocess.PIPE, env=fresh_env())
+    try:
+        wait_for(lambda: out.is_dir() and len(os.listdir(out)) >= 2)
+        process.send_signal(signal.SIGINT)
+        _, stderr = process.communicate(timeout=60)
+    finally:
+        process.kill()
+    at_exit = sorted(os.listdir(out))
+    time.sleep(1.5)
+    assert (process.returncode, stderr) == (130, b"featurewarp: stopped by SIGINT\n")
+    assert sorted(os.listdir(out)) == at_exit and len(at_exit) < 12          # nothing written after the exit
+    lines = summary_lines(tmp_path / "s.jsonl")
+    assert sorted(os.path.basename(line["output"]) for line in lines) == at_exit
+    assert {line["status"] for line in lines} == {"ok"}
+
+
+def test_a_lost_scheduler_is_one_line_and_the_summary_matches_the_disk(tmp_path, cluster, capfd):
+    """The connection to the scheduler cut mid-run: Dask's traceback and one FutureCancelledError
+    line per file (internal keys, a literal \\n) were printed, and files on disk were 'failed'."""
+    from distributed import Client
+
+    inputs = make_inputs(tmp_path / "in", 12, size=(640, 480))
+    out = tmp_path / "out"
+
+    def cut_the_connection():
+        wait_for(lambda: out.is_dir() and len(os.listdir(out)) >= 1)
+        for client in list(Client._instances):
+            if client.status == "running" and client.scheduler.address == cluster.scheduler_address:
+                client.loop.add_callback(client.scheduler_comm.comm.abort)
+
+    cutter = threading.Thread(target=cut_the_connection)
+    cutter.start()
+    result = invoke(*inputs, "--out-dir", out, "--angle", "120", "--scheduler", cluster.scheduler_address,
+                    "--summary", tmp_path / "s.jsonl")
+    cutter.join()
+    at_exit = sorted(os.listdir(out))
+    time.sleep(1)
+    assert result.code == 1
+    assert result.stderr.startswith("featurewarp: error: lost the connection to the Dask scheduler at ")
+    assert result.stderr.count("\n") == 1 and "files not finished" in result.stderr, result.stderr
+    assert "Traceback" not in capfd.readouterr().err
+    assert sorted(os.listdir(out)) == at_exit and len(at_exit) < 12
+    lines = summary_lines(tmp_path / "s.jsonl")
+    assert sorted(line["job"] for line in lines) == list(range(12))
+    written = {os.path.basename(line["output"]) for line in lines if line["status"] == "ok"}
+    assert written == set(at_exit)
+    assert {line["error"] for line in lines if line["status"] == "failed"} == {
+        "not finished: the connection to the Dask scheduler was lost"}
+
+
+def test_a_scheduler_without_workers_is_said_once_and_waited_for(tmp_path, monkeypatch):
+    """A scheduler whose workers are still queued kept the command waiting in silence. (A scheduler
+    in this process, with no worker until one thread worker joins: no process is started.)"""
+    from distributed import LocalCluster
+
+    from featurewarp_cli.app import scheduler as scheduler_module
+
+    monkeypatch.setattr(scheduler_module, "WORKERS_NOTICE", 0.3)
+    inputs = make_inputs(tmp_path / "in", 1)
+    with LocalCluster(n_workers=0, processes=False, protocol="tcp://", host="127.0.0.1", dashboard_address=None,
+                      scheduler_kwargs={"dashboard_address": "127.0.0.1:0"}) as empty:
+        timer = threading.Timer(2, empty.scale, (1,))
+        timer.start()
+        result = invoke(*inputs, "--out-dir", tmp_path / "out", "--scheduler", empty.scheduler_address)
+        timer.join()
+    assert result.code == 0, result.stderr
+    assert result.stderr == (f"featurewarp: waiting for workers on {empty.scheduler_address}: the Dask scheduler "
+                             "has none yet (Ctrl-C stops)\n")
+    assert os.listdir(tmp_path / "out") == ["img00.png"]
+
+
+def test_local_n_starts_no_dashboard_and_silences_dask(tmp_path, cluster, monkeypatch):
+    """local:N's scheduler served a dashboard on 8787 (another port, with a three-line warning, when
+    8787 was taken), and its workers' log lines reached stderr. (The local cluster is recorded and
+    stood in for by the module's cluster.)"""
+    import dask
+    import distributed
+
+    from featurewarp_cli.app import scheduler as scheduler_module
+
+    seen = {}
+
+    class Recorder:
+        def __init__(self, **options):
+            seen.update(options, routes=dask.config.get("distributed.scheduler.http.routes"))
+            self.scheduler_address = cluster.scheduler_address
+
+        def close(self, timeout=None):
+            seen["closed"] = True
+
+    def client_of(local, **options):
+        return distributed.Client(local.scheduler_address, **options)
+
+    stand_in = type(distributed)("distributed")
+    stand_in.__dict__.update(vars(distributed), LocalCluster=Recorder, Client=client_of)
+    monkeypatch.setattr(scheduler_module, "distributed_module", lambda: stand_in)
+    inputs = make_inputs(tmp_path / "in", 2)
+    result = invoke(*inputs, "--out-dir", tmp_path / "out", "--scheduler", "local:2")
+    assert (result.code, result.stderr) == (0, ""), result.stderr
+    assert seen["dashboard_address"] is None and seen["routes"] == []
+    assert seen["scheduler_kwargs"]["dashboard_address"].endswith(":0")      # no fixed port to be taken
+    assert seen["silence_logs"] > logging.CRITICAL and seen["n_workers"] == 2 and seen["closed"]
+
+
+def test_a_summary_that_cannot_be_written_stops_the_cluster_jobs(tmp_path, cluster):
+    """--summary /dev/full: an anonymous OSError, and the jobs already sent went on writing."""
+    inputs = make_inputs(tmp_path / "in", 12, size=(640, 480))
+    out = tmp_path / "out"
+    result = invoke(*inputs, "--out-dir", out, "--angle", "120", "--scheduler", cluster.scheduler_address,
+                    "--summary", "/dev/full")
+    at_exit = sorted(os.listdir(out))
+    time.sleep(1.5)
+    assert result.code == 1
+    assert result.stderr == ("featurewarp: error: --summary: cannot write /dev/full (No space left on device); "
+                             "the batch was stopped\n")
+    assert sorted(os.listdir(out)) == at_exit and len(at_exit) < 12
+
+
+def test_workers_with_another_featurewarp_version_are_named(tmp_path, cluster, monkeypatch):
+    """Jobs went to workers of another version without a word (other bytes, silently)."""
+    from featurewarp_cli.app import cluster_run
+
+    monkeypatch.setattr(cluster_run, "__version__", "9.9.9")
+    inputs = make_inputs(tmp_path / "in", 2)
+    result = invoke(*inputs, "--out-dir", tmp_path / "out", "--scheduler", cluster.scheduler_address)
+    assert result.code == 0
+    warning, = result.stderr.splitlines()
+    assert warning.startswith("featurewarp: warning: 2 Dask worker(s) run another featurewarp than this "
+                              "command's 9.9.9, and may write other bytes: tcp://"), warning
+    assert f"({featurewarp_cli.__version__})" in warning

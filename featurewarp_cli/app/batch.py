@@ -158,7 +158,9 @@ def _located(path: str, param: str | None = "INPUT") -> str:
 
 def _expanded(path: str) -> list[str]:
     """An INPUT: a path as it is, a URL located, a URL with glob characters as every object
-    it matches."""
+    it matches; '-' a usage error (a batch reads no stdin)."""
+    if path == "-":
+        raise WarpError("'-': a batch reads no stdin; name the files (photos/*.jpg)", "INPUT", usage=True)
     if not urls.is_url(path):
         return [path]
     try:
@@ -255,8 +257,15 @@ def up_to_date(job: Job) -> bool:
         return False
 
 
-def run_jobs(settings: Settings, jobs: list[Job], workers: int = 1, scheduler: str | None = None):
-    """Run ``jobs``, yielding (index, job, error, summary, seconds).
+def run_jobs(settings: Settings, jobs: list[Job], workers: int = 1, scheduler: str | None = None,
+             verbose: bool = False):
+    """Start ``jobs``; iterate the result for (index, job, error, summary, seconds).
+
+    Everything that can refuse to start the run (a ``--scheduler`` that names no scheduler or
+    cannot be reached, a ``memory://`` URL that other processes would not see) is checked before
+    this returns, so a caller opens its own outputs only then. ``close()`` on the result stops
+    the jobs not finished (none writes after it returns on a cluster; local processes finish
+    the file they are on).
 
     Parameters
     ----------
@@ -266,12 +275,14 @@ def run_jobs(settings: Settings, jobs: list[Job], workers: int = 1, scheduler: s
         Local worker processes (``--jobs``); above 1 they are spawned, not forked, so that no
         thread pool of a parent library is inherited.
     scheduler : str, optional
-        A Dask scheduler (:mod:`featurewarp_cli.app.cluster`); the jobs are then yielded as
-        they finish, locally in order.
+        A Dask scheduler (:mod:`featurewarp_cli.app.scheduler`); the jobs are then yielded as
+        they finish, locally in order. Local paths are sent to the workers absolute.
+    verbose : bool
+        Let Dask's log lines through.
 
-    Yields
-    ------
-    (int, Job, str or None, dict or None, float)
+    Returns
+    -------
+    iterator of (int, Job, str or None, dict or None, float), with ``close()``
 
     Notes
     -----
@@ -281,8 +292,8 @@ def run_jobs(settings: Settings, jobs: list[Job], workers: int = 1, scheduler: s
     are byte-identical in every mode.
     """
     if not jobs:
-        return
-    from .cluster import local_workers, run_on_cluster        # imports no Dask
+        return (outcome for outcome in ())
+    from .scheduler import local_workers                    # imports no Dask
 
     share = workers if scheduler is None else local_workers(scheduler)
     if share > 1 and settings.max_memory is not None:       # one budget for the whole command
@@ -291,18 +302,34 @@ def run_jobs(settings: Settings, jobs: list[Job], workers: int = 1, scheduler: s
     if workers > 1 or scheduler is not None:
         _check_shared(jobs, "--scheduler" if scheduler is not None else "--jobs")
     if scheduler is not None:
-        yield from run_on_cluster(settings, jobs, scheduler)
-        return
+        from .cluster_run import ClusterRun
+
+        return ClusterRun(settings, jobs, scheduler, [_absolute(job) for job in jobs], verbose)
     if workers == 1:
-        for i, job in enumerate(jobs):
-            yield (i, job, *timed_job(settings, job))
-        return
+        return ((i, job, *timed_job(settings, job)) for i, job in enumerate(jobs))
+    return _in_processes(settings, jobs, workers)
+
+
+def _in_processes(settings: Settings, jobs: list[Job], workers: int):
+    """:func:`run_jobs` in ``workers`` local processes; closing it cancels the files not started."""
     from concurrent.futures import ProcessPoolExecutor
     from multiprocessing import get_context
 
-    with ProcessPoolExecutor(workers, mp_context=get_context("spawn"), initializer=_worker_setup) as pool:
+    pool = ProcessPoolExecutor(workers, mp_context=get_context("spawn"), initializer=_worker_setup)
+    try:
         outcomes = pool.map(timed_job, [settings] * len(jobs), jobs)
         yield from ((i, job, *outcome) for i, (job, outcome) in enumerate(zip(jobs, outcomes)))
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _absolute(job: Job) -> Job:
+    """``job`` with its local paths absolute (URLs as they are): a Dask worker resolves a relative
+    path against its own working folder, which need not be the command's."""
+    def located(path):
+        return path if path is None or urls.is_url(path) else os.path.abspath(path)
+
+    return Job(located(job.input), located(job.output), located(job.mask))
 
 
 def _check_shared(jobs: list[Job], param: str) -> None:

@@ -1,10 +1,13 @@
-"""Running a batch's jobs on a Dask cluster (``featurewarp batch ... --scheduler ADDRESS``).
+"""A batch's job on a Dask worker (``featurewarp batch ... --scheduler ADDRESS``).
 
 Dask (``dask.distributed``) is an optional extra: ``pip install 'featurewarp[dask]'``.
 Each job is one call of :func:`featurewarp_cli.app.batch.timed_job` on a worker, exactly as
 the local batch runs it, so the outputs are the same bytes. Inputs, masks and the output
-folder must be paths that every worker sees (a shared file system) or fsspec URLs
-(:mod:`featurewarp_cli.app.remote`); the workers need featurewarp installed in the same version.
+folder must be paths that every worker sees (a shared file system; the command sends them
+absolute) or fsspec URLs (:mod:`featurewarp_cli.app.remote`); the workers need featurewarp
+installed in the same version. The command's side (connecting, sending, results, stopping)
+is :mod:`featurewarp_cli.app.cluster_run`; the scheduler it names,
+:mod:`featurewarp_cli.app.scheduler`.
 
 What the cluster gives beyond ``--jobs``: workers on other machines (started by
 dask-jobqueue on Slurm or PBS, by dask-kubernetes, or by hand with ``dask scheduler`` and
@@ -12,87 +15,20 @@ dask-jobqueue on Slurm or PBS, by dask-kubernetes, or by hand with ``dask schedu
 scheduler (up to ``distributed.scheduler.allowed-failures`` times, 3 by default). Outputs
 stay all-or-nothing: each is written to an unnamed temporary file and linked into place
 only when complete, so a worker killed mid-job leaves nothing behind.
+
+No output of a run may appear after its command has exited. A job checks at its write stage
+(:func:`_write_gate`) that its run goes on (the command has not called :func:`stop_run`
+on the workers), its task was not cancelled (its client went away) and its worker is not
+closing (its scheduler was lost); if not, it writes nothing. When the command stops a run,
+it waits until the job that had passed that check on each worker has finished writing.
 """
 
 from __future__ import annotations
 
-import os
+import contextlib
 import threading
-import time
-from typing import Iterator
 
-from .pipeline import WarpError
-
-#: ``--scheduler local:N`` starts a local cluster of N single-threaded worker processes.
-LOCAL_PREFIX = "local:"
-#: Dask settings of the workers ``local:N`` starts: no statistical profiler sampling the
-#: solve's thread every 10 ms (it holds the GIL; a few % of a batch). Workers started by
-#: hand take the same from ``DASK_DISTRIBUTED__WORKER__PROFILE__ENABLED=False``.
-WORKER_CONFIG = {"distributed.worker.profile.enabled": False}
-#: Seconds to wait for a scheduler to answer.
-CONNECT_TIMEOUT = 20
-
-
-def _distributed():
-    """The ``distributed`` module, or a WarpError that says how to install it."""
-    try:
-        import distributed
-    except ImportError:
-        raise WarpError("needs Dask: pip install 'featurewarp[dask]' (dask.distributed)", "--scheduler",
-                        usage=True) from None
-    return distributed
-
-
-def local_workers(scheduler: str) -> int:
-    """N of ``local:N``: the processes on this machine that share its memory (0 when N is not
-    a whole number); 1 for any other scheduler (its workers have machines of their own)."""
-    if not scheduler.startswith(LOCAL_PREFIX):
-        return 1
-    count = scheduler[len(LOCAL_PREFIX):]
-    return int(count) if count.isdigit() else 0
-
-
-def connect(scheduler: str):
-    """A ``distributed.Client`` for ``scheduler`` and the cluster it started (or None).
-
-    Parameters
-    ----------
-    scheduler : str
-        ``tcp://host:port`` (or any address Dask takes), a scheduler file (``.json``, as
-        ``dask scheduler --scheduler-file`` writes it), or ``local:N``.
-
-    Returns
-    -------
-    (distributed.Client, distributed.LocalCluster or None)
-
-    Raises
-    ------
-    WarpError
-        Dask missing, a bad ``local:N``, or a scheduler that cannot be reached.
-    """
-    distributed = _distributed()
-    if scheduler.startswith(LOCAL_PREFIX):
-        count = local_workers(scheduler)
-        if not 1 <= count <= 1024:
-            raise WarpError(f"{scheduler!r}: local:N takes a number of workers from 1 to 1024", "--scheduler",
-                            usage=True)
-        import dask
-
-        with dask.config.set(WORKER_CONFIG):
-            cluster = distributed.LocalCluster(n_workers=count, threads_per_worker=1, processes=True,
-                                               dashboard_address=None)
-        return distributed.Client(cluster), cluster
-    try:
-        if scheduler.endswith(".json"):
-            if not os.path.isfile(scheduler):
-                raise WarpError(f"{scheduler}: no such scheduler file", "--scheduler", usage=True)
-            return distributed.Client(scheduler_file=scheduler, timeout=CONNECT_TIMEOUT), None
-        return distributed.Client(scheduler, timeout=CONNECT_TIMEOUT), None
-    except WarpError:
-        raise
-    except (OSError, TimeoutError, ValueError) as err:
-        raise WarpError(f"cannot reach the Dask scheduler at {scheduler} ({err})", "--scheduler") from None
-
+from .. import stages
 
 #: glibc's mallopt parameters, and the values a worker sets (see :func:`cluster_job`).
 _M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
@@ -101,9 +37,95 @@ _malloc_tuned = False
 #: A worker started with several threads runs one job at a time: the decoders' stderr is
 #: captured per process (a truncated JPEG's warning must reach its own job).
 _ONE_AT_A_TIME = threading.Lock()
+#: On a worker, under _GATE: the runs told to stop, and per run the job that last reached its
+#: write stage here ([task key, whether it is writing]): jobs run one at a time per worker
+#: process, so that job is the only one of the run that may have written a file the command has
+#: not heard of yet. Both keep the last RUNS_KEPT runs.
+_GATE = threading.Lock()
+_STOPPED: dict[str, None] = {}
+_LAST_WRITER: dict[str, list] = {}
+RUNS_KEPT = 1000
 
 
-def cluster_job(settings, job):
+class RunStopped(Exception):
+    """Raised at a job's write stage when its run is over: the job writes nothing."""
+
+
+def _worker():
+    """The Dask worker running this thread's task, or None."""
+    try:
+        from distributed import get_worker
+
+        return get_worker()
+    except (ImportError, ValueError):
+        return None
+
+
+def _may_write(run_id: str, worker) -> bool:
+    """On a worker, in a job's thread: whether the job may still write its output."""
+    if run_id in _STOPPED:
+        return False
+    if worker is None:
+        return True
+    if worker.status.name in ("closing", "closing_gracefully", "closed", "failed"):
+        return False                                  # its scheduler was lost, or it is shut down
+    task = worker.state.tasks.get(worker.get_current_task())
+    return task is not None and task.state != "cancelled"
+
+
+def _remember(runs: dict, run_id: str, value) -> None:
+    """``runs[run_id] = value``, as the newest entry, the oldest beyond RUNS_KEPT forgotten."""
+    runs.pop(run_id, None)
+    runs[run_id] = value
+    while len(runs) > RUNS_KEPT:
+        del runs[next(iter(runs))]
+
+
+@contextlib.contextmanager
+def _write_gate(run_id: str | None):
+    """While the block runs a job of ``run_id``: its write stage raises :class:`RunStopped` when the
+    job may not write, and marks it as writing (until the block ends) when it may."""
+    entry = []
+
+    def at_stage(name: str) -> None:
+        if name != "write" or entry:
+            return
+        worker = _worker()
+        with _GATE:
+            if not _may_write(run_id, worker):
+                raise RunStopped("the batch was stopped before this file was written")
+            entry.extend([worker.get_current_task() if worker else None, True])
+            _remember(_LAST_WRITER, run_id, entry)
+
+    if run_id is None:
+        yield
+        return
+    stages.listen(at_stage)
+    try:
+        yield
+    finally:
+        stages.forget(at_stage)
+        with _GATE:
+            if entry:
+                entry[1] = False
+
+
+def stop_run(run_id: str):
+    """On a worker (through ``Client.run``): no job of run ``run_id`` starts writing from now on.
+
+    Returns
+    -------
+    (key, bool) or None
+        The task key of the run's job that last reached its write stage on this worker and
+        whether it is writing now: the command waits until it is not, then for its result.
+    """
+    with _GATE:
+        _remember(_STOPPED, run_id, None)
+        entry = _LAST_WRITER.get(run_id)
+        return (entry[0], entry[1]) if entry else None
+
+
+def cluster_job(settings, job, run_id: str | None = None):
     """:func:`featurewarp_cli.app.batch.timed_job` on a Dask worker.
 
     Dask's nanny starts workers with ``MALLOC_TRIM_THRESHOLD_=65536``, which also turns
@@ -118,6 +140,9 @@ def cluster_job(settings, job):
     ----------
     settings : Settings
     job : Job
+    run_id : str, optional
+        The batch run the job belongs to: it writes nothing once the run is stopped
+        (:func:`stop_run`), its task cancelled or its worker closing.
 
     Returns
     -------
@@ -139,44 +164,5 @@ def cluster_job(settings, job):
             libc.mallopt(_M_TRIM_THRESHOLD, _TRIM_BYTES)
         except (OSError, AttributeError):
             pass                                    # not glibc: nothing to undo
-    with _ONE_AT_A_TIME:                            # stderr capture is per process: one job at a time
+    with _ONE_AT_A_TIME, _write_gate(run_id):       # stderr capture is per process: one job at a time
         return timed_job(settings, job)
-
-
-def run_on_cluster(settings, jobs: list, scheduler: str) -> Iterator[tuple]:
-    """Run ``jobs`` on the cluster; yield (index, job, error, summary, seconds) as they finish.
-
-    A job whose workers died too often (Dask's ``KilledWorker``) or that the cluster could
-    not run is reported as failed with the reason; the others go on.
-
-    Parameters
-    ----------
-    settings : Settings
-    jobs : list of Job
-    scheduler : str
-        As :func:`connect`.
-
-    Yields
-    ------
-    (int, Job, str or None, dict or None, float)
-    """
-    distributed = _distributed()
-    client, cluster = connect(scheduler)
-    try:
-        futures = client.map(cluster_job, [settings] * len(jobs), jobs, pure=False,
-                             key=[f"featurewarp-job-{i}-{os.getpid()}-{time.monotonic_ns()}"
-                                  for i in range(len(jobs))])
-        index = {future.key: i for i, future in enumerate(futures)}
-        for future in distributed.as_completed(futures):
-            i = index[future.key]
-            try:
-                error, summary, seconds = future.result()
-            except distributed.KilledWorker:
-                error, summary, seconds = "the Dask workers running it died (KilledWorker)", None, 0.0
-            except Exception as err:                      # the cluster's failure, not the job's
-                error, summary, seconds = f"{type(err).__name__}: {err}", None, 0.0
-            yield i, jobs[i], error, summary, seconds
-    finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()

@@ -163,42 +163,97 @@ def warp_one(settings, quiet: bool, verbose: bool, *files, **options) -> None:
 def run_planned(settings, todo, jobs: int, scheduler, summary_path, resume: bool, quiet: bool,
                 verbose: bool) -> int:
     """Run a batch's jobs (locally or on Dask), print errors and warnings, write the JSON-lines
-    summary; returns how many failed."""
-    import json
+    summary; returns how many failed.
 
+    The summary is opened (and an existing one emptied) only once the run has started: a
+    ``--scheduler`` that fails leaves it as it was. A summary that cannot be written stops the
+    run (the jobs not finished are cancelled) with one error naming it."""
     from ..app.batch import run_jobs, summary_record, up_to_date
+    from ..app.cluster_run import Unfinished
 
     skipped = {i for i, job in enumerate(todo) if resume and up_to_date(job)}
     numbers = [i for i in range(len(todo)) if i not in skipped]
     remaining = [todo[i] for i in numbers]
-    sink = None
-    if summary_path:
-        try:
-            sink = click.open_file(summary_path, "w", lazy=False)
-        except OSError as err:
-            raise click.UsageError(f"--summary: cannot write {summary_path} ({err.strerror})") from None
+    if summary_path and summary_path != "-":
+        _summary_writable(summary_path)
     failed = 0
-    try:
-        def record(line):
-            if sink is not None:
-                sink.write(json.dumps(line) + "\n")
-                sink.flush()
-
+    with contextlib.closing(run_jobs(settings, remaining, jobs, scheduler, verbose)) as results, \
+            _summary_sink(summary_path) as record:
         for i in sorted(skipped):
             record(summary_record(i, todo[i], "skipped"))
         with progress_bar(len(remaining), "warping", quiet) as bar:
-            for k, job, error, summary, seconds in run_jobs(settings, remaining, jobs, scheduler):
+            for k, job, error, summary, seconds in results:
                 bar.update(1)
                 if error:
                     failed += 1
-                    say(f"featurewarp: error: {job.input}: {error}")
-                else:
+                    if not isinstance(error, Unfinished):    # said once, for them all
+                        say(f"featurewarp: error: {failure_line(job.input, error)}")
+                elif summary is not None:
                     report_warnings(summary, quiet, verbose)
                 record(summary_record(numbers[k], job, "failed" if error else "ok", seconds, summary, error))
-    finally:
-        if sink is not None and summary_path != "-":
-            sink.close()
     return failed
+
+
+def failure_line(input: str, error: str) -> str:
+    """A failed file's line: its error, after the input's name unless the error starts with it."""
+    return error if error.startswith((input + " ", input + ":")) else f"{input}: {error}"
+
+
+def _summary_writable(path: str) -> None:
+    """Usage error unless ``--summary PATH`` can be written; the file is not touched."""
+    from ..io.write import check_writable
+
+    try:
+        check_writable(path)
+    except ValueError as err:
+        raise click.UsageError(f"--summary: {err}") from None
+
+
+@contextlib.contextmanager
+def _summary_sink(path: str | None):
+    """A function that writes one JSON line to the ``--summary`` file (nothing without one); a
+    failed write is a WarpError naming the file."""
+    import json
+
+    from ..app.pipeline import WarpError
+
+    if not path:
+        yield lambda line: None
+        return
+    try:
+        sink = click.open_file(path, "w", lazy=False)
+    except OSError as err:
+        raise click.UsageError(f"--summary: cannot write {path} ({err.strerror})") from None
+
+    def record(line: dict) -> None:
+        try:
+            sink.write(json.dumps(line) + "\n")
+            sink.flush()
+        except OSError as err:
+            raise WarpError(f"cannot write {path} ({err.strerror or err}); the batch was stopped",
+                            "--summary") from None
+
+    try:
+        yield record
+    finally:
+        if path != "-":
+            with contextlib.suppress(OSError):
+                sink.close()
+
+
+def check_scheduler(scheduler: str | None) -> None:
+    """Usage errors, before anything is read or written: ``--jobs`` given with ``--scheduler``
+    (the cluster's workers run the files), or a ``--scheduler`` value that names no scheduler."""
+    if scheduler is None:
+        return
+    from click.core import ParameterSource
+
+    if click.get_current_context().get_parameter_source("jobs") not in (ParameterSource.DEFAULT, None):
+        raise click.UsageError("--jobs and --scheduler exclude each other: the cluster's workers run the files "
+                               "(local:N for N local processes on Dask)")
+    from ..app.scheduler import resolve
+
+    resolve(scheduler)
 
 
 def batch_command(preset) -> click.Command:
@@ -220,11 +275,12 @@ def batch_command(preset) -> click.Command:
                            help="Appended to each output's stem: DIR/{stem}S.{ext}."),
               param_option(JOBS, "-j", "--jobs"),
               click.Option(["--scheduler"], metavar="ADDRESS",
-                           help="Run the jobs on a Dask cluster instead of --jobs local processes: a "
-                                "scheduler address (tcp://host:8786), a scheduler file (.json, as "
+                           help="Run the jobs on a Dask cluster instead of --jobs local processes (not "
+                                "with --jobs): a scheduler address (tcp://host:8786), a scheduler file (as "
                                 "'dask scheduler --scheduler-file' writes it), or local:N for a local "
-                                "cluster of N workers. Paths must be ones every worker sees (or URLs). Needs "
-                                "pip install 'featurewarp[dask]'."),
+                                "cluster of N workers. Paths must be ones every worker sees (or URLs); "
+                                "relative ones are sent absolute. A scheduler with no workers is waited "
+                                "for. Needs pip install 'featurewarp[dask]'."),
               click.Option(["--summary"], metavar="FILE", type=click.Path(dir_okay=False, allow_dash=True),
                            help="Write one JSON line per file (job, input, mask, output, status: ok, "
                                 "failed or skipped, seconds, warnings, error) as each finishes; '-' "
@@ -235,10 +291,12 @@ def batch_command(preset) -> click.Command:
 
     def callback(inputs, out_dir, mask_pattern, suffix, jobs, scheduler, summary, resume, **kwargs):
         from ..app.batch import plan
+        from ..app.cluster_run import Stopped
         from ..app.pipeline import WarpError
 
         settings, quiet, verbose = settings_from(preset, kwargs)
         try:
+            check_scheduler(scheduler)
             from ..io.formats import format_name
 
             fmt = format_name(settings.fmt) if settings.fmt else None
@@ -252,6 +310,10 @@ def batch_command(preset) -> click.Command:
             failed = run_planned(settings, todo, jobs, scheduler, summary, resume, quiet, verbose)
         except WarpError as err:
             raise click_error(err) from err
+        except Stopped as stop:                  # the cluster's jobs are stopped: exit as for any signal
+            from .main import stop_on_signal
+
+            stop_on_signal(stop.signum, None)
         if failed:
             raise click.ClickException(f"{failed} of {len(todo)} files failed")
 
