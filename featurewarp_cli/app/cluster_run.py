@@ -187,17 +187,28 @@ def _renamed(outcome: tuple, job, sent) -> tuple:
     return named(error, paths), named(summary, paths), seconds
 
 
-def _stamp(path: str):
-    """What a local output is now (None: none, or a URL), to tell afterwards whether a job wrote it."""
+def _clocks(jobs: list) -> dict:
+    """Each local output folder's time now, by its file system's clock (a file made and removed
+    there): an output whose modification time is not earlier was written by this run. One file
+    per folder, not a look at every output (a slow shared file system, 100 000 files)."""
+    import tempfile
+
     from ..io import urls
 
-    if urls.is_url(path):
-        return None
+    clocks = {}
+    for folder in {os.path.dirname(job.output) for job in jobs if not urls.is_url(job.output)}:
+        with contextlib.suppress(OSError), tempfile.TemporaryFile(dir=folder or ".") as probe:
+            clocks[folder] = os.fstat(probe.fileno()).st_mtime_ns
+    return clocks
+
+
+def _written_since(path: str, clocks: dict) -> bool:
+    """Whether the local output ``path`` was written since its folder's time in ``clocks``."""
+    started = clocks.get(os.path.dirname(path))
     try:
-        stat = os.stat(path)
+        return started is not None and os.stat(path).st_mtime_ns >= started
     except OSError:
-        return None
-    return stat.st_ino, stat.st_mtime_ns, stat.st_size
+        return False
 
 
 class ClusterRun:
@@ -266,7 +277,7 @@ class ClusterRun:
     def _run(self, settings, jobs: list, sent: list):
         distributed = distributed_module()
         self.run_id = f"featurewarp-{os.getpid()}-{time.monotonic_ns()}"
-        before = [_stamp(job.output) for job in jobs]
+        clocks = _clocks(jobs)
         self.futures = self.client.map(_reporting(cluster_job), [settings] * len(sent), sent,
                                        [self.run_id] * len(sent), pure=False,
                                        key=[f"{self.run_id}-job-{i}" for i in range(len(sent))])
@@ -285,7 +296,7 @@ class ClusterRun:
                 yield from self._arrived(jobs, sent, index)
                 raise
             except _SchedulerLost:
-                yield from self._lost(jobs, before)
+                yield from self._lost(jobs, clocks)
                 raise WarpError(f"lost the connection to the Dask scheduler at {self.target.value}: "
                                 f"{self.lost} of {len(jobs)} files not finished (failed in --summary; "
                                 "--resume runs them)") from None
@@ -354,7 +365,7 @@ class ClusterRun:
                     self.unfinished.discard(i)
                     yield (i, jobs[i], *_renamed(outcome, jobs[i], sent[i]))
 
-    def _lost(self, jobs: list, before: list):
+    def _lost(self, jobs: list, clocks: dict):
         """After the scheduler was lost: the files not finished, as failed, or as ok where the
         output was written since the run began (its warnings are lost with the scheduler)."""
         from .batch import up_to_date
@@ -363,8 +374,7 @@ class ClusterRun:
         time.sleep(LOST_GRACE)                        # a write begun before the loss is finished
         for i in sorted(self.unfinished):
             job, written = jobs[i], None
-            now = _stamp(job.output)
-            if now is not None and now != before[i] and up_to_date(job):
+            if _written_since(job.output, clocks) and up_to_date(job):
                 written = (None, None, 0.0)
             else:
                 self.lost += 1
