@@ -396,3 +396,23 @@ def test_the_command_runs_openblas_with_one_thread_unless_told_otherwise():
     told = subprocess.run([sys.executable, "-c", probe], env={**env, "OPENBLAS_NUM_THREADS": "3"},
                           capture_output=True, text=True, timeout=60)
     assert told.stdout.split() == ["3", "False"], told.stderr
+
+
+@pytest.mark.parametrize("args, said", [
+    (["presets"], "'featurewarp warps' lists the presets"),
+    (["swirl", "a.png", "b.png"], "a preset is run as 'featurewarp warp swirl INPUT OUTPUT'"),
+    (["warp", "swirl", "a.png", "b.png", "--sx", "2"], "--sx is stretch's; swirl has --angle, --radius, --center"),
+])
+def test_a_misplaced_word_says_where_it_belongs(runner, args, said):
+    """'presets' and a preset in a command's place got 'No such command', and --sx given to swirl
+    'Did you mean --mask?'."""
+    run = runner(*args)
+    assert run.code == 2 and said in run.stderr and len(run.stderr.strip().splitlines()) == 1, run.stderr
+
+
+def test_animate_refuses_an_option_both_given_and_varied(runner, tmp_path):
+    """--vary angle=0:90 with --angle 30 ran 0 to 90 and dropped the 30 in silence."""
+    image = save(tmp_path / "in.png", textured(SIZE))
+    run = runner("animate", "swirl", image, tmp_path / "a.gif", "--vary", "angle=0:90", "--angle", "30")
+    assert run.code == 2 and "--angle is given and varied" in run.stderr
+    assert not (tmp_path / "a.gif").exists()

@@ -38,7 +38,24 @@ Shell completion (bash; use zsh_source or fish_source for zsh or fish):
 """
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100},
+class Commands(click.Group):
+    """The top-level group: a preset's name or ``presets`` in a command's place says where it goes."""
+
+    def resolve_command(self, ctx, args):
+        try:
+            return super().resolve_command(ctx, args)
+        except click.UsageError:
+            name = args[0] if args else ""
+            if name in ("presets", "list", "styles"):
+                raise click.UsageError(f"No such command {name!r}: 'featurewarp warps' lists the presets", ctx) \
+                    from None
+            if plugins.known(name):
+                raise click.UsageError(f"No such command {name!r}: a preset is run as 'featurewarp warp {name} "
+                                       f"INPUT OUTPUT' (or compare, batch, animate)", ctx) from None
+            raise
+
+
+@click.group(cls=Commands, context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100},
              epilog=EPILOG)
 @click.version_option(__version__, "-V", "--version", prog_name="featurewarp")
 @click.option("--debug", is_flag=True, help="Show a traceback with processing errors.")

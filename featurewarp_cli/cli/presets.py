@@ -71,9 +71,39 @@ def progress_bar(length: int, label: str, quiet: bool):
     return click.progressbar(length=length, label=label, file=sys.stderr)
 
 
+class PresetCommand(click.Command):
+    """A preset's command: an option it does not have names the presets that do (``--sx`` given
+    to swirl: "Did you mean '--mask'?" was click's only word)."""
+
+    def __init__(self, preset, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.preset = preset
+
+    def parse_args(self, ctx, args):
+        try:
+            return super().parse_args(ctx, args)
+        except click.NoSuchOption as err:
+            flag = err.option_name
+            owners = [name for name in plugins.names() if name != self.preset.name and plugins.known(name)
+                      and any(f"--{p.cli_name}" == flag for p in _params_of(name))]
+            if not owners:
+                raise
+            own = ", ".join(f"--{p.cli_name}" for p in self.preset.params) or "no options of its own"
+            raise click.NoSuchOption(flag, f"No such option: {flag} ({flag} is {', '.join(owners)}'s; "
+                                           f"{self.preset.name} has {own})", ctx=ctx) from None
+
+
+def _params_of(name: str) -> tuple:
+    """The parameters of the preset ``name`` (none where its plugin does not load)."""
+    try:
+        return plugins.load(name).params
+    except plugins.UnknownPreset:
+        return ()
+
+
 def preset_command(preset, params: list, callback, doc: str) -> click.Command:
     """The command named after ``preset``, with ``params`` then the preset's own options."""
-    return click.Command(preset.name, params=params + preset_options(preset), callback=callback, help=doc,
+    return PresetCommand(preset, preset.name, params=params + preset_options(preset), callback=callback, help=doc,
                          short_help=preset.summary, no_args_is_help=True)
 
 
@@ -363,6 +393,11 @@ def animate_command(preset) -> click.Command:
         settings, quiet, verbose = settings_from(preset, kwargs)
         try:
             ranges = parse_vary(vary, preset)
+            given = click.get_current_context().get_parameter_source
+            for name in ranges:
+                if given(name) == click.core.ParameterSource.COMMANDLINE:    # one value or a range, not both
+                    flag = next(f"--{p.cli_name}" for p in preset.params if p.name == name)
+                    raise WarpError(f"{flag} is given and varied (--vary): give one", "--vary", usage=True)
             with progress_bar(frames, "frames", quiet) as bar:
                 summary = animate_file(settings, input, output, mask, ranges, frames, fps, bar.update)
         except WarpError as err:
