@@ -87,7 +87,7 @@ def test_plain_mode_needs_no_masks(runner, tmp_path):
     (["--out-dir", "{tmp}/out", "--mask-pattern", "{nope}.png"], ["--mask-pattern", "nope"]),
     (["--out-dir", "{tmp}/out", "--mask-pattern", "{stem.__class__}"], ["--mask-pattern", "only field"]),
     (["--out-dir", "{tmp}/out", "--mask-pattern", "{stem:>99999999}"], ["--mask-pattern", "only field"]),
-    (["--out-dir", "{tmp}/out", "--jobs", "0"], ["--jobs", "out of range (1 <= N)"]),
+    (["--out-dir", "{tmp}/out", "--jobs", "0"], ["--jobs", "out of range (1 <= N <= 1024)"]),
     (["--out-dir", "{tmp}/out", "--angle", "inf"], ["--angle", "finite"]),
     (["--out-dir", "{tmp}/out", "--background", "transparent", "--format", "bmp"], []),
 ], ids=["out-dir under a file", "bad pattern", "attribute in pattern", "format spec in pattern", "no jobs",

@@ -29,7 +29,8 @@ QUALITY = Param("quality", int, None, "JPEG and WebP quality (WebP becomes lossy
                 "default: JPEG 95, WebP lossless); other formats ignore it.", min=1, max=100, metavar="N")
 PANEL_WIDTH = Param("panel_width", int, None, "Scale the panel to this many pixels across (default: every "
                     "view at the input's resolution).", min=28, max=32766, metavar="PX")   # 4 views of 1 px, 3 gaps
-JOBS = Param("jobs", int, 1, "Worker processes; results are byte-identical to N=1.", min=1, metavar="N")
+JOBS = Param("jobs", int, 1, "Worker processes, each with an Nth of --max-memory; results are byte-identical "
+             "to N=1.", min=1, max=1024, metavar="N")
 FRAMES = Param("frames", int, 24, "Number of frames (START and END included; at most 10 000).", min=1, max=10_000,
                metavar="N")
 FPS = Param("fps", float, 12.0, "Frames per second (GIF and video players take 0.01 to 100).",
