@@ -416,3 +416,15 @@ def test_animate_refuses_an_option_both_given_and_varied(runner, tmp_path):
     run = runner("animate", "swirl", image, tmp_path / "a.gif", "--vary", "angle=0:90", "--angle", "30")
     assert run.code == 2 and "--angle is given and varied" in run.stderr
     assert not (tmp_path / "a.gif").exists()
+
+
+def test_an_option_the_mode_leaves_unused_is_noted(runner, tmp_path):
+    """--scale-prior under rigid, --feature-weight under plain were taken in silence."""
+    image = save(tmp_path / "in.png", textured(SIZE))
+    run = runner("warp", "stretch", image, tmp_path / "o.png", "--sx", "1.2", "--mode", "plain", "--feature-weight", "3")
+    assert run.code == 0 and "--feature-weight does nothing with --mode plain" in run.stderr
+    run = runner("warp", "stretch", image, tmp_path / "o.png", "--sx", "1.2", "--mode", "rigid", "--scale-prior", "0.5")
+    assert "--scale-prior does nothing with --mode rigid" in run.stderr
+    quiet = runner("warp", "stretch", image, tmp_path / "o.png", "--sx", "1.2", "--mode", "plain", "--decay", "2", "-q")
+    assert quiet.code == 0 and quiet.stderr == ""
+    assert "does nothing" not in runner("warp", "stretch", image, tmp_path / "o.png", "--sx", "1.2").stderr

@@ -215,4 +215,22 @@ def settings_from(preset, kwargs: dict):
 
     stages.quiet = quiet
     params = {p.name: kwargs.pop(p.name) for p in preset.params}
-    return Settings(preset.name, params, **{k: kwargs.pop(k) for k in SETTINGS}), quiet, verbose
+    settings = Settings(preset.name, params, **{k: kwargs.pop(k) for k in SETTINGS})
+    _note_unused(settings)
+    return settings, quiet, verbose
+
+
+#: The options that solve for the features, and the modes in which each does nothing.
+UNUSED_IN = {"feature_weight": ("plain",), "decay": ("plain",), "formulation": ("plain",),
+             "scale_prior": ("plain", "rigid"), "grow_past_edge": ("plain",)}
+
+
+def _note_unused(settings) -> None:
+    """A notice for each option given on the command line that ``settings.mode`` leaves unused
+    (--scale-prior under rigid: features keep their size there)."""
+    from .. import stages
+
+    source = click.get_current_context().get_parameter_source
+    for name, modes in UNUSED_IN.items():
+        if settings.mode in modes and source(name) == click.core.ParameterSource.COMMANDLINE:
+            stages.notice(f"--{name.replace('_', '-')} does nothing with --mode {settings.mode}")
