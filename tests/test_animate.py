@@ -168,3 +168,11 @@ def test_the_automatic_cells_ladder_is_exact():
     rung = round(2 * np.log2(fidelity.base_cell(256, 256) / cell))
     assert cell == fidelity.base_cell(256, 256) * 2.0 ** -(rung // 2) / np.sqrt(2.0) ** (rung % 2)
     assert rung % 2 or cell == fidelity.base_cell(256, 256) / 2 ** (rung // 2)
+
+
+def test_the_animations_automatic_grid_is_held_to_the_memory_budget(files):
+    """Set as the warper's cell, the finest automatic cell skipped the budget a solve checks."""
+    out = run("swirl", str(files / "in.png"), str(files / "big.gif"), "-m", str(files / "mask.png"),
+              "--vary", "angle=400:450", "--frames", "2", "--max-memory", "20M")
+    assert out.code == 1 and "that the memory limit allows" in out.stderr, out.stderr
+    assert not (files / "big.gif").exists()

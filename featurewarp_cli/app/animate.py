@@ -170,6 +170,10 @@ def animate_file(settings: Settings, input: str, output: str, mask: str | None, 
     if settings.cell is None:                  # one grid fine enough for every frame: one factorization
         cell = min(fidelity.auto_cell(width, height, w)[0] for w in warps)
         warper = make_warper(settings, width, height, feature_mask)[1]
+        try:                                   # the automatic grid's budget, as a solve checks it
+            fidelity.check_budget(width, height, cell, warper.max_nodes)
+        except fidelity.GridBudgetError as err:
+            raise WarpError(str(err)) from None
         warper.cell, warper.cell_chosen_automatically = cell, True     # sub-pixel too, as the rule's own
     fmt = "png" if kind != "video" else "bmp"
     background = background_colour(settings.background, fmt) if kind != "video" else (
