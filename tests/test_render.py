@@ -590,6 +590,15 @@ def test_static_gif_output(tmp_path):
     assert cv2.imread(str(tmp_path / "o.gif")).shape == (H, W, 3)
 
 
+def test_gray_and_alpha_is_resampled_premultiplied_too():
+    """A (h, w, 2) gray + alpha array through the API kept the dark fringe."""
+    image = np.zeros((H, W, 2), np.uint8)
+    cv2.circle(image, (W // 2, H // 2), 40, (255, 255), -1)
+    out = warp(image, None, "swirl", angle=120)
+    edge = (out[..., 1] > 0) & (out[..., 1] < 255)
+    assert edge.sum() > 50 and out[..., 0][edge].min() >= 250
+
+
 @pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
 def test_the_colour_under_transparent_pixels_does_not_bleed_into_edges(dtype):
     """Colour and alpha were resampled apart (straight alpha): the green left under the

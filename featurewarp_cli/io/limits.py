@@ -28,8 +28,9 @@ OPENCV_VARIABLE = "OPENCV_IO_MAX_IMAGE_PIXELS"
 #: --cell 1, 12 M nodes, 13.5 GB) to 2.4 kB (an 830 000-node guard run, 2.0 GB).
 NODE_BYTES = 2500
 #: Peak bytes per pixel of input (decoded, mask, prefilter pyramid) and of output (the
-#: canvas, its encoded copy), for 16-bit RGBA, the widest kind.
-INPUT_PIXEL_BYTES = 24
+#: canvas, its encoded copy), for 16-bit RGBA, the widest kind; with alpha that is not wholly
+#: opaque the input is resampled from a premultiplied 16-bit copy (8 bytes more a pixel).
+INPUT_PIXEL_BYTES = 32
 OUTPUT_PIXEL_BYTES = 16
 
 

@@ -294,7 +294,8 @@ def render(image: np.ndarray, source: np.ndarray, target: np.ndarray, triangles:
     antialias : bool
         Prefilter where the map shrinks the image and feather the mesh's
         silhouette (default). False gives exactly ``resample(image,
-        *inverse_map(...))``.
+        *inverse_map(...))``, but for an image with alpha that is not wholly
+        opaque, which is resampled premultiplied (:func:`premultiply`).
     band_pixels : int, optional
         Output pixels per band (default :data:`BAND_PIXELS`); the result does
         not depend on it.
@@ -312,7 +313,7 @@ def render(image: np.ndarray, source: np.ndarray, target: np.ndarray, triangles:
     if image.dtype not in (np.uint8, np.uint16):
         raise ValueError(f"image must be uint8 or uint16, not {image.dtype}")
     width, height = (int(c) for c in canvas)
-    given, (image, straight) = image.dtype, premultiplied(image) if interp != "nearest" else (image, True)
+    given, (image, premultiplied) = image.dtype, premultiply(image) if interp != "nearest" else (image, False)
     with ThreadPoolExecutor(1) as helper:       # the silhouette's setup beside the triangles'
         silhouette = helper.submit(Silhouette, source, target, triangles) if antialias else None
         tris = Triangles(source, target, triangles, (width, height))
@@ -330,7 +331,7 @@ def render(image: np.ndarray, source: np.ndarray, target: np.ndarray, triangles:
     fill = None if background is None else np.array(fill_value(background, out), dtype=np.float64)
     rows = max(1, min(height, (band_pixels or BAND_PIXELS) // max(width, 1)))
     bands = _BandRenderer(image, tris, silhouette, out, interp, fill, rows, holes, antialias)
-    bands.premultiplied = not straight
+    bands.premultiplied = premultiplied
     starts = range(0, height, rows)
     workers = min(threads if threads is not None else THREADS, len(starts))
     if workers > 1:
@@ -348,31 +349,46 @@ def render(image: np.ndarray, source: np.ndarray, target: np.ndarray, triangles:
 
 
 def _opaque(image: np.ndarray) -> bool:
-    """Whether a BGRA image's alpha is its dtype's largest value everywhere."""
-    return bool(np.all(image[:, :, 3] == np.iinfo(image.dtype).max))
+    """Whether an image's last channel (its alpha) is its dtype's largest value everywhere."""
+    return bool(np.all(image[:, :, -1] == np.iinfo(image.dtype).max))
 
 
-def premultiplied(image: np.ndarray) -> tuple[np.ndarray, bool]:
-    """(``image`` with its colour multiplied by its alpha, so that resampling weighs a pixel's
-    colour by how opaque it is (the colour under alpha 0, often black or a painter's leftovers,
-    then counts for nothing: straight alpha drew it into the edges of cut-outs as a dark or
-    coloured fringe). An 8-bit BGRA image that is not wholly opaque becomes 16-bit (times 257,
-    so that colours at low alpha keep their precision), a 16-bit one stays 16-bit; whether it
-    is left as it was: other images are (True). :func:`straighten` undoes it."""
-    if image.ndim != 3 or image.shape[2] != 4 or _opaque(image):
-        return image, True
+def premultiply(image: np.ndarray) -> tuple[np.ndarray, bool]:
+    """An image with alpha, its colour multiplied by its alpha, for resampling.
+
+    Resampling then weighs a pixel's colour by how opaque it is, so the colour under alpha 0
+    (often black, or a painter's leftovers) counts for nothing; resampled straight, it made a
+    dark or coloured fringe along a cut-out's edges. :func:`straighten` undoes it.
+
+    Parameters
+    ----------
+    image : (h, w) or (h, w, C) ndarray, uint8 or uint16
+        Gray + alpha (C = 2) and BGRA (C = 4) are premultiplied unless wholly opaque.
+
+    Returns
+    -------
+    image : ndarray
+        16-bit where it was premultiplied (8-bit samples times 257, so that colours at low
+        alpha keep their precision); else ``image`` itself.
+    done : bool
+        Whether it was premultiplied.
+    """
+    if image.ndim != 3 or image.shape[2] not in (2, 4) or _opaque(image):
+        return image, False
     wide = image.astype(np.uint16) * np.uint16(257) if image.dtype == np.uint8 else image.copy()
-    alpha = np.ascontiguousarray(wide[:, :, 3])
-    colour = cv2.multiply(np.ascontiguousarray(wide[:, :, :3]), cv2.merge([alpha] * 3), scale=1 / 65535)
-    return np.concatenate([colour, alpha[:, :, None]], axis=2), False
+    alpha = np.ascontiguousarray(wide[:, :, -1])
+    colours = image.shape[2] - 1
+    colour = cv2.multiply(np.ascontiguousarray(wide[:, :, :-1]), cv2.merge([alpha] * colours), scale=1 / 65535)
+    return np.concatenate([colour.reshape(alpha.shape + (colours,)), alpha[:, :, None]], axis=2), True
 
 
 def straighten(flat: np.ndarray) -> None:
-    """Divide premultiplied 16-bit BGRA pixels ((n, 4), in place) by their alpha (:func:`premultiplied`):
-    0 where the alpha is, clipped where an interpolation's overshoot left the colour above it."""
-    alpha = flat[:, 3:].astype(np.float32)
-    colour = flat[:, :3] * (np.float32(65535) / np.maximum(alpha, 1))
-    flat[:, :3] = np.where(alpha > 0, np.minimum(np.rint(colour), 65535), 0)
+    """Divide premultiplied 16-bit pixels ((n, C), alpha last; in place) by their alpha
+    (:func:`premultiply`): 0 where the alpha is, clipped where an interpolation's overshoot
+    left the colour above it."""
+    alpha = flat[:, -1:].astype(np.float32)
+    colour = flat[:, :-1] * (np.float32(65535) / np.maximum(alpha, 1))
+    flat[:, :-1] = np.where(alpha > 0, np.minimum(np.rint(colour), 65535), 0)
 
 
 # --------------------------------------------------------------------------- resample
