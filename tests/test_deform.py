@@ -571,3 +571,7 @@ def test_a_cell_coarser_than_the_handles_grid_is_reported_as_the_one_used(tmp_pa
     assert run.exit_code == 0, run.output
     grid = json.loads((tmp_path / "r.json").read_text())["grid"]
     assert grid["cell"] == max(grid["spacing"]) < 64
+    run = CliRunner().invoke(cli, ["deform", str(tmp_path / "in.png"), str(tmp_path / "o.png"), "--pin", "5,5",
+                                   "--move", "60,40:66,44", "--cell", "1.3", "--report", str(tmp_path / "r.json")])
+    grid = json.loads((tmp_path / "r.json").read_text())["grid"]       # a finer one: the refinement's
+    assert run.exit_code == 0 and grid["cell"] == max(grid["spacing"])

@@ -326,7 +326,7 @@ class FeatureWarper:
         self.timings["grid"] = time.perf_counter() - t0
         produced = "plain" if state.features.n_components == 0 else mode      # what the output is
         record = SolveRecord(produced, self.formulation, _border_used(self.boundary, boundary, state),
-                             {"cell": min(cell, max(grid.spacing)) if lattice else cell, "spacing": list(grid.spacing),
+                             {"cell": max(grid.spacing) if lattice else cell, "spacing": list(grid.spacing),
                               "nodes": grid.n_nodes, "quads": int(state.features.weight.size), "pl_error_px": error})
         tied = unpinned = np.zeros(state.features.n_components, bool)
         if mode == "plain" or state.features.n_components == 0:
