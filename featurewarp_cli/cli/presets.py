@@ -356,7 +356,8 @@ def compare_command(preset) -> click.Command:
     params = input_output_mask("Feature mask (as for warp).") + [
         click.Option(["--grid", "draw_grid"], is_flag=True, help="Draw the deformed grid over the three results."),
         param_option(PANEL_WIDTH),
-    ] + [o for o in engine_options(preset, "; a warning of either view refuses the panel") if o.name != "mode"]
+    ] + [o for o in engine_options(preset, "; a warning of any view (or no --mask) refuses the panel")
+         if o.name != "mode"]
 
     def callback(input, output, mask, draw_grid, panel_width, **kwargs):
         from ..app.panel import compare_file
@@ -383,7 +384,8 @@ def animate_command(preset) -> click.Command:
                      help="A numeric option of the preset to vary linearly over the frames, "
                           "e.g. angle=0:360 (repeat for several)."),
         param_option(FRAMES), param_option(FPS),
-    ] + [o for o in engine_options(preset, "; a warning of any frame refuses the animation") if o.name != "fmt"]
+    ] + [o for o in engine_options(preset, "; a warning of any frame refuses the animation (a frame at rest is "
+                                           "not one; every frame at rest is)") if o.name != "fmt"]
 
     def callback(input, output, mask, vary, frames, fps, **kwargs):
         from ..app.animate import animate_file, parse_vary
