@@ -328,8 +328,9 @@ def test_a_mask_that_marks_nothing_says_what_it_read(tmp_path):
     red[20:40, 30:50, 2] = 255
     cv2.imwrite(str(tmp_path / "red.png"), red)
     cv2.imwrite(str(tmp_path / "dim.png"), red[:, :, 2] // 3)
+    cv2.imwrite(str(tmp_path / "half.png"), np.full((60, 80), 32767, np.uint16))     # 127.5 of 255: not 128
     for mask, said in (("red.png", "its brightest pixel is 76, as colour is read as its gray"),
-                       ("dim.png", "its brightest pixel is 85)")):
+                       ("dim.png", "its brightest pixel is 85)"), ("half.png", "its brightest pixel is 127)")):
         run = CliRunner().invoke(cli, ["warp", "swirl", str(tmp_path / "in.png"), str(tmp_path / "o.png"),
                                        "-m", str(tmp_path / mask)])
         assert run.exit_code == 0 and said in run.output, run.output
@@ -349,6 +350,10 @@ def test_a_mask_drawn_on_the_stored_pixels_of_a_turned_photo_is_told_why_it_does
     run = CliRunner().invoke(cli, ["warp", "swirl", str(tmp_path / "in.jpg"), str(tmp_path / "o.png"),
                                    "-m", str(tmp_path / "m.png")])
     assert run.exit_code == 2 and "mask is 80x60 but the image is 60x80 (upright, as its EXIF orientation" in run.output
+    cv2.imwrite(str(tmp_path / "plain.png"), np.zeros((80, 60, 3), np.uint8))      # no EXIF: no such hint
+    run = CliRunner().invoke(cli, ["warp", "swirl", str(tmp_path / "plain.png"), str(tmp_path / "o.png"),
+                                   "-m", str(tmp_path / "m.png")])
+    assert run.exit_code == 2 and "mask is 80x60 but the image is 60x80" in run.output and "EXIF" not in run.output
 
 
 def test_a_frame_cut_feature_that_gives_way_leaves_the_others_exact():

@@ -136,12 +136,10 @@ def read_input(path: str, param: str, max_pixels: int | None, data: bytes | None
 def prefetch_engine(solver: bool = True) -> None:
     """Start importing the engine and, with ``solver``, the solver in a thread.
 
-    Called just before the images are decoded: OpenCV releases the GIL while it
-    decodes, so the imports run meanwhile instead of after it; the solver's
-    (about 0.15 s, most of it scipy.sparse) goes on while the main thread builds
-    the grid and the features. A failed import is left to the main thread, whose
-    own import raises the error.
-    """
+    Called just before the images are decoded: OpenCV releases the GIL while it decodes, so
+    the imports run meanwhile instead of after it; the solver's (about 0.15 s, most of it
+    scipy.sparse) goes on while the main thread builds the grid and the features. A failed
+    import is left to the main thread, whose own import raises the error."""
     modules = [name for name in (ENGINE, SOLVER if solver else None) if name and name not in sys.modules]
 
     def work():
@@ -176,8 +174,9 @@ def load_image_and_mask(settings: Settings, input: str, mask: str | None, data: 
             raise WarpError(str(err)) from err
     image = read_input(input, "INPUT", settings.max_pixels, data, settings.max_memory)
     height, width = image.shape[:2]
-    feature_mask, warnings = _load_mask(settings, mask, (width, height)) if use_mask else (None, [])
-    return image, feature_mask, frames_warning(decode.read_header(data) if data else None) + warnings
+    header = decode.read_header(data) if data else None
+    feature_mask, warnings = _load_mask(settings, mask, (width, height), header) if use_mask else (None, [])
+    return image, feature_mask, frames_warning(header) + warnings
 
 
 def frames_warning(header) -> list[str]:
@@ -207,25 +206,24 @@ def check_file_size(path: str, param: str, max_memory: int | None, max_pixels: i
             raise WarpError(str(err)) from None
 
 
-def _load_mask(settings: Settings, mask: str, size: tuple[int, int]):
-    """The feature mask, checked against the image's (width, height); and warnings."""
+def _load_mask(settings: Settings, mask: str, size: tuple[int, int], header=None):
+    """The feature mask, checked against the image's (width, height) (``header``: its header); and warnings."""
     width, height = size
     if mask != "-" and os.path.isfile(mask):
         check_file_size(mask, "--mask", settings.max_memory, settings.max_pixels)
     pixels = read_input(mask, "--mask", settings.max_pixels, max_bytes=settings.max_memory)
     feature_mask = decode.mask_from_image(pixels)
     if feature_mask.shape != (height, width):
-        turned = " (upright, as its EXIF orientation turns it: draw the mask on the image as viewers show it)" \
-            if feature_mask.shape == (width, height) else ""
+        turned = (feature_mask.shape == (width, height) and getattr(header, "orientation", 1) >= 5) * \
+            " (upright, as its EXIF orientation turns it: draw the mask on the image as viewers show it)"
         raise WarpError(f"mask is {feature_mask.shape[1]}x{feature_mask.shape[0]} but the "
                         f"image is {width}x{height}{turned}", "--mask", usage=True)
-    warnings = []
-    if not feature_mask.any():
-        brightest, colour = decode.brightest_gray(pixels)
-        warnings.append(f"the mask marks no feature (a feature is gray 128 or more, or a 1 of a 0/1 mask; its brightest "
-                        f"pixel is {brightest}{', as colour is read as its gray: pure red is 76' if colour else ''})"
-                        f": plain warp")
-    return feature_mask, warnings
+    if feature_mask.any():
+        return feature_mask, []
+    brightest, colour = decode.brightest_gray(pixels)
+    return feature_mask, [f"the mask marks no feature (a feature is gray 128 or more, or a 1 of a 0/1 mask; its "
+                          f"brightest pixel is {brightest}{', as colour is read as its gray: pure red is 76' * colour})"
+                          f": plain warp"]
 
 
 class _Decoding:
@@ -316,7 +314,7 @@ def start_loading(settings: Settings, input: str, mask: str | None, data: bytes 
     warnings = frames_warning(header)
     if use_mask:
         try:
-            feature_mask, mask_warnings = _load_mask(settings, mask, size)
+            feature_mask, mask_warnings = _load_mask(settings, mask, size, header)
             warnings += mask_warnings
         except WarpError:
             load_image_and_mask(settings, input, mask)       # the image's own error comes first
@@ -392,9 +390,10 @@ def check_solution(settings: Settings, mesh) -> None:
         raise WarpError(f"the result has {folded} folded triangles (the warp turns the image over itself "
                         f"there); nothing written (--allow-folds writes it anyway)")
     if crossings and not settings.allow_folds:
-        raise WarpError(f"the result lays the image over itself (its border crosses itself {'once' if crossings == 1 else f'{crossings} times'}"
-                        f"; handles dragged across each other or a pin's path, or turned far, do that): nothing written "
-                        f"(--allow-folds writes it)")
+        times = "once" if crossings == 1 else f"{crossings} times"
+        raise WarpError(f"the result lays the image over itself (its border crosses itself {times}; handles dragged "
+                        f"across each other or a pin's path, or turned far, do that): nothing written (--allow-folds "
+                        f"writes it)")
     if settings.strict and mesh.record.warnings:
         raise WarpError(f"--strict: {mesh.record.warnings[0]}; nothing written")
 

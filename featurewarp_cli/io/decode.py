@@ -457,11 +457,19 @@ def read_image(path: str, max_pixels: int | None = MAX_PIXELS, max_bytes: int | 
 
 
 def brightest_gray(image: np.ndarray) -> tuple[int, bool]:
-    """(the brightest gray of a mask image on the 0..255 scale, whether it is in colour): what
-    :func:`mask_from_image` compares with 128, for a message about a mask that marks nothing."""
-    colour = image.ndim == 3 and image.shape[2] >= 3
-    gray = cv2.cvtColor(image[:, :, :3], cv2.COLOR_BGR2GRAY) if colour else image.reshape(image.shape[:2] + (-1,))[:, :, 0]
-    return round(float(gray.max(initial=0)) * 255 / np.iinfo(gray.dtype).max), colour
+    """(the brightest gray of a mask image, composited over black as :func:`mask_from_image`
+    reads it, rounded down on the 0..255 scale; whether its colour channels differ anywhere):
+    what that compares with 128, for a message about a mask that marks nothing."""
+    top = np.iinfo(image.dtype).max
+    colour = image[:, :, :3] if image.ndim == 3 and image.shape[2] >= 3 else None
+    if colour is not None:
+        gray = cv2.cvtColor(colour, cv2.COLOR_BGR2GRAY).astype(np.float64)
+    else:
+        gray = (image if image.ndim == 2 else image[:, :, 0]).astype(np.float64)
+    if image.ndim == 3 and image.shape[2] in (2, 4):
+        gray = gray * image[:, :, -1] / top
+    tinted = colour is not None and bool(np.any(colour != colour[:, :, :1]))
+    return int(np.floor(gray.max(initial=0) * 255 / top)), tinted
 
 
 def mask_from_image(image: np.ndarray) -> np.ndarray:
