@@ -16,11 +16,12 @@ def enter(name: str) -> None:
 
 
 class within:
-    """``with within(name):`` the stage ``name`` for the block, then the one it interrupted
-    again (a factorization that the fold guard's release asks for is not the rest of the guard)."""
+    """``with within(name, after):`` the stage ``name`` for the block, then the one it
+    interrupted again (a factorization that the fold guard's release asks for is not the rest
+    of the guard), or the one ``after`` maps it to (the grid's factorization: the solve)."""
 
-    def __init__(self, name: str):
-        self.name, self.before = name, None
+    def __init__(self, name: str, after: dict | None = None):
+        self.name, self.after, self.before = name, after or {}, None
 
     def __enter__(self):
         self.before = _current[0]
@@ -28,7 +29,7 @@ class within:
 
     def __exit__(self, *exc):
         if self.before is not None:
-            enter(self.before)
+            enter(self.after.get(self.before, self.before))
 
 
 def listen(listener) -> None:

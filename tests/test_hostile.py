@@ -253,11 +253,14 @@ def test_a_factorization_inside_the_guard_gives_the_line_back_to_the_guard():
     stages.listen(heard.append)
     try:
         stages.enter("guard")
-        with stages.within("factor"):
+        with stages.within("factor", {"grid": "solve"}):
+            pass
+        stages.enter("grid")                    # the grid's own: the solve follows it
+        with stages.within("factor", {"grid": "solve"}):
             pass
     finally:
         stages.forget(heard.append)
-    assert heard == ["guard", "factor", "guard"]
+    assert heard == ["guard", "factor", "guard", "grid", "factor", "solve"]
 
 
 def test_progress_line_names_the_stages_and_is_erased(monkeypatch):

@@ -70,7 +70,7 @@ def assess(state, target, warped, tied, unpinned, warp, record: SolveRecord, not
     if not quick and tuple(warp.canvas) == (state.grid.width, state.grid.height) and \
             np.max(np.abs(target - state.nodes), initial=0.0) <= STILL_PX:
         record.warnings.append(f"{STILL} by more than {STILL_PX:g} px: the output is the input "
-                               f"(are the preset's options at their identity, or its centre far off the image?)")
+                               f"(options at their identity, a centre far off the image, or handles that stay put?)")
     error = record.grid.get("pl_error_px", 0.0)
     if not quick and error > fidelity.MAX_PL_ERROR:          # NaN (a preview's grid) is not above
         chosen = "the given cell's grid" if chosen_cell else "the finest automatic grid (800 000 nodes at most)"

@@ -233,7 +233,7 @@ class FeatureWarper:
         key = b"".join(u.astype(np.int32).tobytes() for u in unknowns)
         if key not in state.systems:
             t0 = time.perf_counter()
-            with stages.within("factor"):
+            with stages.within("factor", {"grid": "solve"}):
                 state.systems[key] = AxisSystems(state.normal, *unknowns)
             self.factorizations += state.systems[key].factorizations
             self.timings["factor"] = self.timings.get("factor", 0.0) + time.perf_counter() - t0
