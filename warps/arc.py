@@ -73,8 +73,8 @@ class Arc(Warp):
 
     def _setup_edge(self, angle):
         if angle > EDGE_MAX:
-            raise ParamError("angle", f"{number_text(angle)} is out of range when `where` is {self.where} (at most {EDGE_MAX:g})",
-                             mentions=("where",))
+            raise ParamError("angle", f"{number_text(angle)} is out of range when `where` is {self.where} "
+                                      f"(at most {EDGE_MAX:g})", mentions=("where",))
         half = max(math.radians(angle), 1e-9) / 2.0
         self.radius = self.width / (2.0 * math.sin(half))      # the circle through the edge's ends
         self.chord_depth = self.radius * math.cos(half)         # from its centre to the chord

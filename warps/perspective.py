@@ -87,7 +87,8 @@ class Perspective(Warp):
     image's order, its angles 5 to 170 degrees and its sides at least 5 % of the image. The
     canvas is its bounding box, so only the shape matters, not where it is.
 
-    A projective map (homography) of the image's corners onto the four points. One-to-one: write ``W(p) = (a(p), b(p)) / c(p)`` with a, b, c affine. The corners must
+    A projective map (homography) of the image's corners onto the four points. One-to-one:
+    write ``W(p) = (a(p), b(p)) / c(p)`` with a, b, c affine. The corners must
     make a convex quadrilateral in the image's order (:func:`check_quadrilateral`, else a
     ParamError naming the problem). Then c has one sign at the four corners (checked
     too): were it to change sign on the rectangle, W would send part of it beyond the line
