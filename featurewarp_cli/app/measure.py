@@ -20,6 +20,10 @@ under strong anisotropy: when plain matching gives no fit, simulated tilted view
 the component are matched too (as ASIFT does); and the output is then rectified by
 the fit so far and matched again, where the residual map is near the identity
 (validated: within 0.01 of exact affine maps of sigma ratio up to 2, at any rotation).
+The rectified output is compared with the input's own box, keypoints found on both cut
+the same way, and keypoints whose support reaches where the output has no pixels are
+left out on both sides: an image measured against itself gives exactly 0, a feature
+cut by the frame included.
 
 A component that did not move as one affine map (a swirl turns the middle of a large
 component and leaves its rim: RANSAC then fits the rim) is told apart by local fits:
@@ -27,7 +31,12 @@ each match's neighbourhood gets its own affine fit; ``explained`` is the share o
 locally consistent matches that the global map fits, and ``local_p90`` the 90th
 percentile of the local distortions (the counterpart of the mesh's per-triangle
 anisotropy). A component with too few matches gets no figures and a reason instead:
-a number made up from three keypoints would be worse than none.
+a number made up from three keypoints would be worse than none. So does one whose
+matches fix its shape too loosely: ``noise`` is the distortion that their scatter alone
+gives the fit (few matches, bunched, or along the frame that cuts the component), and a
+figure is given only where it is at most :data:`NOISE_LIMIT`, or where the distortion is
+at least :data:`SIGNAL` times it (a bent region's, say). Matches count once per output
+keypoint (simulated views match one from several views).
 
 Only numpy and OpenCV (SIFT is in OpenCV's main module since 4.4).
 
@@ -56,7 +65,8 @@ import cv2
 import numpy as np
 
 from ..io.depth import to_eight_bit
-from .keypoints import FLAT_GRAY, RATIO, Keypoints, detect, local_fits, refine, seed, tilts, view_matches
+from .keypoints import (FLAT_GRAY, RATIO, Keypoints, detect, distinct, local_fits, refine, seed, tilts,
+                        view_matches)
 
 #: Fewest RANSAC inliers for a fit; below this a component gets a reason, not figures.
 MIN_INLIERS = 10
@@ -73,6 +83,12 @@ BENT_COVERAGE = 0.5
 #: Both images are scaled down by one common factor so that neither exceeds this many
 #: pixels (the linear part of the fit does not change under a common scale).
 MAX_PIXELS = 4_000_000
+#: A component's figures are given when the distortion its matches' scatter alone would
+#: give (``noise``) is at most this, or the distortion measured is at least SIGNAL times
+#: it and the map is confirmed by the matches' neighbourhoods (not RANSAC's alone: ten
+#: false matches that agree within its 3 px made one): else the figure could be noise.
+NOISE_LIMIT = 0.005
+SIGNAL = 3.0
 
 
 @dataclass(frozen=True)
@@ -126,9 +142,15 @@ class ComponentFit:
     local_scales : tuple of float or None
         10th, 50th and 90th percentiles of the local fits' scale sqrt(|det|): a
         similarity gives three equal values; a part crushed to save the rest shows
-        as a low first value.
+        as a low first value. Neighbourhoods whose matches are bunched in a spot or
+        along a line fix no map and are left out of these three figures.
+    noise : float or None
+        The distortion that the scatter of the matches alone gives the map (its mean:
+        see :func:`shape_noise`): the figure's noise floor; 0 for an image measured
+        against itself.
     reason : str or None
-        Why there are no figures (too few matches or inliers), else None.
+        Why there are no figures (too few matches or inliers, or a shape they fix too
+        loosely), else None.
     """
 
     label: int
@@ -150,6 +172,7 @@ class ComponentFit:
     local_p90: float | None = None
     local_median: float | None = None
     local_scales: tuple | None = None
+    noise: float | None = None
     reason: str | None = None
 
     def as_dict(self) -> dict:
@@ -218,27 +241,49 @@ def fit_component(gray_in, gray_out, component, src: Keypoints, dst: Keypoints, 
     first = fit = seed(gray_in, component, box, dst, src, opts)
     if isinstance(fit, str):
         return {"reason": fit}
+    if opts["refinements"]:
+        x0, y0, x1, y1 = box
+        in_box = detect(gray_in[y0:y1, x0:x1]).shifted(x0, y0)
+        in_box = in_box.subset(inside(component, in_box.points))
     for _ in range(opts["refinements"]):
-        fit = refine(gray_out, box, src, fit, opts) or fit
+        fit = refine(gray_out, box, in_box, fit, opts) or fit
     keep = fit.inlier
     linear, translation = fit.matrix[:, :2], fit.matrix[:, 2]
     residual = fit.src[keep] @ linear.T + translation - fit.dst[keep]
-    hull = cv2.convexHull(fit.src[keep].astype(np.float32))
-    coverage = float(min(1.0, cv2.contourArea(hull) / len(xs)))
+    hull = cv2.contourArea(cv2.convexHull(fit.src[keep].astype(np.float32)))
+    coverage = float(min(1.0, hull / len(xs)))
     pairs = [(first.src, first.dst), (fit.src, fit.dst)]
-    if keep.mean() < BENT_INLIERS or coverage < BENT_COVERAGE:
-        # Bent or partly fitted: where SIFT's plain views miss, simulated tilts find matches.
+    # Bent or partly fitted (the inliers span less than half the component's keypoints:
+    # the frame, where SIFT finds none, does not count): where SIFT's plain views miss,
+    # simulated tilts find matches for the local figures.
+    spanned = hull / max(1.0, cv2.contourArea(cv2.convexHull(src.points.astype(np.float32))))
+    if keep.mean() < BENT_INLIERS or spanned < BENT_COVERAGE:
         pairs.append(view_matches(gray_in, component, box, dst, opts["ratio"],
                                   [view for views in tilts() for view in views]))
     local = local_figures(pairs, fit.matrix, len(xs), opts)
     matrix, fitted = local.pop("matrix"), local.pop("fitted")
     linear, translation = matrix[:, :2], matrix[:, 2]
-    ransac = (int(keep.sum()), len(fit.src), float(np.sqrt(np.mean(np.sum(residual**2, axis=1)))))
-    used, matches, rms = fitted or ransac
-    return describe(linear) | local | {
+    ransac = (int(keep.sum()), len(fit.src), float(np.sqrt(np.mean(np.sum(residual**2, axis=1)))),
+              shape_noise(fit.src[keep], residual, fit.matrix[:, :2]))
+    used, matches, rms, noise = fitted or ransac
+    shape = describe(linear)
+    if noise > NOISE_LIMIT and shape["distortion"] < SIGNAL * noise:
+        return {"reason": f"its {used} matches fix the distortion only to about {noise:.3f}, and "
+                          f"{shape['distortion']:.3f} is within {SIGNAL:g} times that"}
+    if noise > NOISE_LIMIT and fitted is None:
+        return {"reason": f"its {used} matches fix the distortion only to about {noise:.3f}, and fewer "
+                          f"than {opts['min_inliers']} are confirmed by their neighbourhoods"}
+    return shape | local | {
         "matches": matches, "inliers": used, "linear": linear, "translation": translation,
-        "rms_px": rms, "coverage": coverage,
+        "rms_px": rms, "coverage": coverage, "noise": noise,
     }
+
+
+def inside(component: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """(N,) bool: the points whose nearest pixel is on ``component`` (nonzero)."""
+    cols = np.clip(np.rint(points[:, 0]).astype(int), 0, component.shape[1] - 1)
+    rows = np.clip(np.rint(points[:, 1]).astype(int), 0, component.shape[0] - 1)
+    return component[rows, cols] > 0
 
 
 def local_figures(pairs, matrix: np.ndarray, pixels: int, opts: dict) -> dict:
@@ -255,9 +300,9 @@ def local_figures(pairs, matrix: np.ndarray, pixels: int, opts: dict) -> dict:
     """
     pooled = np.hstack([np.concatenate([p[0] for p in pairs]), np.concatenate([p[1] for p in pairs])])
     _, once = np.unique(np.round(pooled, 2), axis=0, return_index=True)
-    src, dst = pooled[np.sort(once), :2], pooled[np.sort(once), 2:]
+    src, dst = distinct(pooled[np.sort(once), :2], pooled[np.sort(once), 2:])
     radius = max(24.0 * opts["scale"], 0.25 * np.sqrt(pixels))
-    consistent, linear = local_fits(src, dst, radius, opts["threshold"])
+    consistent, linear, _ = local_fits(src, dst, radius, opts["threshold"])
     if consistent.sum() < opts["min_inliers"]:
         return {"explained": None, "local_p90": None, "local_median": None, "local_scales": None,
                 "matrix": matrix, "fitted": None}
@@ -265,23 +310,66 @@ def local_figures(pairs, matrix: np.ndarray, pixels: int, opts: dict) -> dict:
     # holds (true matches, located to the precision the keypoints have, bent or not). A second
     # pass: the residuals of the first pass's looser local maps admitted strays (one bent
     # close-up's figure moved by 0.11 between two renderings of the same map, 0.047 here).
-    fitting = local_fits(src, dst, radius, FIT_PX)[0]
+    fitting, _, scatter = local_fits(src, dst, radius, FIT_PX)
     if fitting.sum() >= opts["min_inliers"]:
         design = np.column_stack([src[fitting], np.ones(int(fitting.sum()))])
         matrix = np.linalg.lstsq(design, dst[fitting], rcond=None)[0].T
+        variance = float(np.mean(scatter[fitting])) / 2.0
     else:
-        fitting = consistent
+        fitting, variance = consistent, None
     miss = src[fitting] @ matrix[:, :2].T + matrix[:, 2] - dst[fitting]
-    sigma = np.linalg.svd(linear[consistent], compute_uv=False)
-    local = sigma[:, 0] / sigma[:, 1] - 1.0
-    scales = np.sqrt(sigma[:, 0] * sigma[:, 1])
     residual = src[consistent] @ matrix[:, :2].T + matrix[:, 2] - dst[consistent]
     explained = np.mean(np.hypot(residual[:, 0], residual[:, 1]) <= opts["threshold"])
-    fitted = (int(fitting.sum()), len(src), float(np.sqrt(np.mean(np.sum(miss**2, axis=1)))))
+    fitted = (int(fitting.sum()), len(src), float(np.sqrt(np.mean(np.sum(miss**2, axis=1)))),
+              shape_noise(src[fitting], miss, matrix[:, :2], variance))
+    shaped = consistent & np.isfinite(linear[:, 0, 0])        # neighbourhoods that fix a map
+    if shaped.sum() < opts["min_inliers"]:
+        return {"matrix": matrix, "fitted": fitted, "explained": float(explained), "local_p90": None,
+                "local_median": None, "local_scales": None}
+    sigma = np.linalg.svd(linear[shaped], compute_uv=False)
+    local = sigma[:, 0] / sigma[:, 1] - 1.0
+    scales = np.sqrt(sigma[:, 0] * sigma[:, 1])
     return {"matrix": matrix, "fitted": fitted,
             "explained": float(explained), "local_p90": float(np.percentile(local, 90)),
             "local_median": float(np.median(local)),
             "local_scales": tuple(float(v) for v in np.percentile(scales, [10, 50, 90]))}
+
+
+def shape_noise(src: np.ndarray, miss: np.ndarray, linear: np.ndarray, variance: float | None = None) -> float:
+    """The distortion that the scatter of the matches alone gives their affine fit (its mean).
+
+    With positions of variance s^2 per coordinate, the linear part's error has an
+    anti-conformal part (the one that changes the shape) of two independent components,
+    each of variance s^2 tr((Xc^T Xc)^-1) / 4 (Xc: the centred input points); its norm is
+    Rayleigh-distributed, and the distortion is twice it over the scale. Matches bunched
+    together, or along a line, or few and scattered, give a large figure.
+
+    Parameters
+    ----------
+    src : (n, 2) ndarray
+        The input points the map was fitted to.
+    miss : (n, 2) ndarray
+        Their residuals from the map, in output pixels.
+    linear : (2, 2) ndarray
+        The fitted linear part.
+    variance : float, optional
+        s^2, when known otherwise (from the matches' local maps: a bent component's
+        residuals from one map are not noise); else from ``miss``.
+
+    Returns
+    -------
+    float
+        inf for fewer than 4 points or points on a line.
+    """
+    n = len(src)
+    centred = src - src.mean(axis=0)
+    gram = centred.T @ centred
+    scale = np.sqrt(abs(np.linalg.det(linear)))
+    if n < 4 or np.linalg.det(gram) <= 1e-12 * max(1.0, np.trace(gram)) ** 2 or scale == 0:
+        return float("inf")
+    if variance is None:
+        variance = np.sum(miss**2) / (2.0 * (n - 3))
+    return float(np.sqrt(variance * np.trace(np.linalg.inv(gram)) * np.pi / 2.0) / scale)
 
 
 def measure(image: np.ndarray, output: np.ndarray, mask: np.ndarray, *, min_inliers: int = MIN_INLIERS,
@@ -336,9 +424,7 @@ def measure(image: np.ndarray, output: np.ndarray, mask: np.ndarray, *, min_inli
     for label in range(1, n_labels):
         x, y, bw, bh, area = (int(v) for v in stats[label])
         component = (small == label).astype(np.uint8)
-        cols = np.clip(np.rint(src_all.points[:, 0]).astype(int), 0, component.shape[1] - 1)
-        rows = np.clip(np.rint(src_all.points[:, 1]).astype(int), 0, component.shape[0] - 1)
-        src = src_all.subset(component[rows, cols] > 0)
+        src = src_all.subset(inside(component, src_all.points))
         found = fit_component(gray_in, gray_out, component, src, dst, opts) if component.any() else {
             "reason": "the component vanishes at the measuring scale"}
         centre = tuple(round(float(v), 1) for v in centroids[label])

@@ -22,7 +22,7 @@ def component_line(fit) -> str:
     mirrored = ", mirrored" if fit.reflected else ""
     local = ("" if fit.local_p90 is None else
              f"; locally {fit.local_p90:.4f} (90th percentile), {100 * fit.explained:.0f} % explained")
-    return (f"{where}: distortion {fit.distortion:.4f}, scale {fit.scale:.4f}, rotation "
+    return (f"{where}: distortion {fit.distortion:.4f} (noise {fit.noise:.4f}), scale {fit.scale:.4f}, rotation "
             f"{fit.rotation:.2f} deg{mirrored}; {fit.inliers} of {fit.matches} matches, rms "
             f"{fit.rms_px:.2f} px, covering {100 * fit.coverage:.0f} %{local}")
 
@@ -35,7 +35,7 @@ def component_line(fit) -> str:
               metavar="PATH", help="The feature mask INPUT was warped with (as for warp).")
 @click.option("--json", "as_json", is_flag=True,
               help="Print machine-readable JSON: input, output, mask, worst_distortion and per component "
-                   "its figures (label, pixels, bbox, centre, distortion, scale, rotation, rms_px, "
+                   "its figures (label, pixels, bbox, centre, distortion, noise, scale, rotation, rms_px, "
                    "local_p90, explained, ...; null where not measured, with the reason).")
 def measure_command(input, output, mask, as_json, max_pixels, max_memory):
     """Measure how each masked region of INPUT came out in OUTPUT.
@@ -46,15 +46,17 @@ def measure_command(input, output, mask, as_json, max_pixels, max_memory):
     component's: the image's counterpart of the report's distortion. Printed per
     component, after its size and place ('around (x, y)', as the report's 'at'):
     distortion = sigma_max/sigma_min - 1 of its linear part (0: the shape is kept,
-    1: stretched 2x along one axis), scale, rotation (degrees, clockwise on
+    1: stretched 2x along one axis) and its noise (the distortion the scatter of
+    the matches alone gives), scale, rotation (degrees, clockwise on
     screen), the matches the map was fitted to out of all matches, rms (their
     root mean square distance from the map, in output pixels: large for a bent
     region) and the share of the component they span; where enough matches are
     locally consistent, also the 90th percentile of the distortion of local fits
     (around each match) and the share of those matches the component's map
     explains (below 100 %: the region was bent, not moved as one map). A
-    component with too few matches is reported as not measured, with the
-    reason. One of INPUT, OUTPUT and MASK may be '-' (stdin).
+    component with too few matches, or whose matches fix its shape too loosely
+    (noise above 0.005 and a distortion within 3 times it), is reported as not
+    measured, with the reason. One of INPUT, OUTPUT and MASK may be '-' (stdin).
 
     \b
     Example:
