@@ -247,3 +247,66 @@ def test_saved_handles_are_what_a_reloaded_page_starts_from_and_exports_run_one_
         thread.join()
     written = json.loads((tmp_path / "h.json").read_text())
     assert written["points"][2]["to"] in ([150, 60], [110, 80]) and session.state()["handles"] == written
+
+
+def _post(server, route: str, body: dict) -> tuple[int, dict]:
+    """POST ``body`` as JSON to ``route`` of ``server``: the status and the JSON answer."""
+    req = urllib.request.Request(server.url.replace("/?", f"/{route}?"), data=json.dumps(body).encode(),
+                                 method="POST", headers={"Content-Type": "application/json"})
+    try:
+        with urllib.request.urlopen(req, timeout=60) as response:
+            return response.status, json.loads(response.read())
+    except urllib.error.HTTPError as err:
+        return err.code, json.loads(err.read())
+
+
+@pytest.mark.parametrize("cell", [1.0, 1.5])
+def test_more_density_at_the_finest_cell_keeps_export_working(tmp_path, cell):
+    """Hostile review D8: started with --cell 1 (or 1.5), "more" asked for a 0.5 px cell: 400
+    'cell must be ... at least 1, not 0.5', but the session had stored it, and every later
+    Export failed the same way. The cell stops at 1 px; Export writes."""
+    small = cv2.resize(cv2.imread(IMAGE), (64, 64), interpolation=cv2.INTER_AREA)
+    cv2.imwrite(str(tmp_path / "in.png"), small)
+    cv2.imwrite(str(tmp_path / "mask.png"), cv2.resize(cv2.imread(MASK, cv2.IMREAD_GRAYSCALE), (64, 64),
+                                                       interpolation=cv2.INTER_NEAREST))
+    session = EditorSession(Settings("deform", cell=cell), str(tmp_path / "in.png"), str(tmp_path / "mask.png"),
+                            None, str(tmp_path / "out.png"))
+    server = EditorServer(session, 0)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    try:
+        status, state = _post(server, "density", {"density": "more"})
+        assert status == 200 and state["density"] == "more" and state["cell"] >= 1.0, state
+        handles = {"version": 1, "points": [{"from": [2, 2], "to": [2, 2]}, {"from": [40, 40], "to": [45, 42]}]}
+        status, answer = _post(server, "export", {"handles": handles})
+        assert status == 200 and answer["exported"] == str(tmp_path / "out.png"), answer
+        assert cv2.imread(str(tmp_path / "out.png")) is not None
+    finally:
+        server.shutdown()
+        server.server_close()
+
+
+def test_a_density_that_fails_leaves_the_session_as_it_was(session, monkeypatch):
+    """Where the new density's mesh cannot be built, the answer is the error and the session keeps
+    its density, cell and deformer (it stored the new ones first)."""
+    from featurewarp_cli.engine import deform
+
+    before = session.density, session.cell, session.deformer
+
+    def refuse(*args, **kwargs):
+        raise ValueError("no mesh here")
+
+    monkeypatch.setattr(deform, "Deformer", refuse)
+    with pytest.raises(ValueError, match="no mesh here"):
+        session.set_density({"density": "fewer"})
+    assert (session.density, session.cell, session.deformer) == before
+
+
+@pytest.mark.parametrize("shape", [(1, 10000), (10000, 1)])
+def test_a_long_strip_opens_in_the_editor(tmp_path, shape):
+    """Hostile review D5: a 10000 x 1 image scaled to the 4096 px texture had no row left, and
+    'edit' stopped on OpenCV's '(-215:Assertion failed) !dsize.empty()'. Each side keeps 1 px."""
+    cv2.imwrite(str(tmp_path / "strip.png"), np.full(shape + (3,), 128, np.uint8))
+    session = EditorSession(Settings("deform"), str(tmp_path / "strip.png"), None, None, None)
+    assert session.texture_size == ((4096, 1) if shape[0] == 1 else (1, 4096))
+    assert cv2.imdecode(np.frombuffer(session.image_png, np.uint8), cv2.IMREAD_UNCHANGED).shape[:2] == \
+        session.texture_size[::-1]

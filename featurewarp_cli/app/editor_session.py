@@ -195,18 +195,27 @@ class EditorSession:
             raise ValueError(f"density {density!r}: use {', '.join(DENSITIES)}")
         cell = self._density_cell(density)
         with self.lock:
+            before = self.density, self.cell, self.deformer
             self.density, self.cell = density, cell
-            self._build()
+            try:
+                self._build()
+            except Exception:              # the session stays as it was: later Exports still work
+                self.density, self.cell, self.deformer = before
+                raise
         return self.state()
 
     def _density_cell(self, density: str) -> float:
         """The preview's cell at ``density``: the rigid grid's spacing over its refinement
-        (:data:`DENSITIES`), no finer than :data:`PREVIEW_MAX_NODES` allows."""
+        (:data:`DENSITIES`), no finer than :data:`PREVIEW_MAX_NODES` allows nor than
+        :data:`~featurewarp_cli.engine.defaults.MIN_CELL` (``--cell 1`` started the editor
+        at 1 px, and "more" asked for 0.5, which every later Export refused)."""
+        from ..engine.defaults import MIN_CELL
         from ..engine.deform import rigid_grid
 
         spacing = max(rigid_grid(self.width, self.height).spacing)
         refinement = DENSITIES[density](max(1, round(spacing / self.normal_cell)))
-        return round(max(spacing / refinement, math.sqrt(self.width * self.height / PREVIEW_MAX_NODES)), 4)
+        cell = round(max(spacing / refinement, math.sqrt(self.width * self.height / PREVIEW_MAX_NODES)), 4)
+        return max(cell, MIN_CELL)
 
     def set_mask(self, body: dict) -> dict:
         """Replace the feature mask by the one painted in the page (``png``: a data URL of a
@@ -368,15 +377,17 @@ def _number(value: float) -> str:
 
 
 def _texture(image: np.ndarray) -> np.ndarray:
-    """``image`` scaled down to :data:`TEXTURE_SIDE` at most (8 bits)."""
+    """``image`` scaled down to :data:`TEXTURE_SIDE` at most (8 bits), each side 1 px at least
+    (a 10000 x 1 strip scaled by 4096 / 10000 would have no row: OpenCV asserts)."""
     import cv2
 
     if image.dtype != np.uint8:
         image = (image / (257.0 if image.dtype == np.uint16 else 1.0 / 255.0)).clip(0, 255).astype(np.uint8)
-    side = max(image.shape[:2])
-    if side > TEXTURE_SIDE:
-        scale = TEXTURE_SIDE / side
-        image = cv2.resize(image, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
+    height, width = image.shape[:2]
+    if max(height, width) > TEXTURE_SIDE:
+        scale = TEXTURE_SIDE / max(height, width)
+        size = (max(1, int(round(width * scale))), max(1, int(round(height * scale))))
+        image = cv2.resize(image, size, interpolation=cv2.INTER_AREA)
     return image
 
 
