@@ -308,3 +308,25 @@ def test_quiet_silences_notices(monkeypatch, tmp_path):
     loud = subprocess.run([sys.executable, "-c", code.replace(", '-q'", "")], capture_output=True, text=True,
                           timeout=60)
     assert "scikit-sparse" in loud.stderr and "warning" in loud.stderr
+
+
+@pytest.mark.parametrize("value", ["abc", "-1", "0", "inf", "-inf", "nan", "1e300", " "])
+def test_a_stage_delay_it_cannot_use_is_ignored(monkeypatch, tmp_path, value):
+    """Hostile review D13: FEATUREWARP_TEST_STAGE_DELAY=abc, -1 or inf turned every run into an
+    internal error (ValueError, OverflowError from time.sleep); the test hook now ignores them."""
+    from featurewarp_cli.io import write
+
+    monkeypatch.setenv(write.STAGE_DELAY_VARIABLE, value)
+    cv2.imwrite(str(tmp_path / "in.png"), picture())
+    started = time.monotonic()
+    run = CliRunner().invoke(cli, ["warp", "swirl", str(tmp_path / "in.png"), str(tmp_path / "out.png"), "-q"])
+    assert run.exit_code == 0, run.output
+    assert (tmp_path / "out.png").exists() and time.monotonic() - started < 30
+    assert write.stage_delay() == 0.0
+
+
+def test_a_usable_stage_delay_still_waits(monkeypatch):
+    from featurewarp_cli.io import write
+
+    monkeypatch.setenv(write.STAGE_DELAY_VARIABLE, "0.25")
+    assert write.stage_delay() == 0.25

@@ -142,20 +142,32 @@ def _stage_file(path: str, target: str, data: bytes, named: bool = False) -> Sta
     return Staged(path, "file", target, temp=temp)
 
 
-#: Seconds to wait after staging each output (tests use it to signal a run mid-write).
+#: Seconds to wait after staging each output (tests use it to signal a run mid-write): a
+#: number above 0 and at most :data:`STAGE_DELAY_MAX`; any other value is ignored.
 STAGE_DELAY_VARIABLE = "FEATUREWARP_TEST_STAGE_DELAY"
+STAGE_DELAY_MAX = 3600.0
 
 
 def stage(path: str, data: bytes, named: bool = False) -> Staged:
     """Get ``data`` ready to go to ``path`` (see the module's docstring; ``named``: a regular
     file waits in a hidden named file, closed, not in an open unnamed one); OSError on failure."""
     staged = _stage(path, data, named)
-    delay = os.environ.get(STAGE_DELAY_VARIABLE)
+    delay = stage_delay()
     if delay:
         import time
 
-        time.sleep(float(delay))
+        time.sleep(delay)
     return staged
+
+
+def stage_delay() -> float:
+    """The test hook's delay (:data:`STAGE_DELAY_VARIABLE`) in seconds; 0 where it is unset or
+    unusable (``abc``, ``-1``, ``inf`` and ``nan`` turned every run into an internal error)."""
+    try:
+        delay = float(os.environ.get(STAGE_DELAY_VARIABLE, "") or 0.0)
+    except ValueError:
+        return 0.0
+    return delay if 0.0 < delay <= STAGE_DELAY_MAX else 0.0
 
 
 def descriptor_of(path: str) -> int | None:
