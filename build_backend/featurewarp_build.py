@@ -23,9 +23,12 @@ Environment variables:
 ``FEATUREWARP_HEADER_DIRS``
     Folders (``os.pathsep``-separated) to look for ``cholmod.h`` in *instead of* the usual
     ones, and the compiler is not asked: to see the message where the headers are installed,
-    ``FEATUREWARP_HEADER_DIRS=/nonexistent pip install .``.
+    ``FEATUREWARP_HEADER_DIRS=/nonexistent pip install .``. Empty (``export VAR=``, as CI
+    templates write it) or naming no folder, it counts as unset.
 ``FEATUREWARP_NO_BUILD_CHECK=1``
     Skip the check (for a build this check misjudges; the compiler then has the last word).
+    ``1``, ``true`` or ``yes`` (any case) skip it; any other value (``0``, ``false``, empty)
+    does not.
 """
 
 from __future__ import annotations
@@ -74,11 +77,21 @@ def compiler_works(command: list[str], source: str = "", flags: list[str] = ()) 
     return run.returncode == 0
 
 
+#: Values of ``FEATUREWARP_NO_BUILD_CHECK`` that skip the check (any case); others do not.
+SKIP_VALUES = ("1", "true", "yes")
+
+
+def given_header_dirs(environ=os.environ) -> list[str] | None:
+    """The folders ``FEATUREWARP_HEADER_DIRS`` names; None where it is unset, empty or names none."""
+    given = [d for d in environ.get("FEATUREWARP_HEADER_DIRS", "").split(os.pathsep) if d.strip()]
+    return given or None
+
+
 def header_dirs(environ=os.environ) -> list[str]:
     """Folders that may hold ``cholmod.h``, in the order scikit-sparse's build and the compiler
     would look (``FEATUREWARP_HEADER_DIRS`` replaces them all)."""
-    if environ.get("FEATUREWARP_HEADER_DIRS") is not None:
-        return [d for d in environ["FEATUREWARP_HEADER_DIRS"].split(os.pathsep) if d]
+    if given_header_dirs(environ) is not None:
+        return given_header_dirs(environ)
     flags = shlex.split(environ.get("CPPFLAGS", "")) + shlex.split(environ.get("CFLAGS", ""))
     from_flags = [flag[2:] for flag in flags if flag.startswith("-I") and len(flag) > 2]
     paths = [d for name in ("CPATH", "C_INCLUDE_PATH") for d in environ.get(name, "").split(os.pathsep) if d]
@@ -93,7 +106,7 @@ def has_cholmod_header(environ=os.environ, compiler: list[str] | None = None) ->
     folders = header_dirs(environ)
     if any(os.path.isfile(os.path.join(folder, "cholmod.h")) for folder in folders):
         return True
-    if compiler is None or environ.get("FEATUREWARP_HEADER_DIRS") is not None:
+    if compiler is None or given_header_dirs(environ) is not None:
         return False
     return compiler_works(compiler, "#include <cholmod.h>", [f"-I{folder}" for folder in folders if os.path.isdir(folder)])
 
@@ -137,8 +150,9 @@ def message(keys: list[str], environ=os.environ) -> str:
 
 def check(environ=os.environ) -> None:
     """End the build (exit status 1, :func:`message` on stderr, no traceback) when something
-    it needs is missing; nothing when ``FEATUREWARP_NO_BUILD_CHECK`` is set."""
-    if environ.get("FEATUREWARP_NO_BUILD_CHECK"):
+    it needs is missing; nothing when ``FEATUREWARP_NO_BUILD_CHECK`` is one of :data:`SKIP_VALUES`
+    (``0`` and ``false`` skipped it too)."""
+    if environ.get("FEATUREWARP_NO_BUILD_CHECK", "").strip().lower() in SKIP_VALUES:
         return
     keys = missing(environ)
     if keys:

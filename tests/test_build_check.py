@@ -76,3 +76,27 @@ def test_the_message_names_only_what_is_missing(keys, named, not_named):
 def test_scikit_sparse_already_installed_needs_no_header(tmp_path, monkeypatch):
     monkeypatch.setattr(build, "scikit_sparse_installed", lambda: True)
     assert build.missing({"FEATUREWARP_HEADER_DIRS": str(tmp_path)}) == []
+
+
+def test_an_empty_header_dirs_counts_as_unset(monkeypatch):
+    """Hostile review D14: FEATUREWARP_HEADER_DIRS= (as CI templates export it) looked for
+    cholmod.h in no folder, and stopped a machine that has it."""
+    monkeypatch.setattr(build, "scikit_sparse_installed", lambda: False)
+    for empty in ("", " ", os.pathsep):
+        env = {**os.environ, "FEATUREWARP_HEADER_DIRS": empty}
+        assert build.header_dirs(env) == build.header_dirs({k: v for k, v in env.items()
+                                                            if k != "FEATUREWARP_HEADER_DIRS"})
+        assert build.missing(env) == []
+
+
+@pytest.mark.parametrize("value, skips", [("1", True), ("true", True), ("YES", True), (" True ", True),
+                                          ("0", False), ("false", False), ("no", False), ("", False)])
+def test_only_1_true_or_yes_skip_the_check(tmp_path, monkeypatch, value, skips):
+    """D14: FEATUREWARP_NO_BUILD_CHECK=0 or false skipped the check as =1 does."""
+    monkeypatch.setattr(build, "scikit_sparse_installed", lambda: False)
+    env = {"FEATUREWARP_HEADER_DIRS": str(tmp_path), "FEATUREWARP_NO_BUILD_CHECK": value}
+    if skips:
+        assert build.check(env) is None
+    else:
+        with pytest.raises(SystemExit, match="missing: SuiteSparse's CHOLMOD headers"):
+            build.check(env)
