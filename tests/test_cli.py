@@ -302,6 +302,20 @@ def test_unexpected_errors_are_one_line(runner, tmp_path, monkeypatch):
         "featurewarp: error: ZeroDivisionError: division by zero (--debug shows a traceback)"]
 
 
+def test_an_opencv_assertion_is_one_clean_line(runner, tmp_path, monkeypatch):
+    """cv2.error read 'error: error: OpenCV(4.14.0) ...' with OpenCV's newline as a literal \\n."""
+    import cv2
+
+    image, _ = scene(tmp_path)
+
+    def fail(image):
+        raise cv2.error("OpenCV(4.14.0) resize.cpp:4020: error: (-215:Assertion failed) !dsize.empty()\n")
+    monkeypatch.setattr(decode, "mask_from_image", fail)
+    run = runner("warp", "swirl", image, tmp_path / "o.png", "-m", image)
+    assert run.code == 1 and len(run.lines) == 1 and run.lines[0].startswith("featurewarp: error: OpenCV: OpenCV(")
+    assert "\\n" not in run.lines[0] and "error: error:" not in run.lines[0]
+
+
 # --- conventions ----------------------------------------------------------------------------
 
 def test_warps_json(runner):

@@ -314,9 +314,16 @@ def main(argv=None):
         if isinstance(err, click.ClickException):
             message, code = err.format_message(), err.exit_code
         else:
-            message, code = f"{type(err).__name__}: {err} (--debug shows a traceback)", 1
+            message, code = f"{_error_name(err)}: {' '.join(str(err).split())} (--debug shows a traceback)", 1
         say(f"featurewarp: error: {message}")
     sys.exit(code if isinstance(code, int) else 0)
+
+
+def _error_name(err: Exception) -> str:
+    """What an unanticipated error is called in its one line: OpenCV's ``cv2.error`` is 'OpenCV'
+    (its class name, 'error', made the line read 'error: error:')."""
+    name = type(err).__name__
+    return "OpenCV" if name == "error" and type(err).__module__.startswith("cv2") else name
 
 
 if __name__ == "__main__":
