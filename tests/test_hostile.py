@@ -330,3 +330,44 @@ def test_a_usable_stage_delay_still_waits(monkeypatch):
 
     monkeypatch.setenv(write.STAGE_DELAY_VARIABLE, "0.25")
     assert write.stage_delay() == 0.25
+
+
+def test_a_name_longer_than_the_file_system_takes_is_a_usage_error(tmp_path):
+    """It was 'OSError: [Errno 36] File name too long' (exit 1), with the whole path echoed."""
+    from click.testing import CliRunner
+
+    from featurewarp_cli.cli.main import cli
+
+    cv2.imwrite(str(tmp_path / "in.png"), np.zeros((20, 30, 3), np.uint8))
+    long = tmp_path / ("a" * 252 + ".png")
+    run = CliRunner().invoke(cli, ["warp", "swirl", str(tmp_path / "in.png"), str(long)])
+    assert run.exit_code == 2 and "file name too long (256 bytes; at most 255)" in run.output
+    assert len(run.output) < 400
+
+
+def test_a_read_only_output_is_not_replaced(tmp_path, monkeypatch):
+    """The atomic rename needs only the folder's permission: a 0444 file was replaced."""
+    import os
+
+    from featurewarp_cli.io import write
+
+    target = tmp_path / "ro.png"
+    target.write_bytes(b"kept")
+    real = os.access
+    monkeypatch.setattr(os, "access", lambda path, mode, **kw: False if str(path) == str(target) else real(path, mode))
+    with pytest.raises(ValueError, match="ro.png is not writable \\(read-only"):
+        write.check_writable(str(target))
+
+
+def test_a_failed_rename_names_the_output_not_its_staging_file(tmp_path, monkeypatch):
+    """The error named the hidden .featurewarp-....tmp file."""
+    import os
+
+    from featurewarp_cli.io import write
+
+    def refuse(source, target):
+        raise PermissionError(13, "Permission denied", source)
+    monkeypatch.setattr(os, "replace", refuse)
+    with pytest.raises(OSError) as caught:
+        write.write_outputs([(str(tmp_path / "out.png"), b"data")])
+    assert caught.value.filename == str(tmp_path / "out.png")

@@ -292,11 +292,16 @@ def _commit_one(output: Staged) -> None:
         try:
             _link_unnamed(output.fd, temp)
             os.replace(temp, output.target)
+        except OSError as err:                  # named as the output, not as the hidden staging file
+            raise OSError(err.errno, err.strerror, output.path) from None
         finally:
             remove_quietly(temp)
             _PENDING.discard(temp)
     else:
-        os.replace(output.temp, output.target)
+        try:
+            os.replace(output.temp, output.target)
+        except OSError as err:
+            raise OSError(err.errno, err.strerror, output.path) from None
         _PENDING.discard(output.temp)
         output.temp = None
 
@@ -383,6 +388,18 @@ def temporary_file(directory: str, suffix: str = ""):
         _PENDING.discard(path)
 
 
+def _check_name_length(path: str) -> None:
+    """ValueError naming the part of ``path`` longer than the file system takes (255 bytes a
+    name, 4096 a path on Linux), with a long path shortened in the message."""
+    shown = path if len(path) <= 120 else f"{path[:60]}...{path[-40:]}"
+    encoded = os.fsencode(path)
+    if len(encoded) >= 4096:
+        raise ValueError(f"{shown}: path too long ({len(encoded)} bytes; at most 4095)")
+    longest = max((os.fsencode(part) for part in path.split(os.sep)), key=len)
+    if len(longest) > 255:
+        raise ValueError(f"{shown}: file name too long ({len(longest)} bytes; at most 255)")
+
+
 def check_writable(path: str) -> None:
     """Raise ValueError unless ``path`` can be written: a file that can be created or replaced in
     an existing, writable folder, or an existing device, FIFO or link to one.
@@ -399,12 +416,13 @@ def check_writable(path: str) -> None:
         if flags & os.O_ACCMODE == os.O_RDONLY:
             raise ValueError(f"{path}: descriptor {descriptor} is not open for writing")
         return
+    _check_name_length(path)
     mode = _mode_of(path)
     if mode is not None and stat.S_ISDIR(mode):
         raise ValueError(f"{path} is a directory")
+    if mode is not None and not os.access(path, os.W_OK):       # a read-only file is not replaced, as cp would not
+        raise ValueError(f"{path} is not writable (read-only: chmod u+w it, or give another name)")
     if mode is not None and not stat.S_ISREG(mode):
-        if not os.access(path, os.W_OK):
-            raise ValueError(f"{path} is not writable")
         return
     directory = os.path.dirname(_replaced(path))
     if not os.path.isdir(directory):
