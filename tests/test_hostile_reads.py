@@ -339,8 +339,8 @@ def test_within_limit_bombs_are_refused_before_decoding(tmp_path, monkeypatch):
     decoded = []
     monkeypatch.setattr(pipeline._Decoding, "start", lambda self: decoded.append(self))
     runner = CliRunner()
-    for command, args, words in ((["warp"], ["--max-memory", "300M"], ("needs about 366 MiB", "--max-memory")),
-                                 (["compare"], ["--max-memory", "300M"], ("needs about 366 MiB", "--max-memory")),
+    for command, args, words in ((["warp"], ["--max-memory", "300M"], ("needs about 488 MiB", "--max-memory")),
+                                 (["compare"], ["--max-memory", "300M"], ("needs about 488 MiB", "--max-memory")),
                                  (["warp"], ["--max-memory", "1G", "--size", "400%x100%"], ("canvas", "--max-memory"))):
         for source in (str(tmp_path / "bomb.png"), "-"):
             result = runner.invoke(cli, [*command, "stretch", source, str(tmp_path / "o.png"), *args],
