@@ -159,15 +159,20 @@ def test_density_and_the_exact_cell_in_the_printed_command(tmp_path):
 def test_a_failed_export_leaves_the_handles_file_and_the_output_as_they_were(tmp_path):
     """Export writes the handles file first (its printed command names it): where the warp then
     fails (handles that lay the image over itself), that file is put back as it was, or removed."""
+    import cv2
+
     from featurewarp_cli.app.pipeline import WarpError
 
-    crossing = {"version": 2, "points": [{"from": [100, 100], "to": [400, 100]}, {"from": [400, 100], "to": [100, 100]},
-                                         {"from": [100, 400], "to": [400, 400]}, {"from": [400, 400], "to": [100, 400]}]}
+    image, mask = str(tmp_path / "small.png"), str(tmp_path / "small_mask.png")     # 128 px: 15 s -> 1 s
+    cv2.imwrite(image, cv2.resize(cv2.imread(IMAGE), (128, 128), interpolation=cv2.INTER_AREA))
+    cv2.imwrite(mask, cv2.resize(cv2.imread(MASK, cv2.IMREAD_GRAYSCALE), (128, 128), interpolation=cv2.INTER_NEAREST))
+    crossing = {"version": 2, "points": [{"from": [25, 25], "to": [100, 25]}, {"from": [100, 25], "to": [25, 25]},
+                                         {"from": [25, 100], "to": [100, 100]}, {"from": [100, 100], "to": [25, 100]}]}
     for existed in (True, False):
         out, handles = tmp_path / "out.png", tmp_path / "out.handles.json"
         for path in (out, handles):
             path.write_bytes(b"SENTINEL") if existed else path.unlink(missing_ok=True)
-        session = EditorSession(Settings("deform"), IMAGE, MASK, None, str(out))
+        session = EditorSession(Settings("deform"), image, mask, None, str(out))
         with pytest.raises(WarpError, match="nothing written"):
             session.export({"handles": crossing})
         for path in (out, handles):
@@ -175,7 +180,7 @@ def test_a_failed_export_leaves_the_handles_file_and_the_output_as_they_were(tmp
     handles.unlink(missing_ok=True)
     handles.symlink_to(tmp_path / "nowhere.json")              # dangling: the restore leaves it a link
     with pytest.raises(WarpError, match="nothing written"):
-        EditorSession(Settings("deform"), IMAGE, MASK, None, str(out)).export({"handles": crossing})
+        EditorSession(Settings("deform"), image, mask, None, str(out)).export({"handles": crossing})
     assert handles.is_symlink() and not (tmp_path / "nowhere.json").exists()
 
 
