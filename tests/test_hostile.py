@@ -355,7 +355,7 @@ def test_a_read_only_output_is_not_replaced(tmp_path, monkeypatch):
     target.write_bytes(b"kept")
     real = os.access
     monkeypatch.setattr(os, "access", lambda path, mode, **kw: False if str(path) == str(target) else real(path, mode))
-    with pytest.raises(ValueError, match="ro.png is not writable \\(read-only"):
+    with pytest.raises(ValueError, match="ro.png is not writable by you \\(read-only"):
         write.check_writable(str(target))
 
 

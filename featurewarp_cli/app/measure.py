@@ -267,11 +267,12 @@ def fit_component(gray_in, gray_out, component, src: Keypoints, dst: Keypoints, 
               shape_noise(fit.src[keep], residual, fit.matrix[:, :2]))
     used, matches, rms, noise = fitted or ransac
     shape = describe(linear)
+    fixed = f"only to about {noise:.3f}" if np.isfinite(noise) else "not at all"
     if noise > NOISE_LIMIT and shape["distortion"] < SIGNAL * noise:
-        return {"reason": f"its {used} matches fix the distortion only to about {noise:.3f}, and "
+        return {"reason": f"its {used} matches fix the distortion {fixed}, and "
                           f"{shape['distortion']:.3f} is within {SIGNAL:g} times that"}
     if noise > NOISE_LIMIT and fitted is None:
-        return {"reason": f"its {used} matches fix the distortion only to about {noise:.3f}, and fewer "
+        return {"reason": f"its {used} matches fix the distortion {fixed}, and fewer "
                           f"than {opts['min_inliers']} are confirmed by their neighbourhoods"}
     return shape | local | {
         "matches": matches, "inliers": used, "linear": linear, "translation": translation,

@@ -23,7 +23,7 @@ def component_line(fit) -> str:
     local = ("" if fit.local_p90 is None else
              f"; locally {fit.local_p90:.4f} (90th percentile), {100 * fit.explained:.0f} % explained")
     return (f"{where}: distortion {fit.distortion:.4f} (noise {fit.noise:.4f}), scale {fit.scale:.4f}, rotation "
-            f"{fit.rotation:.2f} deg{mirrored}; {fit.inliers} of {fit.matches} matches, rms "
+            f"{round(fit.rotation, 2) + 0.0:.2f} deg{mirrored}; {fit.inliers} of {fit.matches} matches, rms "
             f"{fit.rms_px:.2f} px, covering {100 * fit.coverage:.0f} %{local}")
 
 
@@ -55,8 +55,8 @@ def measure_command(input, output, mask, as_json, max_pixels, max_memory):
     (around each match) and the share of those matches the component's map
     explains (below 100 %: the region was bent, not moved as one map). A
     component with too few matches, or whose matches fix its shape too loosely
-    (noise above 0.005 and a distortion within 3 times it), is reported as not
-    measured, with the reason. One of INPUT, OUTPUT and MASK may be '-' (stdin).
+    (noise above 0.005, with a distortion within 3 times it or too few matches
+    confirmed by their neighbourhoods), is reported as not measured, with the reason. One of INPUT, OUTPUT and MASK may be '-' (stdin).
 
     \b
     Example:

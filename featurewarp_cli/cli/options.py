@@ -230,7 +230,10 @@ def _note_unused(settings) -> None:
     (--scale-prior under rigid: features keep their size there)."""
     from .. import stages
 
-    source = click.get_current_context().get_parameter_source
+    context = click.get_current_context(silent=True)
+    if context is None:                       # called outside a command
+        return
+    source = context.get_parameter_source
     for name, modes in UNUSED_IN.items():
         if settings.mode in modes and source(name) == click.core.ParameterSource.COMMANDLINE:
             stages.notice(f"--{name.replace('_', '-')} does nothing with --mode {settings.mode}")

@@ -421,7 +421,7 @@ def check_writable(path: str) -> None:
     if mode is not None and stat.S_ISDIR(mode):
         raise ValueError(f"{path} is a directory")
     if mode is not None and not os.access(path, os.W_OK):       # a read-only file is not replaced, as cp would not
-        raise ValueError(f"{path} is not writable (read-only: chmod u+w it, or give another name)")
+        raise ValueError(f"{path} is not writable by you (read-only, or another user's): give another name")
     if mode is not None and not stat.S_ISREG(mode):
         return
     directory = os.path.dirname(_replaced(path))
