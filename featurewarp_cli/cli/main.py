@@ -15,6 +15,7 @@ import os
 import signal
 import sys
 import textwrap
+import time
 import warnings
 
 import click
@@ -260,8 +261,9 @@ def stop_on_signal(signum, frame) -> None:
         children = processes.active_children()
         for child in children:
             child.kill()
+        deadline = time.monotonic() + 2.0              # one wait for all, not a second each
         for child in children:                        # dead before their copies are removed
-            child.join(1)
+            child.join(max(0.0, deadline - time.monotonic()))
             stopped.append(child.pid)
         _release_semaphores()
     remote = sys.modules.get("featurewarp_cli.app.remote")
