@@ -590,6 +590,14 @@ def test_static_gif_output(tmp_path):
     assert cv2.imread(str(tmp_path / "o.gif")).shape == (H, W, 3)
 
 
+def test_gray_and_alpha_gets_the_silhouettes_partial_alpha_as_rgba_does():
+    """Through the API a (h, w, 2) image's alpha came out 0 or 255 along the arc's edge (the
+    coverage went to an alpha only a fourth channel had); RGBA's had 249 levels."""
+    gray_alpha = warp(np.full((H, W, 2), 255, np.uint8), None, "arc", angle=120)
+    rgba = warp(np.full((H, W, 4), 255, np.uint8), None, "arc", angle=120)
+    assert gray_alpha.shape[2] == 2 and np.array_equal(gray_alpha[..., 1], rgba[..., 3])
+
+
 def test_gray_and_alpha_is_resampled_premultiplied_too():
     """A (h, w, 2) gray + alpha array through the API kept the dark fringe."""
     image = np.zeros((H, W, 2), np.uint8)

@@ -310,6 +310,9 @@ def render(image: np.ndarray, source: np.ndarray, target: np.ndarray, triangles:
     """
     if interp not in INTERPOLATION:
         raise ValueError(f"interp must be one of {', '.join(INTERPOLATION)}, not {interp!r}")
+    if image.ndim == 3 and image.shape[2] == 2:     # gray + alpha: as BGRA, for the silhouette's alpha
+        return _gray_alpha(image, (source, target, triangles, canvas, interp, background), antialias, band_pixels,
+                           threads)
     if image.dtype not in (np.uint8, np.uint16):
         raise ValueError(f"image must be uint8 or uint16, not {image.dtype}")
     width, height = (int(c) for c in canvas)
@@ -346,6 +349,14 @@ def render(image: np.ndarray, source: np.ndarray, target: np.ndarray, triangles:
         for y0, pixels in holes.items():
             out.reshape(-1, 4)[y0 * width + pixels] = 0
     return cv2.convertScaleAbs(out, alpha=1 / 257) if out.dtype != given else out
+
+
+def _gray_alpha(image: np.ndarray, args: tuple, antialias: bool, band_pixels, threads) -> np.ndarray:
+    """:func:`render` of a gray + alpha ``image`` (``args``: its other positional arguments) as
+    BGRA, given back as gray + alpha (a fill's gray is its luma)."""
+    bgra = render(cv2.merge([image[:, :, 0]] * 3 + [image[:, :, 1]]), *args, antialias=antialias,
+                  band_pixels=band_pixels, threads=threads)
+    return np.dstack([cv2.cvtColor(np.ascontiguousarray(bgra[:, :, :3]), cv2.COLOR_BGR2GRAY), bgra[:, :, 3]])
 
 
 def _opaque(image: np.ndarray) -> bool:
