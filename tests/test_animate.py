@@ -176,3 +176,15 @@ def test_the_animations_automatic_grid_is_held_to_the_memory_budget(files):
               "--vary", "angle=400:450", "--frames", "2", "--max-memory", "20M")
     assert out.code == 1 and "that the memory limit allows" in out.stderr, out.stderr
     assert not (files / "big.gif").exists()
+
+
+def test_an_animation_at_rest_is_said_once_not_as_a_frames(files):
+    """'frame 4: no frame moves a pixel' read as though one frame were at rest; --strict refuses it."""
+    args = ["stretch", str(files / "in.png"), str(files / "rest.gif"), "--vary", "sx=1:1", "--frames", "3"]
+    out = run(*args)
+    assert out.code == 0 and ": no frame moves a pixel: every frame is the input" in out.stderr
+    assert "frame 2: no frame" not in out.stderr
+    args[2] = str(files / "rest_strict.gif")
+    strict = run(*args, "--strict")
+    assert strict.code == 1 and "--strict: no frame moves a pixel" in strict.stderr
+    assert not (files / "rest_strict.gif").exists()

@@ -442,3 +442,5 @@ def test_an_option_the_mode_leaves_unused_is_noted(runner, tmp_path):
     quiet = runner("warp", "stretch", image, tmp_path / "o.png", "--sx", "1.2", "--mode", "plain", "--decay", "2", "-q")
     assert quiet.code == 0 and quiet.stderr == ""
     assert "does nothing" not in runner("warp", "stretch", image, tmp_path / "o.png", "--sx", "1.2").stderr
+    run = runner("warp", "stretch", image, tmp_path / "o.png", "--sx", "1.2", "--decay", "2")     # no mask
+    assert "--decay does nothing without --mask" in run.stderr

@@ -168,13 +168,7 @@ def animate_file(settings: Settings, input: str, output: str, mask: str | None, 
         largest = max(largest, tuple(warp.canvas), key=lambda size: size[0] * size[1])
         check_frames_fit(settings, frames, largest)      # frames share the largest canvas: refused early
     if settings.cell is None:                  # one grid fine enough for every frame: one factorization
-        cell = min(fidelity.auto_cell(width, height, w)[0] for w in warps)
-        warper = make_warper(settings, width, height, feature_mask)[1]
-        try:                                   # the automatic grid's budget, as a solve checks it
-            fidelity.check_budget(width, height, cell, warper.max_nodes)
-        except fidelity.GridBudgetError as err:
-            raise WarpError(str(err)) from None
-        warper.cell, warper.cell_chosen_automatically = cell, True     # sub-pixel too, as the rule's own
+        warper = _one_grid(settings, warps, width, height, feature_mask)
     fmt = "png" if kind != "video" else "bmp"
     background = background_colour(settings.background, fmt) if kind != "video" else (
         parse_colour(settings.background) if settings.background else (255, 255, 255))
@@ -192,16 +186,17 @@ def animate_file(settings: Settings, input: str, output: str, mask: str | None, 
         lines = [line.replace(LISTED_IN_REPORT, "") for line in mesh.record.warnings]   # no report
         still += any(line.startswith(STILL) for line in lines)      # a frame at rest: said once, for all
         said.extend((index, line) for line in lines if not line.startswith(STILL))
-        if still == frames:
-            said.append((index, "no frame moves a pixel: every frame is the input"))
         if settings.strict and said:          # nothing is written before every frame is solved
             raise WarpError(f"--strict: frame {said[0][0]}: {said[0][1]}; nothing written")
         frame = to_bgr(warper.render(image, mesh, settings.interp, background, order="bgr"), alpha)
         rendered.append(centre_on(frame, canvas, fill))
         if progress:
             progress(1)
+    at_rest = ["no frame moves a pixel: every frame is the input"] * (still == frames)    # the whole animation's
+    if settings.strict and at_rest:
+        raise WarpError(f"--strict: {at_rest[0]}; nothing written")
     write_frames(output, kind, rendered, fps)
-    lines = [f"frame {index}: {line}" for index, line in said[:FRAME_WARNINGS]]
+    lines = at_rest + [f"frame {index}: {line}" for index, line in said[:FRAME_WARNINGS]]
     if len(said) > FRAME_WARNINGS:
         first, last = said[FRAME_WARNINGS][0], said[-1][0]
         where = f"frame {first}" if first == last else f"frames {first} to {last}"
@@ -209,6 +204,19 @@ def animate_file(settings: Settings, input: str, output: str, mask: str | None, 
                      f"(featurewarp warp with a frame's values says each)")
     return {"frames": frames, "canvas": canvas, "factorizations": warper.factorizations,
             "flipped_triangles": flips, "seconds": time.perf_counter() - t0, "warnings": warnings + lines}
+
+
+def _one_grid(settings: Settings, warps: list, width: int, height: int, feature_mask):
+    """The warper of every frame: on the finest automatic cell the frames' warps need (sub-pixel
+    too, as the rule's own), held to the memory budget as a solve holds an automatic grid."""
+    cell = min(fidelity.auto_cell(width, height, w)[0] for w in warps)
+    warper = make_warper(settings, width, height, feature_mask)[1]
+    try:
+        fidelity.check_budget(width, height, cell, warper.max_nodes)
+    except fidelity.GridBudgetError as err:
+        raise WarpError(str(err)) from None
+    warper.cell, warper.cell_chosen_automatically = cell, True
+    return warper
 
 
 def output_paths(output: str, kind: str, frames: int) -> list[str]:

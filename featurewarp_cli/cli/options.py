@@ -234,6 +234,11 @@ def _note_unused(settings) -> None:
     if context is None:                       # called outside a command
         return
     source = context.get_parameter_source
+    maskless = "mask" in context.params and context.params["mask"] is None      # the plain warp, too
     for name, modes in UNUSED_IN.items():
-        if settings.mode in modes and source(name) == click.core.ParameterSource.COMMANDLINE:
+        if source(name) != click.core.ParameterSource.COMMANDLINE:
+            continue
+        if settings.mode in modes:
             stages.notice(f"--{name.replace('_', '-')} does nothing with --mode {settings.mode}")
+        elif maskless:
+            stages.notice(f"--{name.replace('_', '-')} does nothing without --mask (the plain warp)")
