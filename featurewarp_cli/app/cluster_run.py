@@ -294,6 +294,7 @@ class ClusterRun:
             except Stopped:
                 self._stop()
                 yield from self._arrived(jobs, sent, index)
+                yield from self._on_disk(jobs, clocks)
                 raise
             except _SchedulerLost:
                 yield from self._lost(jobs, clocks)
@@ -364,6 +365,16 @@ class ClusterRun:
                 if outcome is not None:
                     self.unfinished.discard(i)
                     yield (i, jobs[i], *_renamed(outcome, jobs[i], sent[i]))
+
+    def _on_disk(self, jobs: list, clocks: dict):
+        """After a signal: the files not reported but written since the run began, as ok (a
+        result cancelled on its way back, its file already in place; its warnings are lost)."""
+        from .batch import up_to_date
+
+        for i in sorted(self.unfinished):
+            if _written_since(jobs[i].output, clocks) and up_to_date(jobs[i]):
+                self.unfinished.discard(i)
+                yield (i, jobs[i], None, None, 0.0)
 
     def _lost(self, jobs: list, clocks: dict):
         """After the scheduler was lost: the files not finished, as failed, or as ok where the
