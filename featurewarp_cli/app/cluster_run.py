@@ -277,13 +277,13 @@ class ClusterRun:
     def _run(self, settings, jobs: list, sent: list):
         distributed = distributed_module()
         self.run_id = f"featurewarp-{os.getpid()}-{time.monotonic_ns()}"
-        clocks = _clocks(jobs)
-        self.futures = self.client.map(_reporting(cluster_job), [settings] * len(sent), sent,
-                                       [self.run_id] * len(sent), pure=False,
-                                       key=[f"{self.run_id}-job-{i}" for i in range(len(sent))])
-        index = {future.key: i for i, future in enumerate(self.futures)}
-        self.unfinished = set(range(len(jobs)))
-        with self.signals.installed():
+        with self.signals.installed():      # before the jobs go: a signal meanwhile stops them at the first wait
+            clocks = _clocks(jobs)
+            self.futures = self.client.map(_reporting(cluster_job), [settings] * len(sent), sent,
+                                           [self.run_id] * len(sent), pure=False,
+                                           key=[f"{self.run_id}-job-{i}" for i in range(len(sent))])
+            index = {future.key: i for i, future in enumerate(self.futures)}
+            self.unfinished = set(range(len(jobs)))
             try:
                 for future in self.signals.each(distributed.as_completed(self.futures, loop=self.client.loop)):
                     i = index[future.key]
