@@ -448,3 +448,11 @@ def test_a_refused_value_is_shown_as_given(tmp_path, args, shown):
     cv2.imwrite(str(tmp_path / "in.png"), np.zeros((40, 50, 3), np.uint8))
     run = CliRunner().invoke(cli, ["warp", args[0], str(tmp_path / "in.png"), str(tmp_path / "o.png"), *args[1:]])
     assert run.exit_code == 2 and shown in run.output, run.output
+
+
+def test_a_stretch_below_a_pixel_says_its_side_is_one_pixel():
+    """--sx 0.001 on a 256 px image gave a 1 px canvas in silence, the report keeping 0.001."""
+    warp = load_warp("stretch")(256, 100, sx=0.001)
+    assert warp.canvas == (1, 100)
+    assert warp.review(None) == ["--sx 0.001 makes the width 0.256 px: it is 1 px"]
+    assert load_warp("stretch")(256, 100, sx=0.5).review(None) == []

@@ -42,9 +42,17 @@ class Stretch(Warp):
         # Half-up rounding (Python's round() goes to even: 160.5 -> 160).
         out_w = width if width is not None else max(1, math.floor(self.width * sx + 0.5))
         out_h = height if height is not None else max(1, math.floor(self.height * sy + 0.5))
+        self.notes = [f"--{name} {number_text(factor)} makes the {side} {size * factor:.3g} px: it is 1 px"
+                      for name, factor, side, size, given in (("sx", sx, "width", self.width, width),
+                                                               ("sy", sy, "height", self.height, height))
+                      if given is None and size * factor < 0.5]
         self.canvas = (int(out_w), int(out_h))
         # Scale the pixel-edge extent exactly onto the canvas edge extent.
         self.scale = np.array([out_w / self.width, out_h / self.height])
+
+    def review(self, mesh, quick: bool = False) -> list[str]:
+        """The canvas sides a factor far below 1 px left at 1 px (the report keeps the factor asked for)."""
+        return list(self.notes)
 
     def forward(self, points):
         return (points + 0.5) * self.scale - 0.5
