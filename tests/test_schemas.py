@@ -46,6 +46,7 @@ def test_reports_validate(tmp_path, args):
     wrong["quality"]["background_rms_px"] = "a figure"
     with pytest.raises(jsonschema.ValidationError):
         jsonschema.validate(wrong, schema("report"))
+    assert bool(made["components"]["items"]) == (made["mode"] != "plain")     # plain: no component to check
     for item in wrong["components"]["items"][:1]:
         wrong["quality"] = made["quality"]
         item["anisotropy_worst"] = "a figure"
