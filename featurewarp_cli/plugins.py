@@ -351,6 +351,18 @@ def canvas_size(extent) -> tuple[int, int]:
     return width, height
 
 
+#: The largest canvas side a warp may ask for (a preset's fitted canvas, deform's).
+MAX_CANVAS_SIDE = 65535
+
+
+def check_canvas_side(size: tuple[int, int], name: str, hint: str = "") -> None:
+    """ValueError (``name: the result would be WxH pixels ...``) for a canvas over
+    :data:`MAX_CANVAS_SIDE` a side; ``hint``: what to do about it, after a semicolon."""
+    if max(size) > MAX_CANVAS_SIDE:
+        raise ValueError(f"{name}: the result would be {size[0]}x{size[1]} pixels (at most {MAX_CANVAS_SIDE} a side"
+                         f"{'; ' + hint if hint else ''})")
+
+
 #: A point or size parameter's parts: pixels and percentages within these (beyond, a warp's
 #: arithmetic overflows or its grid cannot follow it: ``--center 1e308,1e308``).
 PAIR_PIXEL_LIMIT = 1e5

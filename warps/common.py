@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 
-from featurewarp_cli.plugins import Param, Warp, canvas_size, centre
+from featurewarp_cli.plugins import Param, Warp, canvas_size, centre, check_canvas_side
 
 __all__ = ["BEND", "HDISTORT", "VDISTORT", "Style", "border", "bounds", "fit_canvas"]
 
@@ -63,8 +63,7 @@ def fit_canvas(warp: Warp, place) -> np.ndarray:
     """
     lo, hi = bounds(warp.width, warp.height, place)
     size = canvas_size(hi - lo)
-    if max(size) > 65535:
-        raise ValueError(f"{warp.name}: the result would be {size[0]}x{size[1]} pixels (at most 65535 a side)")
+    check_canvas_side(size, warp.name)
     warp.canvas = size
     warp.offset = (float(lo[0]), float(lo[1]))
     return lo + 0.5

@@ -202,13 +202,17 @@ def _clocks(jobs: list) -> dict:
     return clocks
 
 
-def _written_since(path: str, clocks: dict) -> bool:
-    """Whether the local output ``path`` was written since its folder's time in ``clocks``."""
-    started = clocks.get(os.path.dirname(path))
+def _in_place(job, clocks: dict) -> bool:
+    """Whether ``job``'s local output was written since its folder's time in ``clocks`` (the
+    run's start) and is up to date for its input."""
+    from .batch import up_to_date
+
+    started = clocks.get(os.path.dirname(job.output))
     try:
-        return started is not None and os.stat(path).st_mtime_ns >= started
+        written = started is not None and os.stat(job.output).st_mtime_ns >= started
     except OSError:
         return False
+    return written and up_to_date(job)
 
 
 class ClusterRun:
@@ -369,23 +373,19 @@ class ClusterRun:
     def _on_disk(self, jobs: list, clocks: dict):
         """After a signal: the files not reported but written since the run began, as ok (a
         result cancelled on its way back, its file already in place; its warnings are lost)."""
-        from .batch import up_to_date
-
         for i in sorted(self.unfinished):
-            if _written_since(jobs[i].output, clocks) and up_to_date(jobs[i]):
+            if _in_place(jobs[i], clocks):
                 self.unfinished.discard(i)
                 yield (i, jobs[i], None, None, 0.0)
 
     def _lost(self, jobs: list, clocks: dict):
         """After the scheduler was lost: the files not finished, as failed, or as ok where the
         output was written since the run began (its warnings are lost with the scheduler)."""
-        from .batch import up_to_date
-
         self.lost = 0
         time.sleep(LOST_GRACE)                        # a write begun before the loss is finished
         for i in sorted(self.unfinished):
             job, written = jobs[i], None
-            if _written_since(job.output, clocks) and up_to_date(job):
+            if _in_place(job, clocks):
                 written = (None, None, 0.0)
             else:
                 self.lost += 1

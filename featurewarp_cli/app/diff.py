@@ -109,12 +109,9 @@ def compare(a: np.ndarray, b: np.ndarray, tolerance: float = 0.0) -> Comparison:
 def failures(c: Comparison, max_rmse=None, min_psnr=None, max_pixels_off=None) -> list[str]:
     """The tolerances ``c`` breaks, one text each; empty when within tolerance.
 
-    With no limit given the images must match within ``c.tolerance`` everywhere
-    (``max_pixels_off`` = 0).
+    With no limit given the images must match within ``c.tolerance`` everywhere.
     """
     exact = max_rmse is None and min_psnr is None and max_pixels_off is None
-    if exact:
-        max_pixels_off = 0
     broken = []
     if max_rmse is not None and c.rmse > max_rmse:
         broken.append(f"rmse {c.rmse:.6g} > {max_rmse:g} (--max-rmse)")

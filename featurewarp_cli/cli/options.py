@@ -115,17 +115,9 @@ STRICT = ("a feature not kept (relaxed to avoid fold-overs or moved towards the 
           "moved towards it, streaks, blank canvas or an outline beyond the plain warp's, an output that "
           "equals the input (the mask covers what the warp moves), a grid more than 0.5 px from the warp, "
           "a mask that marks nothing (a plain warp), an input of several frames of which the first is used")
-#: The presets' default border conditions, for a command that does not name its preset.
-BOUNDARY_DEFAULTS = ("slide for stretch, arc, swirl, bulge and perspective (so fixed wherever they keep no "
-                     "side straight and axis-parallel: swirl, bulge, arc); fixed for arch, flag, fish, rise, "
-                     "inflate, squeeze, shell, cylinder and sphere")
-
-
-def boundary_option(preset=None) -> click.Option:
+def boundary_option(preset) -> click.Option:
     """``--boundary``; its default is ``preset``'s own (``Warp.boundary``), resolved by the engine."""
-    own = getattr(preset, "boundary", "slide")
-    default = (f"[default for {preset.name}: {own}]" if preset is not None else
-               f"Default: the preset's own: {BOUNDARY_DEFAULTS}.")
+    default = f"[default for {preset.name}: {getattr(preset, 'boundary', 'slide')}]"
     return click.Option(
         ["--boundary"], type=click.Choice(defaults.BOUNDARIES),
         help="fixed: border nodes stay where the warp puts them (the paper). slide: on a side the warp maps "
@@ -151,7 +143,7 @@ def engine_options(preset=None, strict_also: str = "") -> list[click.Option]:
                      show_default=True,
                      help="exact: each feature moves as one similarity, held exactly; paper: the "
                           "paper's soft per-quad targets (w_F-weighted), for comparison."),
-        boundary_option(preset),
+        *([boundary_option(preset)] if preset is not None else []),     # only a preset's command has it
         param_option(defaults.SCALE_PRIOR_PARAM),
         click.Option(["--grow-past-edge"], is_flag=True,
                      help="Similarity mode: where the background would streak (stretched over "
@@ -239,6 +231,6 @@ def _note_unused(settings) -> None:
         if source(name) != click.core.ParameterSource.COMMANDLINE:
             continue
         if settings.mode in modes:
-            stages.notice(f"--{name.replace('_', '-')} does nothing with --mode {settings.mode}")
+            stages.notice(f"{option_flag(name)} does nothing with --mode {settings.mode}")
         elif maskless:
-            stages.notice(f"--{name.replace('_', '-')} does nothing without --mask (the plain warp)")
+            stages.notice(f"{option_flag(name)} does nothing without --mask (the plain warp)")

@@ -398,7 +398,7 @@ def animate_command(preset) -> click.Command:
             given = click.get_current_context().get_parameter_source
             for name in ranges:
                 if given(name) == click.core.ParameterSource.COMMANDLINE:    # one value or a range, not both
-                    flag = next(f"--{p.cli_name}" for p in preset.params if p.name == name)
+                    flag = plugins.option_flag(name)
                     raise WarpError(f"{flag} is given and varied (--vary): give one", "--vary", usage=True)
             with progress_bar(frames, "frames", quiet) as bar:
                 summary = animate_file(settings, input, output, mask, ranges, frames, fps, bar.update)

@@ -35,7 +35,7 @@ from .grid import Grid, grid_for, grid_shape, signed_areas
 from .injectivity import border_crossings
 from .handles import Handles, default_radius, resample
 from .mesh import Mesh
-from ..plugins import canvas_size
+from ..plugins import canvas_size, check_canvas_side
 from .warper import FeatureWarper
 
 #: A point handle may end this far from its target (px, or this share of the image's diagonal
@@ -102,9 +102,7 @@ class HandleWarp:
             lo, hi = nodes.min(axis=0), nodes.max(axis=0)
             self.canvas = canvas_size(hi - lo)
             self.offset = (float(lo[0] + 0.5), float(lo[1] + 0.5))
-            if max(self.canvas) > 65535:                 # as the presets' (warps.common.fit_canvas)
-                raise ValueError(f"deform: the result would be {self.canvas[0]}x{self.canvas[1]} pixels (at most "
-                                 f"65535 a side; the canvas 'input' keeps the input's size)")
+            check_canvas_side(self.canvas, "deform", "the canvas 'input' keeps the input's size")
         self.nodes = nodes - np.asarray(self.offset)
         self._embeddings = {} if embeddings is None else embeddings
         self.notes = []
@@ -261,9 +259,7 @@ class RigidMap:
             warp.notes.append(f"the handles ask for a fold; they are held as far as the image can follow "
                               f"without one (up to {held:.0f} px from their targets)")
         if handles.border == "pinned":
-            edge = np.zeros((self.grid.ny, self.grid.nx), bool)
-            edge[[0, -1], :] = edge[:, [0, -1]] = True
-            moved = float(np.hypot(*(nodes - self.grid.nodes())[edge.ravel()].T).max())
+            moved = float(np.hypot(*(nodes - self.grid.nodes())[self.grid.boundary()].T).max())
             if moved > handle_slack(self.width, self.height):
                 warp.notes.append(f"the pinned border gives way by up to {moved:.0f} px where the handles pull "
                                   f"it past itself (it holds only as hard as a handle)")

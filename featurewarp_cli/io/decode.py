@@ -460,16 +460,21 @@ def brightest_gray(image: np.ndarray) -> tuple[int, bool]:
     """(the brightest gray of a mask image, composited over black as :func:`mask_from_image`
     reads it, rounded down on the 0..255 scale; whether its colour channels differ anywhere):
     what that compares with 128, for a message about a mask that marks nothing."""
-    top = np.iinfo(image.dtype).max
     colour = image[:, :, :3] if image.ndim == 3 and image.shape[2] >= 3 else None
-    if colour is not None:
-        gray = cv2.cvtColor(colour, cv2.COLOR_BGR2GRAY).astype(np.float64)
-    else:
-        gray = (image if image.ndim == 2 else image[:, :, 0]).astype(np.float64)
-    if image.ndim == 3 and image.shape[2] in (2, 4):
-        gray = gray * image[:, :, -1] / top
     tinted = colour is not None and bool(np.any(colour != colour[:, :, :1]))
-    return int(np.floor(gray.max(initial=0) * 255 / top)), tinted
+    return int(np.floor(float(_mask_gray(image).max(initial=0)) * 255 / np.iinfo(image.dtype).max)), tinted
+
+
+def _mask_gray(image: np.ndarray) -> np.ndarray:
+    """A mask image's gray composited over black: its luma (its one channel for gray), times
+    its alpha where it has four channels."""
+    if image.ndim == 2:
+        return image
+    colour = image[:, :, :3] if image.shape[2] >= 3 else image[:, :, :1]
+    gray = cv2.cvtColor(colour, cv2.COLOR_BGR2GRAY) if colour.shape[2] == 3 else colour[:, :, 0]
+    if image.shape[2] == 4:
+        gray = gray.astype(np.float64) * image[:, :, 3] / np.iinfo(image.dtype).max
+    return gray
 
 
 def mask_from_image(image: np.ndarray) -> np.ndarray:
@@ -486,10 +491,7 @@ def mask_from_image(image: np.ndarray) -> np.ndarray:
             return image == 1
         return image >= threshold
     colour = image[:, :, :3] if image.shape[2] >= 3 else image[:, :, :1]
-    gray = cv2.cvtColor(colour, cv2.COLOR_BGR2GRAY) if colour.shape[2] == 3 else colour[:, :, 0]
-    if image.shape[2] == 4:
-        gray = gray.astype(np.float64) * image[:, :, 3] / top
     if colour.size and colour.max() == 1:                  # a 0/1 mask saved with colour channels
         marked = colour.max(axis=2) == 1
         return marked & (image[:, :, 3] > 0) if image.shape[2] == 4 else marked
-    return gray >= threshold
+    return _mask_gray(image) >= threshold

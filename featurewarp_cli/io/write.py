@@ -286,22 +286,26 @@ def _commit_one(output: Staged) -> None:
             _write_all(output.descriptor, output.data)
         except OSError as err:
             raise OSError(err.errno, err.strerror, output.path) from None
-    elif output.fd is not None:
+    else:
+        try:
+            _put_in_place(output)
+        except OSError as err:                  # named as the output, not as the hidden staging file
+            raise OSError(err.errno, err.strerror, output.path) from None
+
+
+def _put_in_place(output: Staged) -> None:
+    """Rename a staged file output (an unnamed file linked first, or a named temporary) onto its target."""
+    if output.fd is not None:
         temp = os.path.join(os.path.dirname(output.target), f"{TEMP_PREFIX}{os.getpid()}-{id(output)}.tmp")
         _PENDING.add(temp)
         try:
             _link_unnamed(output.fd, temp)
             os.replace(temp, output.target)
-        except OSError as err:                  # named as the output, not as the hidden staging file
-            raise OSError(err.errno, err.strerror, output.path) from None
         finally:
             remove_quietly(temp)
             _PENDING.discard(temp)
     else:
-        try:
-            os.replace(output.temp, output.target)
-        except OSError as err:
-            raise OSError(err.errno, err.strerror, output.path) from None
+        os.replace(output.temp, output.target)
         _PENDING.discard(output.temp)
         output.temp = None
 

@@ -374,7 +374,7 @@ def premultiply(image: np.ndarray) -> tuple[np.ndarray, bool]:
     Parameters
     ----------
     image : (h, w) or (h, w, C) ndarray, uint8 or uint16
-        Gray + alpha (C = 2) and BGRA (C = 4) are premultiplied unless wholly opaque.
+        BGRA (C = 4) is premultiplied unless wholly opaque (:func:`render` gives gray + alpha as BGRA).
 
     Returns
     -------
@@ -384,13 +384,12 @@ def premultiply(image: np.ndarray) -> tuple[np.ndarray, bool]:
     done : bool
         Whether it was premultiplied.
     """
-    if image.ndim != 3 or image.shape[2] not in (2, 4) or _opaque(image):
+    if image.ndim != 3 or image.shape[2] != 4 or _opaque(image):
         return image, False
     wide = image.astype(np.uint16) * np.uint16(257) if image.dtype == np.uint8 else image.copy()
     alpha = np.ascontiguousarray(wide[:, :, -1])
-    colours = image.shape[2] - 1
-    colour = cv2.multiply(np.ascontiguousarray(wide[:, :, :-1]), cv2.merge([alpha] * colours), scale=1 / 65535)
-    return np.concatenate([colour.reshape(alpha.shape + (colours,)), alpha[:, :, None]], axis=2), True
+    colour = cv2.multiply(np.ascontiguousarray(wide[:, :, :3]), cv2.merge([alpha] * 3), scale=1 / 65535)
+    return np.concatenate([colour, alpha[:, :, None]], axis=2), True
 
 
 def straighten(flat: np.ndarray) -> None:
