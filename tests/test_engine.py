@@ -367,6 +367,41 @@ def test_a_speck_in_the_outer_cells_is_kept_whole():
     assert same is mask and again is pooled and features.analyse(mask, grid).n_components == 1
 
 
+@pytest.mark.parametrize("seed", range(4))
+def test_the_distance_to_features_is_the_exact_transform_within_reach(seed):
+    """features.feature_distance: bit for bit the exact Euclidean distance transform (OpenCV's,
+    its squares rounded to the whole numbers they are) wherever it is within reach, and
+    beyond reach elsewhere; on both of its paths (bounded pass, whole transform), with
+    sub-pixel cells repeating rows and columns."""
+    import cv2
+
+    from featurewarp_cli.engine.features import feature_distance
+
+    rng = np.random.default_rng(seed)
+    paths = set()
+    for _ in range(60):
+        h, w = (int(v) for v in rng.integers(1, 120, 2))
+        mask = np.zeros((h, w), np.uint8)
+        for _ in range(int(rng.integers(1, 5))):
+            cv2.circle(mask, (int(rng.integers(0, w)), int(rng.integers(0, h))), int(rng.integers(0, 15)), 1, -1)
+        mask = (mask > 0) | (rng.random((h, w)) < 0.005)
+        if not mask.any():
+            continue
+        spacing, rho = rng.uniform(0.3, 9.0), float(rng.choice([0.5, 2.0, 40.0]))
+        rows = np.clip(np.round((np.arange(math.ceil(h / spacing)) + 0.5) * spacing - 0.5).astype(int), 0, h - 1)
+        cols = np.clip(np.round((np.arange(math.ceil(w / spacing)) + 0.5) * spacing - 0.5).astype(int), 0, w - 1)
+        reach = math.ceil(rho * spacing)
+        paths.add((2 * min(reach, h + w) + 1) * rows.size * cols.size > mask.size)
+        exact = cv2.distanceTransform((~mask).view(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+        exact = exact[np.ix_(rows, cols)].astype(np.float64)
+        exact = np.sqrt(np.rint(exact * exact)).astype(np.float32)
+        found = feature_distance(mask, rows, cols, reach)
+        within = exact <= reach
+        assert found.dtype == np.float32 and np.array_equal(found[within], exact[within])
+        assert np.all(found[~within] > reach)
+    assert paths == {False, True}
+
+
 def test_a_lasso_joined_only_in_the_outer_cells_stays_one_feature():
     """An arch whose legs meet 2 px under the top edge would fall apart without its outer cells:
     it keeps them (one feature, as the mask draws it)."""
