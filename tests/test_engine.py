@@ -428,3 +428,19 @@ def test_rigid_mode_keeps_a_feature_cut_by_a_border_the_warp_leaves_in_place():
         assert feature.tied and feature.kept and feature.anisotropy_worst < 1e-9, mode
         assert abs(feature.rotation_deg) < 1e-6 and abs(feature.scale - 1.0) < 1e-9
         assert mesh.record.warnings == [] and mesh.flips() == 0
+
+
+def test_a_warper_keeps_its_own_copy_of_the_mask():
+    """The mask's analysis is kept per grid: a caller that reuses its mask buffer after making a
+    warper (painting, np.copyto) must not leave the warper seeing features for one preset and
+    none for another (API trial 1)."""
+    from featurewarp_cli.engine.warper import FeatureWarper, load_warp
+
+    mask = np.zeros((60, 80), bool)
+    mask[20:40, 30:50] = True
+    warper = FeatureWarper(80, 60, mask)
+    first = warper.solve(load_warp("swirl")(80, 60, angle=90))
+    mask[:] = False
+    again = warper.solve(load_warp("stretch")(80, 60, sx=2))
+    assert warper.mask is not mask and warper.mask.any()
+    assert len(first.record.components) == len(again.record.components) == 1

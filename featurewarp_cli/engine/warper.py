@@ -175,14 +175,14 @@ class FeatureWarper:
                 raise ValueError(f"--cell {cell:g} makes a grid of {nodes} nodes, above the {max_nodes} that the "
                                  f"memory limit allows (a larger --cell, or a larger --max-memory)")
         self.width, self.height = int(width), int(height)
-        self.mask = np.zeros((height, width), bool) if mask is None else arrays.mask_array(mask, (height, width))
+        # A copy: the mask's analysis is kept per grid, so the caller's array must not change it.
+        self.mask = np.zeros((height, width), bool) if mask is None else arrays.mask_array(mask, (height, width)).copy()
         self.notes = []
         if min(width, height) < MIN_FEATURE_SIDE and self.mask.any():
             self.notes.append(f"the image is {width}x{height}: too thin for a feature to keep a shape "
                               f"(under {MIN_FEATURE_SIDE} px); the mask is ignored")
             self.mask = np.zeros((height, width), bool)
-        self.feature_weight = float(feature_weight)
-        self.decay = float(decay)
+        self.feature_weight, self.decay = float(feature_weight), float(decay)
         self.formulation = formulation
         self.injective = injective
         self.boundary = boundary
