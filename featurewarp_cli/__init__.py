@@ -18,6 +18,8 @@ load on first use):
 >>> from featurewarp_cli import Deformer, Handles       # the interactive mode (handles)
 """
 
+from typing import TYPE_CHECKING
+
 __version__ = "0.1.0"
 
 __all__ = ["warp", "FeatureWarper", "Mesh", "load_warp", "Deformer", "Handles", "FeatureWarpWarning", "__version__"]
@@ -26,6 +28,18 @@ __all__ = ["warp", "FeatureWarper", "Mesh", "load_warp", "Deformer", "Handles", 
 class FeatureWarpWarning(UserWarning):
     """What :func:`warp` could not do (a feature not kept, an output equal to its input), one
     warning per line of the solve's record."""
+
+
+if TYPE_CHECKING:        # what type checkers see; at run time the names load on first use (__getattr__)
+    from .engine.api import warp
+    from .engine.deform import Deformer, Handles
+    from .engine.mesh import Mesh
+    from .engine.warper import FeatureWarper, load_warp
+
+
+def __dir__():
+    """The module's names with the lazily loaded ones (tab completion, ``help``)."""
+    return sorted(set(globals()) | set(__all__))
 
 
 def __getattr__(name):

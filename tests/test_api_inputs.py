@@ -1,0 +1,229 @@
+"""What the Python API takes and says (trial s28): images, masks, options, presets, warnings."""
+
+from __future__ import annotations
+
+import ast
+import re
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import featurewarp_cli
+from featurewarp_cli import FeatureWarpWarning, warp
+from featurewarp_cli.engine import api, arrays
+from featurewarp_cli.plugins import ParamError, Warp
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def picture(h=24, w=32, channels=3):
+    rng = np.random.default_rng(1)
+    return rng.integers(0, 256, (h, w, channels) if channels else (h, w), dtype=np.uint8)
+
+
+def box(h=24, w=32):
+    mask = np.zeros((h, w), bool)
+    mask[8:16, 10:20] = True
+    return mask
+
+
+def quiet(*args, **kwargs):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return warp(*args, **kwargs)
+
+
+class NoSolve(Exception):
+    pass
+
+
+@pytest.fixture
+def no_solve(monkeypatch):
+    """Fails the test's warp() if it gets as far as building a FeatureWarper."""
+    def refuse(*args, **kwargs):
+        raise NoSolve
+    monkeypatch.setattr(api, "FeatureWarper", refuse)
+
+
+BAD_IMAGES = [
+    (lambda: picture().ravel(), ValueError, r"not shape \(2304,\)"),
+    (lambda: picture()[None], ValueError, r"\(1, 24, 32, 3\) \(one image at a time"),
+    (lambda: picture().astype(np.float32), ValueError, r"float image must hold values in \[0, 1\].*0\.0\.\.25\d"),
+    (lambda: picture()[:0], ValueError, "no pixels"),
+    (lambda: "in.png", TypeError, "not a path"),
+    (lambda: picture().astype(complex), ValueError, "dtype complex128 is not supported"),
+]
+
+
+@pytest.mark.parametrize("make,kind,message", BAD_IMAGES)
+def test_a_bad_image_is_named_before_the_solve(no_solve, make, kind, message):
+    with pytest.raises(kind, match=message):
+        warp(make(), None, "swirl")
+
+
+def test_a_bad_background_or_mask_is_named_before_the_solve(no_solve):
+    with pytest.raises(ValueError, match=r"background must be .* not \(300, 0, 0\)"):
+        warp(picture(), None, "swirl", background=(300, 0, 0))
+    with pytest.raises(ValueError, match=r"mask must be \(h, w\).*not shape \(24, 32, 5\)"):
+        warp(picture(), np.zeros((24, 32, 5), bool), "swirl")
+    with pytest.raises(ValueError, match="mask is 32x20, image is 32x24"):
+        warp(picture(), np.zeros((20, 32), bool), "swirl")
+    with pytest.raises(ValueError, match="3 channels must be uint8 or uint16.*not float32"):
+        warp(picture(), np.zeros((24, 32, 3), np.float32), "swirl")
+    with pytest.raises(ValueError, match="mask: cannot read"):
+        warp(picture(), "no/such/mask.png", "swirl")
+
+
+def test_lists_and_pil_images_are_arrays():
+    from PIL import Image
+
+    image = picture()
+    expected = quiet(image, box(), "swirl", angle=60)
+    np.testing.assert_array_equal(quiet(image.tolist(), box(), "swirl", angle=60), expected)
+    np.testing.assert_array_equal(quiet(Image.fromarray(image), box(), "swirl", angle=60), expected)
+
+
+def test_integer_images_of_eight_bit_data_keep_the_eight_bit_scale():
+    """An int32 image of 0..255 data came back with alpha and white at 65535 and cubic overshoot past 255."""
+    image, mask = picture(), box()
+    for kind in (np.int16, np.int32, np.int64):
+        for preset, options in (("swirl", {"angle": 120}), ("arc", {"angle": 90}), ("arc", {"background": "white"})):
+            got = quiet(image.astype(kind), mask, preset, **options)
+            assert got.dtype == kind
+            np.testing.assert_array_equal(got, quiet(image, mask, preset, **options).astype(kind))
+    wide = image.astype(np.int32) * 200                 # beyond 255: the 16-bit scale
+    np.testing.assert_array_equal(quiet(wide, mask, "arc", angle=90),
+                                  quiet(wide.astype(np.uint16), mask, "arc", angle=90).astype(np.int32))
+
+
+def test_a_grey_image_keeps_its_channel_axis_and_takes_a_grey_background():
+    grey = picture(channels=1)
+    flat = quiet(grey[..., 0], box(), "arc", angle=90)
+    kept = quiet(grey, box(), "arc", angle=90)
+    assert flat.ndim == 3 and flat.shape[2] == 2 and kept.shape == flat.shape      # gained alpha: (grey, alpha)
+    filled = quiet(grey, box(), "arc", angle=90, background=128)
+    assert filled.ndim == 3 and filled.shape[2] == 1 and filled[0, 0, 0] == 128
+    np.testing.assert_array_equal(filled[..., 0], quiet(grey[..., 0], box(), "arc", angle=90, background=128))
+    assert tuple(quiet(picture(), box(), "arc", angle=90, background=128)[0, 0]) == (128, 128, 128)
+    with pytest.raises(ValueError, match="not 256"):
+        arrays.background_rgb(256)
+
+
+def test_masks_with_channels_and_paths_follow_the_command_lines_rule(tmp_path):
+    """A (h, w, 1) mask, an RGB(A) mask and a path were refused ('mask is 128x128, image is 128x128')."""
+    import cv2
+
+    from featurewarp_cli.io.decode import mask_from_image
+
+    mask = box()
+    grey = mask.astype(np.uint8) * 200
+    np.testing.assert_array_equal(arrays.mask_array(mask[..., None], mask.shape), mask)
+    np.testing.assert_array_equal(arrays.mask_array(np.dstack([grey] * 3), mask.shape), mask)
+    red = np.zeros((24, 32, 3), np.uint8)
+    red[..., 0] = grey                                  # pure red reads as its gray, 59: nothing
+    assert not arrays.mask_array(red, mask.shape).any()
+    blue_bgr = red.copy()                               # the same colours as OpenCV's BGR, as a file holds them
+    np.testing.assert_array_equal(arrays.mask_array(red, mask.shape), mask_from_image(blue_bgr[..., ::-1]))
+    rgba = np.dstack([np.full((24, 32, 3), 255, np.uint8), grey])      # white, transparent outside the box
+    np.testing.assert_array_equal(arrays.mask_array(rgba, mask.shape), mask)
+    np.testing.assert_array_equal(arrays.mask_array(np.dstack([grey, grey]), mask.shape), mask)
+    cv2.imwrite(str(tmp_path / "m.png"), grey)
+    np.testing.assert_array_equal(arrays.mask_array(tmp_path / "m.png", mask.shape), mask)
+    np.testing.assert_array_equal(quiet(picture(), str(tmp_path / "m.png"), "swirl", angle=90),
+                                  quiet(picture(), mask, "swirl", angle=90))
+
+
+def test_a_thin_image_is_told_as_thin_not_as_an_empty_mask():
+    """A valid mask on a 3 px image was said to mark no feature, and strict raised that."""
+    image = np.zeros((3, 40, 3), np.uint8)
+    mask = np.zeros((3, 40), bool)
+    mask[1, 10:20] = True
+    with pytest.warns(FeatureWarpWarning) as caught:
+        warp(image, mask, "stretch", sx=2)
+    assert [str(w.message) for w in caught] == [
+        "the image is 40x3: too thin for a feature to keep a shape (under 4 px); the mask is ignored"]
+    with pytest.raises(FeatureWarpWarning, match="too thin"):
+        warp(image, mask, "stretch", sx=2, strict=True)
+    with pytest.warns(FeatureWarpWarning, match="marks no feature"):
+        warp(picture(), np.zeros((24, 32), bool), "swirl", angle=90)
+
+
+def test_options_are_checked_and_named_as_the_api_names_them(no_solve):
+    """strict='no' was true, max_nodes was blamed on the preset, warp()'s own options raised plain ValueErrors."""
+    for options, names, message in (
+            ({"strict": "no"}, ("strict",), "must be True or False, not 'no'"),
+            ({"interp": "bicubic"}, ("interp",), "must be one of nearest"),
+            ({"mode": "affine"}, ("mode",), "must be one of similarity"),
+            ({"max_nodes": 10}, ("max_nodes",), r"neither warp\(\) nor swirl takes it.*'max_memory'.*warp\(\) "
+                                                 r"takes mode, .*return_mesh; swirl takes angle"),
+            ({"max_memory": "lots"}, ("max_memory",), "'lots' is not a size"),
+            ({"max_memory": 100}, ("max_memory",), r"above the memory limit of 100 bytes \(max_memory\)")):
+        with pytest.raises(ParamError, match=message) as err:
+            warp(picture(), None, "swirl", **options)
+        assert err.value.names == names and "--" not in str(err.value)
+
+
+def test_warpers_own_errors_are_param_errors_in_api_terms():
+    with pytest.raises(ParamError, match=r"^cell: 1 makes a grid of 825 nodes, above the \d+ that the memory "
+                                         r"limit allows \(a larger cell, or a larger max_memory\)$"):
+        warp(picture(), None, "swirl", cell=1, max_memory="300K")
+    with pytest.raises(ParamError, match="^boundary: must be one of"):
+        warp(picture(), None, "swirl", boundary="loose")
+    from featurewarp_cli.engine.fidelity import GridBudgetError
+
+    with pytest.raises(GridBudgetError, match=r"above the \d+ that the memory limit allows \(a larger max_memory"):
+        warp(picture(), None, "swirl", angle=500, max_memory="300K")
+    quiet(picture(), None, "swirl", angle=30, max_memory="300K")        # a grid it holds
+
+
+def test_return_mesh_gives_the_record_whose_lines_were_warned():
+    with pytest.warns(FeatureWarpWarning) as caught:
+        out, mesh = warp(picture(), np.zeros((24, 32), bool), "stretch", sx=0.01, return_mesh=True)
+    assert out.shape[1] == 1 and [str(w.message) for w in caught] == mesh.record.warnings
+    assert mesh.record.warnings[0].startswith("the mask marks no feature")
+    assert "sx 0.01 makes the width 0.32 px: it is 1 px" in mesh.record.warnings   # stretch's review, API-named
+    assert not any("--" in line for line in mesh.record.warnings)
+
+
+class Fold(Warp):
+    """Folds the image about its middle column."""
+
+    name = "fold"
+
+    def forward(self, points):
+        out = points.copy()
+        out[:, 0] = np.abs(points[:, 0] - self.width / 2) + self.width / 2
+        return out
+
+
+def test_a_preset_class_or_instance_is_taken_and_folds_are_said():
+    """A Warp class failed inside difflib; a folded result came back without a word."""
+    with pytest.warns(FeatureWarpWarning) as caught:
+        warp(picture(), None, Fold, cell=8)
+    lines = [str(w.message) for w in caught]
+    assert re.match(r"the result has \d+ folded triangles", lines[0])
+    assert any("a finer cell" in line for line in lines) and not any("--" in line for line in lines)
+    with pytest.raises(FeatureWarpWarning, match="folded triangles"):
+        warp(picture(), None, Fold(32, 24), cell=8, strict=True)
+    with pytest.raises(ValueError, match="made for 16x16, the image is 32x24"):
+        warp(picture(), None, Fold(16, 16))
+    with pytest.raises(ParamError, match="instance"):
+        warp(picture(), None, Fold(32, 24), angle=3)
+    with pytest.raises(TypeError, match="preset must be a preset's name.*not 5"):
+        warp(picture(), None, 5)
+
+
+def test_type_checkers_and_dir_see_the_public_names():
+    """Every name was Any to type checkers and dir() did not list warp, FeatureWarper, ..."""
+    assert set(featurewarp_cli.__all__) <= set(dir(featurewarp_cli))
+    tree = ast.parse((ROOT / "featurewarp_cli" / "__init__.py").read_text())
+    block = next(node for node in tree.body if isinstance(node, ast.If) and getattr(node.test, "id", "") == "TYPE_CHECKING")
+    typed = {alias.name for node in block.body for alias in node.names}
+    defined = {node.name for node in tree.body if isinstance(node, ast.ClassDef)} | {"__version__"}
+    assert typed == set(featurewarp_cli.__all__) - defined
+    for name in typed:
+        assert getattr(featurewarp_cli, name) is not None
+
+
