@@ -227,3 +227,9 @@ def test_type_checkers_and_dir_see_the_public_names():
         assert getattr(featurewarp_cli, name) is not None
 
 
+
+def test_the_readme_api_example_closes_its_file():
+    text = (ROOT / "README.md").read_text()
+    section = text[text.index("\n## Python API"):text.index("\n## ", text.index("\n## Python API") + 1)]
+    assert not re.search(r"^(?!\s*with ).*(?<![.\w])open\(", section, re.M)
+    assert "OPENBLAS_NUM_THREADS" in section
