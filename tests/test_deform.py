@@ -575,3 +575,32 @@ def test_a_cell_coarser_than_the_handles_grid_is_reported_as_the_one_used(tmp_pa
                                    "--move", "60,40:66,44", "--cell", "1.3", "--report", str(tmp_path / "r.json")])
     grid = json.loads((tmp_path / "r.json").read_text())["grid"]       # a finer one: the refinement's
     assert run.exit_code == 0 and grid["cell"] == max(grid["spacing"])
+
+
+def test_pins_and_handles_land_where_dragged_in_the_feature_aware_mode(tmp_path):
+    """The feature-aware solve follows the rigid map only as closely as least squares beside the
+    features lets it: a pin beside the flag moved 43 px and nothing was said (deform trial,
+    finding 1). The point handles are re-aimed until they land (HandleWarp.land), through the
+    command line and through a Deformer alike; the editor's previews are not."""
+    from click.testing import CliRunner
+
+    from featurewarp_cli.cli.main import cli
+
+    pins_and_move = ["--pin", "60,470", "--pin", "100,100", "--move", "416,164:700,164", "--canvas", "input"]
+    report = tmp_path / "r.json"
+    run = CliRunner().invoke(cli, ["deform", "samples/astronaut.png", str(tmp_path / "o.png"), "-m",
+                                   "samples/astronaut_mask.png", *pins_and_move, "--report", str(report)])
+    assert run.exit_code == 0, run.output
+    measured = json.loads(report.read_text())
+    assert measured["params"]["handle_error_px"]["max"] < 0.5 and measured["warnings"] == []
+    mask = cv2.imread("samples/astronaut_mask.png", cv2.IMREAD_GRAYSCALE) >= 128
+    data = {"version": 1, "canvas": "input", "points": [{"from": [60, 470], "to": [60, 470]},
+                                                        {"from": [100, 100], "to": [100, 100]},
+                                                        {"from": [416, 164], "to": [700, 164]}]}
+    deformer = Deformer(512, 512, mask)
+    mesh = deformer.solve(data)
+    ends = deformer.warp.ends(mesh)
+    assert np.hypot(*(ends - deformer.handles.points_to).T).max() < 0.5
+    preview = Deformer(512, 512, mask, quick=True)
+    moved = preview.solve(data)
+    assert np.hypot(*(preview.warp.ends(moved) - preview.handles.points_to).T).max() > 5.0

@@ -374,6 +374,7 @@ def solve_within_budget(warper, warp, mode: str):
 
     try:
         mesh = warper.solve(warp, mode)
+        mesh = warp.land(mesh, lambda aimed: warper.solve(aimed, mode)) if hasattr(warp, "land") else mesh
     except GridBudgetError as err:
         raise WarpError(str(err)) from None
     if getattr(warp, "review", None) is not None:
