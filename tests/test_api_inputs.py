@@ -233,3 +233,20 @@ def test_the_readme_api_example_closes_its_file():
     section = text[text.index("\n## Python API"):text.index("\n## ", text.index("\n## Python API") + 1)]
     assert not re.search(r"^(?!\s*with ).*(?<![.\w])open\(", section, re.M)
     assert "OPENBLAS_NUM_THREADS" in section
+
+
+def test_a_warper_renders_lists_and_keeps_a_channel_axis_and_reads_mask_paths(tmp_path):
+    """FeatureWarper itself takes what warp() takes: a mask path (it said "mask is , image is
+    50x40"), a list image, and an (h, w, 1) image keeps its channel axis (API trial)."""
+    import cv2
+
+    from featurewarp_cli import FeatureWarper, load_warp
+
+    mask = np.zeros((40, 50), np.uint8)
+    mask[10:20, 10:20] = 255
+    cv2.imwrite(str(tmp_path / "m.png"), mask)
+    warper = FeatureWarper(50, 40, str(tmp_path / "m.png"))
+    assert warper.mask.sum() == 100
+    mesh = warper.solve(load_warp("swirl")(50, 40))
+    image = np.zeros((40, 50, 1), np.uint8)
+    assert warper.render(image, mesh).shape == warper.render(image.tolist(), mesh).shape == (40, 50, 1)

@@ -157,8 +157,6 @@ class FeatureWarper:
                  scale_prior: float = SCALE_PRIOR, max_nodes: int | None = None, grow_past_edge: bool = False):
         if boundary not in (None,) + BOUNDARIES:
             raise ValueError(f"boundary must be one of {', '.join(BOUNDARIES)}, not {boundary!r}")
-        if mask is not None and np.shape(mask)[:2] != (height, width):     # a list too
-            raise ValueError(f"mask is {'x'.join(map(str, np.shape(mask)[1::-1]))}, image is {width}x{height}")
         for param, value in ((FEATURE_WEIGHT_PARAM, feature_weight), (DECAY_PARAM, decay),
                              (SCALE_PRIOR_PARAM, scale_prior)):
             try:
@@ -465,6 +463,7 @@ class FeatureWarper:
         """
         from ..render import raster
 
+        image = arrays.as_array(image, "image") if order == "rgb" else image       # a list, a PIL image
         if image.shape[:2] != (self.height, self.width):
             raise ValueError(f"image is {image.shape[1]}x{image.shape[0]}, warper is for {self.width}x{self.height}")
         stages.enter("render")
@@ -478,7 +477,7 @@ class FeatureWarper:
                             antialias=antialias and interp != "nearest")       # nearest: source values only
         if mesh.record is not None:
             mesh.record.timings["render"] = time.perf_counter() - t0
-        return arrays.finish(out, channels, dtype) if order == "rgb" else out
+        return arrays.finish(out, channels, dtype, image.ndim == 3) if order == "rgb" else out
 
 
 def _border_used(asked: str | None, boundary: str, state: _GridState) -> str:
