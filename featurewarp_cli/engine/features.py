@@ -201,5 +201,5 @@ def short_of_frame(mask: np.ndarray, grid: Grid, pooled: np.ndarray) -> tuple[np
     drop &= ~(np.bincount(pairs[0], minlength=n + 1) > 1)[quads]   # one that would split keeps them
     if not drop.any():
         return mask, pooled
-    out = mask & ~drop[rows][:, cols]
-    return out, _pooled(out, grid)
+    # Every pixel of a dropped quad goes, and no other: pooling again would give pooled & ~drop.
+    return mask & ~drop[rows][:, cols], pooled & ~drop.view(np.uint8)
