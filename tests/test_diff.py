@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 import math
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -74,8 +76,7 @@ def test_sixteen_bit_is_normalised(runner, tmp_path):
 
 @pytest.mark.parametrize("other, reason", [
     (np.zeros((36, 47, 3), np.uint8), "sizes differ: 48x36 vs 47x36"),
-    (np.zeros((36, 48), np.uint8), "channel counts differ: 3 vs 1"),
-    (np.zeros((36, 48, 4), np.uint8), "channel counts differ: 3 vs 4"),
+    (np.zeros((36, 47), np.uint8), "sizes differ: 48x36 vs 47x36"),
 ])
 def test_incomparable_images(runner, tmp_path, other, reason):
     run = runner("diff", save(tmp_path / "a.png", textured()), save(tmp_path / "b.png", other),
@@ -121,3 +122,101 @@ def test_compare_unit():
     assert diff.failures(c) and not diff.failures(c, max_rmse=5)
     with pytest.raises(ValueError, match="sizes differ"):
         diff.compare(a, np.zeros((3, 2), np.uint8))
+
+
+def frames_file(path, frames, durations=None, **options):
+    """Save BGR frames as an animation or multi-page file by Pillow (format from the extension)."""
+    from PIL import Image
+
+    images = [Image.fromarray(np.ascontiguousarray(f[:, :, ::-1])) for f in frames]
+    if durations:
+        options["duration"] = durations
+    images[0].save(path, save_all=True, append_images=images[1:], **options)
+    return str(path)
+
+
+@pytest.mark.parametrize("ext, options", [(".png", {}), (".webp", {"lossless": True}), (".tif", {}),
+                                          (".gif", {})])
+def test_every_frame_is_compared(runner, tmp_path, ext, options):
+    """Finding 1: frames after the first count, and so does the frame count."""
+    one, two, three = textured(), np.ascontiguousarray(textured()[::-1]), np.ascontiguousarray(textured()[:, ::-1])
+    changed = three.copy()
+    changed[:6, :6] = 255 - changed[:6, :6]
+    a = frames_file(tmp_path / f"a{ext}", [one, two, three], **options)
+    b = frames_file(tmp_path / f"b{ext}", [one, two, changed], **options)
+    same = runner("diff", a, frames_file(tmp_path / f"c{ext}", [one, two, three], **options))
+    assert same.code == 0 and "frames 3 (off: none)" in same.stdout.decode()
+    run = runner("diff", a, b, "--max-rmse", "0.5", "--json")
+    figures = json.loads(run.stdout)
+    assert run.code == 1 and figures["frames"] == 3 and figures["frames_off"] == [3]
+    assert figures["pixels"] == 3 * 48 * 36
+    assert figures["pixels_off"] == 36 or ext == ".gif" and figures["pixels_off"] >= 36    # GIF: a new palette
+    shorter = runner("diff", a, frames_file(tmp_path / f"d{ext}", [one, two], **options))
+    assert shorter.code == 1 and "frame counts differ: 3 vs 2" in shorter.stderr
+    still = runner("diff", a, save(tmp_path / "still.png", one))
+    assert still.code == 1 and "frame counts differ: 3 vs 1" in still.stderr
+
+
+def test_frame_durations_count(runner, tmp_path):
+    frames = [textured(), np.ascontiguousarray(textured()[::-1])]
+    a = frames_file(tmp_path / "a.png", frames, [100, 100])
+    b = frames_file(tmp_path / "b.png", frames, [100, 250])
+    run = runner("diff", a, b, "--max-rmse", "1")
+    assert run.code == 1 and "frame 2 is shown for 100 ms vs 250 ms" in run.stderr
+
+
+@pytest.mark.parametrize("layout", ["gray as rgb", "opaque alpha", "gray as rgba"])
+def test_channel_layouts_compared_by_meaning(runner, tmp_path, layout):
+    """Finding 3: a golden re-saved with another channel layout and the same pixels passes."""
+    gray = textured(channels=1)
+    colour = {"gray as rgb": np.dstack([gray] * 3), "opaque alpha": None,
+              "gray as rgba": np.dstack([gray] * 3 + [np.full_like(gray, 255)])}[layout]
+    if layout == "opaque alpha":
+        gray = textured()
+        colour = np.dstack([gray, np.full(gray.shape[:2], 255, np.uint8)])
+    a, b = save(tmp_path / "a.png", gray), save(tmp_path / "b.png", colour)
+    run = runner("diff", a, b)
+    assert run.code == 0 and metrics(run)["rmse"] == "0"
+    assert "featurewarp: note: A is " in run.stderr and "compared as" in run.stderr
+    off = colour.copy()
+    off[0, 0, 1] ^= 1             # a colour in the RGB file that the gray one cannot have
+    if layout == "opaque alpha":
+        off[1, 1, 3] = 254         # or an alpha that is not opaque
+    run = runner("diff", a, save(tmp_path / "c.png", off))
+    assert run.code == 1 and int(metrics(run)["pixels_off"]) >= 1
+
+
+def test_colour_under_transparent_pixels_not_compared(runner, tmp_path):
+    """Finding 2: encoders differ in the colour they keep where alpha is 0; no one sees it."""
+    a = np.dstack([textured(), np.full((36, 48), 255, np.uint8)])
+    a[:10, :, 3] = 0
+    b = a.copy()
+    a[:10, :, :3] = 0
+    assert runner("diff", save(tmp_path / "a.png", a), save(tmp_path / "b.png", b)).code == 0
+    b[10, 0, 3] = 0               # a pixel made transparent does count
+    assert runner("diff", tmp_path / "a.png", save(tmp_path / "b.png", b)).code == 1
+
+
+def test_tolerance_with_a_limit_is_kept(runner, pair):
+    """Finding 4: --tolerance with --max-rmse means no sample off by more than it."""
+    run = runner("diff", *pair, "--max-rmse", "5", "--tolerance", "1")
+    assert run.code == 1 and "--tolerance without --max-pixels-off: none may" in run.stderr
+    assert runner("diff", *pair, "--max-rmse", "5", "--tolerance", "10").code == 0
+    assert runner("diff", *pair, "--max-rmse", "5").code == 0
+    assert runner("diff", *pair, "--max-rmse", "5", "--tolerance", "1", "--max-pixels-off", "12").code == 0
+
+
+def test_diff_image_cannot_be_stdout(runner, pair, tmp_path):
+    """Finding 7: the picture would land in the metrics."""
+    for alias in ("png:/dev/stdout", "png:/dev/fd/1"):
+        run = runner("diff", *pair, "--diff-image", alias)
+        assert run.code == 2 and "is stdout, which holds the metrics" in run.stderr and b"PNG" not in run.stdout
+    out = tmp_path / "out.txt"
+    with open(out, "wb") as stdout:         # the real command, its stdout a file named again
+        code = subprocess.run([sys.executable, "-m", "featurewarp_cli", "diff", *pair, "--diff-image",
+                               f"png:{out}"], stdout=stdout, stderr=subprocess.PIPE, timeout=60).returncode
+    assert code == 2 and b"PNG" not in out.read_bytes()
+    quiet = subprocess.run([sys.executable, "-m", "featurewarp_cli", "diff", *pair, "-q", "--diff-image",
+                            "png:/dev/stdout"], capture_output=True, timeout=60)
+    assert quiet.returncode == 1 and quiet.stdout.startswith(b"\x89PNG")     # -q: stdout holds only it
+    assert runner("diff", *pair, "--diff-image", "/dev/null").code == 1     # no extension needed there
