@@ -24,7 +24,9 @@ SETTINGS = {
     "png": [cv2.IMWRITE_PNG_COMPRESSION, 1, cv2.IMWRITE_PNG_STRATEGY, cv2.IMWRITE_PNG_STRATEGY_RLE,
             cv2.IMWRITE_PNG_FILTER, cv2.IMWRITE_PNG_FILTER_PAETH],
     "jpg": [cv2.IMWRITE_JPEG_QUALITY, 95, cv2.IMWRITE_JPEG_PROGRESSIVE, 0, cv2.IMWRITE_JPEG_OPTIMIZE, 0],
-    # 101: lossless (libwebp may still clear the colour under fully transparent pixels)
+    # 101: lossless; with alpha it goes through Pillow (:func:`_pillow_encode`): OpenCV's libwebp
+    # call fills the colour under fully transparent pixels with nearby colour (not the 0 the
+    # warp leaves there, which PNG and TIFF keep), so the same result as PNG and WebP differed
     "webp": [cv2.IMWRITE_WEBP_QUALITY, 101],
     "tiff": [cv2.IMWRITE_TIFF_COMPRESSION, 5],                     # 5: LZW
     "bmp": [],
@@ -98,7 +100,8 @@ def encode_image(image: np.ndarray, fmt: str, background=(255, 255, 255), qualit
         image = to_eight_bit(image)
     if fmt == "gif":
         return _gif(image)
-    if (icc or exif) and fmt in METADATA_FORMATS and image.dtype == np.uint8:
+    lossless_alpha = fmt == "webp" and quality is None and image.ndim == 3 and image.shape[2] == 4
+    if (icc or exif or lossless_alpha) and fmt in METADATA_FORMATS and image.dtype == np.uint8:
         return _pillow_encode(image, fmt, quality, icc, exif)
     settings = list(SETTINGS[fmt])
     if quality is not None and fmt in ("jpg", "webp"):
@@ -132,7 +135,9 @@ def _gif(image: np.ndarray) -> bytes:
 def _pillow_encode(image: np.ndarray, fmt: str, quality: int | None, icc: bytes | None,
                    exif: bytes | None) -> bytes:
     """8-bit BGR(A) or grey pixels as ``fmt`` bytes with their ICC profile and EXIF, by Pillow,
-    with the same settings as OpenCV's path where Pillow has them."""
+    with the same settings as OpenCV's path where Pillow has them. Lossless WebP keeps the colour
+    under transparent pixels as given (libwebp's ``exact``) with OpenCV's effort (70): about as
+    fast and small as OpenCV's (arc of the astronaut, 976x538: 0.23 s, 399 kB against 0.21 s, 398 kB)."""
     import io
 
     from PIL import Image
@@ -146,7 +151,7 @@ def _pillow_encode(image: np.ndarray, fmt: str, quality: int | None, icc: bytes 
         options["exif"] = exif
     options.update({"jpg": {"quality": quality or 95, "optimize": False, "progressive": False},
                     "png": {"compress_level": 1},
-                    "webp": {"quality": quality} if quality else {"lossless": True, "quality": 100},
+                    "webp": {"quality": quality} if quality else {"lossless": True, "quality": 70, "exact": True},
                     "tiff": {"compression": "tiff_lzw"}}[fmt])
     buffer = io.BytesIO()
     with captured_stderr() as printed:
