@@ -641,3 +641,16 @@ def test_alpha_is_added_only_where_some_pixel_is_not_opaque():
     image = np.random.default_rng(3).integers(0, 255, (H, W, 3), np.uint8)
     for centre in ((W / 2, H / 2), ((W - 1) / 2, (H - 1) / 2)):
         assert warp(image, None, "swirl", angle=90, center=centre).shape == (H, W, 3)
+
+
+def test_no_colour_is_left_under_a_fully_transparent_pixel():
+    """The README promises colour 0 under alpha 0: a triangle's sliver of coverage rounded the
+    alpha to 0 and left the colour (squeeze of the astronaut: 3 such pixels, fish 2, arc 1;
+    WebP, whose encoder may keep or smear that colour, then differed from PNG)."""
+    from featurewarp_cli import warp
+
+    image = cv2.cvtColor(cv2.imread("samples/astronaut.png"), cv2.COLOR_BGR2RGB)
+    mask = cv2.imread("samples/astronaut_mask.png", cv2.IMREAD_GRAYSCALE)
+    out = warp(image, mask, "squeeze")
+    assert out.shape[2] == 4 and (out[..., 3] == 0).any()
+    assert not out[out[..., 3] == 0][:, :3].any()
