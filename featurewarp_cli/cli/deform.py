@@ -85,6 +85,25 @@ def merged_handles(data, moves, pins, canvas: str | None):
     return merged
 
 
+def given_names(merged: dict, moves, pins, source: str | None) -> list[str] | None:
+    """How each point handle of ``merged`` was given, for the warnings: ``--move X,Y:X2,Y2``,
+    ``--pin X,Y``, or its place in the handles file ``source`` with its coordinates (None when
+    the points are not a list: the schema's check names them)."""
+    points = merged.get("points")
+    if not isinstance(points, list):
+        return None
+    flags = [f"--move {a[0]:g},{a[1]:g}:{b[0]:g},{b[1]:g}" for a, b in moves] + [f"--pin {p[0]:g},{p[1]:g}" for p in pins]
+    file = f"{'stdin' if source == '-' else source}: " if source is not None and flags else ""
+    named = []
+    for k, point in enumerate(points[:len(points) - len(flags)]):
+        try:
+            (x, y), (tx, ty) = point["from"], point["to"]
+            named.append(f"{file}points[{k}] ({x:g},{y:g} -> {tx:g},{ty:g})")
+        except (TypeError, KeyError, ValueError):        # refused by the schema's check before any warning
+            named.append(f"{file}points[{k}]")
+    return named + flags
+
+
 #: A place in the handles file at the start of an error (the point's index in group 1).
 FILE_PLACE = re.compile(r"^(?:points(?:\[(\d+)\])?|curves\b|border\b|radius\b|canvas\b|version\b)")
 POINT_PLACE = re.compile(r"points\[(\d+)\](?:\.(from|to))?")
@@ -157,7 +176,7 @@ def deform_command() -> click.Command:
         from ..engine.deform import handles_factory
 
         merged = merged_handles(data, move, pin, canvas)
-        factory = handles_factory(merged, settings.decay)
+        factory = handles_factory(merged, settings.decay, given_names(merged, move, pin, handles))
         settings = replace(settings, warp_factory=named_places(factory, merged, move, pin, handles))
         warp_one(settings, quiet, verbose, input, output, mask, report, save_grid, draw_grid,
                  also_read=((handles, "--handles"),) if handles else ())

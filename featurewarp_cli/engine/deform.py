@@ -34,32 +34,22 @@ from .defaults import DECAY, MODE
 from .grid import Grid, grid_for, grid_shape, signed_areas
 from .injectivity import border_crossings
 from .handles import Handles, default_radius, resample
+from .handle_review import CURVE_SAMPLES, HANDLE_SLACK_PX, crushed, fold_cause, fold_notes, review_curves, review_points
 from .mesh import Mesh
 from ..plugins import canvas_size, check_canvas_side
 from .warper import FeatureWarper
 
-#: A point handle may end this far from its target (px, or this share of the image's diagonal
-#: if larger) before a warning says so.
-HANDLE_SLACK_PX = 3.0
-HANDLE_SLACK = 0.02
 #: Rounds of re-aiming the point handles (:meth:`HandleWarp.land`), each one solve, until every
 #: handle ends within LANDED_PX of its target: the feature-aware solve follows the rigid map only
 #: as closely as least squares beside the features lets it (a background handle at 1 MP ended
 #: 14 px short, at 12 MP 42 px); each round takes about three quarters of what is left.
 LANDING_ROUNDS = 3
 LANDED_PX = 0.05
-#: Points along a curve handle where it is measured (its target and where it ended).
-CURVE_SAMPLES = 32
 #: Deformed images smaller than this share of the input's area get a warning.
 SHRUNK = 0.01
 #: Nodes of the grid the rigid map is solved on (about; it is coarser than the feature grid:
 #: the map is smooth away from the handles, and its solves must take milliseconds).
 RIGID_NODES = 4096
-
-
-def handle_slack(width: int, height: int) -> float:
-    """How far (px) a handle may end from its target before a warning says so."""
-    return max(HANDLE_SLACK_PX, HANDLE_SLACK * math.hypot(width, height))
 
 
 def rigid_grid(width: int, height: int) -> Grid:
@@ -119,6 +109,7 @@ class HandleWarp:
         self.capped = False                 # the rigid map stopped at its step cap, not converged
         self.rigid_map = None               # the RigidMap that made it (:meth:`aim` asks it again)
         self.aimed = None                   # the point handles' targets the map was solved for
+        self.carried = set()                # the point handles that carry a feature
 
     def review(self, mesh: Mesh, quick: bool = False) -> list[str]:
         """Warnings on the solved ``mesh`` of these handles (also kept in ``values`` for the
@@ -134,19 +125,12 @@ class HandleWarp:
             warnings.append("the rigid map did not converge within its step limit: the result has no "
                             "fold but may differ slightly between machines")
         mesh.crossings = border_crossings(mesh.source, mesh.target)
+        mesh.fold_cause = self.fold_cause()
         if mesh.crossings:
             times = {1: "once", 2: "twice"}.get(mesh.crossings, f"{mesh.crossings} times")
-            warnings.append(f"the handles lay the image over itself (its border crosses itself {times})")
-        ends = self.ends(mesh)
-        if ends is not None:
-            error = np.hypot(*(ends - self.handles.points_to).T)
-            self.values["handle_error_px"] = {"max": round(float(error.max()), 3),
-                                              "mean": round(float(error.mean()), 3)}
-            for k in np.flatnonzero(error > handle_slack(self.width, self.height))[:3]:
-                (x, y), (tx, ty) = self.handles.points_from[k], self.handles.points_to[k]
-                warnings.append(f"handle {k} ({x:g},{y:g} -> {tx:g},{ty:g}) ends {error[k]:.0f} px from its "
-                                f"target: a feature that keeps its shape, or the border, holds it")
-        warnings += self._review_curves(mesh)
+            warnings.append(f"the handles lay the image over itself (its border crosses itself {times}): "
+                            f"{mesh.fold_cause}")
+        warnings += review_points(self, mesh) + crushed(self, mesh) + review_curves(self, mesh)
         area = float(np.sum(signed_areas(mesh.target, mesh.triangles)))
         if area < SHRUNK * self.width * self.height:
             warnings.append(f"the handles shrink the image to {100 * area / (self.width * self.height):.1f} % "
@@ -156,22 +140,9 @@ class HandleWarp:
             warnings.append("the deformed image lies outside the canvas: the output is empty")
         return warnings
 
-    def _review_curves(self, mesh: Mesh) -> list[str]:
-        """Warnings for the curve handles that end farther from their targets than
-        :func:`handle_slack` anywhere along them (``values["curve_error_px"]``: the largest
-        and the mean distance over their samples)."""
-        curves = self.curve_ends(mesh)
-        if not curves:
-            return []
-        errors = [np.hypot(*(ended - wanted).T) for wanted, ended in curves]
-        every = np.concatenate(errors)
-        self.values["curve_error_px"] = {"max": round(float(every.max()), 3), "mean": round(float(every.mean()), 3)}
-        warnings = []
-        for k, error in enumerate(errors):
-            if error.max() > handle_slack(self.width, self.height) and len(warnings) < 3:
-                warnings.append(f"curve {k} ends up to {error.max():.0f} px from its target: a feature that "
-                                f"keeps its shape, or the border, holds it")
-        return warnings
+    def fold_cause(self) -> str:
+        """What makes these handles crush or fold the image (:func:`handle_review.fold_cause`)."""
+        return fold_cause(self)
 
     def land(self, mesh: Mesh, solve) -> Mesh:
         """``mesh`` (``solve(self)``'s), solved again up to :data:`LANDING_ROUNDS` times with the
@@ -274,10 +245,10 @@ class RigidMap:
         radius = handles.radius if handles.radius is not None else default_radius(
             self.width, self.height, max(self.grid.spacing))
         sources, targets, radii = handles.constraints(self.grid, radius)
-        uncarried, band = [], self.decay * max(self.grid.spacing)
+        uncarried, carried, band = [], [], self.decay * max(self.grid.spacing)
         if self.labels is not None and len(handles.points_from):
             sources, targets, radii = carried_features(self.labels, self.grid.nodes(), handles, sources, targets,
-                                                       radii, band, uncarried)
+                                                       radii, band, uncarried, carried)
         notes = [f"the handle at ({x:g}, {y:g}) sits on a feature within {band:.0f} px of the held border: it moves "
                  "that point, not the whole feature (the border stays)" for x, y in handles.points_from[uncarried]]
         key = (sources.tobytes(), radii.tobytes())
@@ -291,21 +262,18 @@ class RigidMap:
                   "canvas": handles.canvas, "radius": radius}
         warp = HandleWarp(self.width, self.height, self.grid, nodes, handles.canvas, values, self._embeddings)
         warp.notes, warp.handles = list(handles.notes) + notes, handles
-        warp.capped, warp.rigid_map = not self.rigid.converged, self
-        held = np.hypot(*(self.rigid.centres(nodes) - targets).T).max()
-        if held > handle_slack(self.width, self.height):
-            warp.notes.append(f"the handles ask for a fold; they are held as far as the image can follow "
-                              f"without one (up to {held:.0f} px from their targets)")
+        warp.capped, warp.rigid_map, warp.carried = not self.rigid.converged, self, set(carried)
+        warp.notes += fold_notes(warp, handles, np.hypot(*(self.rigid.centres(nodes) - targets).T).max())
         if handles.border == "pinned":
             moved = float(np.hypot(*(nodes - self.grid.nodes())[self.grid.boundary()].T).max())
-            if moved > handle_slack(self.width, self.height):
+            if moved > HANDLE_SLACK_PX:
                 warp.notes.append(f"the pinned border gives way by up to {moved:.0f} px where the handles pull "
                                   f"it past itself (it holds only as hard as a handle)")
         return warp
 
 
 def carried_features(labels, nodes, handles: Handles, sources, targets, radii, band: float = 0.0,
-                     uncarried: list | None = None):
+                     uncarried: list | None = None, carried: list | None = None):
     """The constraints with every point handle that sits on a feature replaced by that feature.
 
     Dragging a point of a face moves the face: the nodes of the rigid grid inside the
@@ -323,7 +291,8 @@ def carried_features(labels, nodes, handles: Handles, sources, targets, radii, b
     curve) is not carried: the border holds, and the handle on it moves its own disc (carried,
     the band's border nodes and the pinned border pulled against each other and the border
     slid by 22 px).
-    The indices of its point handles are appended to ``uncarried``.
+    The indices of its point handles are appended to ``uncarried``, those of the handles that
+    carry a feature to ``carried``.
     """
     h, w = labels.shape
     sides = {"top", "bottom", "left", "right"} if handles.border == "pinned" else set(
@@ -354,6 +323,8 @@ def carried_features(labels, nodes, handles: Handles, sources, targets, radii, b
         turn = np.array([[a, -b], [b, a]])
         shift = np.mean(handles.points_to[held] - handles.points_from[held] @ turn.T, axis=0)
         keep[held] = False
+        if carried is not None:
+            carried.extend(int(k) for k in held)
         extra_sources.append(inside)
         extra_targets.append(inside @ turn.T + shift)
     if not extra_sources:
@@ -454,11 +425,14 @@ class Deformer:
         return self.solve(Handles.from_dict(data, self.warper.width, self.warper.height), mode)
 
 
-def handles_factory(data, decay: float = DECAY):
+def handles_factory(data, decay: float = DECAY, names: list | None = None):
     """``make(width, height, mask)``: the map W of the handles file ``data`` (parsed JSON) for an
     image of that size and feature mask (ValueError when the handles do not fit it); ``decay``
-    as the feature-aware solve's (see :class:`RigidMap`)."""
+    as the feature-aware solve's (see :class:`RigidMap`); ``names``: how each point handle
+    was given (:attr:`Handles.names`)."""
     def make(width: int, height: int, mask=None) -> HandleWarp:
-        return RigidMap(width, height, mask=mask, decay=decay).deformation(Handles.from_dict(data, width, height))
+        handles = Handles.from_dict(data, width, height)
+        handles.names = names
+        return RigidMap(width, height, mask=mask, decay=decay).deformation(handles)
 
     return make

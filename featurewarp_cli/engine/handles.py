@@ -18,8 +18,8 @@ both are resampled by arc length. A border SIDE is a polyline ``[[x, y], ...]`` 
 Bezier ``{"bezier": [p0, p1, p2, p3]}``, running left to right (top, bottom) or top to bottom
 (left, right), giving where that edge of the image goes; sides not given are free.
 ``canvas``: ``fit`` (default) is the bounding box of the deformed image, ``input`` keeps
-the input's size and coordinates. Keys this version does not know are ignored, with a note
-(``angle`` in a version-1 file too). :meth:`Handles.as_dict` writes version 1 when nothing
+the input's size and coordinates. Keys this version does not know are ignored, with a warning
+naming them (``angle`` in a version-1 file too). :meth:`Handles.as_dict` writes version 1 when nothing
 needs version 2, so files stay readable by the featurewarp that wrote them before.
 """
 
@@ -71,6 +71,9 @@ class Handles:
         What was ignored (unknown keys).
     border_spec : str or dict
         The border as the file gave it (Bezier sides stay Bezier when saved again).
+    names : list of str or None
+        How each point handle was given (``--pin 100,100``), for warnings; None: by its
+        place in ``points`` and its coordinates.
     """
 
     points_from: np.ndarray
@@ -82,6 +85,7 @@ class Handles:
     notes: list = field(default_factory=list)
     border_spec: object = "free"
     angles: np.ndarray = None
+    names: list | None = None
 
     def __post_init__(self):
         if self.angles is None:
@@ -133,6 +137,38 @@ class Handles:
                       border if isinstance(border, str) else json.loads(json.dumps(border)), angles)
         handles.check_enough()
         return handles
+
+    @classmethod
+    def from_file(cls, path, width: int, height: int) -> "Handles":
+        """The handles file at ``path`` (a handles JSON file, as ``deform --handles`` reads),
+        checked against a ``width`` x ``height`` image (see :meth:`from_dict`).
+
+        Raises
+        ------
+        ValueError
+            One line naming the file and the problem (unreadable, not JSON, not valid handles).
+        """
+        try:
+            with open(path, "rb") as file:
+                text = file.read()
+            data = json.loads(text)
+        except OSError as err:
+            raise ValueError(f"{path}: cannot read it: {err.strerror or err}") from None
+        except (ValueError, RecursionError) as err:
+            raise ValueError(f"{path}: not valid JSON ({err if isinstance(err, ValueError) else 'nested too deeply'})") \
+                from None
+        try:
+            return cls.from_dict(data, width, height)
+        except ValueError as err:
+            raise ValueError(f"{path}: {err}") from None
+
+    def name(self, k: int) -> str:
+        """How point handle ``k`` is named in warnings: as it was given (:attr:`names`), or by
+        its place in the file and its coordinates."""
+        if self.names is not None and k < len(self.names):
+            return self.names[k]
+        (x, y), (tx, ty) = self.points_from[k], self.points_to[k]
+        return f"points[{k}] ({x:g},{y:g} -> {tx:g},{ty:g})"
 
     @classmethod
     def from_moves(cls, moves, pins, width: int, height: int, canvas: str = "fit") -> "Handles":
@@ -309,7 +345,7 @@ def _inside(points: np.ndarray, width: int, height: int, where: str) -> None:
         k = int(np.argmax(outside))
         x, y = points[k]
         raise ValueError(f"{where.format(k)} ({x:g}, {y:g}) lies outside the {width}x{height} image "
-                         f"(pixel centres 0..{width - 1}, 0..{height - 1})")
+                         f"(it spans -0.5..{width - 0.5:g}, -0.5..{height - 0.5:g}: pixel centres at whole numbers)")
 
 
 def _near(points: np.ndarray, width: int, height: int, where: str) -> None:

@@ -1,0 +1,128 @@
+"""What ``deform`` says about a solved mesh of handles: the handles that did not land (named
+as they were given, with a cause), a crushed crease, a fold the handles ask for.
+
+The functions take the :class:`deform.HandleWarp` of the handles (``warp``) and keep what the
+report shows in its ``values`` (``handle_error_px``, ``handle_ends``, ``curve_error_px``,
+``curve_ends``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .grid import signed_areas
+from .handles import resample
+
+#: A point or curve handle may end this far from its target (px) before a warning says so
+#: (it was 2 % of the diagonal, 100 px at 12 MP, before handles were re-aimed until they land).
+HANDLE_SLACK_PX = 3.0
+#: Warnings name this many handles that miss, and count the rest.
+NAMED = 5
+#: A triangle of the result crushed below this share of its area under W (whose barrier keeps
+#: half its rest area) gets a warning: a crease (a feature carried against a pin did 0.014).
+CRUSHED = 0.1
+#: Points along a curve handle where it is measured (its target and where it ended).
+CURVE_SAMPLES = 32
+
+
+def fold_cause(warp) -> str:
+    """What makes these handles crush or fold the image: a feature a handle carries (with
+    its band, one similarity) pressed against a pin or a held border, or else handles
+    dragged across each other or a pin's path, or turned far."""
+    if warp.handles is not None and warp.carried and (
+            np.any(np.all(warp.handles.points_from == warp.handles.points_to, axis=1)) or warp.handles.border != "free"):
+        return ("a feature carried by a handle (with the band around it, as one piece) is pressed against a pin "
+                "or the held border; drag it less far, move the pin, or use --mode plain")
+    return "handles dragged across each other or a pin's path, or turned far, do that"
+
+
+def crushed(warp, mesh) -> list[str]:
+    """A warning when a triangle of ``mesh`` keeps under :data:`CRUSHED` of its area under W
+    (a crease: W's barrier keeps half the rest area, the feature-aware solve does not)."""
+    under_w = signed_areas(warp(mesh.source), mesh.triangles)
+    ratio = signed_areas(mesh.target, mesh.triangles)[under_w > 1e-12] / under_w[under_w > 1e-12]
+    if not ratio.size or ratio.min() >= CRUSHED:
+        return []
+    worst = mesh.source[mesh.triangles[under_w > 1e-12][np.argmin(ratio)]].mean(axis=0)
+    return [f"the result crushes the image into a crease near ({worst[0]:.0f}, {worst[1]:.0f}): triangles keep "
+            f"{100 * ratio.min():.1f} % of their area under the handles' map (quality.area_ratio.min): "
+            f"{fold_cause(warp)}"]
+
+
+def review_points(warp, mesh) -> list[str]:
+    """Warnings for the point handles that end farther than :data:`HANDLE_SLACK_PX` from their
+    targets, as they were given (:meth:`Handles.name`), the first :data:`NAMED` and a count
+    of the rest, each with its cause; ``values``: ``handle_error_px`` (largest, mean) and
+    ``handle_ends`` (per handle: from, to, where it ended, its error)."""
+    ends = warp.ends(mesh)
+    if ends is None:
+        return []
+    handles = warp.handles
+    error = np.hypot(*(ends - handles.points_to).T)
+    warp.values["handle_error_px"] = {"max": round(float(error.max()), 3), "mean": round(float(error.mean()), 3)}
+    warp.values["handle_ends"] = [
+        {"given": handles.name(k), "from": _plain(handles.points_from[k]), "to": _plain(handles.points_to[k]),
+         "ended": _plain(ends[k], 3), "error_px": round(float(e), 3)} for k, e in enumerate(error)]
+    aimed = handles.points_to if warp.aimed is None else warp.aimed
+    reach = np.hypot(*(warp(handles.points_from) + np.asarray(warp.offset) - aimed).T)
+    missed = np.flatnonzero(error > HANDLE_SLACK_PX)
+    warnings = [f"handle {handles.name(k)} ends {error[k]:.0f} px from its target: {_cause(warp, k, reach[k])}"
+                for k in missed[:NAMED]]
+    if len(missed) > NAMED:
+        more = len(missed) - NAMED
+        warnings.append(f"and {more} more handle{'s' * (more > 1)} end{'s' * (more == 1)} over "
+                        f"{HANDLE_SLACK_PX:g} px from their targets (the report's params.handle_ends lists every handle)")
+    return warnings
+
+
+def _cause(warp, k: int, reach: float) -> str:
+    """Why point handle ``k`` missed, ``reach`` px being where the rigid map W itself left it."""
+    if reach <= HANDLE_SLACK_PX:
+        return "a feature beside it keeps its shape and holds it (the handles' map W reaches the target)"
+    if k in warp.carried:
+        return ("the feature it carries keeps its shape, and the other handles on that feature (or pins beside "
+                "it) pull it another way")
+    border = " or the pinned border" if warp.handles.border != "free" else ""
+    return f"other handles{border} pull the same place another way (the handles' map W ends {reach:.0f} px away)"
+
+
+def review_curves(warp, mesh) -> list[str]:
+    """Warnings for the curve handles that end farther from their targets than
+    :data:`HANDLE_SLACK_PX` anywhere along them, the first :data:`NAMED` and a count of the
+    rest (``values["curve_error_px"]``: the largest and the mean distance over their
+    samples; ``values["curve_ends"]``: per curve, its largest and mean)."""
+    curves = warp.curve_ends(mesh)
+    if not curves:
+        return []
+    errors = [np.hypot(*(ended - wanted).T) for wanted, ended in curves]
+    every = np.concatenate(errors)
+    warp.values["curve_error_px"] = {"max": round(float(every.max()), 3), "mean": round(float(every.mean()), 3)}
+    warp.values["curve_ends"] = [{"given": f"curves[{k}]", "error_px": round(float(e.max()), 3),
+                                  "mean_px": round(float(e.mean()), 3)} for k, e in enumerate(errors)]
+    missed = [k for k, e in enumerate(errors) if e.max() > HANDLE_SLACK_PX]
+    warnings = [f"curve {k} ends up to {errors[k].max():.0f} px from its target: a feature that keeps "
+                f"its shape, other handles or the border hold it" for k in missed[:NAMED]]
+    if len(missed) > NAMED:
+        warnings.append(f"and {len(missed) - NAMED} more curve(s) end far from their targets")
+    return warnings
+
+
+def fold_notes(warp, handles, held: float) -> list[str]:
+    """The note for handles that ask for a fold: how far W leaves the user's handles (points and
+    curves) from their targets, or, when they reach them and only a feature they carry is
+    held (``held`` px: every constraint's largest miss), how far that feature is."""
+    if held <= HANDLE_SLACK_PX:
+        return []
+    offset = np.asarray(warp.offset)
+    misses = [np.hypot(*(warp(handles.points_from) + offset - handles.points_to).T)] + [
+        np.hypot(*(warp(resample(a, CURVE_SAMPLES)) + offset - resample(b, CURVE_SAMPLES)).T) for a, b in handles.curves]
+    miss = max((float(m.max()) for m in misses if m.size), default=0.0)
+    if miss > HANDLE_SLACK_PX:
+        return [f"the handles ask for a fold; they are held as far as the image can follow without one (up to "
+                f"{miss:.0f} px from their targets)"]
+    return [f"the handles ask for a fold: a feature a handle carries is held as far as the image can follow "
+            f"without one (up to {held:.0f} px from where its handle carries it; the handles reach their targets)"]
+
+
+def _plain(point, digits: int = 6) -> list:
+    return [round(float(point[0]), digits), round(float(point[1]), digits)]
