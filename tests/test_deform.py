@@ -658,3 +658,25 @@ def test_a_smooth_drag_does_not_warn_of_a_crease():
     handles = Handles.from_moves([((130, 60), (200, 35))], [(60, 470), (450, 470)], 512, 512, "input")
     mesh = Deformer(512, 512, mask).solve(handles)
     assert mesh.record.warnings == [] and mesh.fold_cause.startswith("handles dragged across")
+
+
+def test_deformer_checks_its_options_and_reads_a_handles_file(tmp_path):
+    """API trial, nits 14 and 16: mode='affine' failed only at solve(), rigid_steps=0 and -1
+    passed, an unknown keyword named FeatureWarper; solve() refused a handles file's path."""
+    for bad in ({"mode": "affine"}, {"rigid_steps": 0}, {"rigid_steps": -1}, {"rigid_steps": 2.5}):
+        with pytest.raises(ValueError, match=r"^Deformer: (mode|rigid_steps)="):
+            Deformer(W, H, **bad)
+    with pytest.raises(TypeError, match=r"^Deformer\(\) got an unexpected keyword argument 'colour'"):
+        Deformer(W, H, colour=3)
+    path = tmp_path / "h.json"
+    path.write_text(json.dumps({"version": 1, "points": [{"from": [10, 10], "to": [10, 10]},
+                                                         {"from": [400, 300], "to": [410, 290]}]}))
+    handles = Handles.from_file(path, W, H)
+    assert handles.points_to.tolist() == [[10, 10], [410, 290]]
+    mesh = Deformer(W, H, rigid_steps=1).solve(str(path))
+    assert mesh.flips() == 0
+    path.write_text('{"version": 1, "points": [{"from": [9999, 10], "to": [10, 10]}]}')
+    with pytest.raises(ValueError, match=r"h\.json: points\[0\]\.from \(9999, 10\) lies outside"):
+        Handles.from_file(path, W, H)
+    with pytest.raises(ValueError, match="cannot read it"):
+        Handles.from_file(tmp_path / "missing.json", W, H)

@@ -135,8 +135,8 @@ def named_places(make, merged: dict, moves, pins, source: str | None):
 
 
 #: What ``--strict`` also refuses in ``deform``: the handles' own warnings.
-STRICT_DEFORM = ("; and the handles' warnings: a handle or curve that ends far from its target, a fold the "
-                 "handles ask for, an image shrunk to under 1 % of its area or off the canvas, a handles file's "
+STRICT_DEFORM = ("; and the handles' warnings: a handle or curve that ends over 3 px from its target, a fold the "
+                 "handles ask for, a crease, an image shrunk to under 1 % of its area or off the canvas, a handles file's "
                  "unknown key or version-1 angle, a handle on a feature it cannot carry")
 
 

@@ -26,11 +26,13 @@ from __future__ import annotations
 
 import hashlib
 import math
+import numbers
+import os
 
 import numpy as np
 
 from .arap import RigidDeformer, embed, similarity_fit
-from .defaults import DECAY, MODE
+from .defaults import DECAY, MODE, MODES
 from .grid import Grid, grid_for, grid_shape, signed_areas
 from .injectivity import border_crossings
 from .handles import Handles, default_radius, resample
@@ -383,23 +385,34 @@ class Deformer:
 
     def __init__(self, width: int, height: int, mask: np.ndarray | None = None, *, mode: str = MODE,
                  quick: bool = False, rigid_steps: int | None = None, **options):
-        self.mode = mode
-        self.quick = quick
-        self.warper = FeatureWarper(width, height, mask, **options)         # the border: HandleWarp.boundary
+        if mode not in MODES:
+            raise ValueError(f"Deformer: mode={mode!r}; use one of {', '.join(map(repr, MODES))}")
+        if rigid_steps is not None and (isinstance(rigid_steps, bool) or not isinstance(rigid_steps, numbers.Integral)
+                                        or rigid_steps < 1):
+            raise ValueError(f"Deformer: rigid_steps={rigid_steps!r}; use a whole number of steps, at least 1, or None")
+        self.mode, self.quick = mode, quick
+        try:
+            self.warper = FeatureWarper(width, height, mask, **options)     # the border: HandleWarp.boundary
+        except TypeError as err:
+            raise TypeError(str(err).replace("FeatureWarper.__init__()", "Deformer()")) from None
         self.rigid = RigidMap(width, height, rigid_steps, self.warper.mask, self.warper.decay)
         self.handles = None
         self.warp = None
 
     def solve(self, handles: Handles, mode: str | None = None, drag: bool = False) -> Mesh:
-        """The feature-aware mesh for ``handles`` (whose sources may differ from the last call's:
+        """The feature-aware mesh for ``handles`` (Handles, a handles dict, or a handles file's
+        path: :meth:`Handles.from_file`; whose sources may differ from the last call's:
         the rigid map is then factored anew); ``drag``: an update while a handle is dragged
         (with ``quick``: a fold is not untangled, see :meth:`FeatureWarper.solve`). With
         ``quick``, the features' tie decisions are those of the first solve of this handle set
         (the same sources), a drag's or not, so no later solve of the set factors anew."""
+        if isinstance(handles, (str, os.PathLike)):
+            handles = Handles.from_file(handles, self.warper.width, self.warper.height)
         if isinstance(handles, dict):
             handles = Handles.from_dict(handles, self.warper.width, self.warper.height)
         if not isinstance(handles, Handles):
-            raise TypeError(f"handles must be Handles or a handles dict, not {type(handles).__name__}")
+            raise TypeError(f"handles must be Handles, a handles dict or a handles file's path, not "
+                            f"{type(handles).__name__}")
         self.handles = handles
         factored = self.rigid.rigid
         self.warp = self.rigid.deformation(handles, warm=drag or self.quick)     # a full solve: no history
