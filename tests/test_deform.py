@@ -650,6 +650,7 @@ def test_a_feature_carried_against_a_pin_warns_of_the_crease_and_names_it():
     fold = [w for w in mesh.record.warnings if "ask for a fold" in w]
     assert fold and all("a feature a handle carries" in w and "the handles reach their targets" in w for w in fold)
     assert mesh.fold_cause.startswith("a feature carried by a handle")
+    assert mesh.fold_cause.endswith('give it "angle": 0 in a version-2 handles file to hold it unturned')  # finding 3
 
 
 def test_a_smooth_drag_does_not_warn_of_a_crease():
@@ -658,6 +659,10 @@ def test_a_smooth_drag_does_not_warn_of_a_crease():
     handles = Handles.from_moves([((130, 60), (200, 35))], [(60, 470), (450, 470)], 512, 512, "input")
     mesh = Deformer(512, 512, mask).solve(handles)
     assert mesh.record.warnings == [] and mesh.fold_cause.startswith("handles dragged across")
+    data = {**handles.as_dict(), "version": 2}
+    for point in data["points"][1:]:
+        point["angle"] = 0
+    assert "angle" not in Deformer(512, 512, mask).solve(data).fold_cause       # the pins are unturned
 
 
 def test_deformer_checks_its_options_and_reads_a_handles_file(tmp_path):

@@ -29,11 +29,13 @@ def fold_cause(warp) -> str:
     """What makes these handles crush or fold the image: a feature a handle carries (with
     its band, one similarity) pressed against a pin or a held border, or else handles
     dragged across each other or a pin's path, or turned far."""
-    if warp.handles is not None and warp.carried and (
-            np.any(np.all(warp.handles.points_from == warp.handles.points_to, axis=1)) or warp.handles.border != "free"):
+    pins = np.zeros(0, bool) if warp.handles is None else np.all(warp.handles.points_from == warp.handles.points_to, 1)
+    turned = ("; a pin without an angle turns with the handles' overall rotation: give it \"angle\": 0 in a "
+              "version-2 handles file to hold it unturned") if np.any(pins & ~np.isfinite(warp.handles.angles)) else ""
+    if warp.carried and (np.any(pins) or warp.handles.border != "free"):
         return ("a feature carried by a handle (with the band around it, as one piece) is pressed against a pin "
-                "or the held border; drag it less far, move the pin, or use --mode plain")
-    return "handles dragged across each other or a pin's path, or turned far, do that"
+                f"or the held border; drag it less far, move the pin, or use --mode plain{turned}")
+    return f"handles dragged across each other or a pin's path, or turned far, do that{turned}"
 
 
 def crushed(warp, mesh) -> list[str]:
