@@ -315,3 +315,188 @@ def test_a_long_strip_opens_in_the_editor(tmp_path, shape):
     assert session.texture_size == ((4096, 1) if shape[0] == 1 else (1, 4096))
     assert cv2.imdecode(np.frombuffer(session.image_png, np.uint8), cv2.IMREAD_UNCHANGED).shape[:2] == \
         session.texture_size[::-1]
+
+
+def test_load_warnings_are_kept_and_a_write_asks_before_dropping_what_the_file_had(tmp_path):
+    """Finding 2: a misspelt key of the loaded file was dropped by Save without a word. The state
+    carries the warnings, Save and Export answer 409 until the page confirms (drop_ignored), and
+    the file is written one handle per line (as samples/astronaut_handles.json)."""
+    path = tmp_path / "h.json"
+    loaded = {"version": 1, "points": PINS + [{"from": [130, 60], "to": [200, 35], "angel": 30}], "colour": "red"}
+    path.write_text(json.dumps(loaded))
+    session = EditorSession(Settings("deform"), IMAGE, MASK, str(path), str(tmp_path / "out.png"), loaded)
+    assert any("'colour'" in w for w in session.state()["warnings"])
+    assert any("points[2].angel" in w for w in session.state()["warnings"])
+    server = EditorServer(session, 0)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    try:
+        body = {"handles": session.state()["handles"]}
+        for route in ("save", "export"):
+            status, answer = _post(server, route, body)
+            assert status == 409 and "angel" in answer["error"] and str(path) in answer["error"], answer
+            assert len(answer["confirm"]) == 2 and json.loads(path.read_text()) == loaded
+        assert not (tmp_path / "out.png").exists()
+        status, answer = _post(server, "save", {**body, "drop_ignored": True})
+        assert status == 200 and answer["saved"] == str(path)
+        assert _post(server, "save", body)[0] == 200                  # confirmed once: the file is the editor's now
+    finally:
+        server.shutdown()
+        server.server_close()
+    lines = path.read_text().splitlines()
+    assert [line.rstrip(",") for line in lines[3:6]] == ["    " + json.dumps(p) for p in body["handles"]["points"]]
+    assert json.loads(path.read_text()) == body["handles"]
+
+
+def _small(tmp_path, size=128):
+    """The astronaut and its mask at ``size`` px (an Export in a second, not 15)."""
+    image, mask = str(tmp_path / "small.png"), str(tmp_path / "small_mask.png")
+    cv2.imwrite(image, cv2.resize(cv2.imread(IMAGE), (size, size), interpolation=cv2.INTER_AREA))
+    cv2.imwrite(mask, cv2.resize(cv2.imread(MASK, cv2.IMREAD_GRAYSCALE), (size, size),
+                                 interpolation=cv2.INTER_NEAREST))
+    return image, mask
+
+
+SMALL = {"version": 1, "points": [{"from": [5, 5], "to": [5, 5]}, {"from": [100, 100], "to": [104, 98]}]}
+
+
+def test_ctrl_c_during_an_export_puts_its_files_back_and_the_export_writes_nothing_more(tmp_path, monkeypatch):
+    """Finding 3: Ctrl-C while an Export ran left its new handles file beside the old image.
+    The handles are written after the image; abandon() puts every file back; the Export, when it
+    comes back from the warp, writes no handles and restores what it wrote."""
+    image, mask = _small(tmp_path)
+    out, handles = tmp_path / "out.png", tmp_path / "out.handles.json"
+    out.write_bytes(b"OLD IMAGE")
+    handles.write_bytes(b"OLD HANDLES")
+    session = EditorSession(Settings("deform"), image, mask, None, str(out))
+    warping, release, real = threading.Event(), threading.Event(), editor_session.warp_file
+
+    def slow(*args, **kwargs):
+        summary = real(*args, **kwargs)            # the new image is written ...
+        warping.set()
+        release.wait(10)                           # ... and Ctrl-C comes before the handles are
+        return summary
+
+    monkeypatch.setattr(editor_session, "warp_file", slow)
+    errors = []
+    thread = threading.Thread(target=lambda: _catch(errors, session.export, {"handles": SMALL}))
+    thread.start()
+    assert warping.wait(60) and out.read_bytes() != b"OLD IMAGE"
+    assert session.abandon() == str(out)
+    assert out.read_bytes() == b"OLD IMAGE" and handles.read_bytes() == b"OLD HANDLES"
+    release.set()
+    thread.join(30)
+    assert errors and "abandoned" in str(errors[0])
+    assert out.read_bytes() == b"OLD IMAGE" and handles.read_bytes() == b"OLD HANDLES"
+    assert EditorSession(Settings("deform"), image, mask, None, str(out)).abandon() is None   # none running
+
+
+def _catch(errors, call, *args):
+    try:
+        call(*args)
+    except Exception as err:  # noqa: BLE001  (the test reads it)
+        errors.append(err)
+
+
+def test_serve_prints_load_warnings_and_ctrl_c_during_an_export_exits_130(capsys):
+    """Findings 2 and 3 on the terminal: what loading said is printed; Ctrl-C with an Export
+    running says it was abandoned and exits 130, not 'editor stopped' and 0."""
+    import click
+
+    from featurewarp_cli.cli.edit import serve
+
+    class Session:
+        def __init__(self, running):
+            self.running = running
+
+        def state(self):
+            return {"warnings": ["handles: ignoring the key 'colour' (unknown to version 1)"]}
+
+        def abandon(self):
+            return "out.png" if self.running else None
+
+    class Server:
+        url = "http://127.0.0.1:1/?token=x"
+
+        def __init__(self, running):
+            self.session = Session(running)
+
+        def serve_forever(self, poll_interval):
+            raise KeyboardInterrupt
+
+        def server_close(self):
+            pass
+
+    serve(Server(False), quiet=False, no_browser=True)
+    err = capsys.readouterr().err
+    assert "featurewarp: warning: handles: ignoring the key 'colour'" in err and "editor stopped" in err
+    with pytest.raises(click.exceptions.Exit) as stopped:
+        serve(Server(True), quiet=True, no_browser=True)
+    assert stopped.value.exit_code == 130
+    assert "export of out.png abandoned" in capsys.readouterr().err
+
+
+def test_a_write_error_names_the_file_not_its_temporary(tmp_path):
+    """Finding 8: 'No such file or directory: .../gone/.featurewarp-46qou5f0.tmp'. Save and
+    Export name the file they could not write, and why."""
+    import shutil
+
+    image, mask = _small(tmp_path)
+    (tmp_path / "gone").mkdir()
+    handles, out = tmp_path / "gone" / "h.json", tmp_path / "gone" / "out.png"
+    session = EditorSession(Settings("deform"), image, mask, str(handles), str(out))
+    shutil.rmtree(tmp_path / "gone")
+    server = EditorServer(session, 0)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    try:
+        saved = _post(server, "save", {"handles": SMALL})
+        exported = _post(server, "export", {"handles": SMALL})
+    finally:
+        server.shutdown()
+        server.server_close()
+    assert saved == (500, {"error": f"cannot write {handles}: the folder {tmp_path / 'gone'}/ no longer exists"})
+    assert exported[0] in (400, 500) and str(tmp_path / "gone") in exported[1]["error"], exported
+    assert ".tmp" not in exported[1]["error"]
+
+
+def test_the_printed_command_keeps_max_memory_and_versions_tell_pages_what_another_changed(tmp_path):
+    """Finding 10: --max-memory was left out of the printed command. Finding 4: a density or a
+    mask set by one page shows in every later answer's versions (the other page reloads)."""
+    assert options_given(Settings("deform", max_memory=300 * 2**20)) == ["--max-memory", str(300 * 2**20)]
+    image, mask = _small(tmp_path)
+    session = EditorSession(Settings("deform"), image, mask, None, None)
+    assert session.state()["versions"] == {"grid": 0, "mask": 0}
+    session.set_density({"density": "fewer"})
+    assert session.solve({"handles": SMALL})[0]["versions"] == {"grid": 1, "mask": 0}
+    painted = "data:image/png;base64," + base64.b64encode(session.mask_png).decode()
+    assert session.set_mask({"png": painted})["version"] == 1
+    assert session.state()["versions"] == {"grid": 1, "mask": 1}
+
+
+def test_a_stroke_changes_the_mask_only_near_it_when_the_texture_is_smaller(tmp_path):
+    """Nit: one stroke on an image wider than the texture resampled the whole mask (88 pixels
+    changed far from a 5 px stroke on 8000 x 400). Only pixels under changed texels change."""
+    width, height = 6000, 60
+    rng = np.random.default_rng(3)
+    mask = (rng.random((height // 4, width // 4)) > 0.5).astype(np.uint8) * 255
+    mask = cv2.resize(mask, (width, height), interpolation=cv2.INTER_NEAREST)      # detail finer than a texel
+    cv2.imwrite(str(tmp_path / "wide.png"), np.full((height, width, 3), 128, np.uint8))
+    cv2.imwrite(str(tmp_path / "wide_mask.png"), mask)
+    session = EditorSession(Settings("deform"), str(tmp_path / "wide.png"), str(tmp_path / "wide_mask.png"), None, None)
+    painted = session.mask_texture.copy()
+    assert painted.shape[1] == 4096
+    painted[10:20, 100:110] = 255                                       # a stroke near the left end
+    session.set_mask({"png": "data:image/png;base64," + base64.b64encode(cv2.imencode(".png", painted)[1]).decode()})
+    changed = np.nonzero((session.feature_mask != (mask >= 128)).any(axis=0))[0]
+    assert len(changed) and changed.min() >= 100 * width / 4096 - 4 and changed.max() <= 110 * width / 4096 + 4
+
+
+def test_a_bad_handles_file_is_named_in_the_error(tmp_path):
+    """Nit: 'Invalid value for '--handles': points[0].to: ...' did not say which file."""
+    from click.testing import CliRunner
+
+    from featurewarp_cli.cli.main import cli
+
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"version": 1, "points": [{"from": [1, 2], "to": [3]}, {"from": [5, 5], "to": [5, 5]}]}')
+    result = CliRunner().invoke(cli, ["edit", IMAGE, "--handles", str(bad), "--no-browser"])
+    assert result.exit_code == 2 and f"{bad}: points[0].to" in result.output, result.output

@@ -31,7 +31,7 @@ from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from importlib import resources
 from urllib.parse import parse_qs, urlsplit
 
-from .editor_session import EditorSession  # noqa: F401  (the CLI takes both from here)
+from .editor_session import EditorSession, Unconfirmed  # noqa: F401  (the CLI takes both from here)
 from .pipeline import WarpError
 
 #: Largest request body accepted (bytes; a painted mask of 4096 x 4096 fits).
@@ -203,10 +203,12 @@ class EditorHandler(BaseHTTPRequestHandler):
             return self._json(400, {"error": "the JSON body is nested too deeply"})
         except json.JSONDecodeError as err:
             return self._json(400, {"error": f"the body is not valid JSON ({err})"})
+        except Unconfirmed as err:               # the page asks the user, then posts again with drop_ignored
+            return self._json(409, {"error": str(err), "confirm": err.notes})
         except (ValueError, TypeError, OverflowError, WarpError) as err:
             return self._json(400, {"error": str(err)})
         except OSError as err:
-            return self._json(500, {"error": f"{err.strerror or err}: {err.filename or ''}"})
+            return self._json(500, {"error": f"{err.strerror or err}" + (f": {err.filename}" if err.filename else "")})
         except Exception as err:  # the server keeps serving; the page shows the one line
             return self._json(500, {"error": f"{type(err).__name__}: {err}"})
         if route == "/solve":

@@ -15,9 +15,6 @@ see ``FeatureWarper.solve(quick=True)``; Export runs the full pipeline).
 from __future__ import annotations
 
 import base64
-import binascii
-import contextlib
-import json
 import math
 import os
 import shlex
@@ -25,11 +22,12 @@ import struct
 import threading
 import time
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 
 from ..io import write
+from .editor_files import (TEXTURE_SIDE, Snapshot, Unconfirmed, decode_mask, handles_json, naming, png,  # noqa: F401
+                           texture, write_named)
 from .pipeline import Settings, WarpError, load_image_and_mask, warp_file
 
 #: The live preview's grid is the handles' rigid grid refined k times (:func:`deform.solve_grid`),
@@ -38,8 +36,6 @@ from .pipeline import Settings, WarpError, load_image_and_mask, warp_file
 #: at any density (a forced small ``--cell``; the capped cell is rounded to a refinement).
 #: Export uses the full pipeline, whose grid also follows the warp.
 PREVIEW_MAX_NODES = 260_000
-#: Longest side of the image the browser gets as its texture (and paints the mask on).
-TEXTURE_SIDE = 4096
 #: The rigid map's Newton steps per update at most (each warm-started from the last update;
 #: Export runs them to convergence), and while the pointer is still dragging.
 EDITOR_RIGID_STEPS = 8
@@ -89,15 +85,18 @@ class EditorSession:
         self.height, self.width = image.shape[:2]
         self.normal_cell = settings.cell or base_cell(self.width, self.height)
         self.density, self.cell, self.painted = "normal", self._density_cell("normal"), False
-        texture = _texture(image)
-        self.texture_size = (texture.shape[1], texture.shape[0])
-        self.image_png = _png(texture)
-        self.mask_png = _png(_texture(self._mask_image()))
+        tex = texture(image)
+        self.texture_size = (tex.shape[1], tex.shape[0])
+        self.image_png = png(tex)
+        self.mask_texture = texture(self._mask_image())      # what the page paints on (it reads mask_png)
+        self.mask_png = png(self.mask_texture)
         self.notes = []
         self.initial = ({"version": 1, "points": [], "curves": [], "border": "free", "canvas": "fit"}
                         if handles is None else self._checked({"handles": handles}, self.notes))
         self.lock, self._seen = threading.Lock(), threading.Lock()
         self.files = threading.Lock()          # one Save or Export at a time: its files and command agree
+        self.commit, self.snapshot, self.abandoned = threading.Lock(), None, False
+        self.versions = {"grid": 0, "mask": 0}     # what another page changed (it reloads them)
         self.newest = {}
         self._build()
 
@@ -123,7 +122,8 @@ class EditorSession:
                 "cell": self.cell, "density": self.density, "densities": list(DENSITIES),
                 "texture": list(self.texture_size), "save_to": self.handles_path,
                 "export_to": self.output_path, "mask_to": self.mask_out,
-                "has_mask": self.mask is not None or self.painted, "warnings": self.warnings + self.notes}
+                "has_mask": self.mask is not None or self.painted, "warnings": self.warnings + self.notes,
+                "versions": dict(self.versions)}
 
     def grid(self) -> bytes:
         """The preview grid: node count, triangle count, nodes per row and per column (uint32),
@@ -161,6 +161,7 @@ class EditorSession:
             offset = np.asarray(warp.offset)
             ends, curves = warp.ends(mesh), warp.curve_ends(mesh)
             turns = _turns(warp, mesh, handles, max(1.0, 0.5 * self.cell))
+            versions = dict(self.versions)
         components = mesh.record.components
         warnings = mesh.record.warnings
         if body.get("drag") is True:        # a drag's updates are cut short by design: say so at the release
@@ -170,7 +171,7 @@ class EditorSession:
                   "components": len(components), "kept": sum(c.kept for c in components) if mode != "plain" else 0,
                   "canvas": list(mesh.canvas), "warnings": warnings[:3],
                   "ends": [] if ends is None else np.round(ends, 2).tolist(), "turns": turns,
-                  "curve_ends": [np.round(ended, 2).tolist() for _, ended in curves]}
+                  "curve_ends": [np.round(ended, 2).tolist() for _, ended in curves], "versions": versions}
         return status, (mesh.target + offset).astype("<f4").tobytes()
 
     def _superseded(self, ticket: tuple | None, arriving: bool = False) -> bool:
@@ -202,6 +203,7 @@ class EditorSession:
             except Exception:              # the session stays as it was: later Exports still work
                 self.density, self.cell, self.deformer = before
                 raise
+            self.versions["grid"] += 1
         return self.state()
 
     def _density_cell(self, density: str) -> float:
@@ -219,17 +221,26 @@ class EditorSession:
 
     def set_mask(self, body: dict) -> dict:
         """Replace the feature mask by the one painted in the page (``png``: a data URL of a
-        PNG of the texture's size; white is feature)."""
+        PNG of the texture's size; white is feature). Where the texture is smaller than the
+        image, only the image pixels under texels that changed are taken from it: the rest of
+        the mask keeps its full resolution (a stroke resampled the whole mask)."""
         import cv2
 
-        painted = _decode_mask(body.get("png"), self.texture_size)
-        if painted.shape != (self.height, self.width):
-            painted = cv2.resize(painted, (self.width, self.height), interpolation=cv2.INTER_LINEAR)
+        painted = decode_mask(body.get("png"), self.texture_size)
         with self.lock:
-            self.feature_mask, self.painted = painted >= 128, True
-            self.mask_png = _png(_texture(self._mask_image()))
+            if painted.shape == (self.height, self.width):
+                self.feature_mask = painted >= 128
+            else:
+                changed = cv2.dilate((painted != self.mask_texture).astype(np.uint8), np.ones((3, 3), np.uint8))
+                under = cv2.resize(changed, (self.width, self.height), interpolation=cv2.INTER_LINEAR) > 0
+                mask, full = self._mask_image() >= 128, cv2.resize(painted, (self.width, self.height),
+                                                                    interpolation=cv2.INTER_LINEAR)
+                mask[under] = full[under] >= 128
+                self.feature_mask = mask
+            self.painted, self.mask_texture, self.mask_png = True, painted, png(painted)
+            self.versions["mask"] += 1
             self._build()
-        return {"mask": True, "coverage": round(float(self.feature_mask.mean()), 4)}
+        return {"mask": True, "coverage": round(float(self.feature_mask.mean()), 4), "version": self.versions["mask"]}
 
     def save(self, body: dict) -> dict:
         """Write the handles to ``handles_path`` and a painted mask to ``mask_out`` (checked
@@ -238,18 +249,26 @@ class EditorSession:
         answer = {"saved": self.handles_path, "handles": data, "mask_saved": None}
         with self.files:
             if self.handles_path:
-                write.write_atomic(self.handles_path, (json.dumps(data, indent=2) + "\n").encode())
+                self._confirmed(body, self.handles_path)
+                write_named(self.handles_path, handles_json(data).encode())
                 self.initial, self.notes = data, []   # a reloaded page goes on from what was saved
             if self.painted:
                 if self.mask_out:
                     answer["mask_saved"] = self._write_mask()
                 else:
-                    answer["mask_png"] = base64.b64encode(_png(self._mask_image())).decode()
+                    answer["mask_png"] = base64.b64encode(png(self._mask_image())).decode()
         return answer
 
     def _write_mask(self) -> str:
-        write.write_atomic(self.mask_out, _png(self._mask_image()))
+        write_named(self.mask_out, png(self._mask_image()))
         return self.mask_out
+
+    def _confirmed(self, body: dict, path: str) -> None:
+        """Unconfirmed unless ``body`` says ``drop_ignored``, while the handles file loaded at
+        start had keys the editor ignores (writing ``path`` would drop them for good)."""
+        if self.notes and path == self.handles_path and body.get("drop_ignored") is not True:
+            raise Unconfirmed(f"{path} holds what the editor ignores ({'; '.join(self.notes)}): "
+                              "writing it drops that for good", self.notes)
 
     def export(self, body: dict) -> dict:
         """Render the full-resolution result through exactly the ``deform`` pipeline, after
@@ -264,11 +283,24 @@ class EditorSession:
         settings = replace(self.settings, mode=mode, warp_factory=handles_factory(data, self.settings.decay))
         if self.density != "normal":
             settings = replace(settings, cell=self.cell)
-        with self.files, _restored_on_failure([handles_path] + ([self.mask_out] if self.painted else [])):
-            write.write_atomic(handles_path, (json.dumps(data, indent=2) + "\n").encode())
-            mask = self._write_mask() if self.painted else self.mask
-            summary = warp_file(settings, self.input, self.output_path, mask,
-                                also_read=((handles_path, "--handles"),))
+        with self.files:
+            self._confirmed(body, handles_path)
+            self.snapshot = Snapshot([self.output_path, handles_path] + ([self.mask_out] if self.painted else []))
+            try:
+                mask = self._write_mask() if self.painted else self.mask
+                with naming(self.output_path):
+                    summary = warp_file(settings, self.input, self.output_path, mask,
+                                        also_read=((handles_path, "--handles"),))
+                with self.commit:            # the handles after the image: Ctrl-C before it leaves the old pair
+                    if self.abandoned:
+                        raise WarpError(f"the export of {self.output_path} was abandoned")
+                    write_named(handles_path, handles_json(data).encode())
+            except BaseException:
+                with self.commit:
+                    self.snapshot.restore()
+                raise
+            finally:
+                self.snapshot = None
             if handles_path == self.handles_path:
                 self.initial, self.notes = data, []
         command = ["featurewarp", "deform", self.input, self.output_path] + (["-m", mask] if mask else [])
@@ -278,6 +310,17 @@ class EditorSession:
                 "handles_saved": handles_path, "mask_saved": mask if self.painted else None,
                 "warnings": summary["warnings"][:3], "command": " ".join(shlex.quote(c) for c in command)}
 
+    def abandon(self) -> str | None:
+        """Ctrl-C while an Export runs: put its files back as they were and make it write no
+        more (:class:`Snapshot`); the output it was writing, or None when none was running."""
+        with self.commit:
+            self.abandoned = True
+            if self.snapshot is None:
+                return None
+            self.snapshot.restore()
+            write.remove_pending()
+            return self.output_path
+
     def _checked(self, body: dict, notes: list | None = None) -> dict:
         from ..engine.handles import Handles
 
@@ -285,25 +328,6 @@ class EditorSession:
         if notes is not None:
             notes.extend(handles.notes)
         return handles.as_dict()
-
-
-@contextlib.contextmanager
-def _restored_on_failure(paths: list):
-    """Files put back as they were (or removed, where there was none) when the block fails: an
-    Export that fails leaves every existing file as it was, the handles and mask it wrote first
-    (for the command it prints) included."""
-    paths = [os.path.realpath(path) for path in paths]      # a link's target is what gets written
-    before = {path: Path(path).read_bytes() if os.path.isfile(path) else None for path in paths}
-    absent = {path for path in paths if not os.path.lexists(path)}
-    try:
-        yield
-    except BaseException:
-        for path, data in before.items():
-            if path in absent:
-                write.remove_quietly(path)
-            elif data is not None:              # a FIFO, a device or a dangling link stays as it is
-                write.write_atomic(path, data)
-        raise
 
 
 def _ticket(body: dict) -> tuple | None:
@@ -327,41 +351,14 @@ def _turns(warp, mesh, handles, step: float) -> list:
     return np.round(np.where(np.isfinite(handles.angles), np.degrees(handles.angles), solved), 2).tolist()
 
 
-def _decode_mask(data, size: tuple[int, int]) -> np.ndarray:
-    """The 8-bit mask of a ``data:image/png;base64,...`` URL whose PNG is ``size`` (w, h)."""
-    import cv2
-
-    prefix = "data:image/png;base64,"
-    if not isinstance(data, str) or not data.startswith(prefix):
-        raise ValueError("png: expected a data URL of a PNG (data:image/png;base64,...)")
-    try:
-        raw = base64.b64decode(data[len(prefix):], validate=True)
-    except (binascii.Error, ValueError):
-        raise ValueError("png: not valid base64") from None
-    from ..io.decode import png_size
-
-    found = png_size(raw)                                      # before decoding: no bomb gets decoded
-    if found is None:
-        raise ValueError("png: not a PNG")
-    width, height = found
-    if (width, height) != tuple(size):
-        raise ValueError(f"png: the mask is {width}x{height}; the page's texture is {size[0]}x{size[1]}")
-    from ..io.capture import captured_stderr
-
-    with captured_stderr():                   # libpng's complaints: the 400 says it, not the terminal
-        image = cv2.imdecode(np.frombuffer(raw, np.uint8), cv2.IMREAD_GRAYSCALE)
-    if image is None or image.shape != (height, width):
-        raise ValueError("png: cannot decode the mask")
-    return image
-
-
 def options_given(settings: Settings) -> list[str]:
     """The command-line options of ``settings`` that differ from deform's defaults (for the
     command Export prints; numbers exactly, so that it replays as printed)."""
     default = Settings(settings.preset)
     flags = {"cell": "--cell", "feature_weight": "--feature-weight", "decay": "--decay",
              "scale_prior": "--scale-prior", "background": "--background", "interp": "--interp",
-             "fmt": "--format", "quality": "--quality", "max_pixels": "--max-pixels"}
+             "fmt": "--format", "quality": "--quality", "max_pixels": "--max-pixels",
+             "max_memory": "--max-memory"}
     given = []
     for name, flag in flags.items():
         value = getattr(settings, name)
@@ -374,27 +371,3 @@ def _number(value: float) -> str:
     """``value`` as short as it reads back exactly (``8`` for 8.0, ``7.8125``)."""
     short = f"{value:g}"
     return short if float(short) == value else repr(value)
-
-
-def _texture(image: np.ndarray) -> np.ndarray:
-    """``image`` scaled down to :data:`TEXTURE_SIDE` at most (8 bits), each side 1 px at least
-    (a 10000 x 1 strip scaled by 4096 / 10000 would have no row: OpenCV asserts)."""
-    import cv2
-
-    if image.dtype != np.uint8:
-        image = (image / (257.0 if image.dtype == np.uint16 else 1.0 / 255.0)).clip(0, 255).astype(np.uint8)
-    height, width = image.shape[:2]
-    if max(height, width) > TEXTURE_SIDE:
-        scale = TEXTURE_SIDE / max(height, width)
-        size = (max(1, int(round(width * scale))), max(1, int(round(height * scale))))
-        image = cv2.resize(image, size, interpolation=cv2.INTER_AREA)
-    return image
-
-
-def _png(image: np.ndarray) -> bytes:
-    import cv2
-
-    ok, data = cv2.imencode(".png", image, [cv2.IMWRITE_PNG_COMPRESSION, 1])
-    if not ok:
-        raise WarpError("cannot encode the editor's texture")
-    return data.tobytes()

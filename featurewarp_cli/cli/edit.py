@@ -52,12 +52,16 @@ def check_files(settings, input: str, mask: str | None, handles: str | None, out
 
 
 def serve(server, quiet: bool, no_browser: bool) -> None:
-    """Print the editor's URL, open it unless ``no_browser``, serve until Ctrl-C (exit 0)."""
+    """Print the editor's URL and what loading said, open the URL unless ``no_browser``, serve
+    until Ctrl-C (exit 0; 130 when an Export was running: it is abandoned, its files put back)."""
     signal.signal(signal.SIGINT, signal.default_int_handler)     # Ctrl-C stops it cleanly, exit 0
+    abandoned = None
     try:
         click.echo(server.url)
         sys.stdout.flush()
         if not quiet:
+            for warning in server.session.state()["warnings"]:
+                click.echo(f"featurewarp: warning: {warning}", err=True)
             click.echo("featurewarp: editor running; Ctrl-C stops it", err=True)
         if not no_browser:
             import webbrowser
@@ -65,9 +69,12 @@ def serve(server, quiet: bool, no_browser: bool) -> None:
             webbrowser.open(server.url)
         server.serve_forever(poll_interval=0.2)
     except KeyboardInterrupt:
-        pass
+        abandoned = server.session.abandon()
     finally:
         server.server_close()
+    if abandoned:
+        click.echo(f"featurewarp: export of {abandoned} abandoned (Ctrl-C): its files are as they were", err=True)
+        raise click.exceptions.Exit(130)
     if not quiet:
         click.echo("featurewarp: editor stopped", err=True)
 
@@ -106,7 +113,7 @@ def edit_command() -> click.Command:
         except WarpError as err:
             raise click_error(err) from err
         except ValueError as err:
-            raise click.BadParameter(str(err), param_hint="'--handles'") from None
+            raise click.BadParameter(f"{handles}: {err}", param_hint="'--handles'") from None
         try:
             server = EditorServer(session, port)
         except OSError as err:
