@@ -415,3 +415,69 @@ def test_the_page_keeps_one_solve_in_flight_one_draw_a_frame_and_shows_late_answ
     last = json.loads(js(driver, "window.lastBody"))          # the answer on screen is the last position's
     assert last["handles"]["points"][2]["to"] == js(driver, "featurewarp.handles.points[2].to")
     assert last["drag"] is False and last["seq"] == js(driver, "featurewarp.shown")
+
+
+def test_warnings_unsaved_work_export_state_another_window_and_a_stopped_server(tmp_path, browser):  # noqa: F811
+    """Designer trial findings 2, 4 to 7, 9 and a nit, in one page: load warnings are shown and
+    Save asks before dropping the misspelt key; a click is a pin (from == to) though the
+    positions are off by float32 noise; leaving with unsaved work is prevented; Space leaves a
+    focused checkbox alone; Export disables its button and shows busy, and Enter after it does
+    not export again; a density set by another window reloads this page's mesh; with the
+    server stopped, Save says so and downloads the handles."""
+    import urllib.request
+
+    from selenium.webdriver.common.keys import Keys
+
+    driver = browser
+    (tmp_path / "h.json").write_text(json.dumps({"version": 1, "colour": "red", "points": [
+        {"from": [60, 470], "to": [60, 470]}, {"from": [450, 470], "to": [450, 470], "angel": 30}]}))
+    process = subprocess.Popen([sys.executable, "-m", "featurewarp_cli", "edit", IMAGE, "-m", MASK, "--no-browser",
+                                "--handles", "h.json", "-o", "out.png"], cwd=tmp_path, text=True,
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    try:
+        url = process.stdout.readline().strip()
+        driver.get(url)
+        settled(driver)
+        overlay = driver.find_element("id", "overlay")
+        notice = driver.find_element("id", "notice")
+        assert notice.is_displayed() and "ignoring the key 'colour'" in notice.text, notice.text
+        unload = "const e = new Event('beforeunload', {cancelable: true}); dispatchEvent(e); return e.defaultPrevented"
+        assert not driver.execute_script(unload)
+        driver.execute_script("featurewarp.positions = featurewarp.positions.map((v) => v + 0.004)")
+        click_at(driver, overlay, (250, 100))
+        settled(driver)
+        point = js(driver, "featurewarp.handles.points[2]")
+        assert point["from"] == point["to"], point                     # a pin, not a 0.004 px move
+        assert driver.execute_script(unload)                            # unsaved: the browser asks
+        driver.find_element("id", "grid").click()
+        keys(driver, " ")
+        assert driver.find_element("id", "grid").is_selected()          # Space did not toggle it
+        driver.execute_script("window.asked = []; window.confirm = (m) => (asked.push(m), true)")
+        driver.find_element("id", "save").click()
+        wait_for(driver, "return featurewarp.saved")
+        assert "angel" in js(driver, "asked[0]") and not driver.execute_script(unload)
+        lines = (tmp_path / "h.json").read_text().splitlines()
+        points = js(driver, "featurewarp.handles.points")
+        assert [line.rstrip(",") for line in lines[3:6]] == ["    " + json.dumps(p) for p in points]      # one a line
+        driver.find_element("id", "export").click()
+        assert js(driver, "document.getElementById('export').disabled") and \
+            js(driver, "document.getElementById('busy').textContent") == "exporting…"
+        wait_for(driver, "return featurewarp.exported", timeout=120)
+        assert not js(driver, "document.getElementById('export').disabled")
+        keys(driver, Keys.ENTER)
+        settled(driver)
+        assert js(driver, "featurewarp.exports") == 1 and not js(driver, "featurewarp.exporting")
+        data = json.dumps({"density": "fewer"}).encode()                # another window: a coarser mesh
+        urllib.request.urlopen(urllib.request.Request(url.replace("/?", "/density?"), data=data, method="POST",
+                                                      headers={"Content-Type": "application/json"}))
+        driver.execute_script("featurewarp.epoch++; requestSolve()")
+        wait_for(driver, "return featurewarp.info.density === 'fewer'")
+        settled(driver)
+        assert "another window changed the mesh density" in notice.text
+        assert js(driver, "featurewarp.positions.length === featurewarp.uv.length && featurewarp.status !== null")
+    finally:
+        process.send_signal(signal.SIGINT)
+        process.wait(timeout=10)
+    driver.find_element("id", "save").click()
+    wait_for(driver, "return featurewarp.savedOffline")
+    assert "server is not running" in driver.find_element("id", "status").text

@@ -67,7 +67,7 @@ def handles_json(data: dict) -> str:
     """The handles file's text: one handle (and one border side) per line, as
     ``samples/astronaut_handles.json`` is written, so that a change reads as a line in a diff."""
     lines = []
-    for key, value in data.items():
+    for key, value in _whole(data).items():
         if isinstance(value, list) and value:
             inner = ",\n".join("    " + json.dumps(item) for item in value)
             text = "[\n" + inner + "\n  ]"
@@ -78,6 +78,15 @@ def handles_json(data: dict) -> str:
             text = json.dumps(value)
         lines.append(f"  {json.dumps(key)}: {text}")
     return "{\n" + ",\n".join(lines) + "\n}\n"
+
+
+def _whole(value):
+    """``value`` with every whole float written as an int (``60`` as the samples, not ``60.0``)."""
+    if isinstance(value, float) and value.is_integer() and abs(value) < 2**53:
+        return int(value)
+    if isinstance(value, dict):
+        return {k: _whole(v) for k, v in value.items()}
+    return [_whole(v) for v in value] if isinstance(value, list) else value
 
 
 def write_named(path: str, data: bytes) -> None:

@@ -80,8 +80,11 @@ function startEdit(e) {
   }
   if (e.ctrlKey || e.metaKey) { app.box = { from: p, to: p, add: e.shiftKey }; return; }
   if (e.shiftKey) { app.drawing = [p]; return; }
-  const from = inverse(p);
+  let from = inverse(p);
   if (!from) { app.selected = []; return scheduleDraw(false); }
+  // where the map leaves the clicked point in place, it is a pin (from == to), not the
+  // thousandth of a pixel the float32 positions round it to (a 12 MP photo's coordinates)
+  if (Math.hypot(from[0] - p[0], from[1] - p[1]) < PIN_SNAP) from = p;
   remember();
   app.handles.points.push({ from: from.map(round3), to: p.map(round3) });
   app.selected = [{ kind: "point", index: app.handles.points.length - 1 }];
@@ -185,6 +188,8 @@ window.addEventListener("keydown", (e) => {
 });
 
 window.addEventListener("keyup", (e) => {
+  // Space is the pan key: it does not toggle a focused checkbox nor press a focused button
+  if (e.key === " " && (e.target.type === "checkbox" || e.target.tagName === "BUTTON")) e.preventDefault();
   if (e.key === " ") { app.space = false; if (!app.panning) overlay.style.cursor = ""; }
   else if (e.key === "Alt" && app.hover) { app.hover.alt = false; scheduleDraw(false); }
 });

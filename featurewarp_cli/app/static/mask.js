@@ -48,8 +48,11 @@ function sendMask() {       // the next solve waits for the server to have the m
   const png = app.mask.canvas.toDataURL("image/png");
   app.maskPosting = fetch(url("/mask"), { method: "POST", headers: { "Content-Type": "application/json" },
                                           body: JSON.stringify({ png }) })
-    .then(async (r) => { const data = await r.json(); if (!r.ok) throw new Error(data.error); app.maskCoverage = data.coverage; })
-    .catch((err) => setStatus(err.message, true));
+    .then(async (r) => {
+      const data = await r.json(); if (!r.ok) throw new Error(data.error);
+      app.maskCoverage = data.coverage; app.maskVersion = Math.max(app.maskVersion, data.version);
+    })
+    .catch((err) => setStatus(failure(err), true, true));
   app.epoch++; requestSolve();
 }
 

@@ -47,7 +47,7 @@ async function solveOnce() {
     response = await fetch(url("/solve"), { method: "POST", headers: { "Content-Type": "application/json" }, body: JSON.stringify(body) });
     buffer = response.ok ? await response.arrayBuffer() : null;
   } catch (err) {
-    app.solves++; return setStatus(String(err), true);
+    app.solves++; return setStatus(failure(err), true, true);
   } finally {
     app.inFlight--; clearTimeout(late);
   }
@@ -59,6 +59,9 @@ async function solveOnce() {
   const n = new DataView(buffer).getUint32(0, true);
   const status = JSON.parse(new TextDecoder().decode(new Uint8Array(buffer, 4, n)));
   if (status.stale || epoch !== app.epoch || seq < app.shown || app.tris.length === 0) { app.dropped++; return; }
+  if (status.versions.grid > app.info.versions.grid || status.versions.mask > app.maskVersion) {
+    app.dropped++; return reloadShared(status.versions);      // another window changed the mesh or the mask
+  }
   const positions = new Float32Array(buffer.slice(4 + n + ((4 - ((4 + n) % 4)) % 4)));
   if (positions.length !== app.uv.length) { app.dropped++; return; }     // a density change overtook it
   app.shown = seq; app.positions = positions; app.status = status;
@@ -70,25 +73,68 @@ async function solveOnce() {
   scheduleDraw();
 }
 
-function showLate(late) {   // the busy state: an answer is late
-  if (app.late === late) return;
-  app.late = late;
-  document.body.classList.toggle("busy", late);
-  $("busy").hidden = !late;
+async function reloadShared(versions) {     // the server's mesh or mask is another window's: take it
+  const info = await fetch(url("/state")).then((r) => r.json()), changed = [];
+  if (versions.grid > app.info.versions.grid) { await loadGrid(info); changed.push("the mesh density"); }
+  if (versions.mask > app.maskVersion) {
+    setupMask(await loadImage("/mask")); app.maskVersion = info.versions.mask; changed.push("the mask");
+    $("mask").checked = info.has_mask;
+  }
+  app.info.versions = info.versions;
+  notice(`another window changed ${changed.join(" and ")}: this page reloaded it`);
+  app.epoch++; requestSolve();
 }
 
-function setStatus(text, error) {      // the full text also as the tooltip (the line is cut to one)
+function showLate(late) {   // the busy state: an answer is late (or an Export runs)
+  app.late = late;
+  const on = app.late || app.exporting;
+  document.body.classList.toggle("busy", on);
+  $("busy").hidden = !on; $("busy").textContent = app.exporting ? "exporting…" : "solving…";
+}
+
+function setStatus(text, error, full) {   // the full text also as the tooltip (the line is cut to one)
   const status = $("status");
   status.textContent = text; status.title = text; status.className = error ? "error" : "";
+  if (full) notice(text, error);
 }
 
-async function post(path, body) {
+function notice(text, error) {      // a message read in full (warnings, Export, errors): click hides it
+  const box = $("notice");
+  box.textContent = text; box.className = error ? "error" : ""; box.hidden = false;
+}
+
+const GONE = "the editor's server is not running (restart featurewarp edit)";
+function failure(err) { return err instanceof TypeError ? GONE : err.message || String(err); }
+
+async function post(path, body) {   // the answer's JSON; an Error with .confirm when the server asks first
   const response = await fetch(url(path), { method: "POST", headers: { "Content-Type": "application/json" },
                                              body: JSON.stringify(body || { handles: payload(), mode: mode() }) });
   const data = await response.json();
-  if (!response.ok) throw new Error(data.error);
+  if (!response.ok) throw Object.assign(new Error(data.error), { confirm: data.confirm });
   return data;
 }
+
+async function confirmedPost(path) {    // a write that would drop keys the loaded file had: ask first
+  const body = { handles: payload(), mode: mode() };
+  try { return await post(path, body); } catch (err) {
+    if (!err.confirm || !window.confirm(err.message + "\n\nWrite it anyway?")) throw err;
+    return post(path, { ...body, drop_ignored: true });
+  }
+}
+
+function handlesText(h) {   // one handle per line, as the server writes the file
+  const lines = Object.entries(h).map(([key, value]) => {
+    const many = value && typeof value === "object" && Object.keys(value).length;
+    const inner = !many ? JSON.stringify(value) : Array.isArray(value)
+      ? "[\n" + value.map((v) => "    " + JSON.stringify(v)).join(",\n") + "\n  ]"
+      : "{\n" + Object.entries(value).map(([k, v]) => `    ${JSON.stringify(k)}: ${JSON.stringify(v)}`).join(",\n") + "\n  }";
+    return `  ${JSON.stringify(key)}: ${inner}`;
+  });
+  return "{\n" + lines.join(",\n") + "\n}\n";
+}
+
+const unsaved = () => app.savedAs !== null && current() !== app.savedAs;
+window.addEventListener("beforeunload", (e) => { if (unsaved()) { e.preventDefault(); e.returnValue = ""; } });
 
 function download(name, blob) {
   const a = document.createElement("a");
@@ -96,25 +142,40 @@ function download(name, blob) {
 }
 
 $("save").addEventListener("click", async () => {
+  $("save").blur();                   // Enter or Space afterwards does not save again
+  const state = current();
   try {
-    const data = await post("/save");
-    app.saved = data;
+    const data = await confirmedPost("/save");
+    app.saved = data; app.savedAs = state;
     const saved = [data.saved, data.mask_saved].filter(Boolean);
-    if (!data.saved) download("handles.json", new Blob([JSON.stringify(data.handles, null, 2)], { type: "application/json" }));
+    if (!data.saved) download("handles.json", new Blob([handlesText(data.handles)], { type: "application/json" }));
     if (data.mask_png) download("mask.png", await (await fetch("data:image/png;base64," + data.mask_png)).blob());
     setStatus(saved.length ? "saved " + saved.join(" and ") :
               "downloaded handles.json (start with --handles H.json to save in place)");
-  } catch (err) { setStatus(err.message, true); }
+  } catch (err) {
+    if (!(err instanceof TypeError)) return setStatus(failure(err), true, true);
+    download("handles.json", new Blob([handlesText(payload())], { type: "application/json" }));
+    app.savedAs = state; app.savedOffline = true;
+    setStatus(GONE + ": downloaded handles.json instead" + (app.mask.version ? " (the painted mask is not in it)" : ""),
+              true, true);
+  }
 });
 
 $("export").addEventListener("click", async () => {
+  const button = $("export");
+  if (app.exporting) return;
+  app.exporting = true; button.disabled = true; button.blur(); showLate(app.late);
   setStatus("exporting…");
+  const state = current();
   try {
-    const data = await post("/export");
-    app.exported = data;
+    const data = await confirmedPost("/export");
+    app.exported = data; app.exports++;
+    if (data.handles_saved === app.info.save_to) app.savedAs = state;
     setStatus(`exported ${data.exported} in ${data.seconds} s (the same bytes as: ${data.command})` +
-              (data.warnings.length ? " · " + data.warnings[0] : ""));
-  } catch (err) { setStatus(err.message, true); }
+              data.warnings.map((w) => " · " + w).join(""), false, true);
+  } catch (err) { setStatus(failure(err), true, true); } finally {
+    app.exporting = false; button.disabled = false; showLate(app.late);
+  }
 });
 
 $("density").addEventListener("change", async () => {   // a new preview mesh: the server refactors
@@ -122,5 +183,5 @@ $("density").addEventListener("change", async () => {   // a new preview mesh: t
     const info = await post("/density", { density: $("density").value });
     await loadGrid(info);
     app.epoch++; requestSolve();
-  } catch (err) { setStatus(err.message, true); }
+  } catch (err) { setStatus(failure(err), true, true); }
 });

@@ -54,8 +54,11 @@ async function start() {
   Object.assign(app.view, { x0: -margin, y0: -margin, x1: info.width + margin, y1: info.height + margin });
   fitView();
   texture(0, image); setupMask(mask);
+  app.maskVersion = info.versions.mask; app.savedAs = current();     // what is on disk: nothing unsaved yet
+  if (info.warnings.length) notice("loaded with warnings: " + info.warnings.join(" · "), true);
   document.body.dataset.ready = "1";
   requestSolve();
 }
 
-start().catch((err) => setStatus(String(err), true));
+$("notice").addEventListener("click", () => { $("notice").hidden = true; });
+start().catch((err) => setStatus(failure(err), true, true));

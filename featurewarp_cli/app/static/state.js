@@ -10,6 +10,7 @@ const HIT = 9;            // px on screen: how close a click must be to grab a h
 const RING = 45;          // px on screen: Alt-drag this near a point handle (not on it) turns around it
 const BUSY_MS = 150;      // an answer later than this shows the busy state
 const round3 = (x) => Math.round(x * 1000) / 1000;
+const PIN_SNAP = 0.02;    // input px: a click this close to where its point comes from adds a pin (from == to)
 
 const app = {
   info: null, nx: 0, ny: 0, uv: null, tris: null, edges: null, positions: null,
@@ -20,7 +21,7 @@ const app = {
   // solving: at most one request in flight, the newest handles win, answers to older edits dropped
   busy: false, pending: false, solves: 0, seq: 0, shown: 0, epoch: 0, dropped: 0, inFlight: 0, maxInFlight: 0,
   late: false, client: Math.random().toString(36).slice(2, 12), maskPosting: null,
-  status: null, saved: null, exported: null,
+  status: null, saved: null, exported: null, exports: 0, exporting: false, savedAs: null, maskVersion: 0,
   // drawing: at most one redraw per animation frame; the mesh only when it changed
   frameRequested: false, glDirty: true, frames: 0, draws: 0, glDraws: 0,
   view: { scale: 1, ox: 0, oy: 0, x0: 0, y0: 0, x1: 1, y1: 1, user: false },
