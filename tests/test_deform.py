@@ -685,3 +685,18 @@ def test_deformer_checks_its_options_and_reads_a_handles_file(tmp_path):
         Handles.from_file(path, W, H)
     with pytest.raises(ValueError, match="cannot read it"):
         Handles.from_file(tmp_path / "missing.json", W, H)
+
+
+def test_a_refusal_names_the_feature_carried_against_a_pin(tmp_path):
+    """A face dragged 74 px towards a pinned shuttle lays the image over itself: the refusal
+    named "handles dragged across each other or a pin's path", which had not happened (deform
+    trial, finding 2); it names the carried feature pressed against a pin."""
+    from click.testing import CliRunner
+
+    from featurewarp_cli.cli.main import cli
+
+    run = CliRunner().invoke(cli, ["deform", "samples/astronaut.png", str(tmp_path / "o.png"), "-m",
+                                   "samples/astronaut_mask.png", "--pin", "416,164", "--pin", "60,470", "--pin",
+                                   "450,470", "--move", "226,91:300,100"])
+    assert run.exit_code == 1 and not (tmp_path / "o.png").exists()
+    assert "carried by a handle" in run.output and "dragged across each other" not in run.output

@@ -392,9 +392,9 @@ def check_solution(settings: Settings, mesh) -> None:
                         f"there); nothing written (--allow-folds writes it anyway)")
     if crossings and not settings.allow_folds:
         times = "once" if crossings == 1 else f"{crossings} times"
-        raise WarpError(f"the result lays the image over itself (its border crosses itself {times}; handles dragged "
-                        f"across each other or a pin's path, or turned far, do that): nothing written (--allow-folds "
-                        f"writes it)")
+        cause = getattr(mesh, "fold_cause", "handles dragged across each other or a pin's path, or turned far, do that")
+        raise WarpError(f"the result lays the image over itself (its border crosses itself {times}; {cause}): nothing "
+                        f"written (--allow-folds writes it)")
     if settings.strict and mesh.record.warnings:
         raise WarpError(f"--strict: {mesh.record.warnings[0]}; nothing written")
 
