@@ -46,7 +46,7 @@ from .warper import FeatureWarper
 #: as closely as least squares beside the features lets it (a background handle at 1 MP ended
 #: 14 px short, at 12 MP 42 px); each round takes about three quarters of what is left.
 LANDING_ROUNDS = 3
-LANDED_PX = 0.05
+LANDED_PX = 0.005
 #: Deformed images smaller than this share of the input's area get a warning.
 SHRUNK = 0.01
 #: Nodes of the grid the rigid map is solved on (about; it is coarser than the feature grid:
@@ -111,6 +111,7 @@ class HandleWarp:
         self.capped = False                 # the rigid map stopped at its step cap, not converged
         self.rigid_map = None               # the RigidMap that made it (:meth:`aim` asks it again)
         self.aimed = None                   # the point handles' targets the map was solved for
+        self.fitted = None                  # (canvas, offset) of the re-aimed map, for a fit canvas
         self.carried = set()                # the point handles that carry a feature
 
     def review(self, mesh: Mesh, quick: bool = False) -> list[str]:
@@ -148,33 +149,67 @@ class HandleWarp:
 
     def land(self, mesh: Mesh, solve) -> Mesh:
         """``mesh`` (``solve(self)``'s), solved again up to :data:`LANDING_ROUNDS` times with the
-        point handles re-aimed (:meth:`aim`) so that they end where they were dragged."""
+        point handles re-aimed (:meth:`aim`) so that they end where they were dragged. A round is
+        kept only where it brings the handles closer, keeps as many features and folds nothing
+        (re-aiming towards a pinned border pushed the features into it: untied, a crease); none
+        runs after a mesh that folds or lays the image over itself (it is refused or warned as
+        it is). Every round's time is in the report's stages, and a ``fit`` canvas is the final
+        map's bounding box."""
+        timings = dict(mesh.record.timings)
         for _ in range(LANDING_ROUNDS):
+            if mesh.flips() or border_crossings(mesh.source, mesh.target):
+                break
+            before = self.nodes, self.aimed, self.capped, self.fitted
             if not self.aim(mesh):
                 break
-            mesh = solve(self)
-        return mesh
+            landed = solve(self)
+            for stage, seconds in landed.record.timings.items():
+                timings[stage] = timings.get(stage, 0.0) + seconds
+            if (landed.flips() or border_crossings(landed.source, landed.target)
+                    or self._missed(landed) >= self._missed(mesh) or _kept(landed) < _kept(mesh)):
+                self.nodes, self.aimed, self.capped, self.fitted = before
+                break
+            mesh = landed
+        mesh.record.timings = timings
+        return self._refit(mesh)
 
     def aim(self, mesh: Mesh) -> bool:
-        """Re-aim this map: each point handle (pins too) whose target the rigid map reaches (within
-        :data:`HANDLE_SLACK_PX`) is aimed past it by as far as ``mesh`` left it short, and the map
-        is solved again for those targets (warm, nothing factored); the canvas stays. False, and
-        nothing changed, where every handle ends within :data:`LANDED_PX` or none can be re-aimed."""
+        """Re-aim this map: each point handle (pins too) is aimed past its target by as far as
+        ``mesh`` left it short, in full where the rigid map reaches what it was aimed at within
+        1 px, not at all beyond :data:`HANDLE_SLACK_PX`, in proportion between (no threshold for
+        a one-ulp change to cross); the map is solved again for those targets (warm, nothing
+        factored). False, and nothing changed, where no handle would move by more than
+        :data:`LANDED_PX`."""
         if self.rigid_map is None or self.handles is None or not len(self.handles.points_from):
             return False
         aimed = self.handles.points_to if self.aimed is None else self.aimed
-        short = self.handles.points_to - self.ends(mesh)
-        follows = np.hypot(*(self(self.handles.points_from) + np.asarray(self.offset) - aimed).T) <= HANDLE_SLACK_PX
-        if not np.any(follows & (np.hypot(*short.T) > LANDED_PX)):
+        reach = np.hypot(*(self(self.handles.points_from) + np.asarray(self.offset) - aimed).T)
+        share = np.clip((HANDLE_SLACK_PX - reach) / (HANDLE_SLACK_PX - 1.0), 0.0, 1.0)[:, None]
+        step = share * (self.handles.points_to - self.ends(mesh))
+        if np.hypot(*step.T).max() <= LANDED_PX:
             return False
-        self.aimed = aimed + np.where(follows[:, None], short, 0.0)
+        self.aimed = aimed + step
         data = self.handles.as_dict()
         for point, target in zip(data["points"], self.aimed):
             point["to"] = [float(target[0]), float(target[1])]
         again = self.rigid_map.deformation(Handles.from_dict(data, self.width, self.height), warm=True)
         self.nodes = again.nodes + np.asarray(again.offset) - np.asarray(self.offset)
-        self.capped = self.capped or again.capped
+        self.capped, self.fitted = self.capped or again.capped, (again.canvas, again.offset)
         return True
+
+    def _missed(self, mesh: Mesh) -> float:
+        """How far the point handle furthest from its target ended from it in ``mesh`` (px)."""
+        return float(np.hypot(*(self.ends(mesh) - self.handles.points_to).T).max())
+
+    def _refit(self, mesh: Mesh) -> Mesh:
+        """``mesh`` on the re-aimed map's own ``fit`` canvas (the first map's cut up to 4 px off
+        an image the re-aimed one carried further); as it is on an ``input`` canvas."""
+        if self.fitted is None or self.handles.canvas != "fit":
+            return mesh
+        (self.canvas, offset), shift = self.fitted, np.asarray(self.offset) - np.asarray(self.fitted[1])
+        self.offset, self.nodes = offset, self.nodes + shift
+        return Mesh(mesh.source, mesh.target + shift, mesh.triangles, tuple(self.canvas), mesh.record,
+                    mesh.node_component)
 
     def ends(self, mesh: Mesh) -> np.ndarray | None:
         """Where the point handles ended in ``mesh``, in input pixel coordinates (None: no handles)."""
@@ -206,6 +241,11 @@ class HandleWarp:
         return self._embeddings[key] @ self.nodes
 
     forward = __call__
+
+
+def _kept(mesh: Mesh) -> int:
+    """How many of ``mesh``'s features kept their shape."""
+    return sum(bool(component.kept) for component in mesh.record.components)
 
 
 class RigidMap:

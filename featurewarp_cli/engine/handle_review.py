@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .barrier import SAFE_FRACTION
 from .grid import signed_areas
 from .handles import resample
 
@@ -18,9 +19,11 @@ from .handles import resample
 HANDLE_SLACK_PX = 3.0
 #: Warnings name this many handles that miss, and count the rest.
 NAMED = 5
-#: A triangle of the result crushed below this share of its area under W (whose barrier keeps
-#: half its rest area) gets a warning: a crease (a feature carried against a pin did 0.014).
-CRUSHED = 0.1
+#: A triangle of the result crushed below this share of its area under W gets a warning: a
+#: crease (a feature carried against a pin did 0.014). Half the fold-over guard's safe area:
+#: the barrier lets the thinnest triangles of a hard solve down to 40-70 % of it (at 0.1, a
+#: handle dragged 60 px with two pins warned at 0.097).
+CRUSHED = 0.5 * SAFE_FRACTION
 #: Points along a curve handle where it is measured (its target and where it ended).
 CURVE_SAMPLES = 32
 
