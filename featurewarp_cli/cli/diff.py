@@ -207,6 +207,7 @@ def _frame_info(data: bytes) -> tuple[int, str | None, list | None]:
                     durations = []
                     for index in range(count):
                         image.seek(index)
+                        image.load()              # WebP's duration is set by loading its frame
                         durations.append(image.info.get("duration"))
                 return count, image.format, durations
     except Exception:  # not Pillow's to judge: OpenCV decodes it or says why not
@@ -215,7 +216,9 @@ def _frame_info(data: bytes) -> tuple[int, str | None, list | None]:
 
 def _frames(source: Source):
     """The frames of an animation or multi-page file, one at a time: TIFF pages by OpenCV
-    (depth kept), GIF, PNG and WebP frames by Pillow, composited on the canvas as 8-bit BGRA."""
+    (depth kept), GIF, PNG and WebP frames by Pillow, composited on the canvas as 8-bit BGRA,
+    or BGR where the frame is opaque (so that RMSE does not depend on the container: an
+    opaque APNG read as BGRA averaged a fourth channel of zeros in)."""
     import cv2
     import numpy as np
     from PIL import Image, ImageSequence
@@ -232,7 +235,8 @@ def _frames(source: Source):
     try:
         with Image.open(io.BytesIO(source.data)) as image:
             for frame in ImageSequence.Iterator(image):
-                yield cv2.cvtColor(np.asarray(frame.convert("RGBA")), cv2.COLOR_RGBA2BGRA)
+                bgra = cv2.cvtColor(np.asarray(frame.convert("RGBA")), cv2.COLOR_RGBA2BGRA)
+                yield np.ascontiguousarray(bgra[:, :, :3]) if bgra[:, :, 3].min() == 255 else bgra
     except (OSError, ValueError) as err:
         raise WarpError(f"{source.path}: a frame cannot be decoded: {err}", source.name) from None
 
