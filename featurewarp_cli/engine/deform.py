@@ -24,6 +24,7 @@ Examples
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import math
 import numbers
@@ -188,11 +189,8 @@ class HandleWarp:
         step = share * (self.handles.points_to - self.ends(mesh))
         if np.hypot(*step.T).max() <= LANDED_PX:
             return False
-        self.aimed = aimed + step
-        data = self.handles.as_dict()
-        for point, target in zip(data["points"], self.aimed):
-            point["to"] = [float(target[0]), float(target[1])]
-        again = self.rigid_map.deformation(Handles.from_dict(data, self.width, self.height), warm=True)
+        self.aimed = aimed + step          # pins too: a re-aimed pin is a handle to the rigid map
+        again = self.rigid_map.deformation(dataclasses.replace(self.handles, points_to=self.aimed), warm=True)
         self.nodes = again.nodes + np.asarray(again.offset) - np.asarray(self.offset)
         self.capped, self.fitted = self.capped or again.capped, (again.canvas, again.offset)
         return True
