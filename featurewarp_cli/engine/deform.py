@@ -37,7 +37,8 @@ from .defaults import DECAY, MODE, MODES
 from .grid import Grid, grid_for, grid_shape, signed_areas
 from .injectivity import border_crossings
 from .handles import Handles, default_radius, resample
-from .handle_review import CURVE_SAMPLES, HANDLE_SLACK_PX, crushed, fold_cause, fold_notes, review_curves, review_points
+from .handle_review import (CURVE_SAMPLES, HANDLE_SLACK_PX, carried_scale_notes, crushed, fold_cause, fold_notes,
+                            review_curves, review_points)
 from .mesh import Mesh
 from ..plugins import canvas_size, check_canvas_side
 from .warper import FeatureWarper
@@ -304,6 +305,7 @@ class RigidMap:
         warp.notes, warp.handles = list(handles.notes) + notes, handles
         warp.capped, warp.rigid_map, warp.carried = not self.rigid.converged, self, set(carried)
         warp.notes += fold_notes(warp, handles, np.hypot(*(self.rigid.centres(nodes) - targets).T).max())
+        warp.notes += carried_scale_notes(self.labels, handles, carried) if self.labels is not None else []
         if handles.border == "pinned":
             moved = float(np.hypot(*(nodes - self.grid.nodes())[self.grid.boundary()].T).max())
             if moved > HANDLE_SLACK_PX:

@@ -129,5 +129,35 @@ def fold_notes(warp, handles, held: float) -> list[str]:
             f"without one (up to {held:.0f} px from where its handle carries it; the handles reach their targets)"]
 
 
+#: Several handles on one carried feature whose best similarity scales it beyond this factor
+#: (or below its inverse) get a note: the feature must grow (shrink) as a whole to follow them.
+CARRIED_SCALE = 2.0
+
+
+def carried_scale_notes(labels: np.ndarray, handles, carried) -> list[str]:
+    """A note per feature carried by several handles (``carried``: their indices) whose best
+    similarity scales it by more than :data:`CARRIED_SCALE`: two handles on a face dragged
+    apart ask the whole face to grow (7.6x in the editor trial, whose preview, a few steps of
+    the rigid map from the last drag, showed a plausible picture that Export then refused)."""
+    from .arap import similarity_fit
+
+    carried = np.asarray(sorted(carried), int)
+    if carried.size < 2:
+        return []
+    at = np.clip(np.rint(handles.points_from[carried]).astype(int), 0, [labels.shape[1] - 1, labels.shape[0] - 1])
+    on, notes = labels[at[:, 1], at[:, 0]], []
+    for label in np.unique(on):
+        held = carried[on == label]
+        if held.size < 2:
+            continue
+        scale = float(np.hypot(*similarity_fit(handles.points_from[held], handles.points_to[held])))
+        if max(scale, 1.0 / max(scale, 1e-12)) > CARRIED_SCALE:
+            names = ", ".join(handles.name(int(k)) for k in held)
+            notes.append(f"the handles {names} on one feature ask it to {'grow' if scale > 1 else 'shrink'} "
+                         f"{max(scale, 1 / scale):.1f}x as a whole (a feature keeps its shape: to bend it, use "
+                         f"--mode plain or take it out of the mask)")
+    return notes
+
+
 def _plain(point, digits: int = 6) -> list:
     return [round(float(point[0]), digits), round(float(point[1]), digits)]
