@@ -301,7 +301,7 @@ def test_a_curve_across_a_feature_that_ends_off_target_warns(page):
     settled(driver)
     status = driver.find_element("id", "status").text
     warnings = js(driver, "featurewarp.status.warnings")
-    assert any(w.startswith("curve 0 ends up to") for w in warnings), (status, warnings)
+    assert any(w.startswith("curve curves[0] ends up to") for w in warnings), (status, warnings)
     assert len(js(driver, "featurewarp.status.curve_ends[0]")) == 32
 
 
