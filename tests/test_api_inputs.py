@@ -250,3 +250,14 @@ def test_a_warper_renders_lists_and_keeps_a_channel_axis_and_reads_mask_paths(tm
     mesh = warper.solve(load_warp("swirl")(50, 40))
     image = np.zeros((40, 50, 1), np.uint8)
     assert warper.render(image, mesh).shape == warper.render(image.tolist(), mesh).shape == (40, 50, 1)
+
+
+@pytest.mark.parametrize("size", [(0, 240), (-5, 10), (10.5, 10), (True, 10)])
+def test_impossible_sizes_are_refused_at_once(size):
+    """Deformer(0, 240) was taken and failed in the factorization ("not positive definite"),
+    Deformer(-5, ...) with numpy's "negative dimensions" (smoke trial 5)."""
+    from featurewarp_cli import Deformer, FeatureWarper
+
+    for cls in (FeatureWarper, Deformer):
+        with pytest.raises(ValueError, match=rf"{cls.__name__}: width=.*whole number of pixels"):
+            cls(*size)

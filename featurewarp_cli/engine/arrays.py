@@ -51,6 +51,14 @@ def background_rgb(background) -> tuple[int, int, int] | None:
     return tuple(int(v) for v in values)
 
 
+def check_size(width, height, who: str = "FeatureWarper") -> None:
+    """ValueError unless ``width`` and ``height`` are whole numbers of pixels, at least 1 (0 was
+    taken and failed in the factorization, -5 with numpy's "negative dimensions")."""
+    for name, value in (("width", width), ("height", height)):
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+            raise ValueError(f"{who}: {name}={value!r}; use a whole number of pixels, at least 1")
+
+
 def as_array(value, what: str) -> np.ndarray:
     """``np.asarray(value)``, or a one-line error naming ``what`` and the type it could not take."""
     if isinstance(value, (str, bytes, os.PathLike)) and what == "image":

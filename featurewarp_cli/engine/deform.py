@@ -32,6 +32,7 @@ import os
 
 import numpy as np
 
+from . import arrays
 from .arap import RigidDeformer, embed, similarity_fit
 from .defaults import DECAY, MODE, MODES
 from .grid import Grid, grid_for, grid_shape, signed_areas
@@ -425,6 +426,7 @@ class Deformer:
 
     def __init__(self, width: int, height: int, mask: np.ndarray | None = None, *, mode: str = MODE,
                  quick: bool = False, rigid_steps: int | None = None, **options):
+        arrays.check_size(width, height, "Deformer")
         if mode not in MODES:
             raise ValueError(f"Deformer: mode={mode!r}; use one of {', '.join(map(repr, MODES))}")
         if rigid_steps is not None and (isinstance(rigid_steps, bool) or not isinstance(rigid_steps, numbers.Integral)

@@ -155,6 +155,7 @@ class FeatureWarper:
                  cell: float | None = None, feature_weight: float = FEATURE_WEIGHT, decay: float = DECAY,
                  formulation: str = FORMULATION, injective: bool = True, boundary: str | None = None,
                  scale_prior: float = SCALE_PRIOR, max_nodes: int | None = None, grow_past_edge: bool = False):
+        arrays.check_size(width, height)
         if boundary not in (None,) + BOUNDARIES:
             raise ValueError(f"boundary must be one of {', '.join(BOUNDARIES)}, not {boundary!r}")
         for param, value in ((FEATURE_WEIGHT_PARAM, feature_weight), (DECAY_PARAM, decay),
