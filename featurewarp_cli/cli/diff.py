@@ -224,13 +224,17 @@ def _frames(source: Source):
     from PIL import Image, ImageSequence
 
     from ..app.pipeline import WarpError
+    from ..io import tiff
     from ..io.decode import gray_alpha_to_bgra
 
     if source.format == "TIFF":
         ok, pages = cv2.imdecodemulti(np.frombuffer(source.data, np.uint8), cv2.IMREAD_UNCHANGED)
         if not ok or len(pages) != source.frames:
             raise WarpError(f"{source.path}: its {source.frames} pages cannot be decoded", source.name)
-        yield from (gray_alpha_to_bgra(page) for page in pages)
+        alpha = tiff.extra_samples(source.data) in (tiff.ASSOCIATED, tiff.UNASSOCIATED)
+        for index, page in enumerate(pages):      # libtiff's RGBA reading premultiplied 8-bit alpha
+            straight = alpha and page.dtype == np.uint8 and page.ndim == 3 and page.shape[2] == 4
+            yield gray_alpha_to_bgra(_pillow_page(source.data, index, page) if straight else page)
         return
     try:
         with Image.open(io.BytesIO(source.data)) as image:
@@ -239,6 +243,24 @@ def _frames(source: Source):
                 yield np.ascontiguousarray(bgra[:, :, :3]) if bgra[:, :, 3].min() == 255 else bgra
     except (OSError, ValueError) as err:
         raise WarpError(f"{source.path}: a frame cannot be decoded: {err}", source.name) from None
+
+
+def _pillow_page(data: bytes, index: int, premultiplied):
+    """Page ``index`` of a TIFF as straight-alpha BGRA by Pillow, or ``premultiplied`` (OpenCV's
+    reading of it) divided back where Pillow cannot read it."""
+    import numpy as np
+    from PIL import Image
+
+    from ..io import tiff
+
+    try:
+        with Image.open(io.BytesIO(data)) as image:
+            image.seek(index)
+            rgba = np.asarray(image.convert("RGBA"))
+    except Exception:  # whatever a decoder raises: the division instead
+        return tiff.unpremultiplied(premultiplied)
+    return np.ascontiguousarray(rgba[:, :, [2, 1, 0, 3]]) if rgba.shape == premultiplied.shape else (
+        tiff.unpremultiplied(premultiplied))
 
 
 def _read_within_budget(path: str, name: str) -> Source:
