@@ -195,7 +195,7 @@ def animate_file(settings: Settings, input: str, output: str, mask: str | None, 
     at_rest = ["no frame moves a pixel: every frame is the input"] * (still == frames)    # the whole animation's
     if settings.strict and at_rest:
         raise WarpError(f"--strict: {at_rest[0]}; nothing written")
-    write_frames(output, kind, rendered, fps)
+    write_frames(output, kind, rendered, fps, settings.quality)
     lines = at_rest + [f"frame {index}: {line}" for index, line in said[:FRAME_WARNINGS]]
     if len(said) > FRAME_WARNINGS:
         first, last = said[FRAME_WARNINGS][0], said[-1][0]
@@ -250,16 +250,20 @@ def check_output_paths(paths: list[str], input: str, mask: str | None) -> None:
         check_distinct([(path, "OUTPUT")], [(input, "INPUT"), (mask, "--mask")], output_may_be_input=len(paths) == 1)
 
 
-def write_frames(output: str, kind: str, frames: list[np.ndarray], fps: float) -> None:
+def write_frames(output: str, kind: str, frames: list[np.ndarray], fps: float, quality: int | None = None) -> None:
     """Write ``frames`` all or nothing: a sequence's frames as :func:`featurewarp_cli.io.encode.encode_image`
-    PNG bytes, staged together (:func:`featurewarp_cli.io.write.write_outputs`); an animation or
-    video as OpenCV encodes it into a hidden temporary file (removed on a signal too), whose
-    bytes are then put in place."""
+    PNG bytes, staged together (:func:`featurewarp_cli.io.write.write_outputs`); an animated WebP
+    by Pillow, lossless (every pixel kept) unless ``quality`` is given, as a still WebP (OpenCV
+    wrote it lossy whatever --quality said); another animation or a video as OpenCV encodes it
+    into a hidden temporary file (removed on a signal too), whose bytes are then put in place."""
     if kind == "sequence":
         write.write_outputs([(output % index, encode_image(frame, "png")) for index, frame in enumerate(frames)])
         return
     directory = os.path.dirname(os.path.abspath(output))
     ext = os.path.splitext(output)[1].lower()
+    if kind == "animation" and ext == ".webp":
+        write.write_atomic(output, _webp_animation(frames, max(1, round(1000.0 / fps)), quality))
+        return
     with write.temporary_file(directory, ext) as tmp:
         if kind == "animation":
             animation = cv2.Animation()
@@ -277,3 +281,19 @@ def write_frames(output: str, kind: str, frames: list[np.ndarray], fps: float) -
             raise WarpError(f"OpenCV could not write {output}")
         with open(tmp, "rb") as encoded:         # renamed into place with the usual permissions
             write.write_atomic(output, encoded.read())
+
+
+def _webp_animation(frames: list[np.ndarray], duration: int, quality: int | None) -> bytes:
+    """Animated WebP bytes of BGR(A) ``frames``, each shown ``duration`` ms, looping: lossless in
+    libwebp's exact mode (the colour under transparent pixels kept too), or lossy at ``quality``."""
+    import io
+
+    from PIL import Image
+
+    images = [Image.fromarray(np.ascontiguousarray(cv2.cvtColor(frame, cv2.COLOR_BGRA2RGBA if frame.ndim == 3 and
+                                                                 frame.shape[2] == 4 else cv2.COLOR_BGR2RGB)))
+              for frame in frames]
+    options = {"quality": quality} if quality else {"lossless": True, "exact": True, "quality": 70}
+    buffer = io.BytesIO()
+    images[0].save(buffer, "WEBP", save_all=True, append_images=images[1:], duration=duration, loop=0, **options)
+    return buffer.getvalue()
