@@ -769,3 +769,20 @@ def test_the_worst_handles_that_miss_are_named_first_with_a_decimal_under_10_px(
     assert "ends 30 px" in named[0] and "ends 19 px" in named[1] and "ends 7.0 px" in named[2]
     assert named[-1].startswith("and 2 more handles") and not any("3.3 px" in w for w in named[:5])
     assert "ends 5.0 px" in named[4]
+
+
+def test_a_fold_of_a_feature_turned_in_place_is_blamed_on_the_turn():
+    """A badge turned 90 degrees about its own centre, nothing dragged, was refused as "pressed
+    against a pin ... drag it less far" with the pins 450 px away (smoke trial 4)."""
+    from types import SimpleNamespace
+
+    from featurewarp_cli.engine.handle_review import fold_cause
+
+    data = {"version": 2, "points": [{"from": [343, 768], "to": [343, 768], "angle": 90},
+                                     {"from": [450, 200], "to": [450, 200], "angle": 0}]}
+    handles = Handles.from_dict(data, 1024, 1024)
+    cause = fold_cause(SimpleNamespace(handles=handles, carried={0}))
+    assert "turns by 90°" in cause and "points[0]" in cause and "pressed against a pin" not in cause
+    data["points"][0].update(to=[400, 768], angle=0)
+    cause = fold_cause(SimpleNamespace(handles=Handles.from_dict(data, 1024, 1024), carried={0}))
+    assert cause.startswith("a feature carried by a handle") and "pressed against a pin" in cause

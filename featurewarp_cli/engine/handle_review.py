@@ -35,7 +35,14 @@ def fold_cause(warp) -> str:
     pins = np.zeros(0, bool) if warp.handles is None else np.all(warp.handles.points_from == warp.handles.points_to, 1)
     turned = ("; a pin without an angle turns with the handles' overall rotation: give it \"angle\": 0 in a "
               "version-2 handles file to hold it unturned") if np.any(pins & ~np.isfinite(warp.handles.angles)) else ""
-    if warp.carried and (np.any(pins) or warp.handles.border != "free"):
+    carried = sorted(warp.carried)
+    far = [k for k in carried if np.isfinite(warp.handles.angles[k]) and abs(warp.handles.angles[k]) > TURNED_FAR]
+    if far:
+        k = far[0]
+        return (f"the feature that handle {warp.handles.name(k)} turns by {np.degrees(warp.handles.angles[k]):.0f}° "
+                f"swings the band around it (one piece with it) over the image; turn it less, or use --mode plain")
+    dragged = [k for k in carried if not pins[k]]
+    if dragged and (np.any(pins) or warp.handles.border != "free"):
         return ("a feature carried by a handle (with the band around it, as one piece) is pressed against a pin "
                 f"or the held border; drag it less far, move the pin, or use --mode plain{turned}")
     return f"handles dragged across each other or a pin's path, or turned far, do that{turned}"
@@ -130,6 +137,9 @@ def fold_notes(warp, handles, held: float) -> list[str]:
             f"without one (up to {held:.0f} px from where its handle carries it; the handles reach their targets)"]
 
 
+#: A carried feature turned by its handle's angle beyond this (radians) is named as the cause of
+#: a fold (a badge turned 90 degrees in place was blamed on pins 450 px away).
+TURNED_FAR = np.radians(30.0)
 #: Several handles on one carried feature whose best similarity scales it beyond this factor
 #: (or below its inverse) get a note: the feature must grow (shrink) as a whole to follow them.
 CARRIED_SCALE = 2.0
