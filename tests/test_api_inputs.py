@@ -261,3 +261,17 @@ def test_impossible_sizes_are_refused_at_once(size):
     for cls in (FeatureWarper, Deformer):
         with pytest.raises(ValueError, match=rf"{cls.__name__}: width=.*whole number of pixels"):
             cls(*size)
+
+
+def test_a_nan_mask_is_refused_and_a_whole_float_max_memory_is_bytes():
+    """A float mask with NaN in its features was a plain warp with "marks no feature"; 2e9 was
+    "not a size" (smoke trial nits)."""
+    from featurewarp_cli import warp
+
+    image = np.zeros((40, 50, 3), np.uint8)
+    mask = np.zeros((40, 50))
+    mask[10:20, 10:20] = np.nan
+    with pytest.raises(ValueError, match="mask holds NaN"):
+        warp(image, mask, "swirl")
+    mask[10:20, 10:20] = 1.0
+    assert warp(image, mask, "swirl", max_memory=2e9).shape == (40, 50, 3)

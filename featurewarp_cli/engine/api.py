@@ -166,6 +166,8 @@ def _node_budget(max_memory, width: int, height: int, canvas) -> int | None:
     if max_memory is None:
         return None
     try:
+        if isinstance(max_memory, float) and max_memory.is_integer():      # 2e9 bytes
+            max_memory = int(max_memory)
         if isinstance(max_memory, bool) or not isinstance(max_memory, (str, int, np.integer)):
             raise ValueError(f"{max_memory!r} is not a size (bytes as an integer, or text such as '2G')")
         budget = limits.parse_size(str(max_memory))

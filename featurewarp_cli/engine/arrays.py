@@ -154,6 +154,8 @@ def mask_array(mask, shape: tuple[int, int]) -> np.ndarray | None:
         top = int(np.iinfo(mask.dtype).max)
         return mask >= (32896 if mask.dtype == np.uint16 else 128 if top >= 255 else 128 * top / 255)
     if np.issubdtype(mask.dtype, np.floating):
+        if not np.isfinite(mask).all():          # NaN marked nothing, in silence: a plain warp
+            raise ValueError("mask holds NaN or infinite values: use 0 and 1, or 0.0 to 1.0")
         return mask >= 0.5
     raise ValueError(f"mask dtype {mask.dtype} is not supported (use bool, integers or floats)")
 
