@@ -780,3 +780,19 @@ def test_a_fold_of_a_feature_turned_in_place_is_blamed_on_the_turn():
     data["points"][0].update(to=[400, 768], angle=0)
     cause = fold_cause(SimpleNamespace(handles=Handles.from_dict(data, 1024, 1024), carried={0}))
     assert cause.startswith("a feature carried by a handle") and "pressed against a pin" in cause
+
+
+def test_a_handles_file_s_ignored_keys_are_named_with_the_file(tmp_path):
+    """The unknown-key notes said "handles: ignoring ..." where every error about the same file
+    names it (smoke trial nit)."""
+    from click.testing import CliRunner
+
+    from featurewarp_cli.cli.main import cli
+
+    path = tmp_path / "h.json"
+    path.write_text(json.dumps({"version": 1, "extra": 1, "points": [{"from": [10, 10], "to": [10, 10]},
+                                                                     {"from": [40, 30], "to": [44, 30]}]}))
+    image = tmp_path / "in.png"
+    cv2.imwrite(str(image), np.full((48, 64, 3), 128, np.uint8))
+    run = CliRunner().invoke(cli, ["deform", str(image), str(tmp_path / "o.png"), "--handles", str(path)])
+    assert run.exit_code == 0 and f"{path}: ignoring the key 'extra'" in run.output

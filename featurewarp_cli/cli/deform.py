@@ -176,7 +176,8 @@ def deform_command() -> click.Command:
         from ..engine.deform import handles_factory
 
         merged = merged_handles(data, move, pin, canvas)
-        factory = handles_factory(merged, settings.decay, given_names(merged, move, pin, handles))
+        factory = handles_factory(merged, settings.decay, given_names(merged, move, pin, handles),
+                                  "stdin" if handles == "-" else handles or "handles")
         settings = replace(settings, warp_factory=named_places(factory, merged, move, pin, handles))
         warp_one(settings, quiet, verbose, input, output, mask, report, save_grid, draw_grid,
                  also_read=((handles, "--handles"),) if handles else ())

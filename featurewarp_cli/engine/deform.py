@@ -480,13 +480,13 @@ class Deformer:
         return self.solve(Handles.from_dict(data, self.warper.width, self.warper.height), mode)
 
 
-def handles_factory(data, decay: float = DECAY, names: list | None = None):
+def handles_factory(data, decay: float = DECAY, names: list | None = None, source: str = "handles"):
     """``make(width, height, mask)``: the map W of the handles file ``data`` (parsed JSON) for an
     image of that size and feature mask (ValueError when the handles do not fit it); ``decay``
     as the feature-aware solve's (see :class:`RigidMap`); ``names``: how each point handle
-    was given (:attr:`Handles.names`)."""
+    was given (:attr:`Handles.names`); ``source``: the file's name in its notes."""
     def make(width: int, height: int, mask=None) -> HandleWarp:
-        handles = Handles.from_dict(data, width, height)
+        handles = Handles.from_dict(data, width, height, source)
         handles.names = names
         return RigidMap(width, height, mask=mask, decay=decay).deformation(handles)
 

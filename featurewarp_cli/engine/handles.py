@@ -92,10 +92,11 @@ class Handles:
             self.angles = np.full(len(self.points_from), np.nan)
 
     @classmethod
-    def from_dict(cls, data, width: int, height: int) -> "Handles":
+    def from_dict(cls, data, width: int, height: int, source: str = "handles") -> "Handles":
         """Check ``data`` (a parsed handles file) against a ``width`` x ``height`` image: its
         version, then its shape through the shipped JSON Schema (``featurewarp schema
         handles``), then what a schema cannot say (finite numbers, places in the image).
+        ``source`` names the file in the notes on keys it ignores (``h.json: ignoring ...``).
 
         Raises
         ------
@@ -116,6 +117,7 @@ class Handles:
         notes += _unknown_keys(data, version)
         points = data.get("points", [])
         angles = _angles(points, version, notes)
+        notes = [f"{source}: {note.split(': ', 1)[1]}" if note.startswith("handles: ") else note for note in notes]
         sources = _points([p["from"] for p in points], "points[{}].from")
         targets = _points([p["to"] for p in points], "points[{}].to")
         _inside(sources, width, height, "points[{}].from")
