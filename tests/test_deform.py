@@ -796,3 +796,14 @@ def test_a_handles_file_s_ignored_keys_are_named_with_the_file(tmp_path):
     cv2.imwrite(str(image), np.full((48, 64, 3), 128, np.uint8))
     run = CliRunner().invoke(cli, ["deform", str(image), str(tmp_path / "o.png"), "--handles", str(path)])
     assert run.exit_code == 0 and f"{path}: ignoring the key 'extra'" in run.output
+
+
+def test_landing_adds_no_crease():
+    """A round that brought a handle from 29 to 14 px also crushed the ground towards the pinned
+    border to 0.1 % of its area and streaked it 11x: it is not kept (second review, finding 2)."""
+    mask = cv2.imread("samples/astronaut_mask.png", cv2.IMREAD_GRAYSCALE) >= 128
+    data = {"version": 1, "border": "pinned", "points": [{"from": [130, 60], "to": [168.555, 46.2303]},
+                                                         {"from": [256, 256], "to": [300, 300]}]}
+    mesh = Deformer(512, 512, mask).solve(data)
+    assert mesh.record.quality["area_ratio"]["min"] > 0.025
+    assert not any(w.startswith(("the result crushes", "background stretched")) for w in mesh.record.warnings)

@@ -29,6 +29,7 @@ import hashlib
 import math
 import numbers
 import os
+import time
 
 import numpy as np
 
@@ -38,8 +39,8 @@ from .defaults import DECAY, MODE, MODES
 from .grid import Grid, grid_for, grid_shape, signed_areas
 from .injectivity import border_crossings
 from .handles import Handles, default_radius, resample
-from .handle_review import (CURVE_SAMPLES, HANDLE_SLACK_PX, carried_scale_notes, crushed, fold_cause, fold_notes,
-                            review_curves, review_points)
+from .handle_review import (CURVE_SAMPLES, HANDLE_SLACK_PX, better_round, carried_scale_notes, crushed, fold_cause,
+                            fold_notes, review_curves, review_points)
 from .mesh import Mesh
 from ..plugins import canvas_size, check_canvas_side
 from .warper import FeatureWarper
@@ -115,6 +116,7 @@ class HandleWarp:
         self.rigid_map = None               # the RigidMap that made it (:meth:`aim` asks it again)
         self.aimed = None                   # the point handles' targets the map was solved for
         self.fitted = None                  # (canvas, offset) of the re-aimed map, for a fit canvas
+        self.shares = None                  # how much of its miss each handle was last re-aimed by
         self.carried = set()                # the point handles that carry a feature
 
     def review(self, mesh: Mesh, quick: bool = False) -> list[str]:
@@ -153,23 +155,27 @@ class HandleWarp:
     def land(self, mesh: Mesh, solve) -> Mesh:
         """``mesh`` (``solve(self)``'s), solved again up to :data:`LANDING_ROUNDS` times with the
         point handles re-aimed (:meth:`aim`) so that they end where they were dragged. A round is
-        kept only where it brings the handles closer, keeps as many features and folds nothing
-        (re-aiming towards a pinned border pushed the features into it: untied, a crease); none
-        runs after a mesh that folds or lays the image over itself (it is refused or warned as
-        it is). Every round's time is in the report's stages, and a ``fit`` canvas is the final
-        map's bounding box."""
+        kept only where it brings the re-aimed handles closer (the worst of them: one the rigid
+        map cannot reach does not count), keeps as many features and folds, creases and streaks
+        nothing the last did not (re-aiming towards a pinned border pushed the features into it:
+        untied, a crease); none runs after a mesh that folds or lays the image over itself (it
+        is refused or warned as it is). Whether a round is kept is a discrete choice: near its
+        edge one ulp can switch between the two results. Every round's time is in the report's
+        stages (the rigid map's under ``grid``, as a preset's map), and a ``fit`` canvas is the
+        final map's bounding box."""
         timings = dict(mesh.record.timings)
         for _ in range(LANDING_ROUNDS):
             if mesh.flips() or border_crossings(mesh.source, mesh.target):
                 break
-            before = self.nodes, self.aimed, self.capped, self.fitted
-            if not self.aim(mesh):
+            before, start = (self.nodes, self.aimed, self.capped, self.fitted), time.perf_counter()
+            aimed = self.aim(mesh)
+            timings["grid"] = timings.get("grid", 0.0) + time.perf_counter() - start
+            if not aimed:
                 break
             landed = solve(self)
             for stage, seconds in landed.record.timings.items():
                 timings[stage] = timings.get(stage, 0.0) + seconds
-            if (landed.flips() or border_crossings(landed.source, landed.target)
-                    or self._missed(landed) >= self._missed(mesh) or _kept(landed) < _kept(mesh)):
+            if not better_round(self, landed, mesh):
                 self.nodes, self.aimed, self.capped, self.fitted = before
                 break
             mesh = landed
@@ -191,15 +197,11 @@ class HandleWarp:
         step = share * (self.handles.points_to - self.ends(mesh))
         if np.hypot(*step.T).max() <= LANDED_PX:
             return False
-        self.aimed = aimed + step          # pins too: a re-aimed pin is a handle to the rigid map
+        self.aimed, self.shares = aimed + step, share[:, 0]   # pins too: a re-aimed pin is a handle to W
         again = self.rigid_map.deformation(dataclasses.replace(self.handles, points_to=self.aimed), warm=True)
         self.nodes = again.nodes + np.asarray(again.offset) - np.asarray(self.offset)
         self.capped, self.fitted = self.capped or again.capped, (again.canvas, again.offset)
         return True
-
-    def _missed(self, mesh: Mesh) -> float:
-        """How far the point handle furthest from its target ended from it in ``mesh`` (px)."""
-        return float(np.hypot(*(self.ends(mesh) - self.handles.points_to).T).max())
 
     def _refit(self, mesh: Mesh) -> Mesh:
         """``mesh`` on the re-aimed map's own ``fit`` canvas (the first map's cut up to 4 px off
@@ -241,11 +243,6 @@ class HandleWarp:
         return self._embeddings[key] @ self.nodes
 
     forward = __call__
-
-
-def _kept(mesh: Mesh) -> int:
-    """How many of ``mesh``'s features kept their shape."""
-    return sum(bool(component.kept) for component in mesh.record.components)
 
 
 class RigidMap:
