@@ -115,14 +115,17 @@ def kp_tolerance(fits: list[dict], key: str, spread: float | None = None) -> tup
         percentile 0.072). The bent tolerances sit above the 95th percentiles; ``spread`` raises
         them where one case's own noise is larger, when ``--noise`` ran.
     kind : str
-        ``'one map'`` or ``'bent'``, by the reference, the last fit (plain's; ours where it is
-        alone): bent where it explains less than :data:`BENT_EXPLAINED` of its matches or, beside
-        ours, its local figures say W bent it (:data:`BENT_LOCAL`). Ours bending a component is
-        what the rules catch, so our fit never loosens them (it did, through either test).
+        ``'one map'`` or ``'bent'``, by the reference, the last fit (plain's): bent where it
+        explains less than :data:`BENT_EXPLAINED` of its matches or its local figures say W bent
+        it (:data:`BENT_LOCAL`). Ours alone (``unsaid-kp``: a feature the report says is kept
+        moved as one similarity) is 'one map'. Ours bending a component is what the rules catch,
+        so our fit never loosens them (it did, through either test).
     """
-    reference = fits[-1]                 # plain's (or ours alone): W bends it; ours bending it is what is checked
+    if len(fits) == 1:                   # ours alone (unsaid-kp): a kept feature moved as one map
+        return KP_TOL["one map"][key], "one map"
+    reference = fits[-1]                 # plain's: W bends it; ours bending it is what is checked
     explained = reference.get("explained")
-    bent_map = len(fits) > 1 and (reference.get("local_p90") or 0.0) > reference.get("distortion", 0.0) + BENT_LOCAL
+    bent_map = (reference.get("local_p90") or 0.0) > reference.get("distortion", 0.0) + BENT_LOCAL
     kind = "one map" if explained is not None and explained >= BENT_EXPLAINED and not bent_map else "bent"
     return max(KP_TOL[kind][key], 2.0 * (spread or 0.0)), kind
 
