@@ -1,8 +1,10 @@
 """Tolerant image comparison for golden-image tests (``featurewarp diff``).
 
 All metrics are on the 0..255 scale: 8-bit samples as they are, 16-bit samples
-divided by 257. Every channel counts, alpha included; the colour under a fully
-transparent pixel is not seen, so it counts as 0. Images whose channel layouts
+divided by 257. Every channel counts, alpha included, but an alpha that is opaque
+everywhere in both images (or frames) is left out, so an opaque RGBA file reads as
+its RGB twin; the colour under a fully transparent pixel is not seen, so it counts
+as 0. Images whose channel layouts
 differ are compared as what their pixels mean: gray as R = G = B, no alpha as opaque.
 Animations and multi-page files are compared frame by frame (:func:`compare_frames`).
 """
@@ -179,7 +181,10 @@ def compare_frames(pairs: Iterable[tuple[np.ndarray, np.ndarray]], tolerance: fl
             raise ValueError(reason if count == 1 else f"frame {count}: {reason}")
         a, b, widened = aligned(a, b)
         notes += [note for note in widened if note not in notes]
-        diff = np.abs(normalised(a) - normalised(b))
+        a, b = normalised(a), normalised(b)
+        if a.shape[2] == 4 and (a[:, :, 3] == 255).all() and (b[:, :, 3] == 255).all():
+            a, b = a[:, :, :3], b[:, :, :3]      # opaque in both: as without alpha, whatever the container
+        diff = np.abs(a - b)
         squares += float(np.sum(diff**2))
         samples += diff.size
         max_abs = max(max_abs, float(diff.max()))
