@@ -51,6 +51,9 @@ from .warper import FeatureWarper
 #: 14 px short, at 12 MP 42 px); each round takes about three quarters of what is left.
 LANDING_ROUNDS = 3
 LANDED_PX = 0.005
+#: Newton steps of the rigid map a re-aim may take from the last map (a correction takes 1-3); one that
+#: needs more is not used (towards a pinned border: 122 steps, 1.8 s, for a round not kept anyway).
+AIM_STEPS = 20
 #: Deformed images smaller than this share of the input's area get a warning.
 SHRUNK = 0.01
 #: Nodes of the grid the rigid map is solved on (about; it is coarser than the feature grid:
@@ -167,7 +170,7 @@ class HandleWarp:
         for _ in range(LANDING_ROUNDS):
             if mesh.flips() or border_crossings(mesh.source, mesh.target):
                 break
-            before, start = (self.nodes, self.aimed, self.capped, self.fitted), time.perf_counter()
+            before, start = (self.nodes, self.aimed, self.fitted), time.perf_counter()
             aimed = self.aim(mesh)
             timings["grid"] = timings.get("grid", 0.0) + time.perf_counter() - start
             if not aimed:
@@ -176,7 +179,7 @@ class HandleWarp:
             for stage, seconds in landed.record.timings.items():
                 timings[stage] = timings.get(stage, 0.0) + seconds
             if not better_round(self, landed, mesh):
-                self.nodes, self.aimed, self.capped, self.fitted = before
+                self.nodes, self.aimed, self.fitted = before
                 break
             mesh = landed
         mesh.record.timings = timings
@@ -197,10 +200,15 @@ class HandleWarp:
         step = share * (self.handles.points_to - self.ends(mesh))
         if np.hypot(*step.T).max() <= LANDED_PX:
             return False
+        last = self.rigid_map._last
+        again = self.rigid_map.deformation(dataclasses.replace(self.handles, points_to=aimed + step), warm=True,
+                                           steps=AIM_STEPS)
+        if again.capped:                   # not a correction: W pushed far (into a pinned border, 122 steps)
+            self.rigid_map._last = last
+            return False
         self.aimed, self.shares = aimed + step, share[:, 0]   # pins too: a re-aimed pin is a handle to W
-        again = self.rigid_map.deformation(dataclasses.replace(self.handles, points_to=self.aimed), warm=True)
         self.nodes = again.nodes + np.asarray(again.offset) - np.asarray(self.offset)
-        self.capped, self.fitted = self.capped or again.capped, (again.canvas, again.offset)
+        self.fitted = again.canvas, again.offset
         return True
 
     def _refit(self, mesh: Mesh) -> Mesh:
@@ -277,10 +285,11 @@ class RigidMap:
         self._last = None
         self._embeddings = {}
 
-    def deformation(self, handles: Handles, warm: bool = True) -> HandleWarp:
+    def deformation(self, handles: Handles, warm: bool = True, steps: int | None = None) -> HandleWarp:
         """The map W of ``handles``, a preset-like warp (factoring anew only when the handles'
         sources changed; a fold the handles ask for is noted in its ``notes``); ``warm``: from
-        the last map (a drag's updates), else from the similarity step, whatever came before."""
+        the last map (a drag's updates), else from the similarity step, whatever came before;
+        ``steps``: Newton steps at most (default the map's own cap)."""
         radius = handles.radius if handles.radius is not None else default_radius(
             self.width, self.height, max(self.grid.spacing))
         sources, targets, radii = handles.constraints(self.grid, radius)
@@ -294,7 +303,7 @@ class RigidMap:
         if key != self._key:
             self.rigid = RigidDeformer(self.grid, sources, radii)
             self._key, self._last = key, None
-        nodes = self.rigid.deform(targets, start=self._last if warm else None, steps=self.rigid_steps)
+        nodes = self.rigid.deform(targets, start=self._last if warm else None, steps=steps or self.rigid_steps)
         self._last = nodes
         values = {"points": len(handles.points_from), "curves": len(handles.curves),
                   "border": handles.border if isinstance(handles.border, str) else sorted(handles.border),
