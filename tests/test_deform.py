@@ -824,3 +824,20 @@ def test_landing_adds_no_crease():
     mesh = Deformer(512, 512, mask).solve(data)
     assert mesh.record.quality["area_ratio"]["min"] > 0.025
     assert not any(w.startswith(("the result crushes", "background stretched")) for w in mesh.record.warnings)
+
+
+def test_a_crease_far_from_a_turned_feature_is_not_blamed_on_the_turn():
+    """A badge turned 40 degrees was named as the cause of a crease 400 px away, which a handle
+    dragged across a pin made (second review, finding 4)."""
+    from types import SimpleNamespace
+
+    from featurewarp_cli.engine.handle_review import fold_cause
+
+    mask = np.zeros((200, 200), bool)
+    mask[40:60, 40:60] = True
+    handles = Handles.from_dict({"version": 2, "points": [{"from": [50, 50], "to": [50, 50], "angle": 40},
+                                                         {"from": [150, 20], "to": [150, 20], "angle": 0}]}, 200, 200)
+    warp = SimpleNamespace(handles=handles, carried={0}, rigid_map=RigidMap(200, 200, mask=mask))
+    assert "turns by 40°" in fold_cause(warp, np.array([55.0, 62.0]))
+    assert "turns by 40°" not in fold_cause(warp, np.array([180.0, 180.0]))
+    assert "turns by 40°" in fold_cause(warp)                  # no place to go by (a crossing border)
