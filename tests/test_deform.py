@@ -841,3 +841,19 @@ def test_a_crease_far_from_a_turned_feature_is_not_blamed_on_the_turn():
     assert "turns by 40°" in fold_cause(warp, np.array([55.0, 62.0]))
     assert "turns by 40°" not in fold_cause(warp, np.array([180.0, 180.0]))
     assert "turns by 40°" in fold_cause(warp)                  # no place to go by (a crossing border)
+
+
+def test_a_miss_far_from_any_feature_is_not_blamed_on_one_beside_it():
+    """Every miss the rigid map itself did not cause read "a feature beside it keeps its shape",
+    with no feature near it (first and second reviews)."""
+    from types import SimpleNamespace
+
+    from featurewarp_cli.engine.handle_review import _cause
+
+    mask = np.zeros((200, 200), bool)
+    mask[40:60, 40:60] = True
+    handles = Handles.from_dict({"version": 1, "points": [{"from": [70, 50], "to": [80, 50]},
+                                                         {"from": [180, 180], "to": [190, 180]}]}, 200, 200)
+    warp = SimpleNamespace(handles=handles, carried=set(), rigid_map=RigidMap(200, 200, mask=mask))
+    assert _cause(warp, 0, 0.5).startswith("a feature beside it keeps its shape")
+    assert _cause(warp, 1, 0.5).startswith("the features kept in shape hold the ground it is on")

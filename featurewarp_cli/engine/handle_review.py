@@ -54,6 +54,16 @@ def fold_cause(warp, at=None) -> str:
     return f"handles dragged across each other or a pin's path, or turned far, do that{turned}"
 
 
+def _feature_near(warp, point) -> bool:
+    """Whether a feature pixel lies within four bands of ``point`` (True where that is unknown)."""
+    rigid = getattr(warp, "rigid_map", None)
+    if rigid is None or rigid.labels is None:
+        return True
+    reach = int(np.ceil(rigid.decay * max(rigid.grid.spacing) * 4.0))
+    x, y = np.rint(point).astype(int)
+    return bool(rigid.labels[max(0, y - reach):y + reach + 1, max(0, x - reach):x + reach + 1].any())
+
+
 def _within_band(warp, k: int, at) -> bool:
     """Whether the source point ``at`` lies within the box of the feature handle ``k`` carries,
     widened by its band (as :class:`deform.RigidMap` carries it); True where that is unknown."""
@@ -110,7 +120,10 @@ def review_points(warp, mesh) -> list[str]:
 def _cause(warp, k: int, reach: float) -> str:
     """Why point handle ``k`` missed, ``reach`` px being where the rigid map W itself left it."""
     if reach <= HANDLE_SLACK_PX:
-        return "a feature beside it keeps its shape and holds it (the handles' map W reaches the target)"
+        if _feature_near(warp, warp.handles.points_from[k]):
+            return "a feature beside it keeps its shape and holds it (the handles' map W reaches the target)"
+        held = "the held border and " if warp.handles.border != "free" else ""
+        return f"{held}the features kept in shape hold the ground it is on (the handles' map W reaches the target)"
     if k in warp.carried:
         return ("the feature it carries keeps its shape, and the other handles on that feature (or pins beside "
                 "it) pull it another way")
