@@ -500,3 +500,13 @@ def test_a_bad_handles_file_is_named_in_the_error(tmp_path):
     bad.write_text('{"version": 1, "points": [{"from": [1, 2], "to": [3]}, {"from": [5, 5], "to": [5, 5]}]}')
     result = CliRunner().invoke(cli, ["edit", IMAGE, "--handles", str(bad), "--no-browser"])
     assert result.exit_code == 2 and f"{bad}: points[0].to" in result.output, result.output
+
+
+def test_the_editor_names_the_handles_file_in_its_load_warnings(tmp_path):
+    """The notes on a loaded handles file's unknown keys said "handles: ignoring ...", where
+    deform names the file (smoke trial nit)."""
+    path = str(tmp_path / "h.json")
+    data = {"version": 1, "colour": "red", "points": [{"from": [60, 470], "to": [60, 470]},
+                                                     {"from": [450, 470], "to": [450, 470]}]}
+    session = EditorSession(Settings("deform"), IMAGE, MASK, path, None, data)
+    assert f"{path}: ignoring the key 'colour' (unknown to version 1)" in session.state()["warnings"]

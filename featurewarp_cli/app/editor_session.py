@@ -92,7 +92,7 @@ class EditorSession:
         self.mask_png = png(self.mask_texture)
         self.notes = []
         self.initial = ({"version": 1, "points": [], "curves": [], "border": "free", "canvas": "fit"}
-                        if handles is None else self._checked({"handles": handles}, self.notes))
+                        if handles is None else self._checked({"handles": handles}, self.notes, handles_path))
         self.lock, self._seen = threading.Lock(), threading.Lock()
         self.files = threading.Lock()          # one Save or Export at a time: its files and command agree
         self.commit, self.snapshot, self.abandoned = threading.Lock(), None, False
@@ -321,10 +321,10 @@ class EditorSession:
             write.remove_pending()
             return self.output_path
 
-    def _checked(self, body: dict, notes: list | None = None) -> dict:
+    def _checked(self, body: dict, notes: list | None = None, source: str | None = None) -> dict:
         from ..engine.handles import Handles
 
-        handles = Handles.from_dict(body.get("handles"), self.width, self.height)
+        handles = Handles.from_dict(body.get("handles"), self.width, self.height, source or "handles")
         if notes is not None:
             notes.extend(handles.notes)
         return handles.as_dict()
