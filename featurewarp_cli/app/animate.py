@@ -20,7 +20,7 @@ from ..engine.record import LISTED_IN_REPORT
 from ..io import formats, write
 from ..io.colours import parse_colour
 from ..io.depth import to_eight_bit
-from ..io.encode import encode_image
+from ..io.encode import encode_image, rgb_order, webp_options
 from ..plugins import ParamError
 from .outputs import background_colour, check_encodable
 from .pipeline import (Settings, WarpError, check_solution, load_image_and_mask, make_warper,
@@ -290,10 +290,8 @@ def _webp_animation(frames: list[np.ndarray], duration: int, quality: int | None
 
     from PIL import Image
 
-    images = [Image.fromarray(np.ascontiguousarray(cv2.cvtColor(frame, cv2.COLOR_BGRA2RGBA if frame.ndim == 3 and
-                                                                 frame.shape[2] == 4 else cv2.COLOR_BGR2RGB)))
-              for frame in frames]
-    options = {"quality": quality} if quality else {"lossless": True, "exact": True, "quality": 70}
+    images = [Image.fromarray(rgb_order(frame)) for frame in frames]
     buffer = io.BytesIO()
-    images[0].save(buffer, "WEBP", save_all=True, append_images=images[1:], duration=duration, loop=0, **options)
+    images[0].save(buffer, "WEBP", save_all=True, append_images=images[1:], duration=duration, loop=0,
+                   **webp_options(quality))
     return buffer.getvalue()

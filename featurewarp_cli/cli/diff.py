@@ -248,18 +248,10 @@ def _frames(source: Source):
 def _pillow_page(data: bytes, index: int, premultiplied):
     """Page ``index`` of a TIFF as straight-alpha BGRA by Pillow, or ``premultiplied`` (OpenCV's
     reading of it) divided back where Pillow cannot read it."""
-    import numpy as np
-    from PIL import Image
-
     from ..io import tiff
 
-    try:
-        with Image.open(io.BytesIO(data)) as image:
-            image.seek(index)
-            rgba = np.asarray(image.convert("RGBA"))
-    except Exception:  # whatever a decoder raises: the division instead
-        return tiff.unpremultiplied(premultiplied)
-    return np.ascontiguousarray(rgba[:, :, [2, 1, 0, 3]]) if rgba.shape == premultiplied.shape else (
+    straight = tiff.pillow_rgba(data, index, upright=False)
+    return straight if straight is not None and straight.shape == premultiplied.shape else (
         tiff.unpremultiplied(premultiplied))
 
 

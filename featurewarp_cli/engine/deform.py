@@ -166,10 +166,10 @@ class HandleWarp:
         edge one ulp can switch between the two results. Every round's time is in the report's
         stages (the rigid map's under ``grid``, as a preset's map), and a ``fit`` canvas is the
         final map's bounding box."""
+        if mesh.flips() or border_crossings(mesh.source, mesh.target):
+            return mesh                        # a kept round adds neither (:func:`better_round`)
         timings = dict(mesh.record.timings)
         for _ in range(LANDING_ROUNDS):
-            if mesh.flips() or border_crossings(mesh.source, mesh.target):
-                break
             before, start = (self.nodes, self.aimed, self.fitted), time.perf_counter()
             aimed = self.aim(mesh)
             timings["grid"] = timings.get("grid", 0.0) + time.perf_counter() - start

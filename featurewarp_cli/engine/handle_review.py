@@ -54,27 +54,33 @@ def fold_cause(warp, at=None) -> str:
     return f"handles dragged across each other or a pin's path, or turned far, do that{turned}"
 
 
-def _feature_near(warp, point) -> bool:
-    """Whether a feature pixel lies within four bands of ``point`` (True where that is unknown)."""
+def _labels_and_reach(warp):
+    """(the mask's feature labels, four bands in px) of the rigid map behind ``warp``; None
+    where there is none (a place can then not be told apart)."""
     rigid = getattr(warp, "rigid_map", None)
     if rigid is None or rigid.labels is None:
+        return None
+    return rigid.labels, rigid.decay * max(rigid.grid.spacing) * 4.0
+
+
+def _feature_near(warp, point) -> bool:
+    """Whether a feature pixel lies within four bands of ``point`` (True where that is unknown)."""
+    if (known := _labels_and_reach(warp)) is None:
         return True
-    reach = int(np.ceil(rigid.decay * max(rigid.grid.spacing) * 4.0))
+    labels, reach = known[0], int(np.ceil(known[1]))
     x, y = np.rint(point).astype(int)
-    return bool(rigid.labels[max(0, y - reach):y + reach + 1, max(0, x - reach):x + reach + 1].any())
+    return bool(labels[max(0, y - reach):y + reach + 1, max(0, x - reach):x + reach + 1].any())
 
 
 def _within_band(warp, k: int, at) -> bool:
-    """Whether the source point ``at`` lies within the box of the feature handle ``k`` carries,
-    widened by its band (as :class:`deform.RigidMap` carries it); True where that is unknown."""
-    rigid = getattr(warp, "rigid_map", None)
-    if rigid is None or rigid.labels is None:
+    """Whether the source point ``at`` lies within four bands of the box of the feature handle
+    ``k`` carries; True where that is unknown."""
+    if (known := _labels_and_reach(warp)) is None:
         return True
-    labels = rigid.labels
+    labels, reach = known
     x, y = np.clip(np.rint(warp.handles.points_from[k]).astype(int), 0, [labels.shape[1] - 1, labels.shape[0] - 1])
     ys, xs = np.nonzero(labels == labels[y, x])
-    band = rigid.decay * max(rigid.grid.spacing) * 4.0
-    return bool(xs.min() - band <= at[0] <= xs.max() + band and ys.min() - band <= at[1] <= ys.max() + band)
+    return bool(xs.min() - reach <= at[0] <= xs.max() + reach and ys.min() - reach <= at[1] <= ys.max() + reach)
 
 
 def crushed(warp, mesh) -> list[str]:

@@ -132,6 +132,19 @@ def _gif(image: np.ndarray) -> bytes:
     return buffer.getvalue()
 
 
+def rgb_order(image: np.ndarray) -> np.ndarray:
+    """BGR(A) pixels in Pillow's order, RGB(A); gray as it is."""
+    if image.ndim == 2:
+        return image
+    return cv2.cvtColor(image, cv2.COLOR_BGRA2RGBA if image.shape[2] == 4 else cv2.COLOR_BGR2RGB)
+
+
+def webp_options(quality: int | None) -> dict:
+    """Pillow's WebP settings: lossy at ``quality``, else lossless keeping the colour under
+    transparent pixels as given (libwebp's ``exact``) at OpenCV's effort (70)."""
+    return {"quality": quality} if quality else {"lossless": True, "quality": 70, "exact": True}
+
+
 def _pillow_encode(image: np.ndarray, fmt: str, quality: int | None, icc: bytes | None,
                    exif: bytes | None) -> bytes:
     """8-bit BGR(A) or grey pixels as ``fmt`` bytes with their ICC profile and EXIF, by Pillow,
@@ -142,8 +155,7 @@ def _pillow_encode(image: np.ndarray, fmt: str, quality: int | None, icc: bytes 
 
     from PIL import Image
 
-    if image.ndim == 3:
-        image = cv2.cvtColor(image, cv2.COLOR_BGRA2RGBA if image.shape[2] == 4 else cv2.COLOR_BGR2RGB)
+    image = rgb_order(image)
     options = {"icc_profile": icc} if icc and icc_space(icc) == ("RGB " if image.ndim == 3 else "GRAY") else {}
     if exif and fmt == "tiff":
         exif = _tiff_exif(exif)
@@ -151,7 +163,7 @@ def _pillow_encode(image: np.ndarray, fmt: str, quality: int | None, icc: bytes 
         options["exif"] = exif
     options.update({"jpg": {"quality": quality or 95, "optimize": False, "progressive": False},
                     "png": {"compress_level": 1},
-                    "webp": {"quality": quality} if quality else {"lossless": True, "quality": 70, "exact": True},
+                    "webp": webp_options(quality),
                     "tiff": {"compression": "tiff_lzw"}}[fmt])
     buffer = io.BytesIO()
     with captured_stderr() as printed:

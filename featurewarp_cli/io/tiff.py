@@ -78,7 +78,7 @@ def straight_alpha(image: np.ndarray, data: bytes, name: str) -> np.ndarray:
     if extra not in (ASSOCIATED, UNASSOCIATED):
         return image
     if image.ndim == 2 or image.shape[2] < 4:
-        exact = _pillow_rgba(data)
+        exact = pillow_rgba(data)
         if exact is None:
             raise ImageError(f"{name} is gray with alpha that featurewarp cannot read without losing the "
                              f"alpha and the depth (16 bits): convert it to RGBA first")
@@ -86,21 +86,23 @@ def straight_alpha(image: np.ndarray, data: bytes, name: str) -> np.ndarray:
     if image.dtype == np.uint16 and extra == UNASSOCIATED:
         return image
     if image.dtype == np.uint8:
-        exact = _pillow_rgba(data)
+        exact = pillow_rgba(data)
         if exact is not None and exact.shape == image.shape:
             return exact
     return unpremultiplied(image)
 
 
-def _pillow_rgba(data: bytes) -> np.ndarray | None:
-    """The first page as straight-alpha BGRA by Pillow, turned upright; None where it cannot."""
+def pillow_rgba(data: bytes, index: int = 0, upright: bool = True) -> np.ndarray | None:
+    """Page ``index`` as straight-alpha BGRA by Pillow, turned upright (as OpenCV's still
+    decoding does; not as its pages come); None where it cannot."""
     import io
 
     from PIL import Image, ImageOps
 
     try:
         with Image.open(io.BytesIO(data)) as page:
-            rgba = np.asarray(ImageOps.exif_transpose(page).convert("RGBA"))
+            page.seek(index)
+            rgba = np.asarray((ImageOps.exif_transpose(page) if upright else page).convert("RGBA"))
     except Exception:  # whatever a decoder raises: the division below instead
         return None
     return np.ascontiguousarray(rgba[:, :, [2, 1, 0, 3]])
