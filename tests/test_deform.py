@@ -394,6 +394,29 @@ def test_deform_command_writes_and_reruns_byte_identically(runner, tmp_path):
     assert again.code == 0 and (tmp_path / "m.png").read_bytes() == outs[0]
 
 
+def test_pins_and_moves_take_percentages_as_center_does(runner, tmp_path):
+    """--pin 50%,50% was refused ('is not X,Y (pixels)'); percentages span the first to the last
+    pixel centre, as warp --center's: the same bytes as the points in pixels, named as given."""
+    image, mask = files(tmp_path)
+    w, h = SIZE
+    given = {"percent": ["--pin", "0%,0%", "--pin", "100%, 0%", "--move", "50%,100%:60%,110%"],
+             "pixels": ["--pin", "0,0", "--pin", f"{w - 1},0", "--move", f"{(w - 1) / 2},{h - 1}:"
+                        f"{0.6 * (w - 1)},{1.1 * (h - 1)}"]}
+    names = {}
+    for name, args in given.items():
+        run = runner("deform", image, tmp_path / f"{name}.png", "-m", mask, *args, "--report", tmp_path / "r.json")
+        assert run.code == 0, run.stderr
+        names[name] = [e["given"] for e in json.loads((tmp_path / "r.json").read_text())["params"]["handle_ends"]]
+    assert (tmp_path / "percent.png").read_bytes() == (tmp_path / "pixels.png").read_bytes()
+    assert names == {"percent": ["--move 50%,100%:60%,110%", "--pin 0%,0%", "--pin 100%,0%"],
+                     "pixels": ["--move 23.5,35:28.2,38.5", "--pin 0,0", "--pin 47,0"]}
+    run = runner("deform", image, tmp_path / "o.png", "--pin", "5,5", "--pin", "102%,50%")
+    assert run.code == 2 and run.lines[0].endswith("error: --pin 102%,50% (47.94, 17.5) lies outside the 48x36 image "
+                                                   "(it spans -0.5..47.5, -0.5..35.5: pixel centres at whole numbers)")
+    run = runner("deform", image, tmp_path / "o.png", "--pin", "5,5", "--move", "50%,50%:1e9,1")
+    assert run.code == 2 and "'1e9,1' is out of range" in run.stderr and len(run.lines) == 1
+
+
 @pytest.mark.parametrize("args, message", [
     (["--move", "1,2"], "is not X,Y:X2,Y2"),
     (["--pin", "a,b"], "is not X,Y"),

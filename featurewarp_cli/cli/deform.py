@@ -22,26 +22,49 @@ class Deform:
 
 
 class PointPair(click.ParamType):
-    """``X,Y`` (a pin) or, with ``move``, ``X,Y:X2,Y2`` (a handle dragged from X,Y to X2,Y2)."""
+    """``X,Y`` (a pin) or, with ``move``, ``X,Y:X2,Y2`` (a handle dragged from X,Y to X2,Y2); each
+    part pixels or a percentage of the image, as ``--center`` takes them (:func:`pixels`)."""
 
     def __init__(self, move: bool):
         self.move = move
         self.name = "move" if move else "point"
 
     def convert(self, value, option, ctx):
+        from ..plugins import Param, ParamError
+
         if not isinstance(value, str):
             return value
         parts = value.split(":")
+        point = Param(self.name, tuple, None, "", metavar="X,Y")
         try:
             if len(parts) != (2 if self.move else 1):
                 raise ValueError
-            points = [tuple(float(n) for n in re.split(r"\s*,\s*", p.strip())) for p in parts]
-            if any(len(p) != 2 or not all(math.isfinite(n) for n in p) for p in points):
-                raise ValueError
+            points = [point.check(part) for part in parts]
+        except ParamError as err:
+            if "out of range" in err.reason:            # '1e9,5' is out of range (each part within ...)
+                self.fail(err.detail(), option, ctx)
+            self.fail(f"{value!r} is not {self.form()}", option, ctx)
         except ValueError:
-            form = "X,Y:X2,Y2 (from and to, in pixels)" if self.move else "X,Y (pixels)"
-            self.fail(f"{value!r} is not {form}", option, ctx)
+            self.fail(f"{value!r} is not {self.form()}", option, ctx)
         return tuple(points) if self.move else points[0]
+
+    def form(self) -> str:
+        """What a value must look like, for the error."""
+        return ("X,Y:X2,Y2 (from and to, " if self.move else "X,Y (") + \
+            "pixels or percentages of the image: 50%,50% is its centre)"
+
+
+def pixels(point: tuple[str, str], width: int, height: int) -> tuple[float, float]:
+    """A ``--pin`` or ``--move`` point in pixels of a ``width`` x ``height`` image: percentages span
+    the first to the last pixel centre, as ``--center``'s (:func:`featurewarp_cli.plugins.resolve_pair`)."""
+    from ..plugins import resolve_pair
+
+    return resolve_pair(point, width, height, position=True)
+
+
+def shown(point) -> str:
+    """A point as its flag gives it: ``20,10`` (pixels as numbers), ``50%,50%``."""
+    return ",".join(part if str(part).endswith("%") else f"{float(part):g}" for part in point)
 
 
 def load_handles(path: str | None) -> dict | None:
@@ -92,7 +115,7 @@ def given_names(merged: dict, moves, pins, source: str | None) -> list[str] | No
     points = merged.get("points")
     if not isinstance(points, list):
         return None
-    flags = [f"--move {a[0]:g},{a[1]:g}:{b[0]:g},{b[1]:g}" for a, b in moves] + [f"--pin {p[0]:g},{p[1]:g}" for p in pins]
+    flags = [f"--move {shown(a)}:{shown(b)}" for a, b in moves] + [f"--pin {shown(p)}" for p in pins]
     file = f"{'stdin' if source == '-' else source}: " if source is not None and flags else ""
     named = []
     for k, point in enumerate(points[:len(points) - len(flags)]):
@@ -114,8 +137,7 @@ def named_places(make, merged: dict, moves, pins, source: str | None):
     a point, or the handles file ``source`` ('-': stdin) before a place in it."""
     points = merged.get("points")
     first = len(points) - len(moves) - len(pins) if isinstance(points, list) and (moves or pins) else math.inf
-    flags = [f"--move {a[0]:g},{a[1]:g}:{b[0]:g},{b[1]:g} ({{}})" for a, b in moves] + [
-        f"--pin {p[0]:g},{p[1]:g}" for p in pins]
+    flags = [f"--move {shown(a)}:{shown(b)} ({{}})" for a, b in moves] + [f"--pin {shown(p)}" for p in pins]
 
     def name(match):
         k = int(match.group(1))
@@ -147,11 +169,11 @@ def deform_command() -> click.Command:
                      help="Handles file (JSON; see README, 'The handles file'): points dragged "
                           "from -> to, pins, curves, the border, the canvas. '-' reads stdin."),
         click.Option(["--move"], type=PointPair(move=True), multiple=True, metavar="X,Y:X2,Y2",
-                     help="A handle dragged from X,Y to X2,Y2, in pixels (repeatable; added to "
-                          "--handles)."),
+                     help="A handle dragged from X,Y to X2,Y2, in pixels or percentages of the "
+                          "image (50%,50%: its centre) (repeatable; added to --handles)."),
         click.Option(["--pin"], type=PointPair(move=False), multiple=True, metavar="X,Y",
-                     help="A point that stays where it is, in pixels (repeatable). At least two "
-                          "places must be held in all: a pin counts."),
+                     help="A point that stays where it is, in pixels or percentages of the image "
+                          "(repeatable). At least two places must be held in all: a pin counts."),
         click.Option(["--canvas"], type=click.Choice(["fit", "input"]),
                      help="fit: the deformed image's bounding box (default); input: the input's "
                           "size and coordinates. Overrides the file's."),
@@ -175,9 +197,16 @@ def deform_command() -> click.Command:
         settings, quiet, verbose = settings_from(Deform, kwargs)
         from ..engine.deform import handles_factory
 
-        merged = merged_handles(data, move, pin, canvas)
-        factory = handles_factory(merged, settings.decay, given_names(merged, move, pin, handles),
-                                  "stdin" if handles == "-" else handles or "handles")
+        merged = merged_handles(data, move, pin, canvas)          # the points as given: names and places
+        names, source = given_names(merged, move, pin, handles), "stdin" if handles == "-" else handles or "handles"
+        decay = settings.decay
+
+        def factory(width: int, height: int, mask=None):           # percentages of this image in pixels
+            def at(point):
+                return pixels(point, width, height)
+            sized = merged_handles(data, [(at(a), at(b)) for a, b in move], [at(p) for p in pin], canvas)
+            return handles_factory(sized, decay, names, source)(width, height, mask)
+
         settings = replace(settings, warp_factory=named_places(factory, merged, move, pin, handles))
         warp_one(settings, quiet, verbose, input, output, mask, report, save_grid, draw_grid,
                  also_read=((handles, "--handles"),) if handles else ())
@@ -189,8 +218,9 @@ def deform_command() -> click.Command:
     (converged ARAP, kept fold-free); the features marked in the mask then
     keep their shape under it, as with warp. Handles that describe one
     similarity give exactly that similarity. Coordinates are pixels, pixel
-    centres at whole numbers. Design a handles file live with
-    'featurewarp edit'.
+    centres at whole numbers; --pin and --move also take percentages of the
+    image, as --center does (50%,50%: its centre; 0% and 100%: the first and
+    last pixel centres). Design a handles file live with 'featurewarp edit'.
 
     \b
     Examples:
