@@ -301,7 +301,7 @@ def test_a_release_stops_on_its_path_of_minima_where_one_ulp_does_not_move_it():
     assert guard.release_rounds and 0 < guard.feature_blend < 1 and guard.converged and base.flips() == 0
     floor = barrier.SAFE_FRACTION * signed_areas(warp(base.source), base.triangles)
     thinnest = (signed_areas(base.target, base.triangles) / floor).min()
-    assert thinnest >= release.RELEASE_THINNEST * (1 - 1e-9)     # the path's stopping rule holds
+    assert thinnest >= injectivity.CRUSHED_SHARE * (1 - 1e-9)     # the path's stopping rule holds
     for pattern in ("up", "alternate"):
         nudged = FeatureWarper(512, 512, mask).solve(Nudged(warp, pattern), "similarity")
         assert np.abs(nudged.target - base.target).max() < 1e-4, pattern
@@ -349,7 +349,7 @@ def test_a_release_step_not_converged_in_trial_steps_ends_the_path_at_the_point_
     assert np.abs(first.target - mesh.target).max() < 1e-9
     assert any(f"{trial_steps} Newton steps" in line for line in mesh.record.warnings)          # said
     floor = barrier.SAFE_FRACTION * signed_areas(mesh.source * [sx, 1.0], mesh.triangles)
-    assert (signed_areas(mesh.target, mesh.triangles) / floor).min() >= release.RELEASE_THINNEST * (1 - 1e-9)
+    assert (signed_areas(mesh.target, mesh.triangles) / floor).min() >= injectivity.CRUSHED_SHARE * (1 - 1e-9)
     for pattern in ("up", "alternate"):
         nudged, _ = _squashed(160, 120, sx, trial_steps, lambda warp: Nudged(warp, pattern))
         assert np.abs(nudged.target - mesh.target).max() < 1e-6, pattern

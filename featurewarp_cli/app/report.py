@@ -92,7 +92,7 @@ def build_report(input_path, output_path, image, result, warp, mesh, timings, fm
             "release_rounds": info.get("release_rounds", 0),
             "released_components": info.get("released_components", []),
             "feature_blend": info.get("feature_blend", 1.0),
-            "release": {"blend_steps": fold_guard.BLEND_STEPS, "thinnest": fold_guard.RELEASE_THINNEST,
+            "release": {"blend_steps": fold_guard.BLEND_STEPS, "thinnest": fold_guard.injectivity.CRUSHED_SHARE,
                         "trial_steps": fold_guard.TRIAL_STEPS, "cut": info.get("release_cut", False)},
             "fallback": info.get("fallback", False),
             "plain_blend": info.get("plain_blend", 1.0),

@@ -34,9 +34,6 @@ BLEND_STEPS = 8
 #: crushed (the image pressed to 1 px: 530 steps, 35 s at 1 MP, then failing anyway) and ends
 #: more paths early; the steps on the photos and the other extremes converge in 4-35.
 TRIAL_STEPS = 100
-#: The thinnest a release lets a triangle be, as a fraction of its floor: beyond, the
-#: released features give way (their targets blend towards W's) instead of the background.
-RELEASE_THINNEST = 0.5
 #: Windows larger than this fraction of the grid are left to the global pass.
 WINDOW_MAX_FRACTION = 0.5
 
@@ -274,11 +271,11 @@ def _release(problem: Problem, x, floor, record: GuardRecord):
 
 
 def blend_search(problem: Problem, released: np.ndarray, floor, record: GuardRecord, margin=None, origin=None,
-                 steps: int = BLEND_STEPS, thinnest: float = RELEASE_THINNEST):
+                 steps: int = BLEND_STEPS, thinnest: float = injectivity.CRUSHED_SHARE):
     """Untie the components ``released`` and converge the barrier's energy with their targets
     blended ``s`` of their own and ``1 - s`` of W's, for the largest s whose minimum passes
     ``margin`` (positions -> float, <= 0 passes; default ``problem.margin``, else anything),
-    combined with a triangle thinner than ``thinnest`` of its floor (:data:`RELEASE_THINNEST`) failing.
+    combined with a triangle thinner than ``thinnest`` of its floor (:data:`injectivity.CRUSHED_SHARE`) failing.
 
     A path of minima, each converged from the one before, so every point is injective:
     - the least-squares solution is affine in s (the targets enter the right-hand side only):
@@ -381,7 +378,7 @@ def _untangle_window(problem: Problem, rhs, offset, tied, x, floor, margin_facto
     quads : int
         Quads whose shape the window may change.
     """
-    crushed = injectivity.grid_areas(problem.grid, x) < 0.5 * floor
+    crushed = injectivity.grid_areas(problem.grid, x) < injectivity.CRUSHED_SHARE * floor
     margin = max(WINDOW_MIN_MARGIN, int(margin_factor * injectivity.extent(problem.grid, np.flatnonzero(crushed)
                                                                            % problem.features.weight.size)))
     window = _window(problem, rhs, offset, tied, x, crushed, margin, around_ties)

@@ -182,6 +182,10 @@ def extent(grid: Grid, quads: np.ndarray) -> int:
     return int(stats[1:, cv2.CC_STAT_WIDTH:cv2.CC_STAT_HEIGHT + 1].max())
 
 
+#: A triangle below this share of its floor counts as crushed: the untangling lifts it, a
+#: release, a fallback and the tapered moves stop before it, the scale search's spread keeps
+#: above it. Lower lets those steps leave slivers; higher ends them (and releases) sooner.
+CRUSHED_SHARE = 0.5
 #: untangle gives up when, over this many steps, the fold count has not fallen below
 #: this fraction of what it was.
 PROGRESS_EVERY = 20
@@ -295,7 +299,7 @@ def untangle(solve, hessian, x: np.ndarray, triangles: np.ndarray, floor: np.nda
     gradient = hessian(x - optimum)                 # grad E(x) along admissible directions
     for iteration in range(max_iterations):
         current = areas(x)
-        if current.min() > 0 and (not settle or np.all(current >= 0.5 * floor)):
+        if current.min() > 0 and (not settle or np.all(current >= CRUSHED_SHARE * floor)):
             return x, iteration
         if iteration % PROGRESS_EVERY == 0:
             folds = int(np.count_nonzero(current <= 0))

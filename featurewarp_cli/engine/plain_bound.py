@@ -14,8 +14,8 @@ import numpy as np
 
 from . import barrier, injectivity, quality
 from .grid import signed_areas
-from .guard import RELEASE_THINNEST, Problem, blend_search
-from .injectivity import grid_areas, max_step
+from .guard import Problem, blend_search
+from .injectivity import CRUSHED_SHARE, grid_areas, max_step
 from .roots import bracketed_root
 
 #: Cells over which the move towards W tapers off around offending triangles
@@ -217,8 +217,8 @@ def no_worse_than_plain(state, x: np.ndarray, warped: np.ndarray, record, proble
         x, record.plain_blend = fixed
         record.degraded_components = [int(c) for c in offending if c >= 0]
         return x
-    if problem is not None:     # RELEASE_THINNEST of the floor, or of x's thinnest where x is thinner
-        thinnest = RELEASE_THINNEST * min(1.0, float(np.min(grid_areas(state.grid, x) / floor)))
+    if problem is not None:     # CRUSHED_SHARE of the floor, or of x's thinnest where x is thinner
+        thinnest = CRUSHED_SHARE * min(1.0, float(np.min(grid_areas(state.grid, x) / floor)))
         found = blend_search(problem, offending, floor, record, margin=release_margin(state, warped, margin),
                              origin=x, steps=0, thinnest=thinnest)
         if found is not None:
@@ -422,7 +422,7 @@ def furthest_move(move, margin, triangles: np.ndarray, floor: np.ndarray) -> tup
     the margin turns positive more than once in the bracket, the closed form may find another
     root than the bracketed search would have (an earlier one)."""
     start, end = move(0.0), move(1.0)
-    reach = max_step(start, end, triangles, 0.5 * np.minimum(floor, signed_areas(start, triangles)))
+    reach = max_step(start, end, triangles, CRUSHED_SHARE * np.minimum(floor, signed_areas(start, triangles)))
     if reach > 0 and margin(move(reach)) > 0:
         samples = reach * np.arange(1, MOVE_SAMPLES + 1) / MOVE_SAMPLES
         failing = next(k for k, t in enumerate(samples) if margin(move(t)) > 0)

@@ -25,12 +25,9 @@ from __future__ import annotations
 import numpy as np
 
 from .grid import signed_areas
-from .injectivity import max_step
+from .barrier import SAFE_FRACTION
+from .injectivity import CRUSHED_SHARE, max_step
 from .roots import bracketed_root
-
-#: Smallest area, relative to W's, that the scale search lets a triangle keep.
-SCALE_FLOOR = 0.05
-
 
 def _between(start_result, end_result, t: float):
     """The solution at ``start + t (end - start)`` from the solutions at both ends.
@@ -56,8 +53,8 @@ def fitting_scales(solve, prior: np.ndarray, optimum: np.ndarray, triangles, war
     triangle that the ``prior``'s solution does not; then the furthest point from the prior
     towards the optimum that crushes none.
 
-    A triangle counts as crushed below :data:`SCALE_FLOOR` of its area under W, or below its
-    area in the prior's solution where that is smaller already (folds there are the fold-over
+    A triangle counts as crushed below its floor (:data:`barrier.SAFE_FRACTION` of its area
+    under W), or below its area in the prior's solution where that is smaller already (folds there are the fold-over
     guard's to open, as for any solution). So solving for scale and rotation never leaves the
     background worse off than the preset's own lambda R would: a feature that cannot grow as
     far as least squares would like stays a similarity, only less grown.
@@ -67,7 +64,7 @@ def fitting_scales(solve, prior: np.ndarray, optimum: np.ndarray, triangles, war
     if np.allclose(prior, optimum):
         return optimum, best
     start = solve(prior)
-    floor = np.minimum(SCALE_FLOOR * signed_areas(warped, triangles), signed_areas(start[0], triangles))
+    floor = np.minimum(SAFE_FRACTION * signed_areas(warped, triangles), signed_areas(start[0], triangles))
     if np.all(signed_areas(best[0], triangles) >= floor):
         return optimum, best
     return _furthest_fitting(prior, optimum, start, best, floor, triangles)
@@ -75,13 +72,13 @@ def fitting_scales(solve, prior: np.ndarray, optimum: np.ndarray, triangles, war
 
 def shrink_to_fit(solve, low: np.ndarray, high: np.ndarray, high_result, triangles, warped):
     """The largest similarities between ``low`` and ``high`` ((C, 2) each; ``high_result`` is
-    ``solve(high)``) whose solution crushes no triangle below :data:`SCALE_FLOOR` of its
+    ``solve(high)``) whose solution crushes no triangle below :data:`barrier.SAFE_FRACTION` of its
     area under W, or None when even ``low`` does. For features that cannot keep
     their shape at the size least squares picked (densely packed coins squeezed to 0.6 of
     their width): smaller but exact.
 
     Returns (ab, solve(ab)) or None."""
-    floor = SCALE_FLOOR * signed_areas(warped, triangles)
+    floor = SAFE_FRACTION * signed_areas(warped, triangles)
     start = solve(low)
     if not np.all(signed_areas(start[0], triangles) >= floor):
         return None
@@ -117,7 +114,7 @@ def spread_stretch(solve, ab: np.ndarray, result, scalable: np.ndarray, triangle
     SPREAD_ABOVE if that comes first, so that a stretch just above SPREAD_ABOVE grows the
     features just a little (no jump where a one-ulp change crosses it); a root found to
     convergence (:func:`roots.bracketed_root`, the ITP method), unless a triangle reaches its floor
-    before (half of :data:`SCALE_FLOOR` of its area under W, or half its area in ``result``
+    before (:data:`injectivity.CRUSHED_SHARE` of its floor, or of its area in ``result``
     where that is smaller already; the first root of quadratics, :func:`injectivity.max_step`).
     Shrinking is not searched here: squeezed features are :func:`shrink_to_fit`'s.
 
@@ -153,7 +150,7 @@ def spread_stretch(solve, ab: np.ndarray, result, scalable: np.ndarray, triangle
     if high <= np.log(SPREAD_ABOVE) or high + low <= 0:
         return ab, result
     areas = signed_areas(result[0], triangles)
-    floor = 0.5 * np.minimum(SCALE_FLOOR * signed_areas(warped, triangles), areas)
+    floor = CRUSHED_SHARE * np.minimum(SAFE_FRACTION * signed_areas(warped, triangles), areas)
     if not np.all(areas >= floor):            # folded: the guard's to open
         return ab, result
     grown = solve(np.where(scalable[:, None], ab * SPREAD_RANGE, ab))
