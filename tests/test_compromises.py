@@ -385,3 +385,48 @@ def test_compare_says_when_it_has_no_mask_and_a_warp_at_rest_once(tmp_path):
     assert run.exit_code == 0 and "no --mask: the rigid and similarity views are the plain warp" in run.output
     run = CliRunner().invoke(cli, ["compare", "stretch", str(tmp_path / "in.png"), str(tmp_path / "p.png")])
     assert run.output.count("moves no pixel") == 1 and "all views: the warp moves no pixel" in run.output
+
+
+@pytest.mark.parametrize("command", ["warp", "deform"])
+def test_strict_writes_the_report_of_a_refused_run(tmp_path, command):
+    """--strict with --report wrote no report when it refused: a CI gate had the first warning
+    alone. The report is written, marked refused with every warning that caused it (output null);
+    the image and the grid are not, and the exit is 1."""
+    import json
+
+    import cv2
+
+    image, mask, handles = tmp_path / "in.png", tmp_path / "black.png", tmp_path / "h.json"
+    cv2.imwrite(str(image), np.random.default_rng(3).integers(0, 255, (36, 48, 3), dtype=np.uint8))
+    cv2.imwrite(str(mask), np.zeros((36, 48), np.uint8))           # marks no feature: a warning
+    handles.write_text('{"version": 1, "points": [{"from": [2, 2], "to": [2, 2], "angel": 3}, '
+                       '{"from": [40, 30], "to": [44, 30]}]}')   # an unknown key: a warning
+    given = ["warp", "swirl"] if command == "warp" else ["deform", "--handles", str(handles)]
+    out, report, grid = tmp_path / "o.png", tmp_path / "r.json", tmp_path / "g.npz"
+    run = CliRunner().invoke(cli, given + [str(image), str(out), "-m", str(mask), "--strict",
+                                           "--report", str(report), "--save-grid", str(grid)])
+    assert run.exit_code == 1 and not out.exists() and not grid.exists(), run.output
+    made = json.loads(report.read_text())                          # checked against the schema (conftest)
+    error = made["refused"]["error"]
+    assert made["output"] is None and run.output.strip().endswith(error)
+    assert error.startswith("--strict: ") and error.endswith("; nothing written but the report")
+    assert made["refused"]["warnings"] == made["warnings"] and len(made["warnings"]) == 1 + (command == "deform")
+    written = CliRunner().invoke(cli, given + [str(image), str(out), "-m", str(mask), "--report", str(report)])
+    assert written.exit_code == 0 and out.exists() and json.loads(report.read_text())["refused"] is None
+
+
+def test_a_refusal_for_folds_reports_no_warning_as_its_cause_and_survives_a_failed_report():
+    from types import SimpleNamespace
+
+    from featurewarp_cli.app.pipeline import Settings, WarpError, check_solution
+
+    mesh = SimpleNamespace(flips=lambda: 2, record=SimpleNamespace(warnings=["a warning"]))
+    seen = []
+    with pytest.raises(WarpError, match=r"2 folded triangles .*; nothing written but the report \(--allow"):
+        check_solution(Settings("swirl", strict=True), mesh, lambda error, causes: seen.append(causes))
+    assert seen == [[]]
+
+    def fails(error, causes):
+        raise WarpError("cannot write r.json: No space left on device")
+    with pytest.raises(WarpError, match=r"; nothing written \(--allow-folds .*\) \(cannot write r.json: No space"):
+        check_solution(Settings("swirl", strict=True), mesh, fails)

@@ -16,7 +16,8 @@ from dataclasses import dataclass, replace
 
 from ..io import urls
 from ..io.decode import path_problem
-from .pipeline import Settings, WarpError, _writable, warp_file
+from .outputs import writable
+from .pipeline import Settings, WarpError, warp_file
 from .remote import has_url, run_url_job, url_up_to_date
 
 
@@ -187,7 +188,7 @@ def _create(out_dir: str) -> None:
         os.makedirs(out_dir, exist_ok=True)
     except OSError as err:
         raise WarpError(f"cannot create {out_dir} ({err.strerror or err})", "--out-dir", usage=True) from None
-    _writable(os.path.join(out_dir, "probe"), "--out-dir")
+    writable(os.path.join(out_dir, "probe"), "--out-dir")
 
 
 def _worker_setup() -> None:

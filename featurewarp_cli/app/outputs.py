@@ -40,6 +40,38 @@ def check_encodable(canvas, fmt: str) -> None:
                         "side (another --format, or a smaller result)", "OUTPUT", usage=True)
 
 
+def writable(path: str, param: str) -> None:
+    """Usage error (WarpError naming ``param``) unless ``path`` can be written (:func:`write.check_writable`)."""
+    from .pipeline import WarpError
+
+    try:
+        write.check_writable(path)
+    except ValueError as err:
+        raise WarpError(str(err), param, usage=True) from None
+
+
+def check_outputs(settings, output: str, *extra: tuple[str | None, str], like: str | None = None):
+    """Resolve OUTPUT's path and format and check that it and ``extra`` (path, option) can be written.
+
+    ``-`` as OUTPUT without ``--format`` or a prefix takes the format of the file ``like``
+    (INPUT), read from its first bytes."""
+    from .pipeline import WarpError
+
+    fmt = settings.fmt
+    if fmt is None and output == "-" and like not in (None, "-"):
+        fmt = format_of(like)
+    try:
+        out_path, fmt = formats.output_target(output, fmt)
+    except ValueError as err:
+        raise WarpError(str(err), "OUTPUT", usage=True) from None
+    if out_path != "-":
+        writable(out_path, "OUTPUT")
+    for path, param in extra:
+        if path and path != "-":
+            writable(path, param)
+    return out_path, fmt
+
+
 def check_grid_name(save_grid: str | None) -> None:
     """--save-grid names one of the two forms it writes (another name silently got an npz)."""
     from .pipeline import WarpError

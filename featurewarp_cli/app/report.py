@@ -33,20 +33,24 @@ def image_summary(path: str, image: np.ndarray, fmt: str | None = None) -> dict:
     }
 
 
-def build_report(input_path, output_path, image, result, warp, mesh, timings, fmt: str | None = None) -> dict:
+def build_report(input_path, output_path, image, result, warp, mesh, timings, fmt: str | None = None,
+                 refused: dict | None = None) -> dict:
     """Assemble the report dictionary (JSON-ready).
 
     Parameters
     ----------
     input_path, output_path : str
     image, result : ndarray
-        Input and output images.
+        Input and output images (``result`` None: none was written, ``refused`` says why).
     warp : warps.Warp
     mesh : featurewarp_cli.engine.mesh.Mesh
     timings : dict
         Seconds per stage.
     fmt : str, optional
         The output's format: the output is described as it stores ``result``.
+    refused : dict, optional
+        A run refused after its solve (``--strict``, folds): ``error`` (its one line) and
+        ``warnings`` (those that caused it); ``output`` is null then.
 
     Returns
     -------
@@ -67,7 +71,8 @@ def build_report(input_path, output_path, image, result, warp, mesh, timings, fm
         "formulation": info["formulation"],
         "boundary": info["boundary"],
         "input": image_summary(input_path, image),
-        "output": image_summary(output_path, result, fmt),
+        "output": None if result is None else image_summary(output_path, result, fmt),
+        "refused": refused,
         "canvas": {"width": mesh.canvas[0], "height": mesh.canvas[1], "offset": list(warp.offset)},
         "grid": info["grid"],
         "components": {"count": len(info["components"]), "items": info["components"]},
@@ -120,8 +125,20 @@ def summary(preset: str, mode: str, input: str, out_path: str, size, mesh, t0: f
     }
 
 
-def report_bytes(input, out_path, image, result, warp, mesh, timings, t0, fmt: str | None = None) -> bytes:
-    """The JSON report's bytes (its ``seconds.total`` is the run so far)."""
+def report_bytes(input, out_path, image, result, warp, mesh, timings, t0, fmt: str | None = None,
+                 refused: dict | None = None) -> bytes:
+    """The JSON report's bytes (its ``seconds.total`` is the run so far; ``refused``: see
+    :func:`build_report`)."""
     timings["total"] = time.perf_counter() - t0
-    report = build_report(input, out_path, image, result, warp, mesh, timings, fmt)
+    report = build_report(input, out_path, image, result, warp, mesh, timings, fmt, refused)
     return (json.dumps(report, indent=2) + "\n").encode()
+
+
+def refused_report(path, input, out_path, image, warp, mesh, timings, t0, fmt, error: str, causes: list) -> None:
+    """Write the report of a run refused after its solve to ``path``: ``refused`` holds the ``error``
+    and the warnings that ``causes`` it, ``output`` is null (no image is written)."""
+    from .outputs import write_all
+
+    timings.update(mesh.info["timings"])
+    refused = {"error": error, "warnings": list(causes)}
+    write_all([(path, report_bytes(input, out_path, image, None, warp, mesh, timings, t0, fmt, refused))])

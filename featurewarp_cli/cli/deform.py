@@ -178,7 +178,7 @@ def deform_command() -> click.Command:
                      help="fit: the deformed image's bounding box (default); input: the input's "
                           "size and coordinates. Overrides the file's."),
         click.Option(["--report"], type=click.Path(dir_okay=False), metavar="PATH",
-                     help="Write a JSON report (as for warp)."),
+                     help="Write a JSON report (as for warp; also of a refused run, marked refused)."),
         click.Option(["--save-grid"], type=click.Path(dir_okay=False), metavar="PATH.npz|PATH.obj",
                      help="Save the solved mesh (as for warp)."),
         click.Option(["--grid", "draw_grid"], is_flag=True, help="Draw the deformed grid over the result."),

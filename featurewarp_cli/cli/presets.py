@@ -158,7 +158,8 @@ def warp_command(preset) -> click.Command:
                           "each feature component (scale, rotation, distortion, kept), "
                           "background_stretch, blank canvas and outline against the plain warp, "
                           "the warnings, the grid, fold-overs before and after the guard, the "
-                          "solver, seconds per stage. Its JSON Schema: 'featurewarp schema "
+                          "solver, seconds per stage; also when --strict or a fold refuses the run "
+                          "(marked refused, no image written). Its JSON Schema: 'featurewarp schema "
                           "report'; its fields: README, 'The report'."),
         click.Option(["--save-grid"], type=click.Path(dir_okay=False), metavar="PATH.npz|PATH.obj",
                      help="Save the mapping: arrays source (N x 2 source pixel positions of "
