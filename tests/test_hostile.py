@@ -359,6 +359,52 @@ def test_a_read_only_output_is_not_replaced(tmp_path, monkeypatch):
         write.check_writable(str(target))
 
 
+def test_a_file_nobody_may_write_is_not_replaced_even_by_root(tmp_path):
+    """os.access lets root write anything: as root (CI) a chmod 444 output was replaced, rc 0.
+    A regular file with no write bit is refused before the work, and again when staged."""
+    import os
+    import stat
+
+    from featurewarp_cli.io import write
+
+    cv2.imwrite(str(tmp_path / "in.png"), np.zeros((20, 30, 3), np.uint8))
+    target = tmp_path / "o.png"
+    target.write_bytes(b"golden")
+    target.chmod(0o444)
+    inode = target.stat().st_ino
+    run = CliRunner().invoke(cli, ["warp", "swirl", str(tmp_path / "in.png"), str(target)])
+    assert run.exit_code == 2 and "Traceback" not in run.output, run.output
+    assert "o.png is read-only (mode 444): not replaced; chmod u+w it or give another name" in run.output
+    with pytest.raises(PermissionError, match="read-only file"):        # made read-only after the check
+        write.write_outputs([(str(target), b"new")])
+    assert target.read_bytes() == b"golden" and target.stat().st_ino == inode
+    target.chmod(0o644)
+    write.write_atomic(str(target), b"new")
+    assert target.read_bytes() == b"new" and stat.S_IMODE(os.stat(target).st_mode) == 0o644
+
+
+def test_the_same_bytes_leave_an_output_in_place(tmp_path):
+    """Each rerun replaced an unchanged output (new inode and mtime, hard links broken), so make
+    rebuilt everything downstream and rsync copied it again; now only a change is written."""
+    import os
+
+    from featurewarp_cli.io import write
+
+    target, linked = tmp_path / "o.png", tmp_path / "hard.png"
+    write.write_atomic(str(target), b"result")
+    os.link(target, linked)
+    os.utime(target, ns=(10**18, 10**18))
+    before = os.stat(target)
+    write.write_outputs([(str(target), b"result"), (str(tmp_path / "r.json"), b"{}")])
+    after = os.stat(target)
+    assert (after.st_ino, after.st_mtime_ns, after.st_nlink) == (before.st_ino, 10**18, 2)
+    assert not [p for p in os.listdir(tmp_path) if p.startswith(write.TEMP_PREFIX)]
+    for changed in (b"resulT", b"result and more"):                 # same size, and another size
+        write.write_atomic(str(target), changed)
+        assert target.read_bytes() == changed and linked.read_bytes() == b"result"
+        assert os.stat(target).st_ino != before.st_ino
+
+
 def test_a_failed_rename_names_the_output_not_its_staging_file(tmp_path, monkeypatch):
     """The error named the hidden .featurewarp-....tmp file."""
     import os

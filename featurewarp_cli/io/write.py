@@ -12,7 +12,9 @@ Where an output goes, by what its path is now:
   behind, even under SIGKILL; at commit it gets a hidden name and is renamed over
   the target. Where the file system has no ``O_TMPFILE``, or a command has more than
   :data:`OPEN_STAGED` outputs, a hidden temporary file is used instead and removed on
-  failure and on SIGTERM or SIGINT.
+  failure and on SIGTERM or SIGINT. A file that already holds exactly these bytes is
+  left as it is (same inode, owner and mtime: make and rsync see no change); one with
+  no write permission for anyone (``chmod a-w``) is refused, even for root.
 - a symbolic link: followed, so its target is replaced as above and the link stays.
 - ``/dev/stdout``, ``/dev/stderr``, ``/dev/fd/N``, ``/proc/self/fd/N``: this process's own
   descriptor, written where it stands (a shell's ``>> log`` appends, ``> file`` is not
@@ -58,7 +60,7 @@ class Staged:
     temp : str or None
         The hidden temporary file holding them where ``O_TMPFILE`` is not available.
     data : bytes or None
-        The bytes themselves, for ``direct``, ``descriptor`` and ``stdout``.
+        The bytes themselves (for ``file``: to leave a target that holds them in place).
     descriptor : int or None
         This process's descriptor the bytes go to, for ``descriptor`` (never closed here).
     """
@@ -128,7 +130,7 @@ def _stage_file(path: str, target: str, data: bytes, named: bool = False) -> Sta
         except BaseException:
             os.close(fd)
             raise
-        return Staged(path, "file", target, fd=fd)
+        return Staged(path, "file", target, fd=fd, data=data)
     handle, temp = tempfile.mkstemp(prefix=TEMP_PREFIX, suffix=".tmp", dir=directory)
     try:
         _write_all(handle, data)
@@ -139,7 +141,7 @@ def _stage_file(path: str, target: str, data: bytes, named: bool = False) -> Sta
         raise
     os.close(handle)
     _PENDING.add(temp)
-    return Staged(path, "file", target, temp=temp)
+    return Staged(path, "file", target, temp=temp, data=data)
 
 
 #: Seconds to wait after staging each output (tests use it to signal a run mid-write): a
@@ -200,7 +202,15 @@ def _stage(path: str, data: bytes, named: bool = False) -> Staged:
         if stat.S_ISDIR(mode):
             raise IsADirectoryError(21, "Is a directory", path)
         return Staged(path, "direct", path, data=data)
+    if mode is not None and read_only(mode):          # checked before the work too (check_writable)
+        raise PermissionError(errno.EACCES, f"read-only file (mode {stat.S_IMODE(mode):o}): not replaced", path)
     return _stage_file(path, _replaced(path), data, named)
+
+
+def read_only(mode: int) -> bool:
+    """Whether ``mode`` (``st_mode``) is a regular file nobody may write (``chmod a-w``): such a file
+    is never replaced, not even by root, whom :func:`os.access` lets write anything."""
+    return stat.S_ISREG(mode) and not mode & 0o222
 
 
 def _mode_of(path: str) -> int | None:
@@ -286,11 +296,36 @@ def _commit_one(output: Staged) -> None:
             _write_all(output.descriptor, output.data)
         except OSError as err:
             raise OSError(err.errno, err.strerror, output.path) from None
-    else:
+    elif not _holds(output.target, output.data):      # the same bytes stay put: same inode and mtime
         try:
             _put_in_place(output)
         except OSError as err:                  # named as the output, not as the hidden staging file
             raise OSError(err.errno, err.strerror, output.path) from None
+
+
+def _holds(path: str, data: bytes) -> bool:
+    """Whether ``path`` is a regular file holding exactly ``data`` (read only when the sizes agree),
+    so that a rerun leaves an unchanged output as it is: make and rsync see no change, hard links
+    and the owner stay."""
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC)
+    except OSError:
+        return False
+    try:
+        info = os.fstat(fd)
+        if not stat.S_ISREG(info.st_mode) or info.st_size != len(data):
+            return False
+        view, done = memoryview(data), 0
+        while done < len(data):
+            piece = os.read(fd, 1 << 20)
+            if not piece or piece != view[done:done + len(piece)]:
+                return False
+            done += len(piece)
+        return not os.read(fd, 1)
+    except OSError:
+        return False
+    finally:
+        os.close(fd)
 
 
 def _put_in_place(output: Staged) -> None:
@@ -424,6 +459,9 @@ def check_writable(path: str) -> None:
     mode = _mode_of(path)
     if mode is not None and stat.S_ISDIR(mode):
         raise ValueError(f"{path} is a directory")
+    if mode is not None and read_only(mode):                    # root too: os.access lets root write anything
+        raise ValueError(f"{path} is read-only (mode {stat.S_IMODE(mode):o}): not replaced; chmod u+w it or "
+                         "give another name")
     if mode is not None and not os.access(path, os.W_OK):       # a read-only file is not replaced, as cp would not
         raise ValueError(f"{path} is not writable by you (read-only, or another user's): give another name")
     if mode is not None and not stat.S_ISREG(mode):
