@@ -217,3 +217,38 @@ def test_a_summary_that_cannot_be_written_is_named_and_stops_the_batch(runner, p
     assert run.lines == ["featurewarp: error: --summary: cannot write /dev/full (No space left on device); the batch "
                          "was stopped"]
     assert names(tmp_path / "out") == ["a.png"]
+
+
+def test_resume_warps_again_what_other_settings_made(runner, photos, tmp_path):
+    """--resume skipped outputs made with other settings (a 300-degree rigid swirl stayed as the
+    90-degree result, CI findings 9): each --summary line records a stamp of the settings, and
+    --resume skips an up-to-date output only where the summary it reads records it with these
+    settings, input and mask; without a summary it says that it could not check."""
+    import json
+
+    out, summary = tmp_path / "out", tmp_path / "s.jsonl"
+    files = [photos / "a.png", photos / "b.png"]
+
+    def lines():
+        return [json.loads(line) for line in summary.read_text().splitlines()]
+
+    first = runner("batch", "swirl", *files, "-o", out, "--angle", "300", "--mode", "rigid", "--summary", summary)
+    assert first.code == 0, first.stderr
+    stamps = {line["settings"] for line in lines()}
+    assert len(stamps) == 1 and next(iter(stamps)).startswith("sha256:")
+    again = runner("batch", "swirl", photos / "a.png", "-o", out, "--angle", "90", "--resume", "--summary", summary)
+    assert again.code == 0 and again.lines == [
+        f"featurewarp: --resume: warping 1 up-to-date output(s) again, which {summary} does not record as made "
+        f"with these settings, input and mask: {out / 'a.png'}"]
+    assert [(line["status"], line["settings"] in stamps) for line in lines()] == [("ok", False)]
+    fresh = runner("batch", "swirl", photos / "a.png", "-o", tmp_path / "fresh", "--angle", "90")
+    assert fresh.code == 0 and (out / "a.png").read_bytes() == (tmp_path / "fresh" / "a.png").read_bytes()
+    same = runner("batch", "swirl", photos / "a.png", "-o", out, "--angle", "90", "--resume", "--summary", summary)
+    assert (same.code, same.stderr, [line["status"] for line in lines()]) == (0, "", ["skipped"])
+    unchecked = runner("batch", "swirl", *files, "-o", out, "--angle", "90", "--resume")
+    assert unchecked.code == 0 and len(unchecked.lines) == 1
+    assert unchecked.lines[0].startswith("featurewarp: warning: --resume skipped 2 output(s) by their times alone")
+    older = {key: value for key, value in lines()[0].items() if key != "settings"}      # an earlier featurewarp's
+    summary.write_text(json.dumps(older) + "\n")
+    run = runner("batch", "swirl", photos / "a.png", "-o", out, "--angle", "90", "--resume", "--summary", summary)
+    assert run.code == 0 and "warping 1 up-to-date output(s) again" in run.stderr

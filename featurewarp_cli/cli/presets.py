@@ -199,11 +199,13 @@ def run_planned(settings, todo, jobs: int, scheduler, summary_path, resume: bool
     The summary is opened (and an existing one emptied) only once the run has started: a
     ``--scheduler`` that fails leaves it as it was. A summary that cannot be written stops the
     run (the jobs not finished are cancelled) with one error naming it."""
-    from ..app.batch import run_jobs, summary_record, up_to_date
+    from ..app.batch import resume_notes, resume_plan, run_jobs, settings_stamp, summary_record
     from ..app.cluster_run import Unfinished
 
-    skipped = {i for i, job in enumerate(todo) if resume and up_to_date(job)}
-    numbers = [i for i in range(len(todo)) if i not in skipped]
+    skipped, redone = resume_plan(todo, settings, summary_path) if resume else ({}, [])
+    for note in resume_notes(todo, skipped, redone, summary_path) if not quiet else ():
+        say(note)
+    numbers, stamp = [i for i in range(len(todo)) if i not in skipped], settings_stamp(settings)
     remaining = [todo[i] for i in numbers]
     if summary_path and summary_path != "-":
         _summary_writable(summary_path)
@@ -211,7 +213,7 @@ def run_planned(settings, todo, jobs: int, scheduler, summary_path, resume: bool
     with contextlib.closing(run_jobs(settings, remaining, jobs, scheduler, verbose)) as results, \
             _summary_sink(summary_path) as record:
         for i in sorted(skipped):
-            record(summary_record(i, todo[i], "skipped"))
+            record(summary_record(i, todo[i], "skipped", settings=skipped[i]))
         with progress_bar(len(remaining), "warping", quiet) as bar:
             for k, job, error, summary, seconds in results:
                 bar.update(1)
@@ -221,7 +223,7 @@ def run_planned(settings, todo, jobs: int, scheduler, summary_path, resume: bool
                         say(f"featurewarp: error: {failure_line(job.input, error)}")
                 elif summary is not None:
                     report_warnings(summary, quiet, verbose)
-                record(summary_record(numbers[k], job, "failed" if error else "ok", seconds, summary, error))
+                record(summary_record(numbers[k], job, "failed" if error else "ok", seconds, summary, error, stamp))
     return failed
 
 
@@ -314,10 +316,15 @@ def batch_command(preset) -> click.Command:
                                 "for. Needs pip install 'featurewarp[dask]'."),
               click.Option(["--summary"], metavar="FILE", type=click.Path(dir_okay=False, allow_dash=True),
                            help="Write one JSON line per file (job, input, mask, output, status: ok, "
-                                "failed or skipped, seconds, warnings, error) as each finishes; '-' "
-                                "for stdout."),
+                                "failed or skipped, seconds, warnings, error, settings: a stamp of the "
+                                "options) as each finishes; '-' for stdout. --resume reads the "
+                                "previous one first."),
               click.Option(["--resume"], is_flag=True,
-                           help="Skip files whose output exists and is newer than their input and mask.")
+                           help="Skip files whose output exists and is newer than their input and mask. "
+                                "When --summary FILE exists (from the run that made them), only outputs "
+                                "it records with these settings (each line's 'settings' stamp), input "
+                                "and mask are skipped; the others are warped again, as a line says. "
+                                "Without it the settings are unchecked (a warning says so).")
               ] + engine_options(preset, "; a file with a warning then fails, the others are still written")
 
     def callback(inputs, out_dir, mask_pattern, suffix, jobs, scheduler, summary, resume, **kwargs):
