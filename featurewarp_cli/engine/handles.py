@@ -311,7 +311,7 @@ def _unknown_keys(data: dict, version: int) -> list[str]:
 
 def _angles(points: list, version: int, notes: list) -> np.ndarray:
     """Each point's ``angle`` in radians (NaN where none is given; in a version-1 file it is
-    ignored, with a note); ValueError for one that is not finite."""
+    ignored, with a warning); ValueError for one that is not finite."""
     angles = np.full(len(points), np.nan)
     for k, point in enumerate(points):
         if "angle" not in point:
