@@ -318,6 +318,16 @@ def test_a_warp_that_moves_nothing_says_so(preset, params, still):
     assert bool(said) == still, mesh.record.warnings
 
 
+def test_a_mask_over_all_the_warp_moves_is_not_called_a_warp_that_moves_nothing():
+    """A bulge whose whole region the mask covers came out as the input, and besides the right
+    warning said "the warp moves no pixel ... (options at their identity ...?)": it tested the
+    result instead of the warp, and sent the user to options that were fine (photo trial 5)."""
+    mask = np.ones((200, 200), bool)
+    mesh = FeatureWarper(200, 200, mask).solve(load_warp("bulge")(200, 200, radius=0.25, strength=1.0))
+    assert any("the mask covers the region the warp moves" in w for w in mesh.record.warnings), mesh.record.warnings
+    assert not any("moves no pixel" in w for w in mesh.record.warnings), mesh.record.warnings
+
+
 def test_a_mask_that_marks_nothing_says_what_it_read(tmp_path):
     """A mask painted pure red was read as empty with "no pixel >= 128", though every painted
     pixel was 255 in red: its gray is 76. The message now gives the brightest gray it read."""

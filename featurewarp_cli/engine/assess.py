@@ -9,8 +9,8 @@ from .record import KEPT, ComponentRecord, SolveRecord, warnings_for
 
 #: Features (quads holding a mask pixel) covering more than this share of the grid get a warning.
 MASK_COVERAGE = 0.9
-#: A result whose nodes all stay within this many pixels of where they were, on the input's own
-#: canvas, is said to move nothing (``stretch`` at its 1 x 1 defaults, a swirl centred far off).
+#: A warp whose nodes all stay within this many pixels of where they were, on the input's own
+#: canvas, is said to move nothing (a mask over all it moves is said otherwise: record.warnings_for) (``stretch`` at its 1 x 1 defaults, a swirl centred far off).
 STILL_PX = 0.01
 #: How that warning begins (an animation's frames say it once for all of them).
 STILL = "the warp moves no pixel"
@@ -68,7 +68,7 @@ def assess(state, target, warped, tied, unpinned, warp, record: SolveRecord, not
                                    f"is left to take the warp (is the mask inverted, or a JPEG whose "
                                    f"noise crosses the threshold?)")
     if not quick and tuple(warp.canvas) == (state.grid.width, state.grid.height) and \
-            np.max(np.abs(target - state.nodes), initial=0.0) <= STILL_PX:
+            np.max(np.abs(warped - state.nodes), initial=0.0) <= STILL_PX:     # W itself (a covering mask: above)
         record.warnings.append(f"{STILL} by more than {STILL_PX:g} px: the output is the input "
                                f"(options at their identity, a centre far off the image, or handles that stay put?)")
     error = record.grid.get("pl_error_px", 0.0)
