@@ -296,17 +296,28 @@ def _commit_one(output: Staged) -> None:
             _write_all(output.descriptor, output.data)
         except OSError as err:
             raise OSError(err.errno, err.strerror, output.path) from None
-    elif not _holds(output.target, output.data):      # the same bytes stay put: same inode and mtime
+    else:
         try:
-            _put_in_place(output)
+            if not (_holds(output.target, output.data) and _touched(output.target)):
+                _put_in_place(output)
         except OSError as err:                  # named as the output, not as the hidden staging file
             raise OSError(err.errno, err.strerror, output.path) from None
 
 
+def _touched(path: str) -> bool:
+    """Whether ``path``'s times could be set to now (a file of another owner's may refuse)."""
+    try:
+        os.utime(path)
+    except OSError:
+        return False
+    return True
+
+
 def _holds(path: str, data: bytes) -> bool:
     """Whether ``path`` is a regular file holding exactly ``data`` (read only when the sizes agree),
-    so that a rerun leaves an unchanged output as it is: make and rsync see no change, hard links
-    and the owner stay."""
+    so that a rerun leaves an unchanged output in place: hard links, the inode and the owner stay;
+    its time is set to now (left alone, make would find the rule's target older than the input
+    that changed and run it again on every call)."""
     try:
         fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC)
     except OSError:
