@@ -9,7 +9,6 @@ import logging
 import os
 import signal
 import socket
-import subprocess
 import sys
 import threading
 import time
@@ -339,29 +338,6 @@ def test_jobs_and_scheduler_exclude_each_other(tmp_path, cluster):
         result = invoke(*inputs, "--out-dir", tmp_path / "out", "--scheduler", cluster.scheduler_address, "-j", jobs)
         assert result.code == 2 and "--jobs and --scheduler exclude each other" in result.stderr
     assert not (tmp_path / "out").exists()
-
-
-def test_a_signal_stops_the_cluster_jobs_and_the_summary_keeps_what_finished(tmp_path, cluster):
-    """SIGINT: the jobs running on the workers went on writing after the command had exited, and
-    the files finished before the signal were missing from the summary."""
-    inputs = make_inputs(tmp_path / "in", 12, size=(640, 480))
-    out = tmp_path / "out"
-    process = subprocess.Popen(featurewarp("batch", "swirl", *inputs, "--out-dir", out, "--angle", "120",
-                                           "--scheduler", cluster.scheduler_address, "--summary", tmp_path / "s.jsonl"),
-                               stderr=subprocess.PIPE, env=fresh_env())
-    try:
-        wait_for(lambda: out.is_dir() and len(os.listdir(out)) >= 2)
-        process.send_signal(signal.SIGINT)
-        _, stderr = process.communicate(timeout=60)
-    finally:
-        process.kill()
-    at_exit = sorted(os.listdir(out))
-    time.sleep(1.5)
-    assert (process.returncode, stderr) == (130, b"featurewarp: stopped by SIGINT\n")
-    assert sorted(os.listdir(out)) == at_exit and len(at_exit) < 12          # nothing written after the exit
-    lines = summary_lines(tmp_path / "s.jsonl")
-    assert sorted(os.path.basename(line["output"]) for line in lines) == at_exit
-    assert {line["status"] for line in lines} == {"ok"}
 
 
 def test_a_lost_scheduler_is_one_line_and_the_summary_matches_the_disk(tmp_path, cluster, capfd):

@@ -16,8 +16,11 @@ How a run ends early, and what the command says:
 - the scheduler lost: the files not finished are yielded as failed (an :class:`Unfinished`
   error; those found written since the run began as ok), then one error line.
 
-Each way, the jobs not finished are cancelled and every worker is told that the run is over
-(:func:`featurewarp_cli.app.cluster.stop_run`), and the command waits until none is writing.
+Each way, the run's stop flag is set on the scheduler (no job of it starts writing, on any
+worker, one that joins later too; :mod:`featurewarp_cli.app.cluster`), the jobs not writing
+are cancelled, and the command waits while a worker says it is writing a file of the run
+(:func:`featurewarp_cli.app.cluster.stop_run`), up to WRITE_WAIT s: a file still being written
+then is named in a warning, as one that may still appear.
 """
 
 from __future__ import annotations
@@ -31,13 +34,16 @@ import time
 from collections.abc import Iterator
 
 from .. import __version__, stages
-from .cluster import cluster_job, stop_run
+from .cluster import cluster_job, stop_flag, stop_run
 from .pipeline import WarpError
 from .scheduler import connect, distributed_module, resolve
 
-#: Seconds the command waits for its jobs that are writing when it stops them, and for each
-#: call to the cluster while it stops (a lost scheduler must not keep it waiting).
+#: Seconds the command waits, when it stops a run, for the results of the jobs that wrote, and
+#: for each call to the cluster (a lost scheduler must not keep it waiting).
 STOP_WAIT, STOP_CALL = 10.0, 3.0
+#: Seconds it waits while a worker says it is writing a file of the run (a large file on a slow
+#: shared file system), and after which it says what it waits for.
+WRITE_WAIT, WRITE_NOTICE = 120.0, 3.0
 #: Seconds given, once the scheduler is lost, to the writes its workers had begun (they write
 #: nothing new: a worker that lost its scheduler closes), before the outputs are looked at.
 LOST_GRACE = 2.0
@@ -238,7 +244,7 @@ class ClusterRun:
     """
 
     def __init__(self, settings, jobs: list, scheduler: str, sent: list, verbose: bool = False):
-        self.target = resolve(scheduler)
+        self.target, self.jobs = resolve(scheduler), jobs
         self._logs = contextlib.ExitStack()
         self._logs.enter_context(_dask_logs_silenced(verbose))
         self.futures, self.run_id, self.stopped, self.signals = [], None, False, _Signals()
@@ -340,24 +346,75 @@ class ClusterRun:
                       f"and may write other bytes: {', '.join(listed[:3])}{', ...' if len(listed) > 3 else ''}")
 
     def _stop(self) -> None:
-        """Stop the run's jobs: no job starts writing, those writing finish (up to STOP_WAIT s) and
-        their results are waited for, then the jobs not finished are cancelled."""
+        """Stop the run's jobs: its flag set on the scheduler (none starts writing, on any worker,
+        present or to come), the jobs that had not written cancelled, those writing waited for
+        (:meth:`_writes_waited`), then the results of those that wrote (up to STOP_WAIT s), then
+        the rest cancelled. A warning names the files still being written then, or says that
+        the cluster did not answer in time (STOP_CALL s). The flag stays on the scheduler (an
+        entry of a few hundred bytes per stopped run): a task of the run a worker still runs,
+        cancelled or not, finds it."""
         if self.stopped or self.client is None:
             return
         self.stopped = True
-        client, deadline, written = self.client, time.monotonic() + STOP_WAIT, set()
-        while time.monotonic() < deadline:
-            found = _bounded(lambda: client.run(stop_run, self.run_id, on_error="return"), STOP_CALL)
-            last = [entry for entry in (found or {}).values() if isinstance(entry, (tuple, list))]
-            written.update(entry[0] for entry in last)
-            if found is None or not any(entry[1] for entry in last):
-                break
-            time.sleep(0.02)
-        waited = [future for future in self.futures if future.key in written]
+        client, distributed = self.client, distributed_module()
+        flagged = _bounded(lambda: distributed.Event(stop_flag(self.run_id), client=client).set() or True, STOP_CALL)
+        answer = self._writers()
+        if not (flagged and answer):
+            stages.notice("warning: the Dask cluster did not answer the stop in time: a file of the batch being "
+                          "written may still appear")
+        written, writing = answer or (set(), set())
+        self._cancel(lambda future: future.key not in written)          # they will write nothing
+        still = self._writes_waited(written, writing)
+        waited = [future for future in self.futures if future.key in written - still]
+        deadline = time.monotonic() + STOP_WAIT
         while time.monotonic() < deadline and any(future.status == "pending" for future in waited):
             time.sleep(0.02)                          # their results are on the way
-        pending = [future for future in self.futures if future.status != "finished"]
+        self._cancel(lambda future: True)
+        if still:
+            stages.notice(f"warning: {self._named(still)} still being written on the Dask workers when the batch "
+                          "stopped, and may still appear (not in --summary)")
+
+    def _writers(self):
+        """Every worker's answer to :func:`stop_run`: (keys of the run's jobs that last passed their
+        write stage, those of them writing now), or None when the cluster does not answer."""
+        client = self.client
+        found = _bounded(lambda: client.run(stop_run, self.run_id, on_error="return"), STOP_CALL)
+        if found is None:
+            return None
+        last = [entry for entry in found.values() if isinstance(entry, (tuple, list))]
+        return {key for key, _ in last}, {key for key, busy in last if busy}
+
+    def _writes_waited(self, written: set, writing: set) -> set:
+        """Ask the workers until none is writing a file of the run (``writing``: the keys said so),
+        up to WRITE_WAIT s, said after WRITE_NOTICE s; the keys still writing then, or when the
+        cluster stopped answering or a signal came (``written`` grows by those that wrote)."""
+        started, said, signum = time.monotonic(), False, self.signals.signum
+        while writing:
+            waited = time.monotonic() - started
+            if waited > WRITE_WAIT or self.signals.signum != signum:
+                return writing
+            if not said and waited > WRITE_NOTICE:
+                said = True
+                stages.notice(f"waiting while the Dask workers finish writing {self._named(writing)} (at most "
+                              f"{WRITE_WAIT:.0f} s; Ctrl-C stops waiting)")
+            time.sleep(0.05)
+            answer = self._writers()
+            if answer is None:
+                return writing
+            written |= answer[0]
+            writing = answer[1]
+        return writing
+
+    def _named(self, keys: set) -> str:
+        """'N file(s) (a.png, b.png, c.png, ...)' for the jobs of ``keys``, named as the user did."""
+        names = [job.output for future, job in zip(self.futures, self.jobs) if future.key in keys]
+        return f"{len(names)} file(s) ({', '.join(names[:3])}{', ...' if len(names) > 3 else ''})"
+
+    def _cancel(self, chosen) -> None:
+        """Cancel the run's futures not finished that ``chosen(future)`` picks."""
+        pending = [future for future in self.futures if future.status != "finished" and chosen(future)]
         if pending:
+            client = self.client
             _bounded(lambda: client.cancel(pending, force=True), STOP_CALL)
 
     def _arrived(self, jobs: list, sent: list, index: dict):
