@@ -342,3 +342,27 @@ def test_measure_past_opencvs_32767_px_limit(runner, tmp_path):
     assert wide.code == 0, wide.stderr
     (fit,) = json.loads(wide.stdout)["components"]
     assert fit["distortion"] == pytest.approx(33600 / 33000 - 1, abs=0.005)
+
+
+def test_a_region_matched_to_its_likeness_elsewhere_is_flagged(runner, tmp_path, astronaut):
+    """The same subject twice (a composite, a reflection): a region whose own image is gone from
+    the output matched the other copy, and measure gave confident figures of the wrong place
+    (photo trial 9). Two disjoint regions that land on one spot are now named, on stderr and
+    as ``lands_on``; where each is where it was, nothing is said."""
+    image, _ = astronaut
+    face = image[30:190, 160:320]
+    scene = np.full((260, 460, 3), 128, np.uint8)
+    scene[20:180, 20:180] = face
+    scene[40:120, 300:380] = cv2.resize(face, (80, 80), interpolation=cv2.INTER_AREA)
+    mask = np.zeros(scene.shape[:2], np.uint8)
+    mask[20:180, 20:180] = mask[40:120, 300:380] = 255
+    gone = scene.copy()
+    gone[20:180, 20:180] = 128                      # the large copy is blanked out of the output
+    assert [fit.lands_on for fit in measure(scene, scene, mask)] == [(), ()]
+    fits = measure(scene, gone, mask)
+    assert fits[0].lands_on == (2,) and fits[1].lands_on == (1,)
+    paths = {name: tmp_path / f"{name}.png" for name in ("in", "out", "mask")}
+    for name, picture in zip(paths, (scene, gone, mask)):
+        cv2.imwrite(str(paths[name]), picture)
+    run = runner("measure", paths["in"], paths["out"], "-m", paths["mask"])
+    assert run.code == 0 and "component 1 lands where component 2 went" in run.stderr

@@ -59,6 +59,8 @@ screen, it keeps its shape (distortion 0) and is rotated by -90 degrees.
 
 from __future__ import annotations
 
+import dataclasses
+
 from dataclasses import dataclass
 
 import cv2
@@ -151,6 +153,10 @@ class ComponentFit:
     reason : str or None
         Why there are no figures (too few matches or inliers, or a shape they fix too
         loosely), else None.
+    lands_on : tuple of int
+        Labels of other measured components whose own maps claim the output spot this one's
+        map puts its centre on (:func:`collisions`): a warp keeps apart what the mask keeps
+        apart, so one of the two matched the other's likeness (the same subject twice).
     """
 
     label: int
@@ -174,6 +180,7 @@ class ComponentFit:
     local_scales: tuple | None = None
     noise: float | None = None
     reason: str | None = None
+    lands_on: tuple = ()
 
     def as_dict(self) -> dict:
         """JSON-ready figures (arrays as nested lists, floats rounded to 6 decimals)."""
@@ -431,7 +438,32 @@ def measure(image: np.ndarray, output: np.ndarray, mask: np.ndarray, *, min_inli
         centre = tuple(round(float(v), 1) for v in centroids[label])
         fits.append(ComponentFit(label=label, pixels=area, bbox=(x, y, bw, bh), centre=centre,
                                  **full_size(found, factor)))
-    return fits
+    return [dataclasses.replace(fit, lands_on=others) for fit, others in zip(fits, collisions(fits, labels))]
+
+
+def collisions(fits: list[ComponentFit], labels: np.ndarray) -> list[tuple]:
+    """Per fit, the labels of the other measured components onto whose output place its map
+    puts its centre: the point, mapped back by the other's map, falls on that component's
+    pixels (``labels``: the mask's components, full size). Disjoint regions of the input stay
+    disjoint under a warp, so such a pair means one of the two was matched to the other's
+    image (a subject that appears twice, at another size or mirrored)."""
+    height, width = labels.shape
+    claims = []
+    for fit in fits:
+        others = []
+        for other in fits:
+            if fit is other or fit.linear is None or other.linear is None or not fit.centre:
+                continue
+            spot = fit.linear @ np.asarray(fit.centre, float) + fit.translation
+            back = np.linalg.solve(other.linear, spot - other.translation) if abs(np.linalg.det(other.linear)) > 1e-12 \
+                else None
+            if back is None or not np.all(np.isfinite(back)):
+                continue
+            col, row = int(round(back[0])), int(round(back[1]))
+            if 0 <= row < height and 0 <= col < width and labels[row, col] == other.label:
+                others.append(other.label)
+        claims.append(tuple(others))
+    return claims
 
 
 def shrink(array: np.ndarray, factor: float, nearest: bool) -> np.ndarray:

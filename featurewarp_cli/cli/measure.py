@@ -56,7 +56,9 @@ def measure_command(input, output, mask, as_json, max_pixels, max_memory):
     explains (below 100 %: the region was bent, not moved as one map). A
     component with too few matches, or whose matches fix its shape too loosely
     (noise above 0.005, with a distortion within 3 times it or too few matches
-    confirmed by their neighbourhoods), is reported as not measured, with the reason. One of INPUT, OUTPUT and MASK may be '-' (stdin).
+    confirmed by their neighbourhoods), is reported as not measured, with the reason. Two regions whose maps put them on one
+    spot of OUTPUT (one matched the other's likeness: the same subject twice) are named on
+    stderr. One of INPUT, OUTPUT and MASK may be '-' (stdin).
 
     \b
     Example:
@@ -93,3 +95,9 @@ def measure_command(input, output, mask, as_json, max_pixels, max_memory):
         click.echo("the mask is empty: nothing to measure")
     for fit in fits:
         click.echo(component_line(fit))
+    for fit in fits:
+        if fit.lands_on:
+            others = ", ".join(str(label) for label in fit.lands_on)
+            click.echo(f"featurewarp: warning: component {fit.label} lands where component{'s' * (len(fit.lands_on) > 1)} "
+                       f"{others} went: one of them was matched to the other's likeness (the same subject twice?); "
+                       f"their figures are doubtful", err=True)
