@@ -457,6 +457,11 @@ class PresetGroup(click.Group):
             if args and args[0] not in plugins.names():
                 import difflib
 
+                from .styles import style_hint
+
+                style = style_hint(ctx.info_name, args[0], args[1:])
+                if style is not None:                # 'fisheye' is bulge's, not 'fish'
+                    raise click.UsageError(style, ctx) from None
                 close = difflib.get_close_matches(args[0], plugins.names(), n=1)
                 hint = f"did you mean {close[0]!r}? " if close else ""
                 raise click.UsageError(
