@@ -41,3 +41,85 @@ def test_styles_come_from_the_summaries():
     styles = summary_styles("Flag (--waves 1) and Wave (--waves 2 or more) of Photoshop and Illustrator: a sine.")
     assert styles == {"flag": ("Flag", "--waves 1"), "wave": ("Wave", "--waves 2")}
     assert [owner[0] for owner in style_owners("photoshop")] == []
+
+
+# --- the input's alpha as its mask (finding 11) -----------------------------------------------
+
+def cut_out(tmp_path, name="cut.png", opaque=None):
+    """An RGBA cut-out: the textured image, opaque over ``opaque`` (default: the square mask)."""
+    alpha = square_mask() if opaque is None else opaque
+    return save(tmp_path / name, np.dstack([textured(), alpha]))
+
+
+def test_mask_alpha_is_the_inputs_alpha_as_a_mask_file(runner, tmp_path):
+    image = cut_out(tmp_path)
+    mask = save(tmp_path / "m.png", square_mask())
+    assert runner("warp", "stretch", image, tmp_path / "a.png", "-m", "alpha", "--sx", "1.6").code == 0
+    assert runner("warp", "stretch", image, tmp_path / "f.png", "-m", mask, "--sx", "1.6").code == 0
+    assert runner("warp", "stretch", image, tmp_path / "p.png", "--sx", "1.6").code == 0
+    assert (tmp_path / "a.png").read_bytes() == (tmp_path / "f.png").read_bytes()
+    assert (tmp_path / "a.png").read_bytes() != (tmp_path / "p.png").read_bytes()
+
+
+def test_half_opaque_marks_the_feature(runner, tmp_path):
+    alpha = np.full(SIZE[::-1], 127, np.uint8)
+    alpha[10:20, 10:20] = 128
+    run = runner("warp", "stretch", cut_out(tmp_path, opaque=alpha), tmp_path / "a.png", "-m", "alpha",
+                 "--sx", "1.6", "--report", tmp_path / "r.json")
+    assert run.code == 0, run.stderr
+    items = json.loads((tmp_path / "r.json").read_text())["components"]["items"]
+    assert len(items) == 1 and items[0]["kept"] and abs(items[0]["at"][0] - 14.5) <= 2
+
+
+def test_mask_alpha_without_alpha_is_one_line(runner, tmp_path):
+    image, _ = scene(tmp_path)
+    run = runner("warp", "stretch", image, tmp_path / "o.png", "-m", "alpha", "--sx", "1.5")
+    assert run.code == 2 and "no alpha channel" in run.stderr and "Traceback" not in run.stderr
+    assert not (tmp_path / "o.png").exists()
+
+
+def test_an_alpha_that_marks_nothing_is_said(runner, tmp_path):
+    image = cut_out(tmp_path, opaque=np.full(SIZE[::-1], 100, np.uint8))
+    run = runner("warp", "stretch", image, tmp_path / "o.png", "-m", "alpha", "--sx", "1.5", "--strict")
+    assert run.code == 1 and "alpha marks no feature" in run.stderr
+
+
+def test_a_file_called_alpha_is_dot_slash_alpha(runner, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    image = cut_out(tmp_path)
+    whole = np.zeros(SIZE[::-1], np.uint8)
+    whole[:8, :8] = 255
+    cv2_png = save(tmp_path / "alpha.png", whole)
+    (tmp_path / "alpha").write_bytes((tmp_path / "alpha.png").read_bytes())
+    run = runner("warp", "stretch", image, "a.png", "-m", "alpha", "--sx", "1.6")
+    assert run.code == 0 and "--mask ./alpha" in run.stderr
+    assert runner("warp", "stretch", image, "f.png", "-m", "./alpha", "--sx", "1.6").code == 0
+    assert runner("warp", "stretch", image, "g.png", "-m", cv2_png, "--sx", "1.6").code == 0
+    assert (tmp_path / "f.png").read_bytes() == (tmp_path / "g.png").read_bytes() != (tmp_path / "a.png").read_bytes()
+
+
+def test_batch_takes_each_inputs_own_alpha(runner, tmp_path):
+    other = np.zeros(SIZE[::-1], np.uint8)
+    other[2:12, 30:44] = 255
+    first, second = cut_out(tmp_path, "a.png"), cut_out(tmp_path, "b.png", other)
+    run = runner("batch", "stretch", first, second, "-o", tmp_path / "out", "--mask-pattern", "alpha", "--sx", "1.6")
+    assert run.code == 0, run.stderr
+    for name, image in (("a.png", first), ("b.png", second)):
+        assert runner("warp", "stretch", image, tmp_path / name, "-m", "alpha", "--sx", "1.6").code == 0
+        assert (tmp_path / "out" / name).read_bytes() == (tmp_path / name).read_bytes()
+    opaque, _ = scene(tmp_path, "c.png")
+    run = runner("batch", "stretch", opaque, "-o", tmp_path / "out2", "--mask-pattern", "alpha")
+    assert run.code == 1 and "c.png: --mask: the input has no alpha channel" in run.stderr
+
+
+@pytest.mark.parametrize("args", [["compare", "stretch", "{in}", "{out}.png", "--sx", "1.5"],
+                                  ["animate", "swirl", "{in}", "{out}.gif", "--vary", "angle=0:60", "--frames", "2"],
+                                  ["deform", "{in}", "{out}.png", "--move", "24,18:28,18", "--pin", "2,2"]])
+def test_the_other_commands_take_the_alpha(runner, tmp_path, args):
+    image = cut_out(tmp_path)
+    filled = [a.replace("{in}", image).replace("{out}", str(tmp_path / "o")) for a in args]
+    run = runner(*filled, "-m", "alpha")
+    assert run.code == 0, run.stderr
+    image, _ = scene(tmp_path)
+    filled = [a.replace("{in}", image).replace("{out}", str(tmp_path / "p")) for a in args]
+    assert "no alpha channel" in runner(*filled, "-m", "alpha").stderr

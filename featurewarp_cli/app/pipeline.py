@@ -16,6 +16,7 @@ from functools import partial
 from .. import plugins, stages
 from ..engine.defaults import DECAY, FEATURE_WEIGHT, FORMULATION, INTERPOLATION, MODE, SCALE_PRIOR
 from ..io import ImageError, decode, formats, limits
+from .masks import load_mask, mask_file, masked, uses_alpha
 from .outputs import (background_colour, check_distinct, check_encodable, check_grid_name, check_outputs, encoded,
                       kept_metadata, rendered, write_all)
 from .report import refused_report, report_bytes, summary
@@ -78,6 +79,9 @@ class Settings:
         JPEG and WebP quality 1..100 (WebP lossy when given).
     strip : bool
         Drop the input's ICC profile and EXIF instead of keeping them.
+    alpha_mask : bool
+        Where no mask is given, INPUT's alpha is its mask (``batch --mask-pattern alpha``; one
+        run's ``--mask alpha`` says it by its mask): :mod:`featurewarp_cli.app.masks`.
     warp_factory : callable, optional
         ``warp_factory(width, height, feature_mask)`` gives the warp instead of the preset
         (``deform``'s handles); its ValueError is a usage error; its ``review(mesh)`` gives
@@ -103,6 +107,7 @@ class Settings:
     allow_folds: bool = False
     quality: int | None = None
     strip: bool = False
+    alpha_mask: bool = False
     warp_factory: object = None
 
 
@@ -157,8 +162,8 @@ def load_image_and_mask(settings: Settings, input: str, mask: str | None, data: 
         None without a mask or in plain mode.
     warnings : list of str
     """
-    use_mask = mask is not None and settings.mode != "plain"
-    _check_paths(input, mask if use_mask else None)
+    use_mask = masked(settings, mask)
+    _check_paths(input, mask_file(settings, mask) if use_mask else None)
     if data is None and (input == "-" or os.path.isfile(input)):
         if input != "-":
             check_file_size(input, "INPUT", settings.max_memory, settings.max_pixels)
@@ -169,7 +174,7 @@ def load_image_and_mask(settings: Settings, input: str, mask: str | None, data: 
     image = read_input(input, "INPUT", settings.max_pixels, data, settings.max_memory)
     height, width = image.shape[:2]
     header = decode.read_header(data) if data else None
-    feature_mask, warnings = _load_mask(settings, mask, (width, height), header) if use_mask else (None, [])
+    feature_mask, warnings = load_mask(settings, mask, (width, height), header, image) if use_mask else (None, [])
     return image, feature_mask, frames_warning(header) + warnings
 
 
@@ -198,26 +203,6 @@ def check_file_size(path: str, param: str, max_memory: int | None, max_pixels: i
             limits.check_size(header.width, header.height, path, max_pixels, max_memory)
         except ImageError as err:
             raise WarpError(str(err)) from None
-
-
-def _load_mask(settings: Settings, mask: str, size: tuple[int, int], header=None):
-    """The feature mask, checked against the image's (width, height) (``header``: its header); and warnings."""
-    width, height = size
-    if mask != "-" and os.path.isfile(mask):
-        check_file_size(mask, "--mask", settings.max_memory, settings.max_pixels)
-    pixels = read_input(mask, "--mask", settings.max_pixels, max_bytes=settings.max_memory)
-    feature_mask = decode.mask_from_image(pixels)
-    if feature_mask.shape != (height, width):
-        turned = (feature_mask.shape == (width, height) and getattr(header, "orientation", 1) >= 5) * \
-            " (upright, as its EXIF orientation turns it: draw the mask on the image as viewers show it)"
-        raise WarpError(f"mask is {feature_mask.shape[1]}x{feature_mask.shape[0]} but the "
-                        f"image is {width}x{height}{turned}", "--mask", usage=True)
-    if feature_mask.any():
-        return feature_mask, []
-    brightest, colour = decode.brightest_gray(pixels)
-    return feature_mask, [f"the mask marks no feature (a feature is gray 128 or more, or a 1 of a 0/1 mask; its "
-                          f"brightest pixel is {brightest}{', as colour is read as its gray: pure red is 76' * colour})"
-                          f": plain warp"]
 
 
 class _Decoding:
@@ -290,8 +275,8 @@ def start_loading(settings: Settings, input: str, mask: str | None, data: bytes 
     size : (int, int)
         (width, height) of INPUT.
     """
-    use_mask = mask is not None and settings.mode != "plain"
-    _check_paths(input, mask if use_mask else None)
+    use_mask = masked(settings, mask)
+    _check_paths(input, mask_file(settings, mask) if use_mask else None)
     header = decode.read_header(data) if data else None             # stdin, already read
     if input != "-" and os.path.isfile(input):
         check_file_size(input, "INPUT", settings.max_memory, settings.max_pixels)
@@ -300,7 +285,8 @@ def start_loading(settings: Settings, input: str, mask: str | None, data: bytes 
         except ImageError:
             pass                                             # reported by the serial path below
         header = decode.read_header(data) if data else None
-    if header is None or not limits.fits(header.width, header.height, settings.max_pixels, settings.max_memory):
+    if header is None or (use_mask and uses_alpha(settings, mask)) or \
+            not limits.fits(header.width, header.height, settings.max_pixels, settings.max_memory):
         image, feature_mask, warnings = load_image_and_mask(settings, input, mask, data)
         return _Ready(image, header), feature_mask, warnings, (image.shape[1], image.shape[0])
     size = header.upright_size
@@ -308,7 +294,7 @@ def start_loading(settings: Settings, input: str, mask: str | None, data: bytes 
     warnings = frames_warning(header)
     if use_mask:
         try:
-            feature_mask, mask_warnings = _load_mask(settings, mask, size, header)
+            feature_mask, mask_warnings = load_mask(settings, mask, size, header)
             warnings += mask_warnings
         except WarpError:
             load_image_and_mask(settings, input, mask)       # the image's own error comes first
@@ -427,7 +413,7 @@ def warp_file(settings: Settings, input: str, output: str, mask: str | None = No
     output : str
         Image path, ``-`` for stdout, optionally with a ``png:``-style format prefix.
     mask : str, optional
-        Feature-mask path (``-``: stdin, unless INPUT is stdin). None: plain warp.
+        Mask path (``-``: stdin, unless INPUT is stdin), ``alpha`` (INPUT's), None: plain warp.
     report : str, optional
         Where to write the JSON report.
     save_grid : str, optional
@@ -453,10 +439,10 @@ def warp_file(settings: Settings, input: str, output: str, mask: str | None = No
     out_path, fmt = check_outputs(settings, output, (report, "--report"), (save_grid, "--save-grid"),
                                   like=input)
     check_distinct([(out_path, "OUTPUT"), (report, "--report"), (save_grid, "--save-grid")],
-                   [(input, "INPUT"), (mask, "--mask"), *also_read])
+                   [(input, "INPUT"), (mask_file(settings, mask), "--mask"), *also_read])
     check_grid_name(save_grid)
     background = background_colour(settings.background, fmt)
-    prefetch_engine(solver=mask is not None and settings.mode != "plain")
+    prefetch_engine(solver=masked(settings, mask))
     pending, feature_mask, warnings, (width, height) = start_loading(settings, input, mask, piped)
     icc, exif = kept_metadata(settings.strip, getattr(pending, "header", None), fmt, warnings)   # --strict sees it
     timings = {"load": time.perf_counter() - t0}

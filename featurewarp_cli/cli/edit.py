@@ -83,7 +83,7 @@ def edit_command() -> click.Command:
     """``featurewarp edit INPUT -m MASK [--handles H.json] [--output OUT] [--port N] [--no-browser]``."""
     params = [
         click.Argument(["input"], type=click.Path(dir_okay=False)),
-        click.Option(["-m", "--mask"], type=click.Path(dir_okay=False), metavar="PATH", help=MASK_HELP),
+        click.Option(["-m", "--mask"], type=click.Path(dir_okay=False), metavar="PATH|alpha", help=MASK_HELP),
         click.Option(["--handles"], type=click.Path(dir_okay=False), metavar="H.json",
                      help="Handles file: loaded at start if it exists; Save writes it."),
         click.Option(["-o", "--output"], type=click.Path(dir_okay=False), metavar="OUT",

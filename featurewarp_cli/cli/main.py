@@ -115,7 +115,7 @@ def batch():
     The batch's own options (with the preset's and warp's; all in
     'featurewarp batch PRESET --help'):
       -o, --out-dir DIR      folder for the outputs (created if missing)
-      --mask-pattern P       each input's mask, default {stem}_mask.png
+      --mask-pattern P       each input's mask, default {stem}_mask.png (alpha: its own)
       --suffix S             outputs are DIR/{stem}S.ext
       -j, --jobs N           local worker processes (same bytes as 1)
       --scheduler ADDRESS    a Dask cluster instead: tcp://host:8786,

@@ -43,6 +43,17 @@ MAX_PIXELS_OFF = Param("max_pixels_off", int, None,
 TOLERANCE = Param("tolerance", float, 0.0, "Per-sample difference (0..255 scale) that still counts as equal.",
                   min=0.0, metavar="T")
 
+#: ``-m/--mask``'s help (warp, deform, edit; compare and animate say "as for warp").
+MASK_HELP = ("Feature mask: an image of INPUT's width and height whose pixels with gray value >= 128 "
+             "(transparent ones count as black) keep their shape; or 'alpha': INPUT's own alpha channel, "
+             "opaque (>= 128) where the features are, as a cut-out's subject (a file called alpha: "
+             "./alpha). A feature with a pixel on the image's edge is cut by it; one that stops short of "
+             "an edge stays inside the frame. Without it the plain warp is produced. To make one: paint "
+             "it in 'featurewarp edit INPUT --save-mask MASK.png' (the brush, then Save), or with "
+             "ImageMagick, e.g. 'convert "
+             "INPUT -alpha extract MASK.png' or 'convert -size WxH xc:black -fill white -draw \"ellipse "
+             "X,Y RX,RY 0,360\" MASK.png'.")
+
 
 class ByteSize(click.ParamType):
     """A size in bytes: a number with an optional K, M, G or T suffix (``--max-memory``)."""
@@ -190,7 +201,7 @@ def input_output_mask(mask_help: str, output_dash: bool = True) -> list[click.Pa
     """INPUT, OUTPUT ('-' for stdin and stdout) and ``-m/--mask``."""
     return [click.Argument(["input"], type=click.Path(dir_okay=False, allow_dash=True)),
             click.Argument(["output"], type=click.Path(dir_okay=False, allow_dash=output_dash)),
-            click.Option(["-m", "--mask"], type=click.Path(dir_okay=False, allow_dash=True), metavar="PATH",
+            click.Option(["-m", "--mask"], type=click.Path(dir_okay=False, allow_dash=True), metavar="PATH|alpha",
                          help=mask_help)]
 
 

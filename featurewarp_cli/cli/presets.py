@@ -14,18 +14,14 @@ import inspect
 import re
 import shlex
 import sys
+from dataclasses import replace
 
 import click
 
 from .. import plugins
-from .options import (FPS, FRAMES, JOBS, PANEL_WIDTH, engine_options, input_output_mask, param_option, preset_options,
-                      settings_from)
+from .options import (FPS, FRAMES, JOBS, MASK_HELP, PANEL_WIDTH, engine_options, input_output_mask, param_option,
+                      preset_options, settings_from)
 from .progress import progress_line, say
-
-MASK_HELP = ("Feature mask: pixels with gray value >= 128 (transparent ones count as black) keep their "
-             "shape. Same width and height as INPUT. A feature with a pixel on the image's edge is cut "
-             "by it; one that stops short of an edge stays inside the frame. Without it the plain "
-             "warp is produced.")
 
 
 def click_error(err) -> click.ClickException:
@@ -300,7 +296,8 @@ def batch_command(preset) -> click.Command:
               click.Option(["--mask-pattern"], default="{stem}_mask.png", show_default=True,
                            metavar="PATTERN",
                            help="Mask file of each input; {stem} is the input's name without "
-                                "extension (its only field); relative to the input's folder unless absolute. "
+                                "extension (its only field); relative to the input's folder unless absolute; "
+                                "'alpha': each input's own alpha channel (as warp's --mask alpha). "
                                 "A missing mask fails that file. Inputs that are another "
                                 "input's mask, or are named as masks by PATTERN (by default *_mask.png) "
                                 "and have no mask of their own, are skipped, so 'photos/*.png' works."),
@@ -330,6 +327,7 @@ def batch_command(preset) -> click.Command:
     def callback(inputs, out_dir, mask_pattern, suffix, jobs, scheduler, summary, resume, **kwargs):
         from ..app.batch import plan
         from ..app.cluster_run import Stopped
+        from ..app.masks import ALPHA
         from ..app.pipeline import WarpError
 
         settings, quiet, verbose = settings_from(preset, kwargs)
@@ -338,6 +336,8 @@ def batch_command(preset) -> click.Command:
             from ..io.formats import format_name
 
             fmt = format_name(settings.fmt) if settings.fmt else None
+            if mask_pattern == ALPHA:                      # each input is its own mask: no file to plan
+                settings, mask_pattern = replace(settings, alpha_mask=True), None
             named_masks = []
             todo = plan(inputs, out_dir, suffix, fmt, None if settings.mode == "plain" else mask_pattern,
                         summary, named_masks)
