@@ -123,3 +123,62 @@ def test_the_other_commands_take_the_alpha(runner, tmp_path, args):
     image, _ = scene(tmp_path)
     filled = [a.replace("{in}", image).replace("{out}", str(tmp_path / "p")) for a in args]
     assert "no alpha channel" in runner(*filled, "-m", "alpha").stderr
+
+
+# --- the help (nit 1) ---------------------------------------------------------------------------
+
+def test_warp_help_names_the_common_options_and_how_to_make_a_mask(runner):
+    text = runner("warp", "--help").stdout.decode()
+    for word in ("--mask PATH|alpha", "--mode", "--report", "--strict", "--grow-past-edge",
+                 "featurewarp warp PRESET --help", "featurewarp edit INPUT --save-mask", "-alpha extract"):
+        assert word in text, word
+
+
+def test_a_presets_help_puts_its_own_options_first_in_plain_words(runner):
+    text = runner("warp", "stretch", "--help").stdout.decode()
+    options = text[text.index("Options:"):]
+    assert options.index("--sx") < options.index("--size") < options.index("--mask") < options.index("--mode")
+    assert "w_F:" not in text and "(w_F-weighted)" not in text and "double precision" not in text
+    assert "(the paper's rho)" in text                     # the paper's term kept in brackets
+    batch = runner("batch", "swirl", "--help").stdout.decode()
+    assert batch.index("--angle") < batch.index("--mode")
+
+
+# --- --grow-past-edge says what it crops (nit 2) ------------------------------------------------
+
+SAMPLES = __import__("pathlib").Path(__file__).resolve().parent.parent / "samples"
+
+
+def test_grow_past_edge_says_where_it_crops(runner, tmp_path):
+    args = ["warp", "stretch", SAMPLES / "closeup.png", tmp_path / "g.png", "-m", SAMPLES / "closeup_mask.png",
+            "--sy", "1.5", "--grow-past-edge", "--report", tmp_path / "g.json"]
+    run = runner(*args, "--strict")                      # the crop is what the option asks: no warning
+    assert run.code == 0, run.stderr
+    past = json.loads((tmp_path / "g.json").read_text())["grown"]["past_px"]
+    assert run.lines == [f"featurewarp: {SAMPLES / 'closeup.png'}: --grow-past-edge grew the features cut by the "
+                         f"frame {json.loads((tmp_path / 'g.json').read_text())['grown']['k']:.2f}x: the image runs "
+                         f"past the left edge by {past['left']:.0f} px and the right edge by {past['right']:.0f} px, "
+                         f"cropped there"]
+    assert runner(*args, "-q").stderr == ""
+
+
+# --- a run that moves nothing (nit 4) -----------------------------------------------------------
+
+def report_of(runner, tmp_path, *args):
+    image, mask = scene(tmp_path)
+    run = runner("warp", *args[:1], image, tmp_path / "o.png", "--report", tmp_path / "r.json",
+                 *[mask if a == "MASK" else a for a in args[1:]])
+    assert run.code == 0, run.stderr
+    return json.loads((tmp_path / "r.json").read_text())
+
+
+def test_the_report_says_when_the_output_is_the_input(runner, tmp_path):
+    whole = save(tmp_path / "whole.png", np.full(SIZE[::-1], 255, np.uint8))
+    covered = report_of(runner, tmp_path, "swirl", "-m", whole, "--angle", "180", "--radius", "0.5")
+    assert covered["features_kept"] is True and covered["no_effect"] is True
+    assert any("the output is the input" in w for w in covered["warnings"])
+    still = report_of(runner, tmp_path, "stretch", "-m", "MASK")
+    assert still["no_effect"] is True
+    moved = report_of(runner, tmp_path, "stretch", "-m", "MASK", "--sx", "1.5")
+    assert moved["no_effect"] is False and not any("the output is the input" in w for w in moved["warnings"])
+    assert report_of(runner, tmp_path, "swirl", "--mode", "plain", "--angle", "90")["no_effect"] is False

@@ -79,6 +79,7 @@ def build_report(input_path, output_path, image, result, warp, mesh, timings, fm
         "solver": info["solver"],
         "seconds": seconds,
         "features_kept": info["features_kept"],
+        "no_effect": info.get("no_effect", False),
         "background_stretch": info["background_stretch"],
         "background_stretch_at": info["background_stretch_at"],
         "blank_share": info["blank_share"],
@@ -113,7 +114,10 @@ def build_report(input_path, output_path, image, result, warp, mesh, timings, fm
 
 def summary(preset: str, mode: str, input: str, out_path: str, size, mesh, t0: float,
             warnings: list) -> dict:
-    """The ``--verbose`` summary of one written image (a fold-over, if any, becomes a warning)."""
+    """The ``--verbose`` summary of one written image (a fold-over, if any, becomes a warning;
+    ``notes``: what is said on stderr beside the warnings, as where --grow-past-edge crops)."""
+    from ..engine.record import grown_note
+
     flips = mesh.info.get("flipped_triangles", 0)
     if flips:
         warnings.append(f"{flips} triangles of the mesh fold over; the output may show folds")
@@ -122,6 +126,7 @@ def summary(preset: str, mode: str, input: str, out_path: str, size, mesh, t0: f
         "preset": preset, "mode": mode, "size": tuple(size), "canvas": tuple(mesh.canvas),
         "solver": mesh.info["solver"], "components": len(mesh.info["components"]),
         "flipped_triangles": flips, "seconds": time.perf_counter() - t0, "warnings": warnings,
+        "notes": [note for note in [grown_note(mesh.info.get("grown"))] if note],
     }
 
 

@@ -97,6 +97,24 @@ def warp():
     own options.
 
     \b
+    Common options (with the preset's own, all in 'featurewarp warp PRESET --help'):
+      -m, --mask PATH|alpha  the features to keep in shape: gray >= 128 in an
+                             image of INPUT's size, or alpha: INPUT's own alpha
+      --mode MODE            similarity (default), rigid (features keep their
+                             size too) or plain (the standard warp)
+      --report PATH          a JSON report: features_kept, no_effect, warnings ...
+      --strict               exit 1 and write nothing if the run has a warning
+      --grow-past-edge       features cut by the frame may grow past it
+      --background, --interp, --format, --quality, --strip, --save-grid,
+      --grid, --cell, --boundary, --allow-folds, -q, -v
+
+    \b
+    Making a mask: paint it in 'featurewarp edit INPUT --save-mask MASK.png'
+    (the brush, then Save), or with ImageMagick:
+      convert cutout.png -alpha extract MASK.png      (or just -m alpha)
+      convert -size WxH xc:black -fill white -draw "ellipse X,Y RX,RY 0,360" MASK.png
+
+    \b
     Example:
       featurewarp warp swirl photo.jpg out.jpg -m mask.png --angle 120 --report report.json
     """

@@ -10,6 +10,8 @@ thresholds) are declared below. Nothing here imports numpy or OpenCV.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import click
 
 from ..engine import defaults
@@ -140,6 +142,28 @@ def boundary_option(preset) -> click.Option:
              f"'boundary' says what was used. {default}")
 
 
+#: The engine's numeric options in plain words for --help (their declarations, which the API
+#: documents, use the paper's terms: w_F, rho, double precision).
+PLAIN_HELP = {
+    "feature_weight": "How firmly features keep their shape against the background: their shape equations "
+                      "count W^2 times the background's (the paper's w_F). Between 0.0001 and 10 000: "
+                      "beyond, the solve's arithmetic cannot tell the two apart (and below, --formulation "
+                      "paper cannot be solved).",
+    "decay": "Width of the band around each feature, in grid cells, over which the feature's weight fades "
+             "to the background's (the paper's rho); at least 0.001.",
+    "scale_prior": "Similarity mode: how firmly each feature's scale and rotation are pulled towards the "
+                   "warp's own there. 1 holds them as firmly as the feature's shape; smaller values let "
+                   "features that fill a row or column grow or shrink uniformly so the background is not "
+                   "streaked; 0 leaves them free. At most 10 000 (beyond, the solve's arithmetic cannot "
+                   "tell it from infinite).",
+}
+
+
+def plain_option(param: Param) -> click.Option:
+    """:func:`param_option` of an engine setting, with its help from :data:`PLAIN_HELP`."""
+    return param_option(replace(param, help=PLAIN_HELP.get(param.name, param.help)))
+
+
 def engine_options(preset=None, strict_also: str = "") -> list[click.Option]:
     """Options ``warp``, ``batch``, ``compare`` and ``animate`` share (built fresh for each command):
     ``--boundary`` shows ``preset``'s default, ``--strict`` lists ``strict_also`` after :data:`STRICT`."""
@@ -148,14 +172,15 @@ def engine_options(preset=None, strict_also: str = "") -> list[click.Option]:
                      help="similarity: features rotate and scale uniformly with the warp; "
                           "rigid: features also keep their size; plain: the standard warp, mask ignored."),
         param_option(defaults.CELL_PARAM),
-        param_option(defaults.FEATURE_WEIGHT_PARAM),
-        param_option(defaults.DECAY_PARAM),
+        plain_option(defaults.FEATURE_WEIGHT_PARAM),
+        plain_option(defaults.DECAY_PARAM),
         click.Option(["--formulation"], type=click.Choice(defaults.FORMULATIONS), default=defaults.FORMULATION,
                      show_default=True,
-                     help="exact: each feature moves as one similarity, held exactly; paper: the "
-                          "paper's soft per-quad targets (w_F-weighted), for comparison."),
+                     help="exact: each feature moves as one similarity, held exactly; paper: soft "
+                          "targets for each grid cell of a feature, weighted by --feature-weight, as in "
+                          "the paper the method comes from, for comparison."),
         *([boundary_option(preset)] if preset is not None else []),     # only a preset's command has it
-        param_option(defaults.SCALE_PRIOR_PARAM),
+        plain_option(defaults.SCALE_PRIOR_PARAM),
         click.Option(["--grow-past-edge"], is_flag=True,
                      help="Similarity mode: where the background would streak (stretched over "
                           "8x beyond the warp, as the strip above a bust cut by the bottom edge "

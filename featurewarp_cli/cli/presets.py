@@ -42,10 +42,12 @@ def summary_line(s: dict) -> str:
 
 
 def report_warnings(summary: dict, quiet: bool, verbose: bool) -> None:
-    """Print an image's warnings (unless quiet) and its summary line (if verbose) on stderr."""
+    """Print an image's warnings and notes (unless quiet) and its summary line (if verbose) on stderr."""
     if not quiet:
         for warning in summary["warnings"]:
             say(f"featurewarp: warning: {summary['input']}: {warning}")
+        for note in summary.get("notes", ()):
+            say(f"featurewarp: {summary['input']}: {note}")
     if verbose:
         say(f"featurewarp: {summary_line(summary)}")
 
@@ -98,9 +100,12 @@ def _params_of(name: str) -> tuple:
 
 
 def preset_command(preset, params: list, callback, doc: str) -> click.Command:
-    """The command named after ``preset``, with ``params`` then the preset's own options."""
-    return PresetCommand(preset, preset.name, params=params + preset_options(preset), callback=callback, help=doc,
-                         short_help=preset.summary, no_args_is_help=True)
+    """The command named after ``preset``: the arguments of ``params``, the preset's own options
+    (first in --help, before some 25 shared ones), then the options of ``params``."""
+    arguments = [p for p in params if isinstance(p, click.Argument)]
+    shared = [p for p in params if not isinstance(p, click.Argument)]
+    return PresetCommand(preset, preset.name, params=arguments + preset_options(preset) + shared, callback=callback,
+                         help=doc, short_help=preset.summary, no_args_is_help=True)
 
 
 #: Each command's example line, around a preset's ``example`` options (``animate``: ``{vary}``).
@@ -151,7 +156,7 @@ def warp_command(preset) -> click.Command:
     params = input_output_mask(MASK_HELP) + [
         click.Option(["--report"], type=click.Path(dir_okay=False), metavar="PATH",
                      help="Write a JSON report of what the run did and how well: features_kept, "
-                          "each feature component (scale, rotation, distortion, kept), "
+                          "no_effect (the output is the input), each feature component (scale, rotation, distortion, kept), "
                           "background_stretch, blank canvas and outline against the plain warp, "
                           "the warnings, the grid, fold-overs before and after the guard, the "
                           "solver, seconds per stage; also when --strict or a fold refuses the run "

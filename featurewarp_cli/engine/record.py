@@ -115,6 +115,8 @@ class SolveRecord:
         ``--grow-past-edge``: ``k`` (how many times the features grew), ``components``
         (which), ``sides`` and ``past_px``; or, when it was due (the background streaked)
         but nothing grew, ``k`` 1 and ``declined`` (why). None: the option was off or not due.
+    output_is_input : bool
+        The mask covers what the warp moves: the output is the input (a warning says so).
     """
 
     mode: str
@@ -135,12 +137,21 @@ class SolveRecord:
     warnings: list = field(default_factory=list)
     timings: dict = field(default_factory=dict)
     grown: dict | None = None
+    output_is_input: bool = False
 
     @property
     def features_kept(self) -> bool | None:
         """Every component kept its shape; None where the result is the plain warp (the plain
         mode, or no feature in the mask): no shape was kept, nor asked to be."""
         return None if self.mode == "plain" else all(c.kept for c in self.components)
+
+    @property
+    def no_effect(self) -> bool:
+        """The output is the input: the mask covers what the warp moves, or the warp moves no
+        pixel (the two warnings that say so); ``features_kept`` is true of such a run."""
+        from .assess import STILL
+
+        return self.output_is_input or any(line.startswith(STILL) for line in self.warnings)
 
     @property
     def flipped_triangles(self) -> int:
@@ -155,6 +166,7 @@ class SolveRecord:
                      for key, value in self.grid.items()}, "solver": self.solver,
             "components": [asdict(c) for c in self.components],
             "features_kept": self.features_kept,
+            "no_effect": self.no_effect,
             "background_stretch": self.background_stretch,
             "background_stretch_at": _rounded(self.background_stretch_at),
             "blank_share": self.blank_share,
@@ -187,7 +199,8 @@ def _rounded(point) -> list | None:
 
 
 def canvas_warnings(record: "SolveRecord") -> list[str]:
-    """One line per compromise the canvas shows: streaks, blank canvas, the outline let go."""
+    """One line per compromise the canvas shows: streaks, blank canvas, --grow-past-edge that grew
+    nothing, the outline let go."""
     lines = []
     if record.background_stretch > STREAKS:
         x, y = record.background_stretch_at
@@ -205,6 +218,19 @@ def canvas_warnings(record: "SolveRecord") -> list[str]:
         lines.append(f"the output's outline leaves the plain warp's by up to {record.outline_departure:.0f} px "
                      f"near ({round(x)}, {round(y)}): a feature cut by the border let go of it to keep its shape")
     return lines
+
+
+def grown_note(grown: dict | None) -> str | None:
+    """The line that says where ``--grow-past-edge`` grew the features past the frame and how far
+    the image runs past each edge, cropped there (``record.grown``; None where nothing runs past
+    by more than :data:`OUTLINE_PX`). A note, not a warning: the crop is what the option asks for,
+    and ``--strict`` passes it; the report's ``grown.past_px`` has the figures."""
+    cropped = {side: px for side, px in ((grown or {}).get("past_px") or {}).items() if px > OUTLINE_PX}
+    if not cropped:
+        return None
+    runs = " and ".join(f"the {side} edge by {px:.0f} px" for side, px in cropped.items())
+    return (f"--grow-past-edge grew the features cut by the frame {grown['k']:.2f}x: the image runs past {runs}, "
+            f"cropped there")
 
 
 #: Components a warning names one by one at most; the rest are counted (a noisy mask of
@@ -277,6 +303,7 @@ def warnings_for(record: "SolveRecord", source, target, warped, warp) -> list[st
             moved = float(np.sqrt(np.mean(np.sum((target - source)[moving] ** 2, axis=1))))
             asked = float(np.sqrt(np.mean(wanted[moving] ** 2)))
             if moved <= max(NO_OP_OUTPUT, NO_OP_FRACTION * asked):
+                record.output_is_input = True
                 lines.append(f"the mask covers the region the warp moves; the output is the input "
                              f"(where the warp moves pixels by {asked:.0f} px RMS, they move by {moved:.1f} px)")
     return lines
