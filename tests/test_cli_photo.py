@@ -182,3 +182,18 @@ def test_the_report_says_when_the_output_is_the_input(runner, tmp_path):
     moved = report_of(runner, tmp_path, "stretch", "-m", "MASK", "--sx", "1.5")
     assert moved["no_effect"] is False and not any("the output is the input" in w for w in moved["warnings"])
     assert report_of(runner, tmp_path, "swirl", "--mode", "plain", "--angle", "90")["no_effect"] is False
+
+
+# --- arc and ImageMagick's -distort Arc (nit 3) -------------------------------------------------
+
+def test_arcs_help_says_where_its_geometry_leaves_imagemagicks(runner):
+    import math
+
+    from featurewarp_cli import load_warp
+
+    arc = load_warp("arc")
+    wide = arc(600, 300, angle=90)                 # ImageMagick's default top radius: w / angle + h / 2
+    assert wide.r_outer == pytest.approx(600 / math.radians(90) + 150)
+    assert tuple(arc(600, 600, angle=120).canvas) == (1144, 630)     # ImageMagick: 1016x595, folded
+    text = " ".join(runner("warp", "arc", "--help").stdout.decode().split())
+    assert "except where those leave an inner radius under a tenth of the height" in text and "1016x595" in text

@@ -19,8 +19,13 @@ EDGE_MAX = 150.0
 
 class Arc(Warp):
     """Bend the image into a ring sector spanning --angle degrees (up to 360: a full ring),
-    its top edge outside, as ImageMagick's -distort Arc; the canvas is the sector's bounding
-    box. --where lower (upper) keeps the columns vertical and bows only the bottom (top)
+    its top edge outside, as ImageMagick's -distort Arc with its default radii (the middle
+    row keeps its length), except where those leave an inner radius under a tenth of the
+    height (width / angle in radians < 0.6 x height: a tall image or a wide angle, such as
+    600x600 at 120 degrees, whose bottom rows ImageMagick folds across the centre): the
+    ring is then moved out to that radius, a larger canvas (1144x630 there, ImageMagick's
+    1016x595). The canvas is the sector's bounding box (ImageMagick's is a pixel or two
+    larger). --where lower (upper) keeps the columns vertical and bows only the bottom (top)
     edge into a circular arc of --angle degrees, at most 150: the design tools' Arc Lower
     (Arc Upper).
 
