@@ -50,22 +50,58 @@ def extra_samples(data: bytes) -> int | None:
     return None
 
 
+#: TIFF field types written here: (code, struct format of one value, or None for bytes).
+BYTE, ASCII, SHORT, LONG, RATIONAL, UNDEFINED = (1, None), (2, None), (3, "H"), (4, "I"), (5, "II"), (7, None)
+
+
 def with_alpha_tag(data: bytes) -> bytes:
     """A one-page TIFF of four samples per pixel (OpenCV's) with ExtraSamples = unassociated
-    alpha. The first directory is written again at the end with the tag, and the header points
-    at it; nothing else moves (the old directory stays, unreferenced)."""
+    alpha (:func:`with_tags`); a file that has the tag as it is."""
     found = first_directory(data)
-    if found is None or found[3]:                                     # OpenCV writes no BigTIFF
+    if found is None or any(struct.unpack_from(found[0] + "H", entry)[0] == EXTRA_SAMPLES for entry in found[2]):
         return data
-    order, first, entries, _ = found
-    if any(struct.unpack_from(order + "H", entry)[0] == EXTRA_SAMPLES for entry in entries):
-        return data
-    entries = sorted(entries + [struct.pack(order + "HHIHH", EXTRA_SAMPLES, 3, 1, UNASSOCIATED, 0)],
-                     key=lambda entry: struct.unpack_from(order + "H", entry)[0])
-    following = data[first + 2 + 12 * (len(entries) - 1):first + 6 + 12 * (len(entries) - 1)]
-    start = len(data) + len(data) % 2                                    # directories start on a word
-    directory = struct.pack(order + "H", len(entries)) + b"".join(entries) + following
-    return data[:4] + struct.pack(order + "I", start) + data[8:] + b"\0" * (start - len(data)) + directory
+    return with_tags(data, {EXTRA_SAMPLES: (SHORT, [UNASSOCIATED])}) or data
+
+
+def with_tags(data: bytes, tags: dict) -> bytes | None:
+    """A one-page TIFF or BigTIFF (OpenCV's) with ``tags`` set in its first directory: {tag:
+    (type, values)}, values a list of numbers (a list of pairs for RATIONAL) or bytes (ASCII with its
+    NUL, UNDEFINED, BYTE). The directory is written again at the end with them (replacing tags of
+    the same number), their data before it, and the header points at it; nothing else moves
+    (the old directory stays, unreferenced). None for data that is no TIFF, or where a classic
+    TIFF would grow past 4 GiB."""
+    found = first_directory(data)
+    if found is None:
+        return None
+    order, first, entries, big = found
+    word, count, size = ("Q", "Q", 20) if big else ("I", "H", 12)
+    inline = 8 if big else 4
+    kept = [entry for entry in entries if struct.unpack_from(order + "H", entry)[0] not in tags]
+    out = bytearray(data)
+    for tag, ((code, form), values) in tags.items():
+        if form is None:
+            payload, number = bytes(values), len(values)
+        else:
+            flat = [part for value in values for part in (value if isinstance(value, tuple) else (value,))]
+            payload, number = struct.pack(order + form[0] * len(flat), *flat), len(values)
+        if len(payload) <= inline:
+            value = payload.ljust(inline, b"\0")
+        else:
+            out += b"\0" * (len(out) % 2)                              # data starts on a word
+            value = struct.pack(order + word, len(out))
+            out += payload
+        kept.append(struct.pack(order + "HH" + word, tag, code, number) + value)
+    kept.sort(key=lambda entry: struct.unpack_from(order + "H", entry)[0])
+    at = first + struct.calcsize(count) + size * len(entries)
+    following = data[at:at + struct.calcsize(word)]                     # the next directory's offset
+    out += b"\0" * (len(out) % 2)                                      # directories start on a word
+    start = len(out)
+    out += struct.pack(order + count, len(kept)) + b"".join(kept) + following
+    if not big and len(out) >= 1 << 32:
+        return None
+    pointer = 8 if big else 4
+    out[pointer:pointer + struct.calcsize(word)] = struct.pack(order + word, start)
+    return bytes(out)
 
 
 def straight_alpha(image: np.ndarray, data: bytes, name: str) -> np.ndarray:

@@ -1,0 +1,238 @@
+"""The input's metadata that the output keeps: EXIF, XMP and resolution, read from its header
+(the ICC profile is :mod:`featurewarp_cli.io.profiles`'), and written where Pillow does not.
+
+The input's XMP packet and resolution ride on its EXIF block (:class:`Exif`, a ``bytes``
+that may be empty), so that every caller that passes the EXIF on to the encoder passes them
+too, and ``--strip``, which passes none, drops them with it. Written:
+
+=========  =====================  =============================  ==============================
+format     resolution             XMP                            by
+=========  =====================  =============================  ==============================
+JPEG       JFIF density           APP1 (up to 65 504 bytes)      Pillow
+PNG        pHYs                   iTXt ``XML:com.adobe.xmp``     Pillow; 16-bit: chunks added
+                                                                 to OpenCV's file
+TIFF       X/YResolution          tag 700                        Pillow; 16-bit: tags added to
+                                                                 OpenCV's directory
+WebP       EXIF X/YResolution     XMP chunk                      Pillow
+BMP        pixels per metre       (none)                         OpenCV, its header patched
+=========  =====================  =============================  ==============================
+"""
+
+from __future__ import annotations
+
+import re
+import struct
+import warnings
+import zlib
+from fractions import Fraction
+
+#: The tags of a TIFF's first directory that describe the picture rather than its layout:
+#: a TIFF's "EXIF" is that whole directory, and its layout tags (sample format, strips,
+#: compression...) written into another file made it unreadable (float samples declared).
+TIFF_DESCRIPTIVE_TAGS = (270, 271, 272, 274, 282, 283, 296, 305, 306, 315, 33432)
+ORIENTATION, X_RESOLUTION, Y_RESOLUTION, RESOLUTION_UNIT = 0x0112, 282, 283, 296
+#: The most XMP bytes a JPEG holds: one APP1 segment less its name (Pillow refuses more).
+JPEG_XMP_BYTES = 65504
+#: Formats that keep no metadata at all.
+BARE_FORMATS = {"bmp": "BMP", "gif": "GIF"}
+#: An orientation in an XMP packet, as an attribute or an element (Pillow's exif_transpose
+#: rewrites the same two forms).
+_XMP_ORIENTATION = re.compile(rb'(tiff:Orientation(?:="|>))([0-9])')
+
+
+class Exif(bytes):
+    """An EXIF block (``b''`` for none) with the input's other metadata for the output.
+
+    Attributes
+    ----------
+    xmp : bytes or None
+        The XMP packet, its orientation set to 1 (the decoded pixels are upright).
+    dpi : (float, float) or None
+        Horizontal and vertical resolution in pixels per inch.
+    iptc : bool
+        The input holds an IPTC block (which no output keeps).
+    """
+
+    xmp: bytes | None = None
+    dpi: tuple[float, float] | None = None
+    iptc: bool = False
+
+    def __new__(cls, block: bytes = b"", xmp: bytes | None = None, dpi=None, iptc: bool = False):
+        made = super().__new__(cls, block)
+        made.xmp, made.dpi, made.iptc = xmp or None, dpi, iptc
+        return made
+
+    def __reduce__(self):                    # pickled with its attributes (batch workers)
+        return Exif, (bytes(self), self.xmp, self.dpi, self.iptc)
+
+
+def descriptive_exif(exif):
+    """The tags of ``exif`` (a :class:`PIL.Image.Exif`)'s main directory listed in
+    :data:`TIFF_DESCRIPTIVE_TAGS`: what of a TIFF's directory describes the picture, and what a
+    TIFF written through libtiff can hold (it writes no sub-directory: a camera's Exif and GPS
+    blocks made it fail with 'Bad LONG8 or IFD8 value' on stderr and a RuntimeError)."""
+    from PIL import Image
+
+    kept = Image.Exif()
+    for tag in TIFF_DESCRIPTIVE_TAGS:
+        if tag in exif:
+            kept[tag] = exif[tag]
+    return kept
+
+
+def _upright_exif(image, oriented) -> bytes | None:
+    """The image's EXIF block with its orientation set to 1, or None (none, or broken); of a
+    TIFF, only its descriptive tags (:data:`TIFF_DESCRIPTIVE_TAGS`)."""
+    if image.format not in oriented or (image.format == "PNG" and "exif" not in image.info):
+        return None
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")            # a broken block is dropped, not reported
+            exif = image.getexif()
+        if image.format == "TIFF":
+            exif = descriptive_exif(exif)
+        if not len(exif):
+            return None
+        if ORIENTATION in exif:
+            exif[ORIENTATION] = 1
+        return exif.tobytes()
+    except Exception:  # a broken EXIF block is not kept
+        return None
+
+
+def upright_xmp(xmp) -> bytes | None:
+    """An XMP packet (bytes or str) with its tiff:Orientation set to 1; None for none."""
+    if not xmp:
+        return None
+    packet = xmp.encode("utf-8") if isinstance(xmp, str) else bytes(xmp)
+    return _XMP_ORIENTATION.sub(rb"\g<1>1", packet)
+
+
+def _exif_resolution(exif) -> tuple[float, float] | None:
+    """(x, y) pixels per inch from a TIFF directory's or EXIF block's resolution tags; None
+    without them or where the unit is none (1). TIFF's default unit is the inch."""
+    try:
+        x, y = float(exif[X_RESOLUTION]), float(exif.get(Y_RESOLUTION, exif[X_RESOLUTION]))
+        unit = exif.get(RESOLUTION_UNIT, 2)
+    except (KeyError, TypeError, ValueError, ZeroDivisionError):
+        return None
+    if unit not in (2, 3) or not (x > 0 and y > 0) or x != x or y != y:
+        return None
+    return (x * 2.54, y * 2.54) if unit == 3 else (x, y)
+
+
+def resolution(image) -> tuple[float, float] | None:
+    """The resolution (pixels per inch) an opened image states: JFIF density in inches or
+    centimetres, else its EXIF's (JPEG); pHYs in metres (PNG); its tags (TIFF); its EXIF (WebP);
+    pixels per metre (BMP). None where it states none (Pillow's made-up 72 dpi for a JPEG whose
+    EXIF has no resolution is not taken)."""
+    info = image.info
+    try:
+        if image.format in ("JPEG", "MPO") and info.get("jfif_unit") in (1, 2) and all(info.get("jfif_density", ())):
+            x, y = info["jfif_density"]
+            return (x * 2.54, y * 2.54) if info["jfif_unit"] == 2 else (float(x), float(y))
+        if image.format in ("PNG", "BMP") and "dpi" in info:
+            x, y = (float(v) for v in info["dpi"])
+            return (x, y) if x > 0 and y > 0 else None
+        if image.format == "TIFF":
+            return _exif_resolution(image.tag_v2)
+        if image.format in ("JPEG", "MPO", "WEBP") and "exif" in info:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                return _exif_resolution(image.getexif())
+    except Exception:  # broken values: no resolution
+        return None
+    return None
+
+
+def _has_iptc(image) -> bool:
+    """Whether an opened image holds an IPTC block (Photoshop resource 0x0404 of a JPEG, or a
+    TIFF's tag 33723)."""
+    if image.format == "TIFF":
+        return 33723 in getattr(image, "tag_v2", {})
+    return 0x0404 in (image.info.get("photoshop") or {})
+
+
+def carried(image, oriented) -> Exif | None:
+    """What of an opened image's metadata the output keeps, besides its ICC profile: its
+    EXIF (upright, :func:`_upright_exif`) with its XMP and resolution; None for none of them."""
+    exif = _upright_exif(image, oriented)
+    xmp = upright_xmp(image.info.get("xmp"))
+    dpi, iptc = resolution(image), _has_iptc(image)
+    if exif is None and xmp is None and dpi is None and not iptc:
+        return None
+    return Exif(exif or b"", xmp, dpi, iptc)
+
+
+def parts(exif) -> tuple[bytes | None, bytes | None, tuple[float, float] | None]:
+    """(EXIF block, XMP packet, resolution) of what the encoder was given (bytes or :class:`Exif`)."""
+    return bytes(exif) if exif else None, getattr(exif, "xmp", None), getattr(exif, "dpi", None)
+
+
+def rational(value: float) -> Fraction:
+    """A resolution as a fraction of small terms (a TIFF RATIONAL)."""
+    return Fraction(value).limit_denominator(10000)
+
+
+def _chunk(kind: bytes, payload: bytes) -> bytes:
+    return struct.pack(">I", len(payload)) + kind + payload + struct.pack(">I", zlib.crc32(kind + payload))
+
+
+def png_with(data: bytes, icc: bytes | None, exif: bytes | None, xmp: bytes | None, dpi) -> bytes:
+    """PNG bytes (OpenCV's) with an iCCP, pHYs, eXIf and iTXt XMP chunk after the IHDR, as
+    Pillow writes them (the profile deflated by zlib at its default level: the same bytes)."""
+    chunks = b""
+    if icc:
+        chunks += _chunk(b"iCCP", b"ICC Profile\0\0" + zlib.compress(icc))
+    if dpi:
+        chunks += _chunk(b"pHYs", struct.pack(">IIB", *(round(v / 0.0254) for v in dpi), 1))
+    if exif:
+        chunks += _chunk(b"eXIf", exif[6:] if exif.startswith(b"Exif\0\0") else exif)
+    if xmp:
+        chunks += _chunk(b"iTXt", b"XML:com.adobe.xmp\0\0\0\0\0" + xmp)
+    at = 8 + 12 + int.from_bytes(data[8:12], "big")          # after the IHDR
+    return data[:at] + chunks + data[at:]
+
+
+def bmp_with(data: bytes, dpi) -> bytes:
+    """BMP bytes with their pixels per metre set from ``dpi`` (OpenCV writes 0)."""
+    if not dpi or len(data) < 46 or data[:2] != b"BM":
+        return data
+    return data[:38] + struct.pack("<2i", *(round(v / 0.0254) for v in dpi)) + data[46:]
+
+
+def pillow_xmp_jpeg() -> bool:
+    """Whether this Pillow writes a JPEG's XMP (``xmp=``, from Pillow 11)."""
+    import PIL
+
+    return int(PIL.__version__.split(".")[0]) >= 11
+
+
+def unkept(header, fmt: str, strip: bool = False) -> list[str]:
+    """Warnings for what of the input ``header``'s colours and metadata the output ``fmt``
+    cannot keep: a CMYK input without a profile to convert it by; with metadata kept (no
+    ``strip``), a BMP or GIF output (which keeps none), an XMP packet too long for a JPEG,
+    an IPTC block."""
+    said = []
+    if header is None:
+        return said
+    if getattr(header, "mode", None) == "CMYK" and not header.icc:
+        said.append("the input is CMYK without a colour profile featurewarp can use: its colours are converted "
+                    "to RGB without colour management and may be off (convert it to RGB with its profile first)")
+    if strip:
+        return said
+    exif = header.exif
+    xmp, iptc = getattr(exif, "xmp", None), getattr(exif, "iptc", False)
+    held = [name for name, present in (("ICC profile", header.icc), ("EXIF", bool(exif)), ("XMP", xmp))
+            if present]
+    if fmt in BARE_FORMATS and held:
+        return said + [f"{BARE_FORMATS[fmt]} output keeps none of the input's {', '.join(held)}: left out "
+                       "(--strip leaves them out without this warning)"]
+    if fmt == "jpg" and xmp and (len(xmp) > JPEG_XMP_BYTES or not pillow_xmp_jpeg()):
+        reason = f"is more than a JPEG holds ({JPEG_XMP_BYTES})" if len(xmp) > JPEG_XMP_BYTES else \
+            "cannot be written into a JPEG by this Pillow (Pillow 11 can)"
+        said.append(f"the input's XMP ({len(xmp)} bytes) {reason}: left out")
+    if iptc:
+        said.append("the input's IPTC block is left out (no output keeps it; its XMP, where tools mirror the "
+                    "IPTC fields, is kept)")
+    return said
