@@ -7,6 +7,7 @@ covers 81 % of the frame. Distortion is read off the written image by keypoints
 
 from __future__ import annotations
 
+import json
 import os
 
 import cv2
@@ -155,7 +156,8 @@ def test_arc_300_keeps_the_head_exact_when_only_the_frame_cut_helmet_must_give(p
 
 
 def test_strict_turns_the_warning_into_exit_1_with_nothing_written(tmp_path):
-    """--strict: where a warning is due the command fails and writes nothing."""
+    """--strict: where a warning is due the command fails and writes no image; its --report
+    is written, marked refused with the warnings that caused it (a CI gate reads why)."""
     out, report = tmp_path / "out.png", tmp_path / "r.json"
     args = ["warp", "swirl", os.path.join(SAMPLES, "closeup.png"), str(out), "-m",
             os.path.join(SAMPLES, "closeup_mask.png"), "--angle", "180", "--report", str(report)]
@@ -168,7 +170,7 @@ def test_strict_turns_the_warning_into_exit_1_with_nothing_written(tmp_path):
     report.unlink()
     strict = runner.invoke(main, args + ["--strict"])
     assert strict.exit_code == 1 and "--strict" in strict.output
-    assert not out.exists() and not report.exists()
+    assert not out.exists() and json.loads(report.read_text())["refused"]["warnings"]
     quiet = runner.invoke(main, args + ["-q"])
     assert quiet.exit_code == 0 and quiet.output == ""
 
