@@ -349,7 +349,8 @@ def test_a_misspelt_key_inside_a_handle_is_noted_and_errors_say_what_is_missing(
 
 def test_a_curve_that_a_feature_holds_off_target_warns():
     """Issue 23: a curve across a feature, dragged against a pinned border, warns as a point
-    handle does, and the report gets how far it ended."""
+    handle does, and the report gets how far it ended (re-aimed, 8 px; over 15 px
+    before curves were re-aimed)."""
     mask = np.zeros((H, W), bool)
     mask[150:260, 180:320] = True
     data = {"version": 1, "canvas": "input", "border": "pinned",
@@ -357,10 +358,26 @@ def test_a_curve_that_a_feature_holds_off_target_warns():
     deformer = Deformer(W, H, mask)
     mesh = deformer.solve(Handles.from_dict(data, W, H))
     error = deformer.warp.values["curve_error_px"]
-    assert error["max"] > 15 and any(w.startswith("curve curves[0] ends up to") for w in mesh.record.warnings)
+    assert error["max"] > 3 and any(w.startswith("curve curves[0] ends up to") for w in mesh.record.warnings)
     data["curves"][0]["to"] = data["curves"][0]["from"]              # held where it is: no warning
     mesh = deformer.solve(Handles.from_dict(data, W, H))
     assert not any(w.startswith("curve") for w in mesh.record.warnings)
+
+
+def test_a_curve_beside_a_feature_lands_where_it_was_dragged():
+    """Curves were not re-aimed as point handles were: a curve dragged 50 px beside a feature
+    ended 2.1 px off (mean 1.4; 3.5 px on the 1 MP photo, warned). Its samples are re-aimed
+    now: within 0.5 px, the pins where they were."""
+    mask = np.zeros((300, 400), bool)
+    mask[95:195, 60:200] = True
+    data = {"version": 2, "canvas": "input",
+            "points": [{"from": [20, 280], "to": [20, 280]}, {"from": [380, 280], "to": [380, 280]}],
+            "curves": [{"from": [[30, 60], [130, 40], [230, 60]], "to": [[40, 110], [130, 90], [220, 115]]}]}
+    deformer = Deformer(400, 300, mask)
+    mesh = deformer.solve(Handles.from_dict(data, 400, 300))
+    curve, pins = deformer.warp.values["curve_error_px"], deformer.warp.values["handle_error_px"]
+    assert curve["max"] < 0.6 and curve["mean"] < 0.4 and pins["max"] < 0.05, (curve, pins)
+    assert all(c.kept for c in mesh.record.components) and mesh.flips() == 0 and not mesh.record.warnings
 
 
 # --- the command line ---------------------------------------------------------------------

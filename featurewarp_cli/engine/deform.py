@@ -24,12 +24,10 @@ Examples
 
 from __future__ import annotations
 
-import dataclasses
 import hashlib
 import math
 import numbers
 import os
-import time
 
 import numpy as np
 
@@ -39,21 +37,13 @@ from .defaults import DECAY, MODE, MODES
 from .grid import Grid, grid_for, grid_shape, signed_areas
 from .injectivity import border_crossings
 from .handles import Handles, default_radius, resample
-from .handle_review import (CURVE_SAMPLES, HANDLE_SLACK_PX, better_round, carried_scale_notes, crushed, fold_cause,
-                            fold_notes, review_curves, review_points)
+from .handle_review import (CURVE_SAMPLES, HANDLE_SLACK_PX, carried_scale_notes, crushed, fold_cause, fold_notes,
+                            review_curves, review_points)
+from . import landing
 from .mesh import Mesh
 from ..plugins import canvas_size, check_canvas_side
 from .warper import FeatureWarper
 
-#: Rounds of re-aiming the point handles (:meth:`HandleWarp.land`), each one solve, until every
-#: handle ends within LANDED_PX of its target: the feature-aware solve follows the rigid map only
-#: as closely as least squares beside the features lets it (a background handle at 1 MP ended
-#: 14 px short, at 12 MP 42 px); each round takes about three quarters of what is left.
-LANDING_ROUNDS = 3
-LANDED_PX = 0.005
-#: Newton steps of the rigid map a re-aim may take from the last map (a correction takes 1-3); one that
-#: needs more is not used (towards a pinned border: 122 steps, 1.8 s, for a round not kept anyway).
-AIM_STEPS = 20
 #: Deformed images smaller than this share of the input's area get a warning.
 SHRUNK = 0.01
 #: Nodes of the grid the rigid map is solved on (about; it is coarser than the feature grid:
@@ -118,6 +108,7 @@ class HandleWarp:
         self.capped = False                 # the rigid map stopped at its step cap, not converged
         self.rigid_map = None               # the RigidMap that made it (:meth:`aim` asks it again)
         self.aimed = None                   # the point handles' targets the map was solved for
+        self.aimed_curves = None            # the curves' sample points' (:mod:`landing`)
         self.fitted = None                  # (canvas, offset) of the re-aimed map, for a fit canvas
         self.shares = None                  # how much of its miss each handle was last re-aimed by
         self.carried = set()                # the point handles that carry a feature
@@ -156,70 +147,8 @@ class HandleWarp:
         return fold_cause(self)
 
     def land(self, mesh: Mesh, solve) -> Mesh:
-        """``mesh`` (``solve(self)``'s), solved again up to :data:`LANDING_ROUNDS` times with the
-        point handles re-aimed (:meth:`aim`) so that they end where they were dragged. A round is
-        kept only where it brings the re-aimed handles closer (the worst of them: one the rigid
-        map cannot reach does not count), keeps as many features and folds, creases and streaks
-        nothing the last did not (re-aiming towards a pinned border pushed the features into it:
-        untied, a crease); none runs after a mesh that folds or lays the image over itself (it
-        is refused or warned as it is). Whether a round is kept is a discrete choice: near its
-        edge one ulp can switch between the two results. Every round's time is in the report's
-        stages (the rigid map's under ``grid``, as a preset's map), and a ``fit`` canvas is the
-        final map's bounding box."""
-        if mesh.flips() or border_crossings(mesh.source, mesh.target):
-            return mesh                        # a kept round adds neither (:func:`better_round`)
-        timings = dict(mesh.record.timings)
-        for _ in range(LANDING_ROUNDS):
-            before, start = (self.nodes, self.aimed, self.fitted), time.perf_counter()
-            aimed = self.aim(mesh)
-            timings["grid"] = timings.get("grid", 0.0) + time.perf_counter() - start
-            if not aimed:
-                break
-            landed = solve(self)
-            for stage, seconds in landed.record.timings.items():
-                timings[stage] = timings.get(stage, 0.0) + seconds
-            if not better_round(self, landed, mesh):
-                self.nodes, self.aimed, self.fitted = before
-                break
-            mesh = landed
-        mesh.record.timings = timings
-        return self._refit(mesh)
-
-    def aim(self, mesh: Mesh) -> bool:
-        """Re-aim this map: each point handle (pins too) is aimed past its target by as far as
-        ``mesh`` left it short, in full where the rigid map reaches what it was aimed at within
-        1 px, not at all beyond :data:`HANDLE_SLACK_PX`, in proportion between (no threshold for
-        a one-ulp change to cross); the map is solved again for those targets (warm, nothing
-        factored). False, and nothing changed, where no handle would move by more than
-        :data:`LANDED_PX`."""
-        if self.rigid_map is None or self.handles is None or not len(self.handles.points_from):
-            return False
-        aimed = self.handles.points_to if self.aimed is None else self.aimed
-        reach = np.hypot(*(self(self.handles.points_from) + np.asarray(self.offset) - aimed).T)
-        share = np.clip((HANDLE_SLACK_PX - reach) / (HANDLE_SLACK_PX - 1.0), 0.0, 1.0)[:, None]
-        step = share * (self.handles.points_to - self.ends(mesh))
-        if np.hypot(*step.T).max() <= LANDED_PX:
-            return False
-        last = self.rigid_map._last
-        again = self.rigid_map.deformation(dataclasses.replace(self.handles, points_to=aimed + step), warm=True,
-                                           steps=AIM_STEPS)
-        if again.capped:                   # not a correction: W pushed far (into a pinned border, 122 steps)
-            self.rigid_map._last = last
-            return False
-        self.aimed, self.shares = aimed + step, share[:, 0]   # pins too: a re-aimed pin is a handle to W
-        self.nodes = again.nodes + np.asarray(again.offset) - np.asarray(self.offset)
-        self.fitted = again.canvas, again.offset
-        return True
-
-    def _refit(self, mesh: Mesh) -> Mesh:
-        """``mesh`` on the re-aimed map's own ``fit`` canvas (the first map's cut up to 4 px off
-        an image the re-aimed one carried further); as it is on an ``input`` canvas."""
-        if self.fitted is None or self.handles.canvas != "fit":
-            return mesh
-        (self.canvas, offset), shift = self.fitted, np.asarray(self.offset) - np.asarray(self.fitted[1])
-        self.offset, self.nodes = offset, self.nodes + shift
-        return Mesh(mesh.source, mesh.target + shift, mesh.triangles, tuple(self.canvas), mesh.record,
-                    mesh.node_component)
+        """``mesh`` solved again with the handles re-aimed until they land (:func:`landing.land`)."""
+        return landing.land(self, mesh, solve)
 
     def ends(self, mesh: Mesh) -> np.ndarray | None:
         """Where the point handles ended in ``mesh``, in input pixel coordinates (None: no handles)."""

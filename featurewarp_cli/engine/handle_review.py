@@ -208,28 +208,6 @@ def carried_scale_notes(labels: np.ndarray, handles, carried) -> list[str]:
     return notes
 
 
-def better_round(warp, landed, mesh) -> bool:
-    """Whether a re-aimed round ``landed`` is kept over ``mesh`` (:meth:`HandleWarp.land`): it
-    brings the handles it re-aimed closer (the worst of them) and adds no fold, no crossing
-    border, no feature given up, no crease (:data:`CRUSHED`) and no streaks (record.STREAKS)."""
-    from .record import STREAKS
-
-    def kept(m):
-        return sum(bool(component.kept) for component in m.record.components)
-
-    def thinnest(m):                     # the smallest share of its area under W a triangle keeps
-        return float(m.record.quality.get("area_ratio", {}).get("min", 1.0))
-
-    def missed(m):
-        return float(np.hypot(*(warp.ends(m) - warp.handles.points_to)[re_aimed].T).max())
-
-    re_aimed = warp.shares > 0
-    worse = [landed.flips() > 0, border_crossings(landed.source, landed.target) > 0, kept(landed) < kept(mesh),
-             thinnest(landed) < CRUSHED <= thinnest(mesh),
-             landed.record.background_stretch > STREAKS >= mesh.record.background_stretch]
-    return not any(worse) and bool(re_aimed.any()) and missed(landed) < missed(mesh)
-
-
 def _px(distance: float) -> str:
     """``distance`` in pixels as a warning gives it: one decimal under 10 px (a 3.31 px miss read
     "3 px", within the 3 px slack), whole pixels beyond."""
