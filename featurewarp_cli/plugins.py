@@ -453,8 +453,12 @@ def load(name: str):
     if name not in BUILTIN and not matches:
         import difflib
 
+        from .styles import style_owners       # it reads the presets' summaries through this module
+
+        owners = [(preset, style) for preset, style, _ in style_owners(name)]
         close = difflib.get_close_matches(name, names(), n=1)
-        hint = f"did you mean {close[0]!r}? " if close else ""
+        hint = (" and ".join(f"{style} is {preset}'s style" for preset, style in owners) + "; " if owners else
+                f"did you mean {close[0]!r}? " if close else "")
         raise UnknownPreset(f"unknown preset {name!r}; {hint}available: {', '.join(names()) or 'none'}")
     try:
         if matches:

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from test_cli import SIZE, runner, save, scene, square_mask, textured  # noqa: F401  (runner: a fixture)
 
-from featurewarp_cli.cli.styles import style_owners, summary_styles
+from featurewarp_cli.styles import style_owners, summary_styles
 
 
 # --- style names (finding 10) ----------------------------------------------------------------
@@ -197,3 +197,16 @@ def test_arcs_help_says_where_its_geometry_leaves_imagemagicks(runner):
     assert tuple(arc(600, 600, angle=120).canvas) == (1144, 630)     # ImageMagick: 1016x595, folded
     text = " ".join(runner("warp", "arc", "--help").stdout.decode().split())
     assert "except where those leave an inner radius under a tenth of the height" in text and "1016x595" in text
+
+
+def test_the_python_api_answers_a_style_name_with_its_preset_too():
+    """load_warp('fisheye') said "did you mean 'fish'?" (the Fish style), as the command line
+    did before it read the presets' summaries."""
+    from featurewarp_cli import load_warp
+    from featurewarp_cli.plugins import UnknownPreset
+
+    with pytest.raises(UnknownPreset, match="Fisheye is bulge's style") as caught:
+        load_warp("fisheye")
+    assert "fish'" not in str(caught.value)
+    with pytest.raises(UnknownPreset, match="did you mean 'swirl'"):
+        load_warp("swrl")

@@ -462,7 +462,7 @@ class PresetGroup(click.Group):
             if args and args[0] not in plugins.names():
                 import difflib
 
-                from .styles import style_hint
+                from ..styles import style_hint
 
                 style = style_hint(ctx.info_name, args[0], args[1:])
                 if style is not None:                # 'fisheye' is bulge's, not 'fish'

@@ -19,7 +19,7 @@ from __future__ import annotations
 import re
 import shlex
 
-from .. import plugins
+from . import plugins
 
 #: Applications the summaries name beside the styles: no style is called that.
 TOOLS = ("photoshop", "illustrator", "imagemagick")
