@@ -62,9 +62,9 @@ CELL_PARAM = Param(
     min=MIN_CELL, metavar="PX")
 FEATURE_WEIGHT_PARAM = Param(
     "feature_weight", float, FEATURE_WEIGHT,
-    "w_F: each side of the feature equations is multiplied by W, so their squared error "
-    "counts W^2 times. From 0.0001 to 10 000: beyond either end, W^2 and the background's "
-    "equations are further apart than double precision can keep (below, the paper "
+    "How firmly features keep their shape against the background: their equations count W^2 "
+    "times the background's (the paper's w_F). From 0.0001 to 10 000: beyond either end the two "
+    "kinds of equations are too far apart for the solve to keep both (below, the paper "
     "formulation's system cannot be factored: a feature's inner nodes lose their equations).",
     min=1e-4, max=1e4, metavar="W")
 DECAY_PARAM = Param(
