@@ -80,8 +80,9 @@ def camera_exif() -> bytes:
     return exif.tobytes()
 
 
-def carried(dpi=(300.0, 300.0)) -> metadata.Exif:
-    return metadata.Exif(camera_exif(), metadata.upright_xmp(XMP), dpi)
+def carried(dpi=(300.0, 300.0)) -> dict:
+    """An EXIF block, an upright XMP packet and a resolution, as encode_image's keywords."""
+    return {"exif": camera_exif(), "xmp": metadata.upright_xmp(XMP), "dpi": dpi}
 
 
 def opened(data: bytes) -> Image.Image:
@@ -93,8 +94,8 @@ def test_16_bit_output_keeps_profile_exif_xmp_and_resolution(fmt):
     """16-bit PNG and TIFF went to OpenCV, which writes no metadata: the profile (an Adobe RGB
     master's) was dropped silently (finding 2)."""
     image, icc = picture(dtype=np.uint16), srgb()
-    data = encode.encode_image(image, fmt, icc=icc, exif=carried())
-    assert data == encode.encode_image(image, fmt, icc=icc, exif=carried())       # the same bytes each run
+    data = encode.encode_image(image, fmt, icc=icc, **carried())
+    assert data == encode.encode_image(image, fmt, icc=icc, **carried())       # the same bytes each run
     back = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
     assert back.dtype == np.uint16 and np.array_equal(back, image)
     with opened(data) as written:
@@ -114,7 +115,7 @@ def test_16_bit_tiff_with_alpha_keeps_its_alpha_tag_and_the_profile():
 
 
 def test_16_bit_png_chunks_have_right_crcs():
-    data = encode.encode_image(picture(dtype=np.uint16), "png", icc=srgb(), exif=carried())
+    data = encode.encode_image(picture(dtype=np.uint16), "png", icc=srgb(), **carried())
     at, kinds = 8, []
     while at < len(data):
         length = int.from_bytes(data[at:at + 4], "big")
@@ -128,7 +129,7 @@ def test_16_bit_png_chunks_have_right_crcs():
 @pytest.mark.parametrize("fmt", ["png", "jpg", "tiff", "bmp"])
 def test_resolution_is_kept(fmt):
     """pHYs, JFIF density and BMP's pixels per metre were dropped (finding 4)."""
-    data = encode.encode_image(picture(), fmt, exif=metadata.Exif(dpi=(240.0, 240.0)))
+    data = encode.encode_image(picture(), fmt, dpi=(240.0, 240.0))
     with opened(data) as written:
         assert [round(v) for v in written.info["dpi"]] == [240, 240]
 
@@ -136,7 +137,7 @@ def test_resolution_is_kept(fmt):
 @pytest.mark.parametrize("fmt", ["jpg", "webp", "png", "tiff"])
 def test_xmp_is_kept_upright(fmt):
     """XMP was dropped from JPEG and WebP (finding 6); its orientation is set to 1 as the EXIF's."""
-    data = encode.encode_image(picture(), fmt, exif=carried())
+    data = encode.encode_image(picture(), fmt, **carried())
     with opened(data) as written:
         xmp = written.info["xmp"]
         assert b"Copyright Jane" in (xmp if isinstance(xmp, bytes) else xmp.encode())
@@ -147,15 +148,33 @@ def test_header_reads_xmp_resolution_and_iptc():
     buffer = io.BytesIO()
     Image.fromarray(picture()).save(buffer, "JPEG", xmp=XMP, dpi=(300, 300))
     header = decode.read_header(buffer.getvalue())
-    assert header.exif.dpi == (300.0, 300.0) and b'tiff:Orientation="1"' in header.exif.xmp
-    assert not header.exif.iptc
-    assert pickle.loads(pickle.dumps(header.exif)).xmp == header.exif.xmp
+    assert header.dpi == (300.0, 300.0) and b'tiff:Orientation="1"' in header.xmp
+    assert not header.iptc
+    assert pickle.loads(pickle.dumps(header)) == header                # a batch's workers get it whole
+    kept = metadata.Metadata.of(header)
+    assert pickle.loads(pickle.dumps(kept)) == kept and kept.xmp == header.xmp and kept.dpi == header.dpi
     png = io.BytesIO()
     Image.fromarray(picture()).save(png, "PNG", dpi=(300, 300))
-    assert round(decode.read_header(png.getvalue()).exif.dpi[0]) == 300
+    assert round(decode.read_header(png.getvalue()).dpi[0]) == 300
     plain = io.BytesIO()
     Image.fromarray(picture()).save(plain, "PNG")
-    assert decode.read_header(plain.getvalue()).exif is None
+    bare = decode.read_header(plain.getvalue())
+    assert (bare.exif, bare.xmp, bare.dpi, bare.iptc) == (None, None, None, False)
+
+
+def test_header_keeps_the_orientation_it_turns_by_and_an_upright_exif():
+    """The EXIF kept is set upright on Pillow's own cached block: read before the orientation,
+    the header said 1 and a turned photo came out as stored."""
+    exif = Image.Exif()
+    exif[270], exif[0x0112] = "a caption", 6
+    buffer = io.BytesIO()
+    Image.fromarray(picture()).save(buffer, "JPEG", exif=exif.tobytes())
+    header = decode.read_header(buffer.getvalue())
+    kept = Image.Exif()
+    kept.load(header.exif)
+    assert header.orientation == 6 and header.upright_size == (48, 64)
+    assert kept[0x0112] == 1 and kept[270] == "a caption"
+    assert decode.decode_image(buffer.getvalue(), "turned.jpg").shape[:2] == (64, 48)
 
 
 @pytest.mark.parametrize("quality, sampling", [(None, 0), (95, 0), (90, 0), (89, 2), (75, 2)])
@@ -223,14 +242,14 @@ def test_cmyk_without_a_profile_is_said():
 
 
 def test_what_an_output_cannot_keep_is_said():
-    header = decode.Header("PNG", 4, 4, icc=srgb(), exif=metadata.Exif(camera_exif(), XMP * 300))
+    header = decode.Header("PNG", 4, 4, icc=srgb(), exif=camera_exif(), xmp=XMP * 300)
     assert "BMP output keeps none of the input's ICC profile, EXIF, XMP" in metadata.unkept(header, "bmp")[0]
     assert metadata.unkept(header, "bmp", strip=True) == []
     assert "XMP (" in metadata.unkept(header, "jpg")[0]
     assert metadata.unkept(header, "png") == []
-    iptc = decode.Header("JPEG", 4, 4, exif=metadata.Exif(iptc=True))
+    iptc = decode.Header("JPEG", 4, 4, iptc=True)
     assert "IPTC" in metadata.unkept(iptc, "jpg")[0]
-    with opened(encode.encode_image(picture(), "jpg", exif=header.exif)) as written:   # written without it
+    with opened(encode.encode_image(picture(), "jpg", **metadata.Metadata.of(header).keywords())) as written:
         assert "xmp" not in written.info and written.getexif()[270] == "a caption"
 
 
@@ -240,3 +259,47 @@ def test_eight_bit_output_without_new_metadata_is_unchanged():
     buffer = io.BytesIO()
     Image.fromarray(image[:, :, ::-1]).save(buffer, "PNG", icc_profile=icc, exif=camera_exif(), compress_level=1)
     assert encode.encode_image(image, "png", icc=icc, exif=camera_exif()) == buffer.getvalue()
+
+
+def test_cli_says_a_cmyk_jpeg_without_a_profile_and_strict_refuses_it(tmp_path):
+    """metadata.unkept's lines were made but nothing called it: a CMYK JPEG without a usable
+    profile was converted without colour management in silence. The line reaches stderr, the
+    report's warnings and --strict, under --strip too (the colours are off either way)."""
+    import json
+
+    from click.testing import CliRunner
+
+    from featurewarp_cli.cli.main import cli
+
+    source, out, report = tmp_path / "cmyk.jpg", tmp_path / "out.png", tmp_path / "r.json"
+    source.write_bytes(_cmyk_jpeg(None)[0])
+    args = ["warp", "swirl", str(source), str(out), "--angle", "30", "--report", str(report)]
+    for extra in ([], ["--strip"]):
+        said = CliRunner().invoke(cli, args + extra)
+        assert said.exit_code == 0 and out.exists(), said.output
+        lines = said.output.strip().splitlines()
+        assert len(lines) == 1 and "CMYK without a colour profile" in lines[0], said.output
+        assert any("CMYK without a colour profile" in w for w in json.loads(report.read_text())["warnings"])
+        out.unlink()
+    strict = CliRunner().invoke(cli, args + ["--strict"])
+    assert strict.exit_code == 1 and "--strict" in strict.output and "CMYK" in strict.output
+    assert not out.exists() and json.loads(report.read_text())["refused"]["warnings"]
+
+
+def test_cli_says_what_a_bmp_output_leaves_out(tmp_path):
+    """BMP keeps the resolution only: the profile and EXIF left out are said, not with --strip."""
+    from click.testing import CliRunner
+
+    from featurewarp_cli.cli.main import cli
+
+    source = tmp_path / "in.png"
+    buffer = io.BytesIO()
+    Image.fromarray(picture()).save(buffer, "PNG", icc_profile=srgb(), exif=camera_exif(), dpi=(300, 300))
+    source.write_bytes(buffer.getvalue())
+    args = ["warp", "swirl", str(source), str(tmp_path / "out.bmp"), "--angle", "30"]
+    said = CliRunner().invoke(cli, args)
+    assert said.exit_code == 0 and "BMP output keeps none of the input's ICC profile, EXIF" in said.output
+    with opened((tmp_path / "out.bmp").read_bytes()) as written:
+        assert [round(v) for v in written.info["dpi"]] == [300, 300]
+    quiet = CliRunner().invoke(cli, args + ["--strip"])
+    assert quiet.exit_code == 0 and quiet.output == "", quiet.output

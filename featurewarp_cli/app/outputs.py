@@ -5,8 +5,9 @@ from __future__ import annotations
 
 import os
 import stat
+from dataclasses import replace
 
-from ..io import ImageError, colours, decode, encode, formats, write
+from ..io import ImageError, colours, decode, encode, formats, metadata, write
 
 
 def format_of(path: str) -> str | None:
@@ -113,27 +114,46 @@ def check_distinct(outputs: list[tuple[str | None, str]], inputs: list[tuple[str
 JPEG_EXIF_BYTES = 65533
 
 
-def kept_metadata(strip: bool, header, fmt: str, warnings: list) -> tuple[bytes | None, bytes | None]:
-    """(ICC profile, EXIF) of the input ``header`` to write with the output: none with ``strip``;
-    an EXIF block larger than a JPEG holds is left out, with a warning appended to ``warnings``
-    (the whole run failed after the solve: "EXIF data is too long")."""
-    kept = None if strip else header
-    icc, exif = getattr(kept, "icc", None), getattr(kept, "exif", None)
-    if fmt == "jpg" and exif and len(exif) > JPEG_EXIF_BYTES:
-        warnings.append(f"the input's EXIF ({len(exif)} bytes) is more than a JPEG holds ({JPEG_EXIF_BYTES}): "
-                        "left out")
-        exif = None
-    return icc, exif
+def kept_metadata(strip: bool, header, fmt: str, warnings: list) -> metadata.Metadata:
+    """What of the input's metadata to write with the output, said before any work.
+
+    Parameters
+    ----------
+    strip : bool
+        ``--strip``: keep nothing.
+    header : featurewarp_cli.io.decode.Header or None
+        INPUT's header (None where it could not be read: nothing is kept).
+    fmt : str
+        The output format name.
+    warnings : list of str
+        Appended to, so that stderr, the report and ``--strict`` see them: what ``fmt`` cannot
+        keep and a CMYK input without a usable profile (:func:`featurewarp_cli.io.metadata.unkept`,
+        under ``strip`` too), and an EXIF block larger than a JPEG holds, which is left out
+        (the whole run failed after the solve: "EXIF data is too long").
+
+    Returns
+    -------
+    featurewarp_cli.io.metadata.Metadata
+        ICC profile, EXIF, XMP and resolution; every field None with ``strip``.
+    """
+    warnings.extend(metadata.unkept(header, fmt, strip))
+    kept = metadata.Metadata() if strip else metadata.Metadata.of(header)
+    if fmt == "jpg" and kept.exif and len(kept.exif) > JPEG_EXIF_BYTES:
+        warnings.append(f"the input's EXIF ({len(kept.exif)} bytes) is more than a JPEG holds "
+                        f"({JPEG_EXIF_BYTES}): left out")
+        kept = replace(kept, exif=None)
+    return kept
 
 
-def encoded(out_path: str, fmt: str, image, background, quality: int | None = None, icc: bytes | None = None,
-            exif: bytes | None = None) -> bytes:
-    """``image`` encoded as ``fmt``, with a quality and metadata to keep (failures are WarpError
-    naming ``out_path``)."""
+def encoded(out_path: str, fmt: str, image, background, quality: int | None = None,
+            kept: metadata.Metadata | None = None) -> bytes:
+    """``image`` encoded as ``fmt``, with a quality and the metadata to keep (:func:`kept_metadata`;
+    None: none); failures are WarpError naming ``out_path``."""
     from .pipeline import WarpError
 
     try:
-        return encode.encode_image(image, fmt, background or (255, 255, 255), quality, icc, exif)
+        return encode.encode_image(image, fmt, background or (255, 255, 255), quality,
+                                   **(kept or metadata.Metadata()).keywords())
     except ImageError as err:
         raise WarpError(f"cannot write {out_path}: {err}") from err
 

@@ -444,7 +444,7 @@ def warp_file(settings: Settings, input: str, output: str, mask: str | None = No
     background = background_colour(settings.background, fmt)
     prefetch_engine(solver=masked(settings, mask))
     pending, feature_mask, warnings, (width, height) = start_loading(settings, input, mask, piped)
-    icc, exif = kept_metadata(settings.strip, getattr(pending, "header", None), fmt, warnings)   # --strict sees it
+    kept = kept_metadata(settings.strip, getattr(pending, "header", None), fmt, warnings)   # --strict sees it
     timings = {"load": time.perf_counter() - t0}
     warp, warper = make_warper(settings, width, height, feature_mask)    # the canvas and the budget, undecoded
     check_encodable(warp.canvas, fmt)
@@ -467,7 +467,7 @@ def warp_file(settings: Settings, input: str, output: str, mask: str | None = No
     timings.update(mesh.info["timings"])
     stages.enter("write")
     t1 = time.perf_counter()
-    outputs = [(out_path, encoded(out_path, fmt, result, background, settings.quality, icc, exif))]
+    outputs = [(out_path, encoded(out_path, fmt, result, background, settings.quality, kept))]
     timings["write"] = time.perf_counter() - t1
     if save_grid:
         outputs.append((save_grid, mesh.to_obj() if save_grid.lower().endswith(".obj") else mesh.to_npz()))

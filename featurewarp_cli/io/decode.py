@@ -107,11 +107,16 @@ class Header:
         The ICC colour profile of the decoded pixels, for the output to keep (of a CMYK
         JPEG: sRGB, which :func:`decode_image` converts it to through its own, if usable).
     exif : bytes or None
-        The EXIF block (its orientation set to 1: the decoded pixels are upright), as a
-        :class:`featurewarp_cli.io.metadata.Exif` that also carries the XMP packet and the
-        resolution, for the output to keep.
+        The EXIF block (its orientation set to 1: the decoded pixels are upright), for the
+        output to keep.
     mode : str or None
         Pillow's mode of the stored pixels (``RGB``, ``CMYK``, ``I;16``...).
+    xmp : bytes or None
+        The XMP packet (its orientation set to 1), for the output to keep.
+    dpi : (float, float) or None
+        The resolution in pixels per inch, for the output to keep.
+    iptc : bool
+        The file holds an IPTC block (which no output keeps: a warning says so).
     """
 
     format: str
@@ -122,6 +127,9 @@ class Header:
     icc: bytes | None = field(default=None, repr=False)
     exif: bytes | None = field(default=None, repr=False)
     mode: str | None = field(default=None, repr=False)
+    xmp: bytes | None = field(default=None, repr=False)
+    dpi: tuple[float, float] | None = field(default=None, repr=False)
+    iptc: bool = field(default=False, repr=False)
 
     @property
     def upright_size(self) -> tuple[int, int]:
@@ -278,8 +286,10 @@ def read_header(data: bytes) -> Header | None:
                 icc = image.info.get("icc_profile") or None
                 if image.mode == "CMYK":                   # decoded to sRGB through its profile, or not managed
                     icc = profiles.srgb() if image.format in CMYK_MANAGED and profiles.cmyk_usable(icc) else None
-                return Header(image.format, *size, _orientation(image, data),
-                              bool(getattr(image, "is_animated", False)), icc, carried(image, ORIENTED), image.mode)
+                orientation = _orientation(image, data)     # before carried() sets the EXIF's to 1
+                exif, xmp, dpi, iptc = carried(image, ORIENTED)
+                return Header(image.format, *size, orientation, bool(getattr(image, "is_animated", False)), icc,
+                              exif, image.mode, xmp, dpi, iptc)
     except Exception:  # UnidentifiedImageError, or whatever a broken header raises in a plugin
         return _png_header(data)
 

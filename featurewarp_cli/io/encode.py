@@ -72,7 +72,8 @@ def full_chroma(quality: int | None) -> bool:
 
 
 def encode_image(image: np.ndarray, fmt: str, background=(255, 255, 255), quality: int | None = None,
-                 icc: bytes | None = None, exif: bytes | None = None) -> bytes:
+                 icc: bytes | None = None, exif: bytes | None = None, *, xmp: bytes | None = None,
+                 dpi: tuple[float, float] | None = None) -> bytes:
     """Encode ``image`` as format ``fmt`` (a name of :data:`FORMATS`) with fixed settings.
 
     Parameters
@@ -86,10 +87,16 @@ def encode_image(image: np.ndarray, fmt: str, background=(255, 255, 255), qualit
         1..100 for JPEG (default 95) and WebP (lossy when given; default lossless); other
         formats ignore it.
     icc, exif : bytes, optional
-        An ICC profile and an EXIF block to store (JPEG, PNG, WebP, TIFF); ``exif`` may be a
-        :class:`featurewarp_cli.io.metadata.Exif` carrying an XMP packet and a resolution too.
-        A grey profile on pixels written in colour is turned into the RGB one of its tone
+        An ICC profile and an EXIF block to store (JPEG, PNG, WebP, TIFF). A grey profile on
+        pixels written in colour is turned into the RGB one of its tone
         (:func:`featurewarp_cli.io.profiles.for_pixels`); one of another space is left out.
+    xmp : bytes, optional
+        An XMP packet to store (JPEG up to :data:`featurewarp_cli.io.metadata.JPEG_XMP_BYTES`,
+        PNG, WebP, TIFF); a longer one is left out of a JPEG (:func:`featurewarp_cli.io.metadata.unkept`
+        says so).
+    dpi : (float, float), optional
+        A resolution in pixels per inch to store (JPEG, PNG, TIFF, BMP; WebP only in its EXIF).
+        :class:`featurewarp_cli.io.metadata.Metadata` gives all four: ``**kept.keywords()``.
 
     Returns
     -------
@@ -113,7 +120,7 @@ def encode_image(image: np.ndarray, fmt: str, background=(255, 255, 255), qualit
     if fmt == "gif":
         return _gif(image)
     lossless_alpha = fmt == "webp" and quality is None and image.ndim == 3 and image.shape[2] == 4
-    exif, xmp, dpi = metadata.parts(exif)
+    exif, xmp, dpi = bytes(exif) if exif else None, bytes(xmp) if xmp else None, dpi or None
     given = icc or exif or xmp or dpi
     icc = profiles.for_pixels(icc, 1 if image.ndim == 2 else image.shape[2])
     if fmt == "jpg" and xmp and (len(xmp) > metadata.JPEG_XMP_BYTES or not metadata.pillow_xmp_jpeg()):

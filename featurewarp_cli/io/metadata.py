@@ -1,9 +1,9 @@
 """The input's metadata that the output keeps: EXIF, XMP and resolution, read from its header
 (the ICC profile is :mod:`featurewarp_cli.io.profiles`'), and written where Pillow does not.
 
-The input's XMP packet and resolution ride on its EXIF block (:class:`Exif`, a ``bytes``
-that may be empty), so that every caller that passes the EXIF on to the encoder passes them
-too, and ``--strip``, which passes none, drops them with it. Written:
+The decoder's :class:`featurewarp_cli.io.decode.Header` holds each of them in a field of its
+own (:func:`carried`); what the output keeps of them is a :class:`Metadata`, whose fields the
+encoder (:func:`featurewarp_cli.io.encode.encode_image`) takes as keyword arguments. Written:
 
 =========  =====================  =============================  ==============================
 format     resolution             XMP                            by
@@ -24,6 +24,7 @@ import re
 import struct
 import warnings
 import zlib
+from dataclasses import dataclass, field
 from fractions import Fraction
 
 #: The tags of a TIFF's first directory that describe the picture rather than its layout:
@@ -40,30 +41,37 @@ BARE_FORMATS = {"bmp": "BMP", "gif": "GIF"}
 _XMP_ORIENTATION = re.compile(rb'(tiff:Orientation(?:="|>))([0-9])')
 
 
-class Exif(bytes):
-    """An EXIF block (``b''`` for none) with the input's other metadata for the output.
+@dataclass(frozen=True)
+class Metadata:
+    """The input's metadata that an output keeps (all None: nothing, as under ``--strip``).
 
     Attributes
     ----------
+    icc : bytes or None
+        The ICC colour profile of the decoded pixels.
+    exif : bytes or None
+        The EXIF block, its orientation set to 1 (the decoded pixels are upright).
     xmp : bytes or None
-        The XMP packet, its orientation set to 1 (the decoded pixels are upright).
+        The XMP packet, its orientation set to 1.
     dpi : (float, float) or None
         Horizontal and vertical resolution in pixels per inch.
-    iptc : bool
-        The input holds an IPTC block (which no output keeps).
     """
 
-    xmp: bytes | None = None
+    icc: bytes | None = field(default=None, repr=False)
+    exif: bytes | None = field(default=None, repr=False)
+    xmp: bytes | None = field(default=None, repr=False)
     dpi: tuple[float, float] | None = None
-    iptc: bool = False
 
-    def __new__(cls, block: bytes = b"", xmp: bytes | None = None, dpi=None, iptc: bool = False):
-        made = super().__new__(cls, block)
-        made.xmp, made.dpi, made.iptc = xmp or None, dpi, iptc
-        return made
+    @classmethod
+    def of(cls, header) -> Metadata:
+        """What ``header`` (a :class:`featurewarp_cli.io.decode.Header`, or None) holds."""
+        if header is None:
+            return cls()
+        return cls(header.icc, header.exif, header.xmp, header.dpi)
 
-    def __reduce__(self):                    # pickled with its attributes (batch workers)
-        return Exif, (bytes(self), self.xmp, self.dpi, self.iptc)
+    def keywords(self) -> dict:
+        """The fields as :func:`featurewarp_cli.io.encode.encode_image` takes them."""
+        return {"icc": self.icc, "exif": self.exif, "xmp": self.xmp, "dpi": self.dpi}
 
 
 def descriptive_exif(exif):
@@ -153,20 +161,28 @@ def _has_iptc(image) -> bool:
     return 0x0404 in (image.info.get("photoshop") or {})
 
 
-def carried(image, oriented) -> Exif | None:
-    """What of an opened image's metadata the output keeps, besides its ICC profile: its
-    EXIF (upright, :func:`_upright_exif`) with its XMP and resolution; None for none of them."""
-    exif = _upright_exif(image, oriented)
-    xmp = upright_xmp(image.info.get("xmp"))
-    dpi, iptc = resolution(image), _has_iptc(image)
-    if exif is None and xmp is None and dpi is None and not iptc:
-        return None
-    return Exif(exif or b"", xmp, dpi, iptc)
+def carried(image, oriented) -> tuple[bytes | None, bytes | None, tuple[float, float] | None, bool]:
+    """What of an opened image's metadata the output keeps, besides its ICC profile.
 
+    Parameters
+    ----------
+    image : PIL.Image.Image
+        Opened, not decoded.
+    oriented : set of str
+        Pillow's names of the formats whose EXIF orientation is applied.
 
-def parts(exif) -> tuple[bytes | None, bytes | None, tuple[float, float] | None]:
-    """(EXIF block, XMP packet, resolution) of what the encoder was given (bytes or :class:`Exif`)."""
-    return bytes(exif) if exif else None, getattr(exif, "xmp", None), getattr(exif, "dpi", None)
+    Returns
+    -------
+    exif : bytes or None
+        Its EXIF block, upright (:func:`_upright_exif`).
+    xmp : bytes or None
+        Its XMP packet, upright (:func:`upright_xmp`).
+    dpi : (float, float) or None
+        Its resolution in pixels per inch (:func:`resolution`).
+    iptc : bool
+        Whether it holds an IPTC block (which no output keeps).
+    """
+    return _upright_exif(image, oriented), upright_xmp(image.info.get("xmp")), resolution(image), _has_iptc(image)
 
 
 def rational(value: float) -> Fraction:
@@ -209,10 +225,23 @@ def pillow_xmp_jpeg() -> bool:
 
 
 def unkept(header, fmt: str, strip: bool = False) -> list[str]:
-    """Warnings for what of the input ``header``'s colours and metadata the output ``fmt``
-    cannot keep: a CMYK input without a profile to convert it by; with metadata kept (no
-    ``strip``), a BMP or GIF output (which keeps none), an XMP packet too long for a JPEG,
-    an IPTC block."""
+    """Warnings for what of the input's colours and metadata the output cannot keep.
+
+    Parameters
+    ----------
+    header : featurewarp_cli.io.decode.Header or None
+        The input's header (None: nothing to say).
+    fmt : str
+        The output format name.
+    strip : bool
+        ``--strip``: the metadata is dropped on purpose, and only the colours are said.
+
+    Returns
+    -------
+    list of str
+        A CMYK input without a profile to convert it by; with metadata kept, a BMP or GIF
+        output (which keeps none), an XMP packet too long for a JPEG, an IPTC block.
+    """
     said = []
     if header is None:
         return said
@@ -221,9 +250,8 @@ def unkept(header, fmt: str, strip: bool = False) -> list[str]:
                     "to RGB without colour management and may be off (convert it to RGB with its profile first)")
     if strip:
         return said
-    exif = header.exif
-    xmp, iptc = getattr(exif, "xmp", None), getattr(exif, "iptc", False)
-    held = [name for name, present in (("ICC profile", header.icc), ("EXIF", bool(exif)), ("XMP", xmp))
+    xmp = header.xmp
+    held = [name for name, present in (("ICC profile", header.icc), ("EXIF", header.exif), ("XMP", xmp))
             if present]
     if fmt in BARE_FORMATS and held:
         return said + [f"{BARE_FORMATS[fmt]} output keeps none of the input's {', '.join(held)}: left out "
@@ -232,7 +260,7 @@ def unkept(header, fmt: str, strip: bool = False) -> list[str]:
         reason = f"is more than a JPEG holds ({JPEG_XMP_BYTES})" if len(xmp) > JPEG_XMP_BYTES else \
             "cannot be written into a JPEG by this Pillow (Pillow 11 can)"
         said.append(f"the input's XMP ({len(xmp)} bytes) {reason}: left out")
-    if iptc:
+    if header.iptc:
         said.append("the input's IPTC block is left out (no output keeps it; its XMP, where tools mirror the "
                     "IPTC fields, is kept)")
     return said
