@@ -205,8 +205,10 @@ def engine_options(preset=None, strict_also: str = "") -> list[click.Option]:
         max_pixels_option(),
         param_option(QUALITY),
         click.Option(["--strip"], is_flag=True,
-                     help="Drop the input's ICC colour profile and EXIF (kept by default, EXIF with "
-                          "its orientation reset, for JPEG, PNG, WebP and TIFF output)."),
+                     help="Drop the input's metadata: its ICC colour profile, EXIF, XMP and resolution (by "
+                          "default all are kept, EXIF and XMP with their orientation reset, for JPEG, PNG, WebP "
+                          "and TIFF output, 8- and 16-bit; BMP keeps the resolution only, GIF nothing: said in a "
+                          "warning)."),
         max_memory_option(),
         click.Option(["--allow-folds"], is_flag=True,
                      help="Write a result even if triangles are still folded over (they never are "
