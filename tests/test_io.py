@@ -188,3 +188,74 @@ def test_webp_with_alpha_keeps_metadata_path_exact():
     exif[0x010E] = "caption"
     back = decode.decode_image(encode.encode_image(image, "webp", exif=exif.tobytes()), "webp")
     assert np.array_equal(back, image)
+
+
+def _raw_png(samples: np.ndarray, depth: int, colour_type: int, trns: bytes | None) -> bytes:
+    """A PNG of ``samples`` ((h, w) grey levels or (h, w, 3) RGB at ``depth`` bits) with a tRNS
+    chunk (None: none), written by hand: Pillow writes no 16-bit RGB nor 2-bit grey with one."""
+    import zlib
+
+    def chunk(kind, payload):
+        return struct.pack(">I", len(payload)) + kind + payload + struct.pack(">I", zlib.crc32(kind + payload))
+
+    height, width = samples.shape[:2]
+    rows = samples.reshape(height, -1)
+    if depth < 8:                                    # pack the levels, 8 // depth to a byte
+        per = 8 // depth
+        rows = np.pad(rows, ((0, 0), (0, -rows.shape[1] % per))).reshape(height, -1, per)
+        rows = sum(rows[:, :, k].astype(np.uint16) << (8 - depth * (k + 1)) for k in range(per))
+    body = b"".join(b"\0" + row.astype(">u2" if depth == 16 else np.uint8).tobytes() for row in rows)
+    header = struct.pack(">IIBBBBB", width, height, depth, colour_type, 0, 0, 0)
+    return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header) + (chunk(b"tRNS", trns) if trns is not None else b"")
+            + chunk(b"IDAT", zlib.compress(body)) + chunk(b"IEND", b""))
+
+
+@pytest.mark.parametrize("depth", [2, 8, 16])
+def test_grey_png_with_trns_decodes_with_its_alpha(depth):
+    """A grey PNG's tRNS level: OpenCV's IMREAD_UNCHANGED gives no alpha for it (it does for
+    RGB and palette PNGs), so its transparent pixels came out opaque. Pillow reads the level
+    but leaves 16-bit grey without alpha and compares a 2-bit level unscaled."""
+    top = (1 << depth) - 1
+    levels = np.arange(4 * 6).reshape(4, 6) % (top + 1)
+    data = _raw_png(levels, depth, 0, struct.pack(">H", top // 3))
+    image = decode.decode_image(data, "grey.png")
+    dtype = np.uint16 if depth == 16 else np.uint8
+    scale = np.iinfo(dtype).max // top if depth < 8 else 1
+    assert image.shape == (4, 6, 4) and image.dtype == dtype
+    assert np.array_equal(image[:, :, 0], (levels * scale).astype(dtype))
+    assert np.array_equal(image[:, :, 3] == 0, levels == top // 3) and image[:, :, 3].max() == np.iinfo(dtype).max
+    assert decode.decode_image(_raw_png(levels, depth, 0, None), "grey.png").ndim == 2   # none: no alpha
+    outside = _raw_png(levels, depth, 0, struct.pack(">H", top + 1)) if depth < 16 else None
+    assert outside is None or decode.decode_image(outside, "grey.png").ndim == 2
+
+
+@pytest.mark.parametrize("depth", [8, 16])
+def test_rgb_png_with_trns_decodes_with_its_alpha(depth):
+    """OpenCV gives an RGB PNG's tRNS colour as alpha already, at 8 and 16 bits."""
+    dtype = np.uint16 if depth == 16 else np.uint8
+    rgb = np.array([[[1000, 2000, 3000], [5, 6, 7]]]) % (np.iinfo(dtype).max + 1)
+    image = decode.decode_image(_raw_png(rgb, depth, 2, struct.pack(">3H", *rgb[0, 0])), "rgb.png")
+    assert image.dtype == dtype and image.shape == (1, 2, 4)
+    assert image[0, 0, 3] == 0 and image[0, 1, 3] == np.iinfo(dtype).max
+    assert image[0, 1, :3].tolist() == [7, 6, 5]
+
+
+@pytest.mark.parametrize("depth", [8, 16])
+def test_mask_alpha_takes_a_grey_pngs_trns(tmp_path, depth):
+    """--mask alpha said "no alpha channel" for a grey cut-out whose surround is its tRNS level,
+    and the surround came out opaque."""
+    from click.testing import CliRunner
+
+    from featurewarp_cli.cli.main import cli
+
+    y, x = np.mgrid[0:60, 0:80]
+    subject = (abs(x - 40) < 15) & (abs(y - 30) < 12)
+    grey = np.where(subject, (x * 3 + y) % 250 + 1, 0) * (257 if depth == 16 else 1)
+    source, out = tmp_path / "cut.png", tmp_path / "out.png"
+    source.write_bytes(_raw_png(grey, depth, 0, struct.pack(">H", 0)))
+    run = CliRunner().invoke(cli, ["warp", "swirl", str(source), str(out), "--mask", "alpha", "--angle", "20"])
+    assert run.exit_code == 0 and run.output == "", run.output
+    written = cv2.imread(str(out), cv2.IMREAD_UNCHANGED)
+    assert written.shape == (60, 80, 4) and written.dtype == (np.uint16 if depth == 16 else np.uint8)
+    assert written[0, 0, 3] == 0 and written[30, 40, 3] == np.iinfo(written.dtype).max
+    assert abs(int((written[:, :, 3] == 0).sum()) - int((~subject).sum())) < 0.05 * (~subject).sum()

@@ -5,6 +5,7 @@ One module per step, in the order a command uses them::
     limits    the pixel limit on inputs (MAX_PIXELS), told to OpenCV's decoders too
     decode    read bytes once, check the header's size (Pillow), decode (OpenCV),
               turn upright (EXIF orientation), the mask rule
+    png       PNG chunks read without decoding; a grey PNG's tRNS transparency
     colours   colour names and #rrggbb for the background
     formats   output format names, ``png:``-style prefixes, the output's format
     depth     the one rule that brings 16-bit samples to 8 bits

@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import ImageError, profiles, tiff
+from . import ImageError, png, profiles, tiff
 from .capture import captured_stderr
 from .metadata import TIFF_DESCRIPTIVE_TAGS, carried, descriptive_exif  # noqa: F401  (their old home)
 from .limits import MAX_PIXELS, check_pixels, check_size, limit_opencv_decoders, opencv_limit, size_text
@@ -238,28 +238,13 @@ def _orientation(image: Image.Image, data: bytes) -> int:
     try:
         if image.format == "PNG" and "exif" not in image.info:
             exif = Image.Exif()             # an eXIf chunk after the pixels: Pillow would decode them
-            exif.load(_png_chunk(data, b"eXIf") or b"")
+            exif.load(png.chunk(data, b"eXIf") or b"")
         else:
             exif = image.getexif()
         value = exif.get(_EXIF_ORIENTATION, 1)
     except Exception:  # a broken EXIF block: the pixels are shown as stored
         return 1
     return value if value in ORIENTATIONS else 1
-
-
-def _png_chunk(data: bytes, kind: bytes) -> bytes | None:
-    """The payload of the first chunk of type ``kind`` in PNG bytes (None if there is none);
-    chunk headers only are read, the pixels are skipped."""
-    at = 8
-    while at + 8 <= len(data):
-        length = int.from_bytes(data[at:at + 4], "big")
-        name = data[at + 4:at + 8]
-        if name == kind:
-            return data[at + 8:at + 8 + length]
-        if name == b"IEND":
-            return None
-        at += 12 + length
-    return None
 
 
 def read_header(data: bytes) -> Header | None:
@@ -309,7 +294,7 @@ def _png_header(data: bytes) -> Header | None:
     size = png_size(data)
     if size is None or not all(size):
         return None                                  # no PNG, or no pixels: the decoder says so
-    return Header("PNG", *size, 1, _png_chunk(data, b"acTL") is not None)
+    return Header("PNG", *size, 1, png.chunk(data, b"acTL") is not None)
 
 
 def gray_alpha_to_bgra(image: np.ndarray) -> np.ndarray:
@@ -387,7 +372,8 @@ def decode_image(data: bytes, name: str, max_pixels: int | None = MAX_PIXELS,
 
     The size in the header is checked against ``max_pixels`` before decoding;
     JPEG, PNG and WebP are turned upright according to their EXIF orientation
-    (OpenCV's TIFF decoder does it itself); gray + alpha becomes BGRA. Corrupt
+    (OpenCV's TIFF decoder does it itself); gray + alpha, and a grey PNG with a transparent
+    level (tRNS), become BGRA. Corrupt
     data that the decoder only warns about (libjpeg's "Corrupt JPEG data",
     "Premature end") is refused as well.
 
@@ -428,6 +414,7 @@ def decode_image(data: bytes, name: str, max_pixels: int | None = MAX_PIXELS,
     if header is not None and header.mode == "CMYK" and header.icc:   # sRGB: converted through its profile
         image = profiles.cmyk_to_srgb(data, image.shape, name)
     image = tiff.straight_alpha(image, data, name)   # what OpenCV's TIFF reading does to alpha
+    image = png.with_gray_transparency(image, data)   # a grey PNG's tRNS, which OpenCV leaves out
     if image.dtype not in (np.uint8, np.uint16):
         raise ImageError(f"{name} has unsupported sample type {image.dtype}")
     check_pixels(image.shape[1], image.shape[0], name, max_pixels)
