@@ -78,7 +78,7 @@ class Settings:
     quality : int or None
         JPEG and WebP quality 1..100 (WebP lossy when given).
     strip : bool
-        Drop the input's ICC profile and EXIF instead of keeping them.
+        Drop the input's metadata (ICC profile, EXIF, XMP, resolution) instead of keeping it.
     alpha_mask : bool
         Where no mask is given, INPUT's alpha is its mask (``batch --mask-pattern alpha``; one
         run's ``--mask alpha`` says it by its mask): :mod:`featurewarp_cli.app.masks`.
