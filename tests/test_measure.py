@@ -366,3 +366,27 @@ def test_a_region_matched_to_its_likeness_elsewhere_is_flagged(runner, tmp_path,
         cv2.imwrite(str(paths[name]), picture)
     run = runner("measure", paths["in"], paths["out"], "-m", paths["mask"])
     assert run.code == 0 and "component 1 lands where component 2 went" in run.stderr
+
+
+def test_max_distortion_makes_measure_a_check(runner, tmp_path, astronaut):
+    """measure exited 0 whatever it found, even with nothing measured (an unrelated OUTPUT), so
+    CI had to parse --json (animate trial nit 9); --max-distortion exits 1 above D or with
+    nothing measured. An animated OUTPUT's first frame is measured, and now it says so (nit 5)."""
+    from PIL import Image
+
+    image, mask = astronaut
+    output, _ = warp_affine(image, anisotropic(2.0, 0.0))
+    paths = {name: tmp_path / f"{name}.png" for name in ("in", "out", "mask", "flat")}
+    for name, picture in zip(paths, (image, output, mask.astype(np.uint8) * 255, np.full_like(image, 128))):
+        cv2.imwrite(str(paths[name]), picture)
+    base = ["measure", paths["in"], paths["out"], "-m", paths["mask"]]
+    assert runner(*base, "--max-distortion", "2").code == 0
+    above = runner(*base, "--max-distortion", "0.5")
+    assert above.code == 1 and "component 1 (around" in above.stderr and "above 0.5" in above.stderr
+    assert len(above.stdout.decode().splitlines()) == 3                   # the figures, all the same
+    nothing = runner("measure", paths["in"], paths["flat"], "-m", paths["mask"], "--max-distortion", "1")
+    assert nothing.code == 1 and "no region could be measured" in nothing.stderr
+    frames = [Image.fromarray(cv2.cvtColor(picture, cv2.COLOR_BGR2RGB)) for picture in (output, output[::-1])]
+    frames[0].save(tmp_path / "anim.png", save_all=True, append_images=frames[1:], duration=100)
+    run = runner("measure", paths["in"], tmp_path / "anim.png", "-m", paths["mask"])
+    assert run.code == 0 and "has several frames (animated or multi-page); the first is measured" in run.stderr

@@ -7,6 +7,8 @@ modules load only when the command runs.
 
 from __future__ import annotations
 
+import os
+
 import click
 
 from .options import max_memory_option, max_pixels_option
@@ -37,7 +39,10 @@ def component_line(fit) -> str:
               help="Print machine-readable JSON: input, output, mask, worst_distortion and per component "
                    "its figures (label, pixels, bbox, centre, distortion, noise, scale, rotation, rms_px, "
                    "local_p90, explained, ...; null where not measured, with the reason).")
-def measure_command(input, output, mask, as_json, max_pixels, max_memory):
+@click.option("--max-distortion", type=click.FloatRange(min=0.0), metavar="D",
+              help="A check for CI: exit 1 when a region's distortion is above D (0.02: the report's "
+                   "'kept'), or when no region could be measured; the figures are printed all the same.")
+def measure_command(input, output, mask, as_json, max_distortion, max_pixels, max_memory):
     """Measure how each masked region of INPUT came out in OUTPUT.
 
     SIFT keypoints inside each connected component of the mask are matched with
@@ -65,15 +70,25 @@ def measure_command(input, output, mask, as_json, max_pixels, max_memory):
       featurewarp measure photo.png out.png -m mask.png --json
     """
     from ..app import measure
-    from ..app.pipeline import WarpError, read_input
-    from ..io.decode import mask_from_image
+    from ..app.pipeline import WarpError, frames_warning, read_input
+    from ..io.decode import ImageError, mask_from_image, read_bytes, read_header
     from .presets import click_error
 
     if [input, output, mask].count("-") > 1:
         raise click.UsageError("only one of INPUT, OUTPUT and --mask can be '-' (stdin)")
 
     def read(path, param):                 # the pixel and memory limits, as for warp
-        return read_input(path, param, max_pixels, None, max_memory)
+        data = None if path == "-" or not os.path.isfile(path) else read_file(path, param)
+        if data is not None and frames_warning(read_header(data)):
+            click.echo(f"featurewarp: warning: {param} {path} has several frames (animated or multi-page); "
+                       f"the first is measured", err=True)
+        return read_input(path, param, max_pixels, data, max_memory)
+
+    def read_file(path, param):
+        try:
+            return read_bytes(path, max_memory)
+        except ImageError as err:
+            raise WarpError(str(err), None if param == "INPUT" else param) from err
 
     try:
         image, result = read(input, "INPUT"), read(output, "OUTPUT")
@@ -90,14 +105,31 @@ def measure_command(input, output, mask, as_json, max_pixels, max_memory):
         click.echo(json.dumps({"input": input, "output": output, "mask": mask,
                                "worst_distortion": measure.worst(fits),
                                "components": [f.as_dict() for f in fits]}, indent=2))
-        return
-    if not fits:
-        click.echo("the mask is empty: nothing to measure")
-    for fit in fits:
-        click.echo(component_line(fit))
+    else:
+        if not fits:
+            click.echo("the mask is empty: nothing to measure")
+        for fit in fits:
+            click.echo(component_line(fit))
+    _warn_and_gate(fits, max_distortion)
+
+
+def _warn_and_gate(fits, max_distortion: float | None) -> None:
+    """A warning per region that landed on another's place; with ``max_distortion``, exit 1
+    where a measured region is more distorted, or where no region could be measured."""
     for fit in fits:
         if fit.lands_on:
             others = ", ".join(str(label) for label in fit.lands_on)
             click.echo(f"featurewarp: warning: component {fit.label} lands where component{'s' * (len(fit.lands_on) > 1)} "
                        f"{others} went: one of them was matched to the other's likeness (the same subject twice?); "
                        f"their figures are doubtful", err=True)
+    if max_distortion is None:
+        return
+    measured = [fit for fit in fits if fit.distortion is not None]
+    above = [fit for fit in measured if fit.distortion > max_distortion]
+    if not measured:
+        click.echo("featurewarp: error: --max-distortion: no region could be measured", err=True)
+    for fit in above:
+        click.echo(f"featurewarp: error: --max-distortion: component {fit.label} (around ({fit.centre[0]:.0f}, "
+                   f"{fit.centre[1]:.0f})) has distortion {fit.distortion:.4f}, above {max_distortion:g}", err=True)
+    if above or not measured:
+        raise SystemExit(1)
