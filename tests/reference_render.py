@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from featurewarp_cli.render.antialias import AA_MAX_STEPS
+from featurewarp_cli.render.antialias import AA_MAX_STEPS, AA_START, BLEND_MARGIN, TENT_REACH
 
 
 class ReferenceMap:
@@ -89,20 +89,27 @@ class ReferenceMap:
         return best.reshape(self.height, self.width)
 
 
-def reference_footprint(jacobians: np.ndarray, max_steps: int = AA_MAX_STEPS):
+def reference_footprint(jacobians: np.ndarray, max_steps: int = AA_MAX_STEPS, per_octave: int = 8,
+                        start: float = AA_START, margin: float = BLEND_MARGIN, reach: float = TENT_REACH):
     """The filter of each Jacobian (n, 2, 2), from numpy's SVD and log2.
 
-    The tent of probes spans 2 (m1 - m2) on each side of the centre along the
-    major left singular vector (m1 >= m2 >= 1 the singular values, floored at
-    1), with probes at most m2 apart, at most ``max_steps`` a side: beyond that
-    the probes spread to 2 m1 / (max_steps + 2) apart and the pyramid level
-    rises to match. Returns (axis (n, 2), probes per side k (n,), spacing (n,),
-    pyramid level log2(m2) (n,)).
+    m1 >= m2 >= 1 are the singular values less ``start^2 - 1`` in quadrature (floored at
+    1). The level is made for m2 (at least reach m1 / sqrt(max_steps^2 + (reach start)^2),
+    beyond which the tent would need more probes); the tent along the major left singular
+    vector has radius reach sqrt(m1^2 - (start m2)^2) (0 below), probes at most m2 apart, at least 2 a side once it is
+    1e-3 long, at most ``max_steps``. The pyramid level: ``b = floor(per_octave
+    log2(m2))`` plus the weight of level b + 1, which rises linearly in m2 from 0 to 1
+    between ``margin`` and ``1 - margin`` of the way from 2^(b / per_octave) to
+    2^((b + 1) / per_octave). Returns (axis (n, 2), probes per side k (n,), spacing (n,),
+    level b + weight (n,)).
     """
     u, sv, _ = np.linalg.svd(jacobians)
-    m1, m2 = np.maximum(sv[:, 0], 1.0), np.maximum(sv[:, 1], 1.0)
-    wanted = np.maximum(2, np.ceil(2 * (m1 - m2) / m2 - 1e-9))
-    m2 = np.where(wanted > max_steps, 2 * m1 / (max_steps + 2), m2)
-    half = 2 * (m1 - m2)
-    k = np.where(half < 1e-3, 1, np.minimum(wanted, max_steps)).astype(int)
-    return u[:, :, 0], k, half / k, np.log2(m2)
+    slack = start ** 2 - 1
+    m1, m2 = (np.sqrt(np.maximum(sv[:, i] ** 2 - slack, 1.0)) for i in (0, 1))
+    m2 = np.maximum(m2, reach * m1 / np.sqrt(max_steps ** 2 + (reach * start) ** 2))
+    radius = reach * np.sqrt(np.maximum(m1 ** 2 - (start * m2) ** 2, 0))
+    k = np.where(radius < 1e-3, 1, np.clip(np.ceil(radius / m2 - 1e-9), 2, max_steps)).astype(int)
+    b = np.floor(per_octave * np.log2(m2) + 1e-12)
+    lo, hi = 2.0 ** (b / per_octave), 2.0 ** ((b + 1) / per_octave)
+    weight = np.clip(((m2 - lo) / (hi - lo) - margin) / (1 - 2 * margin), 0, 1)
+    return u[:, :, 0], k, radius / k, b + np.where(weight > 1 - 1e-4, 1.0, weight)

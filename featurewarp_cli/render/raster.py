@@ -36,7 +36,8 @@ import cv2
 import numpy as np
 
 from . import _raster
-from .antialias import COMPACT_WIDTH, Footprints, Pyramid, Silhouette, filter_band, sample_points
+from .antialias import Footprints, Silhouette, filter_band
+from .pyramid import COMPACT_WIDTH, Pyramid, sample_points
 from .remap import remap
 
 INTERPOLATION = {"nearest": cv2.INTER_NEAREST, "linear": cv2.INTER_LINEAR, "cubic": cv2.INTER_CUBIC,
@@ -178,7 +179,7 @@ class _BandRenderer:
             band[..., 3] = np.iinfo(band.dtype).max
         self._sample(bx, by, aatri, marked, band, flat)
         if marked:
-            filter_band(self.pyramid, foot, aatri, bx, by, flat, self.scratch)
+            filter_band(self.pyramid, foot, aatri, bx, by, flat, self.scratch, self.flag)
         if self.premultiplied:
             straighten(flat)
         return True if coverage is None else self._apply_coverage(coverage, flat, y0)
@@ -193,7 +194,7 @@ class _BandRenderer:
         by.fill(-1.0)
         sel = self.tris.in_rows(y0, y1)
         rec = self.tris.records(sel, self.scratch("rec", sel.size * len(Triangles.FIELDS), np.float64))
-        foot = Footprints(rec) if self.antialias and sel.size else None
+        foot = Footprints(rec, top_level=self.pyramid.top_level) if self.antialias and sel.size else None
         aatri = None
         if foot is not None:
             aatri = self.scratch("aatri", size, np.int32)
