@@ -1,7 +1,9 @@
 """Animations: one preset parameter (or several) varied over frames, factoring once.
 
-Writes an animated GIF, WebP or PNG (APNG), an MP4/AVI video through OpenCV's
-video writer, or a numbered PNG sequence (a path with a ``%d``-style field).
+Writes an animated GIF, WebP or PNG (APNG, :mod:`featurewarp_cli.io.animation`), an MP4/AVI
+video through OpenCV's video writer (its sides padded to even with the background), or a
+numbered PNG sequence (a path with a ``%d``-style field). The background and the metadata kept
+are a still output's of the format (GIF: white unless transparent; video: white, no alpha).
 """
 
 from __future__ import annotations
@@ -14,15 +16,18 @@ from dataclasses import replace
 import cv2
 import numpy as np
 
+from .. import plugins
 from ..engine import fidelity
 from ..engine.assess import STILL
 from ..engine.record import LISTED_IN_REPORT
-from ..io import formats, write
-from ..io.colours import parse_colour
+from ..io import ImageError, animation, formats, profiles, write
+from ..io.animation import GIF_MAX_FPS
+from ..io.colours import TRANSPARENT
 from ..io.depth import to_eight_bit
-from ..io.encode import encode_image, rgb_order, webp_options
+from ..io.encode import encode_image, flatten
+from ..io.metadata import Metadata
 from ..plugins import ParamError
-from .outputs import background_colour, check_encodable
+from .outputs import background_colour, check_encodable, kept_metadata, rendered
 from .pipeline import (Settings, WarpError, check_solution, load_image_and_mask, make_warper,
                        prefetch_engine, solve_within_budget)
 
@@ -118,16 +123,41 @@ def centre_on(image: np.ndarray, size: tuple[int, int], fill) -> np.ndarray:
     return canvas
 
 
-def to_bgr(image: np.ndarray, alpha: bool) -> np.ndarray:
-    """8-bit BGR (or BGRA when ``alpha``) from any gray/BGR/BGRA 8/16-bit image."""
+def to_bgr(image: np.ndarray, alpha: bool, background=(255, 255, 255)) -> np.ndarray:
+    """8-bit BGR (or BGRA when ``alpha``) from any gray/BGR/BGRA 8/16-bit image; without
+    ``alpha``, an image's own alpha is laid over ``background`` (r, g, b) as a still output's
+    (the colour under its transparent pixels came out)."""
     image = to_eight_bit(image)
     if image.ndim == 2:
         image = cv2.cvtColor(image, cv2.COLOR_GRAY2BGR)
     if alpha and image.shape[2] == 3:
         image = cv2.cvtColor(image, cv2.COLOR_BGR2BGRA)
     if not alpha and image.shape[2] == 4:
-        image = image[:, :, :3]
+        image = flatten(image, background[:3])
     return image
+
+
+def frame_background(text: str | None, kind: str, ext: str):
+    """The frames' background from ``--background`` (usage errors before any work): as a still
+    output of the format has it (:func:`featurewarp_cli.app.outputs.background_colour`: white
+    for GIF and video, transparent for PNG and WebP; a translucent colour laid over white where
+    the format has no alpha). A GIF may be transparent too (its pixels cut at half alpha); a
+    video cannot."""
+    transparent = text is not None and text.strip().lower() in TRANSPARENT
+    if kind == "video" and transparent:
+        raise WarpError(f"{text}: {ext[1:].upper()} video has no alpha channel; give a colour (default white)",
+                        "--background", usage=True)
+    if ext == ".gif" and transparent:
+        return None
+    return background_colour(text, "jpg" if kind == "video" else "gif" if ext == ".gif" else "png")
+
+
+def fill_of(background, alpha: bool) -> tuple:
+    """The BGR(A) sample of ``background`` ((r, g, b), (r, g, b, a) or None: transparent)."""
+    if background is None:
+        return (0, 0, 0, 0)
+    bgr = tuple(background[2::-1])
+    return bgr + ((background[3] if len(background) == 4 else 255),) if alpha else bgr
 
 
 def animate_file(settings: Settings, input: str, output: str, mask: str | None, ranges: dict,
@@ -152,58 +182,150 @@ def animate_file(settings: Settings, input: str, output: str, mask: str | None, 
         Summary: frames, canvas, factorizations, seconds, flipped triangles (total).
     """
     t0 = time.perf_counter()
-    kind = output_kind(output)
+    kind, ext = output_kind(output), os.path.splitext(output)[1].lower()
     check_output_paths(output_paths(output, kind, frames), formats.split_prefix(input)[1], mask)
+    background = frame_background(settings.background, kind, ext)
     prefetch_engine()
-    image, feature_mask, warnings = load_image_and_mask(settings, formats.split_prefix(input)[1], mask)
+    image, feature_mask, warnings, header = load_with_header(settings, formats.split_prefix(input)[1], mask)
+    kept = output_metadata(settings.strip, header, kind, ext, warnings)
+    if ext == ".gif" and kind == "animation" and fps > GIF_MAX_FPS:
+        warnings.append(f"--fps {fps:g}: a GIF plays at most {GIF_MAX_FPS:g} frames a second (its delays are in "
+                        f"1/100 s, and browsers show one under 2/100 s for 1/10 s): written at {GIF_MAX_FPS:g}")
     height, width = image.shape[:2]
     if settings.strict and warnings:
         raise WarpError(f"--strict: {warnings[0]}; nothing written")
     per_frame = frame_params(settings, ranges, frames)
-    warps, largest = [], (0, 0)
-    for params in per_frame:
-        warp, warper = make_warper(Settings(**{**settings.__dict__, "params": params}), width, height,
-                                   feature_mask)
-        warps.append(warp)
-        largest = max(largest, tuple(warp.canvas), key=lambda size: size[0] * size[1])
-        check_frames_fit(settings, frames, largest)      # frames share the largest canvas: refused early
+    warps, warper = frame_warps(settings, per_frame, ranges, width, height, feature_mask)
+    check_vary_moves(settings, ranges, warps, width, height)
     if settings.cell is None:                  # one grid fine enough for every frame: one factorization
         warper = _one_grid(settings, warps, width, height, feature_mask)
-    fmt = "png" if kind != "video" else "bmp"
-    background = background_colour(settings.background, fmt) if kind != "video" else (
-        parse_colour(settings.background) if settings.background else (255, 255, 255))
-    alpha = kind != "video" and background is None
+    alpha = background is None or (kind != "video" and ext != ".gif" and (
+        len(background) == 4 or (image.ndim == 3 and image.shape[2] in (2, 4))))
     canvas = (max(w.canvas[0] for w in warps), max(w.canvas[1] for w in warps))
+    if kind == "video":                       # codecs take even sides: padded, not cropped
+        canvas = (canvas[0] + canvas[0] % 2, canvas[1] + canvas[1] % 2)
     check_frames_fit(settings, frames, canvas)
     if kind != "video":                       # refused before any frame is made, not after
-        check_encodable(canvas, formats.format_name(os.path.splitext(output)[1]) or "png")
-    fill = (0, 0, 0, 0) if alpha else tuple(background[::-1]) + (255,)
-    rendered, flips, said, still = [], 0, [], 0
+        check_encodable(canvas, formats.format_name(ext) or "png")
+    rendered_frames, flips, said, still = [], 0, [], 0
     for index, warp in enumerate(warps):
-        mesh = solve_within_budget(warper, warp, settings.mode)
+        try:
+            mesh = solve_within_budget(warper, warp, settings.mode)
+            check_solution(replace(settings, strict=False), mesh)
+        except WarpError as err:
+            raise WarpError(f"{frame_name(index, per_frame[index], ranges)}: {err}", usage=err.usage) from None
         flips += mesh.info["flipped_triangles"]
-        check_solution(replace(settings, strict=False), mesh)
         lines = [line.replace(LISTED_IN_REPORT, "") for line in mesh.record.warnings]   # no report
         still += any(line.startswith(STILL) for line in lines)      # a frame at rest: said once, for all
         said.extend((index, line) for line in lines if not line.startswith(STILL))
         if settings.strict and said:          # nothing is written before every frame is solved
             raise WarpError(f"--strict: frame {said[0][0]}: {said[0][1]}; nothing written")
-        frame = to_bgr(warper.render(image, mesh, settings.interp, background, order="bgr"), alpha)
-        rendered.append(centre_on(frame, canvas, fill))
+        frame = to_bgr(rendered(warper, image, mesh, settings.interp, background), alpha, background or ())
+        rendered_frames.append(centre_on(frame, canvas, fill_of(background, alpha)))
         if progress:
             progress(1)
     at_rest = ["no frame moves a pixel: every frame is the input"] * (still == frames)    # the whole animation's
     if settings.strict and at_rest:
         raise WarpError(f"--strict: {at_rest[0]}; nothing written")
-    write_frames(output, kind, rendered, fps, settings.quality)
-    lines = at_rest + [f"frame {index}: {line}" for index, line in said[:FRAME_WARNINGS]]
+    write_frames(output, kind, rendered_frames, fps, settings.quality, kept, transparent=background is None)
+    return {"frames": frames, "canvas": canvas, "factorizations": warper.factorizations,
+            "flipped_triangles": flips, "seconds": time.perf_counter() - t0,
+            "warnings": warnings + at_rest + frame_lines(said)}
+
+
+def frame_lines(said: list[tuple[int, str]]) -> list[str]:
+    """The frames' compromises ((frame, line) pairs) as warnings: ``frame N: ...`` for the first
+    :data:`FRAME_WARNINGS`, then one line counting the rest."""
+    lines = [f"frame {index}: {line}" for index, line in said[:FRAME_WARNINGS]]
     if len(said) > FRAME_WARNINGS:
         first, last = said[FRAME_WARNINGS][0], said[-1][0]
         where = f"frame {first}" if first == last else f"frames {first} to {last}"
         lines.append(f"{len(said) - FRAME_WARNINGS} more compromises in {where} "
                      f"(featurewarp warp with a frame's values says each)")
-    return {"frames": frames, "canvas": canvas, "factorizations": warper.factorizations,
-            "flipped_triangles": flips, "seconds": time.perf_counter() - t0, "warnings": warnings + lines}
+    return lines
+
+
+def frame_name(index: int, params: dict, ranges: dict) -> str:
+    """``frame 12 (angle 85 of --vary angle=10:160)``: a frame and its varied values."""
+    values = ", ".join(f"{name.replace('_', '-')} {params[name]:g} of --vary {name.replace('_', '-')}="
+                       f"{start:g}:{end:g}" for name, (start, end) in ranges.items())
+    return f"frame {index} ({values})"
+
+
+def frame_warps(settings: Settings, per_frame: list[dict], ranges: dict, width: int, height: int, feature_mask):
+    """Each frame's warp and a warper (any frame's: they differ only in the warp). A frame's
+    refused values are a usage error naming the frame and its varied values, the varied
+    parameters by name (their options cannot be given beside --vary); the memory limit is
+    checked as the canvases grow."""
+    warps, largest, warper = [], (0, 0), None
+    for index, params in enumerate(per_frame):
+        try:
+            warp = plugins.load(settings.preset)(width, height, **params) if settings.warp_factory is None \
+                else settings.warp_factory(width, height, feature_mask)
+        except plugins.ParamError as err:
+            detail = err.render(lambda name: name.replace("_", "-") if name in ranges else plugins.option_flag(name))
+        except ValueError as err:
+            detail = str(err)
+        else:
+            detail = None
+        if detail is not None:
+            raise WarpError(f"{frame_name(index, params, ranges)}: {detail}", usage=True) from None
+        warp, warper = make_warper(replace(settings, params=params, warp_factory=lambda *_, made=warp: made),
+                                   width, height, feature_mask)
+        warps.append(warp)
+        largest = max(largest, tuple(warp.canvas), key=lambda size: size[0] * size[1])
+        check_frames_fit(settings, len(per_frame), largest)      # frames share the largest canvas: refused early
+    return warps, warper
+
+
+def check_vary_moves(settings: Settings, ranges: dict, warps: list, width: int, height: int) -> None:
+    """Usage error when the varied values change no frame though they vary: another option given
+    overrides them (stretch's --size or --width over a varied sx wrote a still animation). Frames
+    that are all the input are left to the at-rest warning."""
+    if len(warps) < 2 or all(start == end for start, end in ranges.values()):
+        return
+    points = np.stack(np.meshgrid(np.linspace(0, width - 1, 5), np.linspace(0, height - 1, 5)), -1).reshape(-1, 2)
+    first = warps[0].forward(points)
+    if np.allclose(first, points) or any(tuple(w.canvas) != tuple(warps[0].canvas)
+                                         or not np.array_equal(w.forward(points), first) for w in warps[1:]):
+        return
+    preset = plugins.load(settings.preset)
+    given = [plugins.option_flag(p.name) for p in preset.params
+             if p.name not in ranges and settings.params.get(p.name, p.default) != p.default]
+    varied = ", ".join(name.replace("_", "-") for name in ranges)
+    given = " or ".join(given) or "an option given"
+    raise WarpError(f"the varied {varied} changes no frame: {given} overrides it; drop {given} to vary {varied}",
+                    "--vary", usage=True)
+
+
+def load_with_header(settings: Settings, input: str, mask: str | None):
+    """:func:`featurewarp_cli.app.pipeline.load_image_and_mask`, and INPUT's header (None where
+    it cannot be read): the metadata an output keeps (:func:`featurewarp_cli.app.outputs.kept_metadata`)."""
+    from ..io import ImageError, decode
+    from .pipeline import check_file_size
+
+    data = None
+    if input == "-" or os.path.isfile(input):
+        if input != "-":
+            check_file_size(input, "INPUT", settings.max_memory, settings.max_pixels)
+        try:
+            data = decode.read_bytes(input, settings.max_memory)
+        except ImageError as err:
+            raise WarpError(str(err)) from err
+    image, feature_mask, warnings = load_image_and_mask(settings, input, mask, data)
+    return image, feature_mask, warnings, decode.read_header(data) if data else None
+
+
+def output_metadata(strip: bool, header, kind: str, ext: str, warnings: list) -> Metadata:
+    """What of the input's metadata the animation keeps (:func:`featurewarp_cli.app.outputs.kept_metadata`):
+    all of it in PNG frames and APNG, the profile, EXIF and XMP in WebP, none in GIF and video
+    (said in ``warnings`` unless ``strip``)."""
+    if kind == "video":
+        said = []
+        kept_metadata(strip, header, "bmp", said)
+        warnings.extend(line.replace("BMP output", f"{ext[1:].upper()} video") for line in said)
+        return Metadata()
+    return kept_metadata(strip, header, {".gif": "gif", ".webp": "webp"}.get(ext, "png"), warnings)
 
 
 def _one_grid(settings: Settings, warps: list, width: int, height: int, feature_mask):
@@ -250,48 +372,48 @@ def check_output_paths(paths: list[str], input: str, mask: str | None) -> None:
         check_distinct([(path, "OUTPUT")], [(input, "INPUT"), (mask, "--mask")], output_may_be_input=len(paths) == 1)
 
 
-def write_frames(output: str, kind: str, frames: list[np.ndarray], fps: float, quality: int | None = None) -> None:
-    """Write ``frames`` all or nothing: a sequence's frames as :func:`featurewarp_cli.io.encode.encode_image`
-    PNG bytes, staged together (:func:`featurewarp_cli.io.write.write_outputs`); an animated WebP
-    by Pillow, lossless (every pixel kept) unless ``quality`` is given, as a still WebP (OpenCV
-    wrote it lossy whatever --quality said); another animation or a video as OpenCV encodes it
-    into a hidden temporary file (removed on a signal too), whose bytes are then put in place."""
-    if kind == "sequence":
-        write.write_outputs([(output % index, encode_image(frame, "png")) for index, frame in enumerate(frames)])
-        return
-    directory = os.path.dirname(os.path.abspath(output))
-    ext = os.path.splitext(output)[1].lower()
-    if kind == "animation" and ext == ".webp":
-        write.write_atomic(output, _webp_animation(frames, max(1, round(1000.0 / fps)), quality))
-        return
-    with write.temporary_file(directory, ext) as tmp:
+def write_frames(output: str, kind: str, frames: list[np.ndarray], fps: float, quality: int | None = None,
+                 kept: Metadata | None = None, transparent: bool = False) -> None:
+    """Write ``frames`` all or nothing, with the metadata ``kept`` where the format holds it.
+
+    A sequence's frames are :func:`featurewarp_cli.io.encode.encode_image` PNGs, staged together
+    (:func:`featurewarp_cli.io.write.write_outputs`); a GIF, APNG or WebP is encoded by
+    :mod:`featurewarp_cli.io.animation` (WebP lossless unless ``quality`` is given; a GIF
+    ``transparent`` where alpha is under half); a video is written by OpenCV into a hidden
+    temporary file (removed on a signal too), whose bytes are then put in place.
+    """
+    kept = kept or Metadata()
+    try:
+        if kind == "sequence":
+            write.write_outputs([(output % index, encode_image(frame, "png", **kept.keywords()))
+                                 for index, frame in enumerate(frames)])
+            return
+        ext = os.path.splitext(output)[1].lower()
         if kind == "animation":
-            animation = cv2.Animation()
-            animation.frames = frames
-            animation.durations = [max(1, round(1000.0 / fps))] * len(frames)
-            written = cv2.imwriteanimation(tmp, animation)
-        else:
-            size = (frames[0].shape[1], frames[0].shape[0])
-            writer = cv2.VideoWriter(tmp, cv2.VideoWriter_fourcc(*VIDEO[ext]), fps, size)
-            written = writer.isOpened()
-            for frame in frames:
-                writer.write(frame)
-            writer.release()
+            if ext == ".gif":
+                data = animation.gif_bytes(frames, fps, transparent)
+            elif ext == ".webp":
+                data = animation.webp_bytes(frames, fps, quality, profiles.for_pixels(kept.icc, frames[0].shape[2]),
+                                            kept.exif, kept.xmp)
+            else:
+                data = animation.apng_bytes(frames, fps, **kept.keywords())
+            write.write_atomic(output, data)
+            return
+    except ImageError as err:
+        raise WarpError(f"cannot write {output}: {err}") from err
+    _write_video(output, ext, frames, fps)
+
+
+def _write_video(output: str, ext: str, frames: list[np.ndarray], fps: float) -> None:
+    """An MP4 or AVI video of 8-bit BGR ``frames`` by OpenCV's video writer (:data:`VIDEO` codecs)."""
+    with write.temporary_file(os.path.dirname(os.path.abspath(output)), ext) as tmp:
+        size = (frames[0].shape[1], frames[0].shape[0])
+        writer = cv2.VideoWriter(tmp, cv2.VideoWriter_fourcc(*VIDEO[ext]), fps, size)
+        written = writer.isOpened()
+        for frame in frames:
+            writer.write(frame)
+        writer.release()
         if not written or os.path.getsize(tmp) == 0:
             raise WarpError(f"OpenCV could not write {output}")
         with open(tmp, "rb") as encoded:         # renamed into place with the usual permissions
             write.write_atomic(output, encoded.read())
-
-
-def _webp_animation(frames: list[np.ndarray], duration: int, quality: int | None) -> bytes:
-    """Animated WebP bytes of BGR(A) ``frames``, each shown ``duration`` ms, looping: lossless in
-    libwebp's exact mode (the colour under transparent pixels kept too), or lossy at ``quality``."""
-    import io
-
-    from PIL import Image
-
-    images = [Image.fromarray(rgb_order(frame)) for frame in frames]
-    buffer = io.BytesIO()
-    images[0].save(buffer, "WEBP", save_all=True, append_images=images[1:], duration=duration, loop=0,
-                   **webp_options(quality))
-    return buffer.getvalue()

@@ -35,7 +35,8 @@ JOBS = Param("jobs", int, 1, "Worker processes, each with an Nth of --max-memory
              "to N=1.", min=1, max=1024, metavar="N")
 FRAMES = Param("frames", int, 24, "Number of frames (START and END included; at most 10 000).", min=1, max=10_000,
                metavar="N")
-FPS = Param("fps", float, 12.0, "Frames per second (GIF and video players take 0.01 to 100).",
+FPS = Param("fps", float, 12.0, "Frames per second, 0.01 to 100; a GIF plays at most 50 (its delays are in "
+            "1/100 s, and browsers slow one under 2/100 s to 1/10 s): faster is written at 50, with a warning.",
             min=0.01, max=100.0)
 MAX_RMSE = Param("max_rmse", float, None, "Pass if RMSE <= X.", min=0.0, metavar="X")
 MIN_PSNR = Param("min_psnr", float, None, "Pass if PSNR >= DB.", metavar="DB")
