@@ -70,8 +70,23 @@ def tint(image: np.ndarray, mask: np.ndarray | None, strength: float = 0.45) -> 
     return out
 
 
-#: A panel's caption bar height and the gap between its views, in pixels.
+#: A panel's caption bar height and the gap between its views, in pixels, at the label's
+#: smallest font scale (:data:`FONT`); taller views get larger labels (:func:`label_font`).
 CAPTION_BAR, GAP = 28, 8
+#: The labels' font scale (OpenCV's Hershey simplex) on views up to :data:`FONT_HEIGHT` px tall,
+#: larger in proportion above it (a fixed 0.55 was a few hundredths of a 12 MP panel's height),
+#: and the smallest it takes to fit a narrow view.
+FONT, FONT_HEIGHT, SMALLEST_FONT = 0.55, 720, 0.3
+
+
+def label_font(height: int) -> float:
+    """The labels' font scale on views ``height`` pixels tall."""
+    return FONT * max(1.0, height / FONT_HEIGHT)
+
+
+def caption_bar(height: int) -> int:
+    """The caption bar's height, in pixels, above views ``height`` pixels tall."""
+    return round(CAPTION_BAR * label_font(height) / FONT)
 
 
 def panel_size(sizes: list[tuple[int, int]], width: int | None = None) -> tuple[int, int]:
@@ -80,7 +95,33 @@ def panel_size(sizes: list[tuple[int, int]], width: int | None = None) -> tuple[
     scale = 1.0 if width is None else max(1, width - GAP * (len(sizes) - 1)) / natural
     edges = np.round(np.cumsum([0] + [w for w, _ in sizes]) * scale).astype(int)
     height = max(max(1, round(h * scale)) for _, h in sizes)
-    return int(np.maximum(np.diff(edges), 1).sum()) + GAP * (len(sizes) - 1), height + CAPTION_BAR
+    return int(np.maximum(np.diff(edges), 1).sum()) + GAP * (len(sizes) - 1), height + caption_bar(height)
+
+
+def fit_labels(labels: list, widths: list[int], height: int) -> tuple[list[str], float]:
+    """Each view's label and the font scale they share, so that the views of a narrow or tall
+    panel are still told apart ("featurewarp rigi" | "featur" were cut at the view's edge).
+
+    Each label (a str, or its forms longest first) is written in its longest form that fits its
+    view's width, at :func:`label_font` or, where that fits more of the labels' text, at
+    :data:`FONT`; a view too narrow for even the shortest form shrinks the font (to
+    :data:`SMALLEST_FONT`) until it fits.
+    """
+    forms = [[label] if isinstance(label, str) else list(label) for label in labels]
+
+    def wide(text, scale):
+        return cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, scale, 1)[0][0]
+
+    def choose(font):
+        room = [max(1, across - 2 * round(6 * font / FONT)) for across in widths]
+        chosen = [next((text for text in options if wide(text, font) <= space), options[-1])
+                  for options, space in zip(forms, room)]
+        for text, space in zip(chosen, room):
+            font = max(SMALLEST_FONT, min(font, font * space / max(1, wide(text, font))))
+        return chosen, font
+
+    tried = [choose(font) for font in dict.fromkeys((label_font(height), FONT))]
+    return max(tried, key=lambda pair: (sum(map(len, pair[0])), pair[1]))
 
 
 def check_panel(settings, size: tuple[int, int], fmt: str) -> None:
@@ -104,35 +145,47 @@ def check_panel(settings, size: tuple[int, int], fmt: str) -> None:
                         f"--panel-width)")
 
 
-def labelled_panel(images: list[np.ndarray], labels: list[str], width: int | None = None) -> np.ndarray:
+def labelled_panel(images: list[np.ndarray], labels: list, width: int | None = None) -> np.ndarray:
     """Side-by-side panel of ``images``, each with a caption bar.
 
     Each view keeps its own pixels (a retoucher judges pixels): the panel is as tall as
     the tallest, shorter views padded with white. ``width``: scale the whole panel to that
-    many pixels across instead (a small panel for a page).
+    many pixels across instead (a small panel for a page). ``labels``: each view's, a str or
+    its forms longest first, written in the longest that fits (:func:`fit_labels`).
 
     Returns
     -------
     (H, W, 3) uint8 ndarray
     """
-    bar, gap = CAPTION_BAR, GAP
+    gap = GAP
     images = [as_bgr8(image) for image in images]
     natural = sum(image.shape[1] for image in images)
     scale = 1.0 if width is None else max(1, width - gap * (len(images) - 1)) / natural
     height = max(max(1, round(image.shape[0] * scale)) for image in images)
+    bar = caption_bar(height)
     edges = np.round(np.cumsum([0] + [image.shape[1] for image in images]) * scale).astype(int)
+    widths = [int(across) for across in np.maximum(np.diff(edges), 1)]
+    labels, font = fit_labels(labels, widths, height)
+    step = font / FONT                    # the margins and stroke grow with the font
     tiles = []
-    for image, label, across in zip(images, labels, np.maximum(np.diff(edges), 1)):
-        size = (int(across), max(1, round(image.shape[0] * scale)))
+    for image, label, across in zip(images, labels, widths):
+        size = (across, max(1, round(image.shape[0] * scale)))
         if scale != 1.0:
             image = cv2.resize(image, size, interpolation=cv2.INTER_AREA if scale < 1 else cv2.INTER_CUBIC)
         tile = np.full((height, size[0], 3), 255, np.uint8)
         tile[:size[1]] = image
         caption = np.full((bar, size[0], 3), 255, np.uint8)
-        cv2.putText(caption, label, (6, bar - 9), cv2.FONT_HERSHEY_SIMPLEX, 0.55, (30, 30, 30), 1, cv2.LINE_AA)
+        cv2.putText(caption, label, (round(6 * step), bar - round(9 * step)), cv2.FONT_HERSHEY_SIMPLEX, font,
+                    (30, 30, 30), max(1, round(step)), cv2.LINE_AA)
         tiles.append(np.vstack([caption, tile]))
         tiles.append(np.full((height + bar, gap, 3), 255, np.uint8))
     return np.hstack(tiles[:-1])
+
+
+#: Each view's label, longest first (:func:`fit_labels`): ``{preset}`` is the preset's name.
+LABELS = {"input + mask": ("input + mask", "input", "in"), "input": ("input", "in"),
+          "plain": ("plain {preset}", "plain", "P"), "rigid": ("featurewarp rigid", "rigid", "R"),
+          "similarity": ("featurewarp similarity", "similarity", "simil.", "S")}
 
 
 def compare_file(settings, input: str, output: str, mask: str | None = None,
@@ -156,9 +209,10 @@ def compare_file(settings, input: str, output: str, mask: str | None = None,
     from ..engine.assess import STILL
     from ..engine.record import LISTED_IN_REPORT
     from ..io import formats
-    from .outputs import background_colour, check_distinct, rendered, write_image
-    from .pipeline import (WarpError, check_outputs, check_solution, load_image_and_mask, make_warper,
-                           prefetch_engine, solve_within_budget)
+    from .animate import load_with_header
+    from .outputs import background_colour, check_distinct, encoded, kept_metadata, rendered, write_all
+    from .pipeline import (WarpError, check_outputs, check_solution, make_warper, prefetch_engine,
+                           solve_within_budget)
     from .report import summary
 
     t0 = time.perf_counter()
@@ -168,11 +222,12 @@ def compare_file(settings, input: str, output: str, mask: str | None = None,
     background = background_colour(settings.background, fmt)
     settings = replace(settings, mode="similarity")
     prefetch_engine()
-    image, feature_mask, warnings = load_image_and_mask(settings, input, mask)
+    image, feature_mask, warnings, header = load_with_header(settings, input, mask)
+    kept = kept_metadata(settings.strip, header, fmt, warnings)        # the views are in the input's colours
     height, width = image.shape[:2]
     warp, warper = make_warper(settings, width, height, feature_mask)
     check_panel(settings, panel_size([(width, height)] + [tuple(warp.canvas)] * 3, panel_width), fmt)
-    tiles, labels = [tint(image, feature_mask)], ["input + mask" if feature_mask is not None else "input"]
+    tiles, labels = [tint(image, feature_mask)], [LABELS["input + mask" if feature_mask is not None else "input"]]
     if mask is None:
         warnings.append("no --mask: the rigid and similarity views are the plain warp (--mask marks the features "
                         "they keep)")
@@ -189,6 +244,7 @@ def compare_file(settings, input: str, output: str, mask: str | None = None,
             raise WarpError(f"--strict: {warnings[0]}; nothing written")
         result = rendered(warper, image, mesh, settings.interp, background)
         tiles.append(draw_grid(result, mesh) if with_grid else result)
-        labels.append(f"{mode} {settings.preset}" if mode == "plain" else f"featurewarp {mode}")
-    write_image(out_path, fmt, labelled_panel(tiles, labels, panel_width), (255, 255, 255))
+        labels.append(tuple(form.format(preset=settings.preset) for form in LABELS[mode]))
+    panel = labelled_panel(tiles, labels, panel_width)
+    write_all([(out_path, encoded(out_path, fmt, panel, (255, 255, 255), settings.quality, kept))])
     return summary(settings.preset, "compare", input, out_path, (width, height), mesh, t0, warnings)
