@@ -220,6 +220,27 @@ def test_the_move_towards_plain_stops_at_the_first_root_of_a_margin_that_turns_b
     assert t == pytest.approx(0.2, abs=1e-9) and t <= 0.2
 
 
+def test_a_margin_that_passes_again_where_a_triangle_reaches_its_floor_is_not_jumped():
+    """The move looked at the margin only where a triangle reaches its floor, and there its
+    thinness is 0 by construction: where it read -1e-15 the move went all the way, past a
+    stretch of failing margin, and where it read +1e-13 it stopped at that stretch (fish
+    --bend -100 on the dahlia at 320 px: one ulp of the bend moved the mesh 4 px, the release's
+    blend 0.15 <-> 0.25, as did numpy without AVX-512). Every sample is looked at now."""
+    from featurewarp_cli.engine.plain_bound import furthest_move
+
+    triangle = np.array([[0, 1, 2]])
+    warped = np.array([[0.0, 0.0], [10.0, 0.0], [0.0, 10.0]])
+    target = warped - [[0.0, 0.0], [10.0, 0.0], [0.0, 0.0]]          # crushed to nothing at t = 1
+    floor = barrier.SAFE_FRACTION * signed_areas(warped, triangle)
+
+    def margin(points):
+        t = (10.0 - points[1, 0]) / 10.0
+        return (t - 0.2) * (0.5 - t)                    # fails between 0.2 and 0.5 only
+
+    _, t = furthest_move(lambda t: warped + t * (target - warped), margin, triangle, floor)
+    assert t == pytest.approx(0.2, abs=1e-9) and t <= 0.2
+
+
 def test_the_move_stops_just_before_a_noisy_root_not_at_the_last_sample():
     """A margin that rounding makes noisy at its root (areas of crushed triangles lose digits:
     about 1e-13) used to send the move back to the last sample that passed (0.25 instead of

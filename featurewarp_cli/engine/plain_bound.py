@@ -27,6 +27,10 @@ MOVE_SAMPLES = 8
 #: How far :func:`furthest_move` steps back from the margin's root, in turn, until the margin
 #: passes there (its rounding noise is about 1e-13 of the move).
 ROOT_BACKOFF = (4e-12, 1e-9, 1e-6, 1e-4, 1e-2)
+#: Where :func:`furthest_move` looks last, as a share of the way to where a triangle reaches its
+#: floor short of it: there the margin's thinness is 0 by construction (its sign was rounding,
+#: and it decided whether the way before it was looked at: fish at 320 px, 4 px apart).
+REACH_INSIDE = 1e-9
 #: How far past a root of the plain margin :func:`_fixable_root` looks for the tapered moves
 #: that fix the point (and past their root, for one that no longer fixes it).
 ROOT_STEP = 1e-6
@@ -414,8 +418,9 @@ def furthest_move(move, margin, triangles: np.ndarray, floor: np.ndarray) -> tup
 
     Up to where a triangle falls to half its floor (or to half its area at t = 0 where that is
     smaller: the first root of quadratics, :func:`injectivity.max_step`) and, where the margin
-    turns positive before that, at its root: the first of :data:`MOVE_SAMPLES` evenly spaced
-    points where it fails brackets it, and the root is the margin's own in closed form where it
+    turns positive before that, at its first root: the first of :data:`MOVE_SAMPLES` evenly
+    spaced points where it fails (every one is looked at, the last :data:`REACH_INSIDE` short of
+    the triangle's root, so that a margin that fails and passes again is not jumped) brackets it, and the root is the margin's own in closed form where it
     gives one in the bracket (``margin.first_root(start, end, upto)``: :class:`PlainMargin`, and
     :func:`release_margin` where it can tell), else :func:`roots.bracketed_root` finds it to
     convergence. Both are functions of the inputs, and a root has no threshold to flip; where
@@ -423,9 +428,10 @@ def furthest_move(move, margin, triangles: np.ndarray, floor: np.ndarray) -> tup
     root than the bracketed search would have (an earlier one)."""
     start, end = move(0.0), move(1.0)
     reach = max_step(start, end, triangles, CRUSHED_SHARE * np.minimum(floor, signed_areas(start, triangles)))
-    if reach > 0 and margin(move(reach)) > 0:
-        samples = reach * np.arange(1, MOVE_SAMPLES + 1) / MOVE_SAMPLES
-        failing = next(k for k, t in enumerate(samples) if margin(move(t)) > 0)
+    samples = reach * np.arange(1, MOVE_SAMPLES + 1) / MOVE_SAMPLES
+    samples[-1] = reach * (1.0 - REACH_INSIDE)
+    failing = next((k for k, t in enumerate(samples) if margin(move(t)) > 0), None) if reach > 0 else None
+    if failing is not None:
         low, high = (samples[failing - 1] if failing else 0.0), samples[failing]
         closed_form = getattr(margin, "first_root", None)
         root = closed_form(start, end, high) if closed_form is not None else None
