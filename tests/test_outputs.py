@@ -524,3 +524,20 @@ def test_a_signal_while_a_library_message_is_captured_is_still_said():
               "    import time; time.sleep(5)\n")
     run = subprocess.run([sys.executable, "-c", script], capture_output=True, timeout=60)
     assert run.returncode == 130 and run.stderr.decode() == "featurewarp: stopped by SIGINT\n", run.stderr
+
+
+def test_a_named_staged_file_is_pending_while_it_is_written(tmp_path, monkeypatch):
+    """A sequence of more than 256 frames stages named files; Ctrl-C while one was written left it
+    (it joined _PENDING only once written): the handlers must see it from its creation."""
+    seen = []
+    real = write._write_all
+
+    def spy(fd, data):
+        seen.append(set(write._PENDING))
+        return real(fd, data)
+
+    monkeypatch.setattr(write, "_write_all", spy)
+    staged = write._stage_file(str(tmp_path / "a.png"), str(tmp_path / "a.png"), b"x", named=True)
+    assert seen and staged.temp in seen[0]
+    write.remove_pending()
+    assert not os.path.exists(staged.temp)

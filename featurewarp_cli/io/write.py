@@ -33,6 +33,7 @@ import fcntl
 import io
 import os
 import re
+import signal
 import stat
 import sys
 import tempfile
@@ -131,16 +132,16 @@ def _stage_file(path: str, target: str, data: bytes, named: bool = False) -> Sta
             os.close(fd)
             raise
         return Staged(path, "file", target, fd=fd, data=data)
-    handle, temp = tempfile.mkstemp(prefix=TEMP_PREFIX, suffix=".tmp", dir=directory)
+    handle, temp = _pending_mkstemp(directory, ".tmp")
     try:
         _write_all(handle, data)
         os.fchmod(handle, mode)
     except BaseException:
         os.close(handle)
         os.unlink(temp)
+        _PENDING.discard(temp)
         raise
     os.close(handle)
-    _PENDING.add(temp)
     return Staged(path, "file", target, temp=temp, data=data)
 
 
@@ -417,6 +418,19 @@ def remove_quietly(path: str) -> None:
 _PENDING: set[str] = set()
 
 
+def _pending_mkstemp(directory: str, suffix: str) -> tuple[int, str]:
+    """:func:`tempfile.mkstemp` in ``directory``, its path in :data:`_PENDING` before a signal can
+    come between the two (SIGINT and SIGTERM are held for them): the handlers remove only what
+    is pending, and a file staged while Ctrl-C came (registered after it was written) was left."""
+    held = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
+    try:
+        fd, path = tempfile.mkstemp(prefix=TEMP_PREFIX, suffix=suffix, dir=directory)
+        _PENDING.add(path)
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, held)
+    return fd, path
+
+
 def remove_pending() -> None:
     """Remove every hidden temporary file this process has not put in place (signal handlers)."""
     for path in list(_PENDING):
@@ -428,9 +442,8 @@ def remove_pending() -> None:
 def temporary_file(directory: str, suffix: str = ""):
     """The path of a new hidden temporary file in ``directory`` (for an encoder that writes only to
     a named file), removed on leaving and by the signal handlers (:func:`remove_pending`)."""
-    fd, path = tempfile.mkstemp(prefix=TEMP_PREFIX, suffix=suffix, dir=directory)
+    fd, path = _pending_mkstemp(directory, suffix)
     os.close(fd)
-    _PENDING.add(path)
     try:
         yield path
     finally:
