@@ -147,12 +147,42 @@ def bench_photos(size: int = 384) -> list[dict]:
     return rows
 
 
+#: Cases a determinism trial found (2026-11-27) by nudging options and emulating other CPUs:
+#: (photo, mask, longest side or None for the file's own size, preset, parameters, mode).
+TRIAL_CASES = (
+    ("dahlia.png", "dahlia_mask.png", 320, "fish", {"bend": -100}, "similarity"),
+    ("china.png", "china_mask.png", 512, "squeeze", {"bend": 100}, "similarity"),
+    ("astronaut.png", "astronaut_mask.png", 320, "swirl", {"angle": 230}, "rigid"),
+    ("astronaut.png", "astronaut_mask.png", 1024, "swirl", {"angle": 229.99999}, "similarity"),
+)
+
+
+def bench_trial() -> list[dict]:
+    """:data:`TRIAL_CASES`, each at its size; print and return the rows."""
+    samples, rows = ROOT / "samples", []
+    print(f"\nStability of the determinism trial's cases: one-ulp nudges ({', '.join(PATTERNS)})")
+    for photo, mask_name, size, preset, params, mode in TRIAL_CASES:
+        image = cv2.cvtColor(cv2.imread(str(samples / photo)), cv2.COLOR_BGR2RGB)
+        scale = size / max(image.shape[:2])
+        shape = (max(8, round(image.shape[1] * scale)), max(8, round(image.shape[0] * scale)))
+        image = cv2.resize(image, shape, interpolation=cv2.INTER_AREA)
+        mask = cv2.resize(cv2.imread(str(samples / mask_name), cv2.IMREAD_GRAYSCALE), shape,
+                          interpolation=cv2.INTER_NEAREST) >= 128
+        rows.append(_measured_row(f"{photo} {size} {preset} {params} {mode}", image, mask, preset, params, mode,
+                                  photo=photo))
+    print(f"{sum(r['ok'] for r in rows)} of {len(rows)} cases within the targets")
+    return rows
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--size", type=int, default=None, help="default 256; 384 with --photos")
     parser.add_argument("--photos", action="store_true", help="the settings on other photos instead")
+    parser.add_argument("--trial", action="store_true", help="the determinism trial's cases instead")
     args = parser.parse_args(argv)
-    if args.photos:
+    if args.trial:
+        bench_trial()
+    elif args.photos:
         bench_photos(args.size or 384)
     else:
         bench_stability(args.size or 256)
