@@ -148,7 +148,7 @@ def bench_photos(size: int = 384) -> list[dict]:
 
 
 #: Cases a determinism trial found (2026-11-27) by nudging options and emulating other CPUs:
-#: (photo, mask, longest side or None for the file's own size, preset, parameters, mode).
+#: (photo, mask, longest side, preset, parameters, mode).
 TRIAL_CASES = (
     ("dahlia.png", "dahlia_mask.png", 320, "fish", {"bend": -100}, "similarity"),
     ("china.png", "china_mask.png", 512, "squeeze", {"bend": 100}, "similarity"),

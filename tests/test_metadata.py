@@ -303,3 +303,16 @@ def test_cli_says_what_a_bmp_output_leaves_out(tmp_path):
         assert [round(v) for v in written.info["dpi"]] == [300, 300]
     quiet = CliRunner().invoke(cli, args + ["--strip"])
     assert quiet.exit_code == 0 and quiet.output == "", quiet.output
+
+
+def test_a_resolution_no_output_can_store_is_not_kept(tmp_path):
+    """A TIFF at 4294967295 dpi (valid: its rationals are 32-bit) failed the write as BMP or PNG
+    with a raw struct.error; resolutions above metadata.MOST_DPI are left out."""
+    from PIL import Image
+
+    from featurewarp_cli.io import metadata
+
+    Image.fromarray(np.zeros((20, 30, 3), np.uint8)).save(tmp_path / "big.tif", dpi=(4294967295, 4294967295))
+    Image.fromarray(np.zeros((20, 30, 3), np.uint8)).save(tmp_path / "fine.tif", dpi=(300, 300))
+    assert metadata.resolution(Image.open(tmp_path / "big.tif")) is None
+    assert metadata.resolution(Image.open(tmp_path / "fine.tif")) == pytest.approx((300, 300))

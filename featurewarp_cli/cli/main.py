@@ -83,6 +83,9 @@ def cli(ctx, debug, quiet, verbose):
       featurewarp warps            # presets, their options, defaults and ranges
     """
     ctx.meta["featurewarp.quiet"], ctx.meta["featurewarp.verbose"] = quiet, verbose
+    from .. import stages
+
+    stages.quiet = quiet          # a command's own -q sets it again; an earlier run's does not last
 
 
 @cli.group(cls=PresetGroup, context_settings={"help_option_names": ["-h", "--help"]},

@@ -10,7 +10,8 @@ from .record import KEPT, ComponentRecord, SolveRecord, warnings_for
 #: Features (quads holding a mask pixel) covering more than this share of the grid get a warning.
 MASK_COVERAGE = 0.9
 #: A warp whose nodes all stay within this many pixels of where they were, on the input's own
-#: canvas, is said to move nothing (a mask over all it moves is said otherwise: record.warnings_for) (``stretch`` at its 1 x 1 defaults, a swirl centred far off).
+#: canvas, is said to move nothing (``stretch`` at its 1 x 1 defaults, a swirl centred far off;
+#: a mask over all a warp moves is said otherwise, by record.warnings_for).
 STILL_PX = 0.01
 #: How that warning begins (an animation's frames say it once for all of them).
 STILL = "the warp moves no pixel"

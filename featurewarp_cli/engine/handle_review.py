@@ -12,7 +12,7 @@ import numpy as np
 
 from .barrier import SAFE_FRACTION
 from .grid import signed_areas
-from .injectivity import border_crossings
+from .injectivity import CRUSHED_SHARE
 from .handles import resample
 
 #: A point or curve handle may end this far from its target (px) before a warning says so
@@ -24,7 +24,7 @@ NAMED = 5
 #: crease (a feature carried against a pin did 0.014). Half the fold-over guard's safe area:
 #: the barrier lets the thinnest triangles of a hard solve down to 40-70 % of it (at 0.1, a
 #: handle dragged 60 px with two pins warned at 0.097).
-CRUSHED = 0.5 * SAFE_FRACTION
+CRUSHED = CRUSHED_SHARE * SAFE_FRACTION
 #: Points along a curve handle where it is measured (its target and where it ended).
 CURVE_SAMPLES = 32
 

@@ -431,7 +431,9 @@ def furthest_move(move, margin, triangles: np.ndarray, floor: np.ndarray) -> tup
     samples = reach * np.arange(1, MOVE_SAMPLES + 1) / MOVE_SAMPLES
     samples[-1] = reach * (1.0 - REACH_INSIDE)
     failing = next((k for k, t in enumerate(samples) if margin(move(t)) > 0), None) if reach > 0 else None
-    if failing is not None:
+    if failing is None:
+        reach = samples[-1] if reach > 0 else reach     # the last point looked at: it passes
+    else:
         low, high = (samples[failing - 1] if failing else 0.0), samples[failing]
         closed_form = getattr(margin, "first_root", None)
         root = closed_form(start, end, high) if closed_form is not None else None

@@ -129,11 +129,26 @@ def _exif_resolution(exif) -> tuple[float, float] | None:
     return (x * 2.54, y * 2.54) if unit == 3 else (x, y)
 
 
+#: The highest resolution kept (pixels per inch): every output stores it (a TIFF's rationals, PNG's
+#: pHYs and BMP's pixels per metre are 32-bit; 4294967295 dpi failed the write), and a scanner
+#: stops far below (12 800).
+MOST_DPI = 100_000.0
+
+
 def resolution(image) -> tuple[float, float] | None:
     """The resolution (pixels per inch) an opened image states: JFIF density in inches or
     centimetres, else its EXIF's (JPEG); pHYs in metres (PNG); its tags (TIFF); its EXIF (WebP);
     pixels per metre (BMP). None where it states none (Pillow's made-up 72 dpi for a JPEG whose
-    EXIF has no resolution is not taken)."""
+    EXIF has no resolution is not taken), or one that is not above 0 and at most
+    :data:`MOST_DPI`."""
+    stated = _stated_resolution(image)
+    if stated is None or not all(0.0 < float(v) <= MOST_DPI for v in stated):
+        return None
+    return stated
+
+
+def _stated_resolution(image) -> tuple[float, float] | None:
+    """:func:`resolution` as the image states it, unchecked."""
     info = image.info
     try:
         if image.format in ("JPEG", "MPO") and info.get("jfif_unit") in (1, 2) and all(info.get("jfif_density", ())):
