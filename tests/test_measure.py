@@ -155,7 +155,7 @@ def test_measure_command_bad_input(runner, tmp_path, astronaut):
     missing = runner("measure", tmp_path / "in.png", tmp_path / "nope.png", "-m", tmp_path / "small.png")
     assert missing.code == 2 and len(missing.lines) == 1 and "does not exist" in missing.stderr
     wrong = runner("measure", tmp_path / "in.png", tmp_path / "in.png", "-m", tmp_path / "small.png")
-    assert wrong.code == 2 and len(wrong.lines) == 1 and "the mask is 10x10" in wrong.stderr
+    assert wrong.code == 2 and len(wrong.lines) == 1 and "mask is 10x10 but the image is 512x512" in wrong.stderr
     # the pixel and memory limits of warp (three 400 MP bombs decoded to 4.4 GB, with no limit)
     big = runner("measure", tmp_path / "in.png", tmp_path / "in.png", "-m", tmp_path / "in.png", "--max-pixels", "1000")
     assert big.code == 1 and len(big.lines) == 1 and "--max-pixels" in big.stderr
@@ -385,8 +385,35 @@ def test_max_distortion_makes_measure_a_check(runner, tmp_path, astronaut):
     assert above.code == 1 and "component 1 (around" in above.stderr and "above 0.5" in above.stderr
     assert len(above.stdout.decode().splitlines()) == 3                   # the figures, all the same
     nothing = runner("measure", paths["in"], paths["flat"], "-m", paths["mask"], "--max-distortion", "1")
-    assert nothing.code == 1 and "no region could be measured" in nothing.stderr
+    assert nothing.code == 1 and nothing.stderr.count("could not be measured (0 keypoint matches") == 3
     frames = [Image.fromarray(cv2.cvtColor(picture, cv2.COLOR_BGR2RGB)) for picture in (output, output[::-1])]
     frames[0].save(tmp_path / "anim.png", save_all=True, append_images=frames[1:], duration=100)
     run = runner("measure", paths["in"], tmp_path / "anim.png", "-m", paths["mask"])
     assert run.code == 0 and "has several frames (animated or multi-page); the first is measured" in run.stderr
+
+
+def test_measure_reads_as_warp_does_and_its_check_passes_nothing_it_could_not_see(runner, tmp_path, astronaut):
+    """Review findings 2, 6, 7: a region wrecked past measuring passed --max-distortion (only a
+    mask with no region measured at all failed); -m alpha was refused though the help says "as
+    for warp"; its warnings ignored -q and an animated OUTPUT on stdin said nothing."""
+    from PIL import Image
+
+    image, mask = astronaut
+    output, _ = warp_affine(image, anisotropic(1.0, 0.0))
+    wrecked = output.copy()
+    x, y, w, h = cv2.connectedComponentsWithStats(mask.astype(np.uint8), connectivity=8)[2][1][:4]   # region 1
+    wrecked[y:y + h, x:x + w] = np.random.default_rng(0).integers(0, 255, (h, w, 3), dtype=np.uint8)
+    cut = np.dstack([image, mask.astype(np.uint8) * 255])
+    paths = {name: tmp_path / f"{name}.png" for name in ("in", "out", "bad", "mask", "cut")}
+    for name, picture in zip(paths, (image, output, wrecked, mask.astype(np.uint8) * 255, cut)):
+        cv2.imwrite(str(paths[name]), picture)
+    run = runner("measure", paths["in"], paths["bad"], "-m", paths["mask"], "--max-distortion", "0.5")
+    assert run.code == 1 and "component 1 (around" in run.stderr and "could not be measured" in run.stderr
+    alpha = runner("measure", paths["cut"], paths["out"], "-m", "alpha", "--json")
+    assert alpha.code == 0 and len(json.loads(alpha.stdout)["components"]) == 3
+    frames = [Image.fromarray(cv2.cvtColor(p, cv2.COLOR_BGR2RGB)) for p in (output, output[::-1])]
+    frames[0].save(tmp_path / "anim.png", save_all=True, append_images=frames[1:], duration=100)
+    piped = runner("measure", paths["in"], "-", "-m", paths["mask"], input=(tmp_path / "anim.png").read_bytes())
+    assert piped.code == 0 and "OUTPUT - has several frames" in piped.stderr
+    quiet = runner("-q", "measure", paths["in"], tmp_path / "anim.png", "-m", paths["mask"])
+    assert quiet.code == 0 and quiet.stderr == ""

@@ -34,14 +34,16 @@ def component_line(fit) -> str:
 @click.argument("input", type=click.Path(dir_okay=False, allow_dash=True))
 @click.argument("output", type=click.Path(dir_okay=False, allow_dash=True))
 @click.option("-m", "--mask", required=True, type=click.Path(dir_okay=False, allow_dash=True),
-              metavar="PATH", help="The feature mask INPUT was warped with (as for warp).")
+              metavar="PATH|alpha", help="The feature mask INPUT was warped with (as for warp: alpha is "
+                                         "INPUT's own alpha).")
 @click.option("--json", "as_json", is_flag=True,
               help="Print machine-readable JSON: input, output, mask, worst_distortion and per component "
                    "its figures (label, pixels, bbox, centre, distortion, noise, scale, rotation, rms_px, "
                    "local_p90, explained, ...; null where not measured, with the reason).")
 @click.option("--max-distortion", type=click.FloatRange(min=0.0), metavar="D",
               help="A check for CI: exit 1 when a region's distortion is above D (0.02: the report's "
-                   "'kept'), or when no region could be measured; the figures are printed all the same.")
+                   "'kept'), or a region could not be measured or landed on another's place (each named on "
+                   "stderr); the figures are printed all the same.")
 def measure_command(input, output, mask, as_json, max_distortion, max_pixels, max_memory):
     """Measure how each masked region of INPUT came out in OUTPUT.
 
@@ -70,31 +72,29 @@ def measure_command(input, output, mask, as_json, max_distortion, max_pixels, ma
       featurewarp measure photo.png out.png -m mask.png --json
     """
     from ..app import measure
-    from ..app.pipeline import WarpError, frames_warning, read_input
-    from ..io.decode import ImageError, mask_from_image, read_bytes, read_header
+    from ..app.animate import load_with_header
+    from ..app.pipeline import Settings, WarpError, frames_warning, read_input
+    from ..io import ImageError, decode
     from .presets import click_error
 
     if [input, output, mask].count("-") > 1:
         raise click.UsageError("only one of INPUT, OUTPUT and --mask can be '-' (stdin)")
-
-    def read(path, param):                 # the pixel and memory limits, as for warp
-        data = None if path == "-" or not os.path.isfile(path) else read_file(path, param)
-        if data is not None and frames_warning(read_header(data)):
-            click.echo(f"featurewarp: warning: {param} {path} has several frames (animated or multi-page); "
-                       f"the first is measured", err=True)
-        return read_input(path, param, max_pixels, data, max_memory)
-
-    def read_file(path, param):
-        try:
-            return read_bytes(path, max_memory)
-        except ImageError as err:
-            raise WarpError(str(err), None if param == "INPUT" else param) from err
-
-    try:
-        image, result = read(input, "INPUT"), read(output, "OUTPUT")
-        feature_mask = mask_from_image(read(mask, "--mask"))
+    settings = Settings("measure", max_pixels=max_pixels, max_memory=max_memory)
+    try:                                   # INPUT and its mask as warp reads them (-m alpha too)
+        if input != "-" and not os.path.isfile(input):
+            raise WarpError(f"{input} {decode.path_problem(input)}", "INPUT", usage=True)
+        data = decode.read_bytes(output, max_memory) if output == "-" or os.path.isfile(output) else None
+        warnings = [f"OUTPUT {output} has several frames (animated or multi-page); the first is measured"] * bool(
+            data is not None and frames_warning(decode.read_header(data)))
+        result = read_input(output, "OUTPUT", max_pixels, data, max_memory)
+        image, feature_mask, loaded, _ = load_with_header(settings, input, mask)
+        warnings = loaded + warnings
+    except ImageError as err:
+        raise click_error(WarpError(str(err), "OUTPUT")) from err
     except WarpError as err:
         raise click_error(err) from err
+    _warn([line.replace("the input has several frames", f"INPUT {input} has several frames")
+           .replace("; the first is used", "; the first is measured") for line in warnings])
     try:
         fits = measure.measure(image, result, feature_mask)
     except ValueError as err:
@@ -113,23 +113,34 @@ def measure_command(input, output, mask, as_json, max_distortion, max_pixels, ma
     _warn_and_gate(fits, max_distortion)
 
 
+def _warn(lines) -> None:
+    """Each line as a warning on stderr, unless -q."""
+    from .. import stages
+    from .progress import say
+
+    for line in [] if stages.quiet else lines:
+        say(f"featurewarp: warning: {line}")
+
+
 def _warn_and_gate(fits, max_distortion: float | None) -> None:
     """A warning per region that landed on another's place; with ``max_distortion``, exit 1
-    where a measured region is more distorted, or where no region could be measured."""
-    for fit in fits:
-        if fit.lands_on:
-            others = ", ".join(str(label) for label in fit.lands_on)
-            click.echo(f"featurewarp: warning: component {fit.label} lands where component{'s' * (len(fit.lands_on) > 1)} "
-                       f"{others} went: one of them was matched to the other's likeness (the same subject twice?); "
-                       f"their figures are doubtful", err=True)
+    where a region is more distorted, could not be measured, or landed on another's place
+    (a check cannot pass what it could not see), or where the mask marks nothing."""
+    _warn([f"component {fit.label} lands where component{'s' * (len(fit.lands_on) > 1)} "
+           f"{', '.join(str(label) for label in fit.lands_on)} went: one of them was matched to the other's "
+           f"likeness (the same subject twice?); their figures are doubtful" for fit in fits if fit.lands_on])
     if max_distortion is None:
         return
-    measured = [fit for fit in fits if fit.distortion is not None]
-    above = [fit for fit in measured if fit.distortion > max_distortion]
-    if not measured:
-        click.echo("featurewarp: error: --max-distortion: no region could be measured", err=True)
-    for fit in above:
-        click.echo(f"featurewarp: error: --max-distortion: component {fit.label} (around ({fit.centre[0]:.0f}, "
-                   f"{fit.centre[1]:.0f})) has distortion {fit.distortion:.4f}, above {max_distortion:g}", err=True)
-    if above or not measured:
+    failed = ["the mask marks no region"] if not fits else []
+    for fit in fits:
+        where = f"component {fit.label} (around ({fit.centre[0]:.0f}, {fit.centre[1]:.0f}))"
+        if fit.distortion is None:
+            failed.append(f"{where} could not be measured ({fit.reason})")
+        elif fit.lands_on:
+            failed.append(f"{where} landed where another region went: its figures are doubtful")
+        elif fit.distortion > max_distortion:
+            failed.append(f"{where} has distortion {fit.distortion:.4f}, above {max_distortion:g}")
+    for line in failed:
+        click.echo(f"featurewarp: error: --max-distortion: {line}", err=True)
+    if failed:
         raise SystemExit(1)
