@@ -106,7 +106,7 @@ def warp():
       --mode MODE            similarity (default), rigid (features keep their
                              size too) or plain (the standard warp)
       --report PATH          a JSON report: features_kept, no_effect, warnings ...
-      --strict               exit 1 and write nothing if the run has a warning
+      --strict               exit 1 and write no image if the run has a warning
       --grow-past-edge       features cut by the frame may grow past it
       --background, --interp, --format, --quality, --strip, --save-grid,
       --grid, --cell, --boundary, --allow-folds, -q, -v

@@ -128,7 +128,10 @@ def max_memory_option(what: str = "work whose images and grid would need more me
 STRICT = ("a feature not kept (relaxed to avoid fold-overs or moved towards the plain warp), every feature "
           "moved towards it, streaks, blank canvas or an outline beyond the plain warp's, an output that "
           "equals the input (the mask covers what the warp moves), a grid more than 0.5 px from the warp, "
-          "a mask that marks nothing (a plain warp), an input of several frames of which the first is used")
+          "a mask that marks nothing (a plain warp), an input of several frames of which the first is used, "
+          "a CMYK JPEG without a usable profile, metadata the output cannot keep")
+
+
 def boundary_option(preset) -> click.Option:
     """``--boundary``; its default is ``preset``'s own (``Warp.boundary``), resolved by the engine."""
     default = f"[default for {preset.name}: {getattr(preset, 'boundary', 'slide')}]"
@@ -191,8 +194,9 @@ def engine_options(preset=None, strict_also: str = "") -> list[click.Option]:
                           "cannot be done (no room, folds, rigid mode), nothing grows and a "
                           "warning says why."),
         click.Option(["--strict"], is_flag=True,
-                     help=f"Exit 1 and write nothing if the run has any warning (each is otherwise "
-                          f"printed and the output written): {STRICT}{strict_also}."),
+                     help=f"Exit 1 and write no image if the run has any warning (each is otherwise "
+                          f"printed and the output written; a --report is written all the same, marked "
+                          f"refused): {STRICT}{strict_also}."),
         click.Option(["--background"], metavar="COLOR",
                      help="Fill where no source pixel lands: #rrggbb or #rgb, a colour name, rgb(r,g,b), "
                           "hsl(h,s%,l%), rgba(r,g,b,a) or #rrggbbaa (translucent), or transparent. "
