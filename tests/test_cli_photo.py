@@ -98,6 +98,19 @@ def test_a_file_called_alpha_is_dot_slash_alpha(runner, tmp_path, monkeypatch):
     assert (tmp_path / "f.png").read_bytes() == (tmp_path / "g.png").read_bytes() != (tmp_path / "a.png").read_bytes()
 
 
+def test_a_file_called_alpha_beside_an_input_without_alpha_is_pointed_to(runner, tmp_path, monkeypatch):
+    """-m alpha read the file 'alpha' before it meant the alpha channel: on an input without
+    alpha the error said "give a mask file", not how to read that file (review finding 8)."""
+    monkeypatch.chdir(tmp_path)
+    image, mask = scene(tmp_path)
+    run = runner("warp", "stretch", image, "o.png", "-m", "alpha", "--sx", "1.5")
+    assert run.code == 2 and "give a mask file" in run.stderr and "./alpha" not in run.stderr
+    (tmp_path / "alpha").write_bytes(open(mask, "rb").read())
+    run = runner("warp", "stretch", image, "o.png", "-m", "alpha", "--sx", "1.5")
+    assert run.code == 2 and "no alpha channel" in run.stderr and "give --mask ./alpha" in run.stderr, run.stderr
+    assert runner("warp", "stretch", image, "o.png", "-m", "./alpha", "--sx", "1.5").code == 0
+
+
 def test_batch_takes_each_inputs_own_alpha(runner, tmp_path):
     other = np.zeros(SIZE[::-1], np.uint8)
     other[2:12, 30:44] = 255
@@ -109,7 +122,9 @@ def test_batch_takes_each_inputs_own_alpha(runner, tmp_path):
         assert (tmp_path / "out" / name).read_bytes() == (tmp_path / name).read_bytes()
     opaque, _ = scene(tmp_path, "c.png")
     run = runner("batch", "stretch", opaque, "-o", tmp_path / "out2", "--mask-pattern", "alpha")
-    assert run.code == 1 and "c.png: --mask: the input has no alpha channel" in run.stderr
+    assert run.code == 1 and "c.png: --mask-pattern: the input has no alpha channel" in run.stderr
+    assert "give --mask-pattern a file pattern, such as '{stem}_mask.png'" in run.stderr    # not "a mask file"
+    assert "give a mask file" not in run.stderr and "--mask:" not in run.stderr
 
 
 @pytest.mark.parametrize("args", [["compare", "stretch", "{in}", "{out}.png", "--sx", "1.5"],

@@ -63,12 +63,20 @@ def load_mask(settings, mask: str | None, size: tuple[int, int], header=None, im
 def alpha_mask(image: np.ndarray, named: bool = True) -> tuple[np.ndarray, list[str]]:
     """The feature mask of INPUT's alpha: alpha >= 128 (on the 0..255 scale), and warnings
     (an alpha that marks nothing or everything). ``named``: ``--mask alpha`` was given (a
-    notice where a file called alpha is beside it). An image without alpha is a usage error."""
+    notice where a file called alpha is beside it), else a batch's ``--mask-pattern alpha``. An
+    image without alpha is a usage error naming the option given and what to give instead (``./alpha``
+    where a file called alpha is here)."""
     from .pipeline import WarpError
 
     if image.ndim != 3 or image.shape[2] != 4:
+        if not named:                       # a batch's --mask-pattern alpha: it has no --mask
+            todo, param = "give --mask-pattern a file pattern, such as '{stem}_mask.png'", "--mask-pattern"
+        elif os.path.isfile(ALPHA):         # --mask alpha read this file before it meant the alpha
+            todo, param = "for the file 'alpha' here, give --mask ./alpha", "--mask"
+        else:
+            todo, param = "give a mask file", "--mask"
         raise WarpError("the input has no alpha channel to take the mask from (alpha: a cut-out's own "
-                        "transparency, in a PNG, WebP or TIFF with alpha); give a mask file", "--mask", usage=True)
+                        f"transparency, in a PNG, WebP or TIFF with alpha); {todo}", param, usage=True)
     if named and os.path.isfile(ALPHA):
         stages.notice("--mask alpha is the input's alpha channel, not the file 'alpha' here (for that "
                       "file: --mask ./alpha)")
