@@ -185,6 +185,16 @@ def test_an_option_that_overrides_the_varied_one_is_refused(files, given):
     animate(files, "stretch", "in.png", "ok.gif", "--vary", "sx=1:2", "--frames", "2", "--height", "200")
 
 
+def test_only_the_options_that_override_the_varied_one_are_named(files):
+    """With --sy beside --size the error said "--sy or --size overrides it; drop --sy or --size",
+    though dropping --sy changes nothing (review finding 12)."""
+    out = run("animate", "stretch", str(files / "in.png"), str(files / "o.gif"), "-m", str(files / "mask.png"),
+              "--vary", "sx=1:2", "--size", "100x100", "--sy", "1.5", "--frames", "3")
+    assert out.code == 2 and "the varied sx changes no frame: --size overrides it; drop --size to vary sx" \
+        in out.stderr, out.stderr
+    assert "--sy" not in out.stderr
+
+
 @pytest.mark.parametrize("name", ["odd.mp4", "odd.avi"])
 def test_an_odd_sized_video_is_padded_with_the_background_not_cropped(files, name):
     out = run("animate", "bulge", str(files / "odd.png"), str(files / name), "-m", str(files / "odd_mask.png"),

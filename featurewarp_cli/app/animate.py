@@ -289,13 +289,30 @@ def check_vary_moves(settings: Settings, ranges: dict, warps: list, width: int, 
     if np.allclose(first, points) or any(tuple(w.canvas) != tuple(warps[0].canvas)
                                          or not np.array_equal(w.forward(points), first) for w in warps[1:]):
         return
-    preset = plugins.load(settings.preset)
-    given = [plugins.option_flag(p.name) for p in preset.params
-             if p.name not in ranges and settings.params.get(p.name, p.default) != p.default]
     varied = ", ".join(name.replace("_", "-") for name in ranges)
-    given = " or ".join(given) or "an option given"
+    given = " or ".join(_overriding(settings, ranges, warps, points)) or "an option given"
     raise WarpError(f"the varied {varied} changes no frame: {given} overrides it; drop {given} to vary {varied}",
                     "--vary", usage=True)
+
+
+def _overriding(settings: Settings, ranges: dict, warps: list, points: np.ndarray) -> list[str]:
+    """The flags of the options given (not default, not varied) without which the first and last
+    frames differ: those that override the varied values (stretch's --size over sx, not --sy)."""
+    if settings.warp_factory is not None:       # not the preset's warps: nothing to try without
+        return []
+    preset = plugins.load(settings.preset)
+    first, last = dict(warps[0].values), dict(warps[-1].values)
+    width, height = warps[0].width, warps[0].height
+
+    def moves(name, default):
+        try:
+            a, b = (preset(width, height, **(values | {name: default})) for values in (first, last))
+        except ValueError:                       # refused without it: it does not free the varied ones
+            return False
+        return tuple(a.canvas) != tuple(b.canvas) or not np.array_equal(a.forward(points), b.forward(points))
+
+    return [plugins.option_flag(p.name) for p in preset.params
+            if p.name not in ranges and settings.params.get(p.name, p.default) != p.default and moves(p.name, p.default)]
 
 
 def load_with_header(settings: Settings, input: str, mask: str | None):
