@@ -115,3 +115,26 @@ def test_deform_reports_document_how_far_each_handle_ended(tmp_path):
 def test_the_handles_schema_says_unknown_keys_are_warned():
     """Deform trial, nit 8: the schema said 'ignored, with a note'; it is a warning --strict refuses."""
     assert "with a note" not in json.dumps(schema("handles"))
+
+
+def test_output_and_refused_come_in_one_of_their_two_forms(tmp_path):
+    """A report with neither an output nor a refusal, or with both, validated (review finding 11):
+    the schema ties output null to a refused object, and an output to refused null or absent
+    (reports of earlier versions have no refused)."""
+    report = tmp_path / "r.json"
+    run = CliRunner().invoke(cli, ["warp", "swirl", os.path.join(SAMPLES, "shapes.png"), str(tmp_path / "o.png"),
+                                   "--report", str(report)])
+    assert run.exit_code == 0
+    written = json.loads(report.read_text())
+    assert written["refused"] is None and isinstance(written["output"], dict)
+    refused = written | {"output": None, "refused": {"error": "--strict: a warning; nothing written but the report",
+                                                     "warnings": ["a warning"]}}
+    earlier = {key: value for key, value in written.items() if key != "refused"}
+    for good in (written, refused, earlier):
+        jsonschema.validate(good, schema("report"))
+    neither = refused | {"refused": None}
+    both = written | {"refused": refused["refused"]}
+    unsaid = {key: value for key, value in refused.items() if key != "refused"}
+    for bad in (neither, both, unsaid):
+        with pytest.raises(jsonschema.ValidationError):
+            jsonschema.validate(bad, schema("report"))
