@@ -29,8 +29,11 @@ UNNAMED = {"resize": ("stretch", ""), "scale": ("stretch", ""), "implode": ("bul
 
 #: A capitalised word of a summary (Fisheye, Arc, Lower, Non-uniform).
 WORD = re.compile(r"\b[A-Z][A-Za-z-]+")
-#: The options a summary gives in brackets right after a style's name: ``Wave (--waves 2 or more)``.
-OPTIONS = re.compile(r"\s*\((--[\w-]+ -?[\d.]+)")
+#: The option a summary gives in brackets right after a style's name: ``Wave (--waves 2 or more)``,
+#: ``Pinch (--strength -0.5: ...)``, ``Arc Lower (--where lower)``.
+OPTIONS = re.compile(r"\s*\((--[\w-]+ -?[\w.]+)")
+#: A command-line word that is an option (``--bend``, ``-m``), not a value (``-30``, ``-``).
+FLAG = re.compile(r"-[A-Za-z-]")
 
 
 def _key(name: str) -> str:
@@ -73,15 +76,67 @@ def style_owners(name: str) -> list[tuple[str, str, str]]:
     return owners
 
 
-def style_hint(command: str, name: str, rest: list[str]) -> str | None:
+def option_table(command) -> dict[str, tuple[str, bool]]:
+    """Each option word of a click ``command`` (``--mask``, ``-m``) -> (its parameter's name,
+    whether it takes a value); {} for None."""
+    table = {}
+    for param in getattr(command, "params", ()):
+        if getattr(param, "param_type_name", "") == "option":
+            for word in (*param.opts, *param.secondary_opts):
+                table[word] = (param.name, not (param.is_flag or param.count))
+    return table
+
+
+def merged(rest: list[str], options: str, table: dict, others: dict) -> tuple[list[str], list[str], bool]:
+    """The words after the preset in the suggested command: ``rest`` without the options the
+    preset does not take (``table``: :func:`option_table`; empty: all kept), then the style's
+    ``options`` the user did not give (the user's ``--waves 3`` is not overridden); and the
+    options left out, as written; and whether ``options`` gave way to the user's. ``others`` tells
+    whether an option left out takes a value."""
+    kept, dropped, given = [], [], set()
+    i = 0
+    while i < len(rest):
+        word, i = rest[i], i + 1
+        if word == "--":
+            kept.extend(rest[i - 1:])
+            break
+        if not FLAG.match(word):
+            kept.append(word)
+            continue
+        flag, equals, _ = word.partition("=")
+        name, takes = table.get(flag) or others.get(flag) or (flag, i < len(rest) and not FLAG.match(rest[i]))
+        value = rest[i:i + 1] if takes and not equals else []
+        i += len(value)
+        if table and flag not in table:
+            dropped.append(shlex.join([word, *value]))
+        else:
+            kept += [word, *value]
+            given.add(name)
+    words = shlex.split(options)
+    yields = bool(words) and (table.get(words[0]) or (words[0],))[0] in given
+    return kept + ([] if yields else words), dropped, yields
+
+
+def style_hint(command: str, name: str, rest: list[str], command_of=None) -> str | None:
     """The usage error's text for ``featurewarp COMMAND NAME REST...`` where NAME is a style
-    some preset gives: which preset, and the command line that runs it (REST kept, the style's
-    options added); None when no preset gives it."""
+    some preset gives: which preset, and the command line that runs it (REST kept but for the
+    options the preset does not take, which it names; the style's options added where REST does
+    not give them); None when no preset gives it. ``command_of(preset)``: the click command
+    ``featurewarp COMMAND preset`` (without it every option of REST is kept)."""
     owners = style_owners(name)
     if not owners:
         return None
-    lines = [shlex.join(["featurewarp", command, preset, *rest, *shlex.split(options)])
-             for preset, _, options in owners]
+    tables = {preset: option_table(command_of(preset) if command_of else None) for preset, _, _ in owners}
+    others = {}
+    if command_of and any(FLAG.match(word) for word in rest):     # what the options left out take
+        for preset in plugins.names():
+            others.update(option_table(command_of(preset)))
+    lines = []
+    for preset, style, options in owners:
+        words, dropped, yields = merged(rest, options, tables[preset], others)
+        left = f" ({', '.join(dropped)} left out: not an option of {preset})" if dropped else ""
+        left += f" ({style} is {options}; {shlex.split(options)[0]} kept as given)" if yields else ""
+        lines.append(shlex.join(["featurewarp", command, preset, *words]) + left)
     if len(owners) == 1:
         preset, style, _ = owners[0]
         summary = plugins.load(preset).summary if plugins.known(preset) else ""

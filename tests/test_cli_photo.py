@@ -15,15 +15,84 @@ from featurewarp_cli.styles import style_owners, summary_styles
 # --- style names (finding 10) ----------------------------------------------------------------
 
 @pytest.mark.parametrize("name, preset, options", [
-    ("fisheye", "bulge", []), ("pinch", "bulge", []), ("twist", "swirl", []), ("twirl", "swirl", []),
+    ("fisheye", "bulge", []), ("twist", "swirl", []), ("twirl", "swirl", []),
     ("wave", "flag", ["--waves", "2"]), ("resize", "stretch", []), ("spherize", "sphere", []),
-    ("Arc-Lower", "arc", [])])
+    ("Arc-Lower", "arc", ["--where", "lower"]), ("shellupper", "shell", ["--side", "upper"]),
+    ("implode", "bulge", ["--strength", "-0.5"])])
 def test_a_style_name_leads_to_its_preset(runner, name, preset, options):
-    run = runner("warp", name, "in.png", "out.png", "--bend", "30")
+    run = runner("warp", name, "in.png", "out.png", "-m", "m.png")
     assert run.code == 2
-    line = " ".join(["featurewarp warp", preset, "in.png out.png --bend 30", *options])
+    line = " ".join(["featurewarp warp", preset, "in.png out.png -m m.png", *options])
     assert line in run.stderr and "did you mean" not in run.stderr, run.stderr
     assert run.stderr.count("\n") <= 2                     # usage line and the error, no traceback
+
+
+#: What each style name must select: preset -> a test of the parameters it runs with.
+SELECTS = {
+    "fisheye": {"bulge": lambda p: p["strength"] > 0},
+    "pinch": {"bulge": lambda p: p["strength"] < 0, "inflate": lambda p: p["bend"] < 0},
+    "implode": {"bulge": lambda p: p["strength"] < 0},
+    "twist": {"swirl": lambda p: p["angle"] != 0}, "twirl": {"swirl": lambda p: p["angle"] != 0},
+    "wave": {"flag": lambda p: p["waves"] >= 2},
+    "arclower": {"arc": lambda p: p["where"] == "lower"}, "arcupper": {"arc": lambda p: p["where"] == "upper"},
+    "shelllower": {"shell": lambda p: p["side"] == "lower"}, "shellupper": {"shell": lambda p: p["side"] == "upper"},
+    "lower": {"arc": lambda p: p["where"] == "lower", "shell": lambda p: p["side"] == "lower"},
+    "upper": {"arc": lambda p: p["where"] == "upper", "shell": lambda p: p["side"] == "upper"},
+    "spherize": {"sphere": lambda p: True}, "wrap": {"cylinder": lambda p: True, "sphere": lambda p: True},
+    "distort": {"perspective": lambda p: True}, "nonuniform": {"stretch": lambda p: True},
+    "resize": {"stretch": lambda p: True}, "scale": {"stretch": lambda p: True},
+}
+
+
+def suggested(stderr: str) -> list[list[str]]:
+    """The command lines a style hint offers, as words."""
+    import re
+    import shlex
+
+    return [shlex.split(line) for line in re.findall(r"featurewarp warp .*?(?= \(| or featurewarp|$)", stderr, re.M)]
+
+
+def test_every_suggested_command_runs_and_gives_the_style(runner, tmp_path):
+    """'pinch' was sent to plain bulge (which magnifies), 'arc-lower' and 'shellupper' to arc and
+    shell without the --where / --side that selects them (review finding 1): every style the
+    summaries name (and the unnamed ones) is offered a command that runs and selects it."""
+    from featurewarp_cli import plugins
+    from featurewarp_cli.styles import UNNAMED, _key
+
+    image, _ = scene(tmp_path)
+    named = {key for preset in plugins.BUILTIN for key in summary_styles(plugins.load(preset).summary)}
+    styles = (named | set(UNNAMED)) - set(plugins.BUILTIN)
+    assert styles == set(SELECTS)
+    for style in sorted(styles):
+        run = runner("warp", style, image, tmp_path / "o.png")
+        commands = suggested(run.stderr)
+        assert run.code == 2 and {words[2] for words in commands} == set(SELECTS[style]), (style, run.stderr)
+        for words in commands:
+            report = tmp_path / "r.json"
+            done = runner(*words[1:], "--report", report)
+            assert done.code == 0, (style, words, done.stderr)
+            params = json.loads(report.read_text())["params"]
+            assert SELECTS[_key(style)][words[2]](params), (style, words, params)
+
+
+def test_a_style_hint_drops_what_the_preset_lacks_and_keeps_what_the_user_gave(runner, tmp_path):
+    """fisheye --bend 30 was offered 'bulge ... --bend 30' (No such option: --bend); wave
+    --waves 3 was offered '... --waves 3 --waves 2', the appended 2 winning (review finding 10)."""
+    image, mask = scene(tmp_path)
+    out = str(tmp_path / "o.png")
+    run = runner("warp", "fisheye", image, out, "-m", mask, "--bend", "30")
+    assert f"featurewarp warp bulge {image} {out} -m {mask} (--bend 30 left out: not an option of bulge)" \
+        in run.stderr, run.stderr
+    assert runner(*suggested(run.stderr)[0][1:]).code == 0
+    run = runner("warp", "wave", image, out, "--waves", "3")
+    assert suggested(run.stderr) == [["featurewarp", "warp", "flag", image, out, "--waves", "3"]], run.stderr
+    run = runner("warp", "pinch", image, out, "--bend=30", "--strength", "0.2")
+    lines = suggested(run.stderr)
+    assert lines == [["featurewarp", "warp", "bulge", image, out, "--strength", "0.2"],
+                     ["featurewarp", "warp", "inflate", image, out, "--bend=30"]], run.stderr
+    assert "(Pinch is --strength -0.5; --strength kept as given)" in run.stderr
+    for words in lines:
+        assert runner(*words[1:]).code == 0
 
 
 def test_fisheye_is_not_fish_and_a_misspelling_still_gets_the_nearest_name(runner):
@@ -34,7 +103,8 @@ def test_fisheye_is_not_fish_and_a_misspelling_still_gets_the_nearest_name(runne
 def test_a_style_of_several_presets_names_them_all(runner):
     run = runner("compare", "lower", "a.png", "b.png")
     assert run.code == 2
-    assert "featurewarp compare arc a.png b.png" in run.stderr and "featurewarp compare shell a.png b.png" in run.stderr
+    assert "featurewarp compare arc a.png b.png --where lower" in run.stderr
+    assert "featurewarp compare shell a.png b.png --side lower" in run.stderr
 
 
 def test_styles_come_from_the_summaries():

@@ -46,8 +46,8 @@ class Arc(Warp):
     """
 
     name = "arc"
-    summary = ("Arc (ImageMagick, Photoshop): a ring sector; --where lower or upper: Arc Lower, "
-               "Arc Upper (one edge bows).")
+    summary = ("Arc (ImageMagick, Photoshop): a ring sector; Arc Lower (--where lower) and Arc Upper "
+               "(--where upper): one edge bows.")
     example = "--angle 120"
     params = (
         Param("angle", float, 90.0, "Angle the sector spans, in degrees (--where lower or upper: the "

@@ -20,8 +20,8 @@ class Bulge(Warp):
     """
 
     name = "bulge"
-    summary = ("Fisheye, Bulge, Pinch (Photoshop's Fisheye style and Pinch filter): magnify (S > 0) or "
-               "pinch (S < 0) the centre, smooth at the radius.")
+    summary = ("Fisheye (Photoshop's Fisheye style), Bulge and Pinch (--strength -0.5: Photoshop's Pinch "
+               "filter): magnify (--strength > 0) or pinch (--strength < 0) the centre, smooth at the radius.")
     example = "--strength 0.8"
     params = (
         Param("strength", float, 0.5,

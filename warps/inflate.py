@@ -28,7 +28,7 @@ class Inflate(Style):
     """
 
     name = "inflate"
-    summary = "Inflate (Photoshop, Illustrator): swell like a cushion (negative bend: pinch)."
+    summary = "Inflate (Photoshop, Illustrator): swell like a cushion; Pinch (--bend -40): a negative bend."
     params = Style.params
     example = "--bend 40"
     #: (s, t) per unit bend, on a square image

@@ -32,7 +32,8 @@ class Shell(Style):
     """
 
     name = "shell"
-    summary = "Shell Lower and Shell Upper (Photoshop, Illustrator): one side bows out and narrows."
+    summary = ("Shell Lower (--side lower) and Shell Upper (--side upper) of Photoshop and Illustrator: one "
+               "side bows out and narrows.")
     example = "--side upper --bend 40"
     params = Style.params + (
         Param("side", str, "lower", "The side that bows: lower (Shell Lower) or upper (Shell Upper).",

@@ -464,7 +464,7 @@ class PresetGroup(click.Group):
 
                 from ..styles import style_hint
 
-                style = style_hint(ctx.info_name, args[0], args[1:])
+                style = style_hint(ctx.info_name, args[0], args[1:], lambda preset: self.get_command(ctx, preset))
                 if style is not None:                # 'fisheye' is bulge's, not 'fish'
                     raise click.UsageError(style, ctx) from None
                 close = difflib.get_close_matches(args[0], plugins.names(), n=1)
