@@ -128,17 +128,22 @@ PHOTO_SETTINGS = (("swirl", {"angle": 180}), ("swirl", {"angle": 300}), ("arc", 
                   ("flag", {}), ("perspective", {}))
 
 
+def _scaled(photo: Path, mask: Path, size: int):
+    """(RGB image, bool mask) of a sample photo and its mask, the longer side ``size`` px."""
+    image = cv2.cvtColor(cv2.imread(str(photo)), cv2.COLOR_BGR2RGB)
+    scale = size / max(image.shape[:2])
+    shape = (max(8, round(image.shape[1] * scale)), max(8, round(image.shape[0] * scale)))
+    image = cv2.resize(image, shape, interpolation=cv2.INTER_AREA)
+    return image, cv2.resize(cv2.imread(str(mask), cv2.IMREAD_GRAYSCALE), shape,
+                             interpolation=cv2.INTER_NEAREST) >= 128
+
+
 def bench_photos(size: int = 384) -> list[dict]:
     """:data:`PHOTO_SETTINGS` in both modes on each of :data:`PHOTOS`; print and return the rows."""
     samples, rows = ROOT / "samples", []
     print(f"\nStability on other photos (longest side {size} px): one-ulp nudges ({', '.join(PATTERNS)})")
     for photo, mask_name in PHOTOS:
-        image = cv2.cvtColor(cv2.imread(str(samples / photo)), cv2.COLOR_BGR2RGB)
-        scale = size / max(image.shape[:2])
-        shape = (max(8, round(image.shape[1] * scale)), max(8, round(image.shape[0] * scale)))
-        image = cv2.resize(image, shape, interpolation=cv2.INTER_AREA)
-        mask = cv2.resize(cv2.imread(str(samples / mask_name), cv2.IMREAD_GRAYSCALE), shape,
-                          interpolation=cv2.INTER_NEAREST) >= 128
+        image, mask = _scaled(samples / photo, samples / mask_name, size)
         for preset, params in PHOTO_SETTINGS:
             for mode in ("similarity", "rigid"):
                 rows.append(_measured_row(f"{photo} {preset} {params} {mode}", image, mask, preset, params, mode,
@@ -162,12 +167,7 @@ def bench_trial() -> list[dict]:
     samples, rows = ROOT / "samples", []
     print(f"\nStability of the determinism trial's cases: one-ulp nudges ({', '.join(PATTERNS)})")
     for photo, mask_name, size, preset, params, mode in TRIAL_CASES:
-        image = cv2.cvtColor(cv2.imread(str(samples / photo)), cv2.COLOR_BGR2RGB)
-        scale = size / max(image.shape[:2])
-        shape = (max(8, round(image.shape[1] * scale)), max(8, round(image.shape[0] * scale)))
-        image = cv2.resize(image, shape, interpolation=cv2.INTER_AREA)
-        mask = cv2.resize(cv2.imread(str(samples / mask_name), cv2.IMREAD_GRAYSCALE), shape,
-                          interpolation=cv2.INTER_NEAREST) >= 128
+        image, mask = _scaled(samples / photo, samples / mask_name, size)
         rows.append(_measured_row(f"{photo} {size} {preset} {params} {mode}", image, mask, preset, params, mode,
                                   photo=photo))
     print(f"{sum(r['ok'] for r in rows)} of {len(rows)} cases within the targets")

@@ -318,17 +318,10 @@ def _overriding(settings: Settings, ranges: dict, warps: list, points: np.ndarra
 def load_with_header(settings: Settings, input: str, mask: str | None):
     """:func:`featurewarp_cli.app.pipeline.load_image_and_mask`, and INPUT's header (None where
     it cannot be read): the metadata an output keeps (:func:`featurewarp_cli.app.outputs.kept_metadata`)."""
-    from ..io import ImageError, decode
-    from .pipeline import check_file_size
+    from ..io import decode
+    from .pipeline import input_bytes
 
-    data = None
-    if input == "-" or os.path.isfile(input):
-        if input != "-":
-            check_file_size(input, "INPUT", settings.max_memory, settings.max_pixels)
-        try:
-            data = decode.read_bytes(input, settings.max_memory)
-        except ImageError as err:
-            raise WarpError(str(err)) from err
+    data = input_bytes(settings, input)
     image, feature_mask, warnings = load_image_and_mask(settings, input, mask, data)
     return image, feature_mask, warnings, decode.read_header(data) if data else None
 

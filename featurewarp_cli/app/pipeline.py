@@ -164,18 +164,24 @@ def load_image_and_mask(settings: Settings, input: str, mask: str | None, data: 
     """
     use_mask = masked(settings, mask)
     _check_paths(input, mask_file(settings, mask) if use_mask else None)
-    if data is None and (input == "-" or os.path.isfile(input)):
-        if input != "-":
-            check_file_size(input, "INPUT", settings.max_memory, settings.max_pixels)
-        try:
-            data = decode.read_bytes(input, settings.max_memory)
-        except ImageError as err:
-            raise WarpError(str(err)) from err
+    data = input_bytes(settings, input) if data is None else data
     image = read_input(input, "INPUT", settings.max_pixels, data, settings.max_memory)
     height, width = image.shape[:2]
     header = decode.read_header(data) if data else None
     feature_mask, warnings = load_mask(settings, mask, (width, height), header, image) if use_mask else (None, [])
     return image, feature_mask, frames_warning(header) + warnings
+
+
+def input_bytes(settings: Settings, input: str) -> bytes | None:
+    """INPUT's bytes, read once within the limits (stdin's too); None where it is no file."""
+    if not (input == "-" or os.path.isfile(input)):
+        return None
+    if input != "-":
+        check_file_size(input, "INPUT", settings.max_memory, settings.max_pixels)
+    try:
+        return decode.read_bytes(input, settings.max_memory)
+    except ImageError as err:
+        raise WarpError(str(err)) from err
 
 
 def frames_warning(header) -> list[str]:
