@@ -239,7 +239,7 @@ def test_resume_warps_again_what_other_settings_made(runner, photos, tmp_path):
     again = runner("batch", "swirl", photos / "a.png", "-o", out, "--angle", "90", "--resume", "--summary", summary)
     assert again.code == 0 and again.lines == [
         f"featurewarp: --resume: warping 1 up-to-date output(s) again, which {summary} does not record as made "
-        f"with these settings, input and mask: {out / 'a.png'}"]
+        f"with these settings, input and mask: {out / 'a.png'} (other settings)"]
     assert [(line["status"], line["settings"] in stamps) for line in lines()] == [("ok", False)]
     fresh = runner("batch", "swirl", photos / "a.png", "-o", tmp_path / "fresh", "--angle", "90")
     assert fresh.code == 0 and (out / "a.png").read_bytes() == (tmp_path / "fresh" / "a.png").read_bytes()

@@ -258,106 +258,6 @@ def up_to_date(job: Job) -> bool:
         return False
 
 
-#: Settings that change no output byte (they only refuse a file), left out of :func:`settings_stamp`.
-UNSTAMPED = ("max_pixels", "max_memory", "warp_factory")
-
-
-def settings_stamp(settings: Settings) -> str:
-    """``sha256:`` and 16 hex digits of what makes a batch's outputs what they are: the preset, its
-    parameters, the engine and output options (not the limits). Each ``--summary`` line records
-    it, for ``--resume`` to compare (:func:`resume_plan`)."""
-    import hashlib
-    import json
-
-    chosen = {name: value for name, value in vars(settings).items() if name not in UNSTAMPED}
-    text = json.dumps(chosen, sort_keys=True, default=str)
-    return "sha256:" + hashlib.sha256(text.encode()).hexdigest()[:16]
-
-
-def recorded_outputs(summary: str | None) -> dict | None:
-    """What an earlier ``--summary`` file records of the outputs it wrote or found up to date:
-    output -> ((input, mask), settings stamp), by what they name (:func:`_identity`; a line that
-    is not a job's JSON is passed over); None where there is no file to read (none given, ``-``,
-    not there or unreadable)."""
-    import json
-
-    if not summary or summary == "-" or not os.path.isfile(summary):
-        return None
-    lines = {}
-    try:
-        with open(summary, encoding="utf-8", errors="replace") as file:
-            for text in file:
-                try:
-                    line = json.loads(text)
-                except ValueError:
-                    continue
-                places = _places(line)
-                if places is not None and line.get("status") in ("ok", "skipped"):
-                    lines[places[0]] = (places[1:], line.get("settings"))
-    except OSError:
-        return None
-    return lines
-
-
-def _places(line) -> tuple | None:
-    """What the output, input and mask of a summary line name (:func:`_identity`; the mask None
-    where it had none); None for a line that is not a job's, or names a store not installed."""
-    try:
-        output, input, mask = (line[name] for name in ("output", "input", "mask"))
-        if not (isinstance(output, str) and isinstance(input, str) and isinstance(mask, (str, type(None)))):
-            return None
-        return _identity(output), _identity(input), mask and _identity(mask)
-    except (TypeError, KeyError, ValueError, OSError, ImportError):
-        return None
-
-
-def resume_plan(jobs: list[Job], settings: Settings, summary: str | None) -> tuple[dict, list]:
-    """What ``--resume`` does with ``jobs`` whose outputs are up to date by their times
-    (:func:`up_to_date`): with the ``summary`` file of an earlier run to read, each is skipped only
-    where a line of it records this input, mask and :func:`settings_stamp`, else warped again;
-    without one, each is skipped unchecked.
-
-    Returns
-    -------
-    skipped : dict
-        Index -> the stamp its output is known to be made with, None where unchecked.
-    redone : list of int
-        The jobs whose outputs are up to date but not recorded as made with these settings,
-        input and mask.
-    """
-    stamp, known = settings_stamp(settings), recorded_outputs(summary)
-    skipped, redone = {}, []
-    for i, job in enumerate(jobs):
-        if not up_to_date(job):
-            continue
-        if known is None:
-            skipped[i] = None
-        elif known.get(_identity(job.output)) == ((_identity(job.input), job.mask and _identity(job.mask)), stamp):
-            skipped[i] = stamp
-        else:
-            redone.append(i)
-    return skipped, redone
-
-
-def resume_notes(jobs: list[Job], skipped: dict, redone: list, summary: str | None) -> list[str]:
-    """The lines ``--resume`` says about :func:`resume_plan`'s outcome: the outputs warped again,
-    and (a warning) those skipped unchecked."""
-    def listed(indices):
-        names = [jobs[i].output for i in indices[:3]]
-        return ", ".join(names) + (f" and {len(indices) - 3} more" if len(indices) > 3 else "")
-
-    notes = []
-    if redone:
-        notes.append(f"featurewarp: --resume: warping {len(redone)} up-to-date output(s) again, which {summary} does "
-                     f"not record as made with these settings, input and mask: {listed(redone)}")
-    unchecked = sorted(i for i, stamp in skipped.items() if stamp is None)
-    if unchecked:
-        notes.append(f"featurewarp: warning: --resume skipped {len(unchecked)} output(s) by their times alone, the "
-                     f"settings that made them unchecked (give the --summary FILE of the run that made them): "
-                     f"{listed(unchecked)}")
-    return notes
-
-
 def run_jobs(settings: Settings, jobs: list[Job], workers: int = 1, scheduler: str | None = None,
              verbose: bool = False):
     """Start ``jobs``; iterate the result for (index, job, error, summary, seconds).
@@ -464,12 +364,14 @@ def summary_record(index: int, job: Job, status: str, seconds: float = 0.0, summ
         :func:`featurewarp_cli.app.report.summary` of a written file (its warnings are kept).
     error : str, optional
     settings : str, optional
-        The :func:`settings_stamp` its output was (or is known to have been) made with.
+        The :func:`featurewarp_cli.app.resume.settings_stamp` its output was (or is known to have
+        been) made with. ``dir`` is the folder the paths as given are relative to (``--resume``
+        reads them there, from whichever folder it is run).
 
     Returns
     -------
     dict
     """
-    return {"job": index, "input": job.input, "mask": job.mask, "output": job.output, "status": status,
-            "seconds": round(seconds, 4), "warnings": list(summary["warnings"]) if summary else [],
+    return {"job": index, "input": job.input, "mask": job.mask, "output": job.output, "dir": os.getcwd(),
+            "status": status, "seconds": round(seconds, 4), "warnings": list(summary["warnings"]) if summary else [],
             "error": error, "settings": settings}

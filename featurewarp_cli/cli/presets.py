@@ -200,7 +200,8 @@ def run_planned(settings, todo, jobs: int, scheduler, summary_path, resume: bool
     The summary is opened (and an existing one emptied) only once the run has started: a
     ``--scheduler`` that fails leaves it as it was. A summary that cannot be written stops the
     run (the jobs not finished are cancelled) with one error naming it."""
-    from ..app.batch import resume_notes, resume_plan, run_jobs, settings_stamp, summary_record
+    from ..app.batch import run_jobs, summary_record
+    from ..app.resume import resume_notes, resume_plan, settings_stamp
     from ..app.cluster_run import Unfinished
 
     skipped, redone = resume_plan(todo, settings, summary_path) if resume else ({}, [])
