@@ -20,7 +20,7 @@ import warnings
 
 import click
 
-from .. import __version__, blas, plugins
+from .. import __version__, blas, plugins, stages
 from .deform import deform_command
 from .diff import diff_command
 from .edit import edit_command
@@ -83,9 +83,7 @@ def cli(ctx, debug, quiet, verbose):
       featurewarp warps            # presets, their options, defaults and ranges
     """
     ctx.meta["featurewarp.quiet"], ctx.meta["featurewarp.verbose"] = quiet, verbose
-    from .. import stages
-
-    stages.quiet = quiet          # a command's own -q sets it again; an earlier run's does not last
+    stages.quiet = quiet                   # a command's own -q sets it too (settings_from)
 
 
 @cli.group(cls=PresetGroup, context_settings={"help_option_names": ["-h", "--help"]},
@@ -339,6 +337,8 @@ def main(argv=None):
         else:
             message, code = f"{_error_name(err)}: {' '.join(str(err).split())} (--debug shows a traceback)", 1
         say(f"featurewarp: error: {message}")
+    finally:
+        stages.quiet = False               # -q was this run's: a process that goes on (tests, the API) speaks
     sys.exit(code if isinstance(code, int) else 0)
 
 
