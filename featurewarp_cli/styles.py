@@ -107,11 +107,12 @@ def merged(rest: list[str], options: str, table: dict, others: dict) -> tuple[li
         name, takes = table.get(flag) or others.get(flag) or (flag, i < len(rest) and not FLAG.match(rest[i]))
         value = rest[i:i + 1] if takes and not equals else []
         i += len(value)
-        if table and flag not in table:
-            dropped.append(shlex.join([word, *value]))
+        varied = (word.partition("=")[2] if equals else "".join(value)).partition("=")[0] if flag == "--vary" else ""
+        if table and (flag not in table or (varied and f"--{varied.replace('_', '-')}" not in table)):
+            dropped.append(shlex.join([word, *value]))      # an option, or a varied one, it does not take
         else:
             kept += [word, *value]
-            given.add(name)
+            given.update({name, varied.replace("-", "_")} - {""})    # --vary waves=1:3 gives waves too
     words = shlex.split(options)
     yields = bool(words) and (table.get(words[0]) or (words[0],))[0] in given
     return kept + ([] if yields else words), dropped, yields

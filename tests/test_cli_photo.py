@@ -295,3 +295,17 @@ def test_the_python_api_answers_a_style_name_with_its_preset_too():
     assert "fish'" not in str(caught.value)
     with pytest.raises(UnknownPreset, match="did you mean 'swirl'"):
         load_warp("swrl")
+
+
+def test_a_style_hint_under_animate_keeps_the_varied_option_and_drops_one_the_preset_lacks():
+    """animate wave --vary waves=1:3 was told to run flag ... --vary waves=1:3 --waves 2, which
+    animate refuses (given and varied); pinch's inflate command kept --vary strength=..., which
+    inflate does not have (smoke trial 1)."""
+    from featurewarp_cli.styles import merged
+
+    table = {"--vary": ("vary", True), "--frames": ("frames", True), "--waves": ("waves", True),
+             "--bend": ("bend", True)}
+    kept, dropped, yields = merged(["--vary", "waves=1:3", "--frames", "3"], "--waves 2", table, {})
+    assert kept == ["--vary", "waves=1:3", "--frames", "3"] and yields and not dropped
+    kept, dropped, _ = merged(["--vary=strength=-0.2:-0.5"], "--bend -40", table, {})
+    assert kept == ["--bend", "-40"] and dropped == ["--vary=strength=-0.2:-0.5"]
