@@ -211,3 +211,19 @@ def test_the_same_run_writes_the_same_bytes(files):
                 "transparent")
     for ext in ("gif", "png", "webp"):
         assert (files / f"r1.{ext}").read_bytes() == (files / f"r2.{ext}").read_bytes()
+
+
+def test_a_16_bit_input_says_its_frames_have_8_bits(tmp_path):
+    """animate wrote a 16-bit input's frames at 8 bits without a word, where warp keeps 16 and
+    README called APNG lossless (smoke trial 2)."""
+    import subprocess
+    import sys
+
+    from pathlib import Path
+
+    image = cv2.imread(str(Path(__file__).resolve().parent.parent / "samples" / "shapes.png")).astype(np.uint16) * 257
+    cv2.imwrite(str(tmp_path / "in.png"), image)
+    run = subprocess.run([sys.executable, "-m", "featurewarp_cli", "animate", "swirl", str(tmp_path / "in.png"),
+                          str(tmp_path / "a.png"), "--vary", "angle=0:90", "--frames", "2"],
+                         capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0 and "16 bits a sample; the animation's frames have 8" in run.stderr

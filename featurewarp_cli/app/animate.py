@@ -191,6 +191,9 @@ def animate_file(settings: Settings, input: str, output: str, mask: str | None, 
     if ext == ".gif" and kind == "animation" and fps > GIF_MAX_FPS:
         warnings.append(f"--fps {fps:g}: a GIF plays at most {GIF_MAX_FPS:g} frames a second (its delays are in "
                         f"1/100 s, and browsers show one under 2/100 s for 1/10 s): written at {GIF_MAX_FPS:g}")
+    if image.dtype == np.uint16:
+        warnings.append("the input has 16 bits a sample; the animation's frames have 8 (GIF, WebP and video hold no "
+                        "more, and APNG and PNG frames are written as the animation's: warp keeps 16 bits)")
     height, width = image.shape[:2]
     if settings.strict and warnings:
         raise WarpError(f"--strict: {warnings[0]}; nothing written")
