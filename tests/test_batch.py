@@ -252,3 +252,23 @@ def test_resume_warps_again_what_other_settings_made(runner, photos, tmp_path):
     summary.write_text(json.dumps(older) + "\n")
     run = runner("batch", "swirl", photos / "a.png", "-o", out, "--angle", "90", "--resume", "--summary", summary)
     assert run.code == 0 and "warping 1 up-to-date output(s) again" in run.stderr
+
+
+def test_a_strict_refusal_keeps_its_warnings_in_the_summary(tmp_path):
+    """A file that --strict refused had "warnings": [] in its --summary line, the warning that
+    caused it only inside "error" (smoke trial 4)."""
+    import json
+    import shutil
+
+    from test_cli import Runner
+
+    from pathlib import Path
+
+    samples = Path(__file__).resolve().parent.parent / "samples"
+    for name in ("closeup.png", "closeup_mask.png"):
+        shutil.copy(samples / name, tmp_path / name)
+    run = Runner()("batch", "swirl", tmp_path / "closeup.png", "--out-dir", tmp_path / "out", "--angle", "180",
+                   "--strict", "--summary", tmp_path / "s.jsonl")
+    line = json.loads((tmp_path / "s.jsonl").read_text().splitlines()[0])
+    assert run.code == 1 and line["status"] == "failed" and "--strict" in line["error"]
+    assert line["warnings"] and line["warnings"][0] in line["error"]

@@ -225,8 +225,8 @@ def run_job(settings: Settings, job: Job) -> tuple[str | None, dict | None]:
         return f"{job.input} {path_problem(job.input)}", None
     try:
         return None, warp_file(settings, job.input, job.output, job.mask)
-    except WarpError as err:
-        return str(err), None
+    except WarpError as err:                         # a --strict refusal keeps the warnings behind it
+        return str(err), {"input": job.input, "output": job.output, "warnings": err.warnings} if err.warnings else None
     except Exception as err:  # one bad file must not stop the batch
         return f"{type(err).__name__}: {err}", None
 

@@ -38,11 +38,13 @@ class WarpError(Exception):
         The argument or option at fault (``INPUT``, ``--mask`` ...).
     usage : bool
         True for a bad invocation (exit 2), False for a failure while processing (exit 1).
+    warnings : sequence of str
+        The warnings that made ``--strict`` refuse the run (a batch's summary keeps them).
     """
 
-    def __init__(self, message: str, param: str | None = None, usage: bool = False):
+    def __init__(self, message: str, param: str | None = None, usage: bool = False, warnings=()):
         super().__init__(message)
-        self.message, self.param, self.usage = message, param, usage
+        self.message, self.param, self.usage, self.warnings = message, param, usage, list(warnings)
 
     def __str__(self) -> str:
         return f"{self.param}: {self.message}" if self.param else self.message
@@ -383,7 +385,7 @@ def check_solution(settings: Settings, mesh, refused=None) -> None:
             error = said
         except WarpError as err:                 # the refusal is still what is said first
             error = f"{error} ({err})"
-    raise WarpError(error)
+    raise WarpError(error, warnings=causes)
 
 
 def refusal(settings: Settings, mesh) -> tuple[str | None, list[str]]:
