@@ -26,7 +26,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..io import write
-from .editor_files import (TEXTURE_SIDE, Snapshot, Unconfirmed, decode_mask, handles_json, naming, png,  # noqa: F401
+from .editor_files import (Snapshot, Unconfirmed, decode_mask, handles_json, naming, png,  # noqa: F401
                            texture, write_named)
 from .pipeline import Settings, WarpError, load_image_and_mask, warp_file
 

@@ -116,10 +116,10 @@ def _places(line) -> tuple | None:
         return None
 
 
-def resume_plan(jobs: list[Job], settings: Settings, summary: str | None) -> tuple[dict, list]:
+def resume_plan(jobs: list[Job], stamp: str, summary: str | None) -> tuple[dict, list]:
     """What ``--resume`` does with ``jobs`` whose outputs are up to date by their times
     (:func:`up_to_date`): with the ``summary`` file of an earlier run to read, each is skipped only
-    where a line of it records this input, mask and :func:`settings_stamp`, else warped again;
+    where a line of it records this input, mask and ``stamp`` (:func:`settings_stamp`), else warped again;
     without one, each is skipped unchecked.
 
     Returns
@@ -131,7 +131,7 @@ def resume_plan(jobs: list[Job], settings: Settings, summary: str | None) -> tup
         input and mask, and what differs ('settings', 'input', 'mask', joined by ', ', or
         'not recorded').
     """
-    stamp, known = settings_stamp(settings), recorded_outputs(summary)
+    known = recorded_outputs(summary)
     skipped, redone = {}, []
     for i, job in enumerate(jobs):
         if not up_to_date(job):

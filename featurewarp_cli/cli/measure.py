@@ -72,8 +72,7 @@ def measure_command(input, output, mask, as_json, max_distortion, max_pixels, ma
       featurewarp measure photo.png out.png -m mask.png --json
     """
     from ..app import measure
-    from ..app.animate import load_with_header
-    from ..app.pipeline import Settings, WarpError, frames_warning, read_input
+    from ..app.pipeline import Settings, WarpError, _check_paths, frames_warning, load_image_and_mask, read_input
     from ..io import ImageError, decode
     from .presets import click_error
 
@@ -81,13 +80,12 @@ def measure_command(input, output, mask, as_json, max_distortion, max_pixels, ma
         raise click.UsageError("only one of INPUT, OUTPUT and --mask can be '-' (stdin)")
     settings = Settings("measure", max_pixels=max_pixels, max_memory=max_memory)
     try:                                   # INPUT and its mask as warp reads them (-m alpha too)
-        if input != "-" and not os.path.isfile(input):
-            raise WarpError(f"{input} {decode.path_problem(input)}", "INPUT", usage=True)
+        _check_paths(input, None)              # INPUT named first, as warp does
         data = decode.read_bytes(output, max_memory) if output == "-" or os.path.isfile(output) else None
         warnings = [f"OUTPUT {output} has several frames (animated or multi-page); the first is measured"] * bool(
             data is not None and frames_warning(decode.read_header(data)))
         result = read_input(output, "OUTPUT", max_pixels, data, max_memory)
-        image, feature_mask, loaded, _ = load_with_header(settings, input, mask)
+        image, feature_mask, loaded = load_image_and_mask(settings, input, mask)
         warnings = loaded + warnings
     except ImageError as err:
         raise click_error(WarpError(str(err), "OUTPUT")) from err

@@ -204,10 +204,11 @@ def run_planned(settings, todo, jobs: int, scheduler, summary_path, resume: bool
     from ..app.resume import resume_notes, resume_plan, settings_stamp
     from ..app.cluster_run import Unfinished
 
-    skipped, redone = resume_plan(todo, settings, summary_path) if resume else ({}, [])
+    stamp = settings_stamp(settings)
+    skipped, redone = resume_plan(todo, stamp, summary_path) if resume else ({}, [])
     for note in resume_notes(todo, skipped, redone, summary_path) if not quiet else ():
         say(note)
-    numbers, stamp = [i for i in range(len(todo)) if i not in skipped], settings_stamp(settings)
+    numbers = [i for i in range(len(todo)) if i not in skipped]
     remaining = [todo[i] for i in numbers]
     if summary_path and summary_path != "-":
         _summary_writable(summary_path)

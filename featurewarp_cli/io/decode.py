@@ -29,7 +29,7 @@ import numpy as np
 
 from . import ImageError, png, profiles, tiff
 from .capture import captured_stderr
-from .metadata import TIFF_DESCRIPTIVE_TAGS, carried, descriptive_exif  # noqa: F401  (their old home)
+from .metadata import carried
 from .limits import MAX_PIXELS, check_pixels, check_size, limit_opencv_decoders, opencv_limit, size_text
 
 limit_opencv_decoders(MAX_PIXELS, replace=False)        # before cv2 loads; the CLI may have set it

@@ -266,8 +266,8 @@ def _extra_options(fmt: str, exif: bytes | None, xmp: bytes | None, dpi) -> dict
     EXIF), TIFF ``dpi`` where the EXIF states none and tag 700 (BYTE) beside the EXIF's tags."""
     from PIL import PngImagePlugin, TiffImagePlugin
 
-    options = {}
-    if dpi and fmt in ("jpg", "png") or (fmt == "tiff" and dpi and metadata.X_RESOLUTION not in _exif_tags(exif)):
+    options, tags = {}, _exif_tags(exif) if fmt == "tiff" else {}
+    if dpi and fmt in ("jpg", "png") or (fmt == "tiff" and dpi and metadata.X_RESOLUTION not in tags):
         options["dpi"] = dpi
     if xmp and fmt in ("jpg", "webp"):
         options["xmp"] = xmp
@@ -276,7 +276,7 @@ def _extra_options(fmt: str, exif: bytes | None, xmp: bytes | None, dpi) -> dict
         options["pnginfo"].add_itxt("XML:com.adobe.xmp", xmp.decode("utf-8", "replace"))
     elif xmp and fmt == "tiff":
         directory = TiffImagePlugin.ImageFileDirectory_v2()
-        for tag, (_, value) in _exif_tags(exif).items():
+        for tag, (_, value) in tags.items():
             directory[tag] = value.rstrip(b"\0").decode("utf-8") if isinstance(value, bytes) else \
                 (value[0] if not isinstance(value[0], tuple) else TiffImagePlugin.IFDRational(*value[0]))
         directory[700] = xmp
@@ -287,15 +287,14 @@ def _extra_options(fmt: str, exif: bytes | None, xmp: bytes | None, dpi) -> dict
 
 def _tiff_exif(exif: bytes) -> bytes | None:
     """An EXIF block as a TIFF written through libtiff can hold it: the main directory's
-    descriptive tags (:func:`featurewarp_cli.io.decode.descriptive_exif`); None if broken or empty."""
+    descriptive tags (:func:`featurewarp_cli.io.metadata.descriptive_exif`); None if broken or empty."""
     from PIL import Image
 
-    from .decode import descriptive_exif
 
     try:
         whole = Image.Exif()
         whole.load(exif)
-        kept = descriptive_exif(whole)
+        kept = metadata.descriptive_exif(whole)
         return kept.tobytes() if len(kept) else None
     except Exception:  # a broken block is not kept
         return None
