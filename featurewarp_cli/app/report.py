@@ -11,6 +11,7 @@ import numpy as np
 from .. import __version__
 from ..engine import barrier
 from ..engine import guard as fold_guard
+from ..engine import path as fold_path
 
 
 #: The report's own format version (``featurewarp schema report`` prints its JSON Schema).
@@ -95,6 +96,8 @@ def build_report(input_path, output_path, image, result, warp, mesh, timings, fm
             "flipped_after": info["flipped_triangles"],
             "untangle_iterations": info.get("untangle_iterations", 0),
             "window_quads": info.get("untangle_window_quads", 0),
+            "path": {"steps": info.get("path_steps", 0), "blocked_share": fold_path.BLOCKED_SHARE,
+                     "tolerance": fold_path.PATH_TOLERANCE, "max_steps": fold_path.MAX_STEPS},
             "release_rounds": info.get("release_rounds", 0),
             "released_components": info.get("released_components", []),
             "feature_blend": info.get("feature_blend", 1.0),

@@ -359,7 +359,7 @@ def _direct_direction(rows: InverseRows, move, points, triangles, blocks, gradie
 
 def converge(solve, normal, movable: np.ndarray, x: np.ndarray, triangles: np.ndarray, floor: np.ndarray,
              kappa: np.ndarray, areas=None, max_steps: int | None = None,
-             inverse=None, linear=None) -> tuple[np.ndarray, Convergence]:
+             inverse=None, linear=None, tolerance: float = TOLERANCE) -> tuple[np.ndarray, Convergence]:
     """Minimise Phi (module docstring) from the injective positions ``x``.
 
     Parameters
@@ -373,9 +373,9 @@ def converge(solve, normal, movable: np.ndarray, x: np.ndarray, triangles: np.nd
         Nodes ``solve`` moves one by one (not held, not tied; used without ``inverse``).
     x, triangles, floor, kappa : (N, 2), (M, 3), (M,), (M,) ndarray
         Start (no triangle folded), the triangles, f_t and kappa_t (:func:`weights`).
-    areas, max_steps : callable, int, optional
-        ``areas(points)`` -> signed area per triangle (default :func:`grid.signed_areas`);
-        Newton steps at most (default :data:`MAX_STEPS`; a preview takes a few, bounded).
+    areas, max_steps, tolerance : callable, int, float, optional
+        ``areas(points)`` -> signed area per triangle (default :func:`grid.signed_areas`); Newton
+        steps at most (default :data:`MAX_STEPS`; a preview: a few); a path's looser tolerance.
     inverse : InverseRows, optional
         ``solve``'s linear part between nodes, as far as earlier runs on the same system filled
         it: with it, a Newton system whose barrier touches few nodes is solved exactly.
@@ -416,8 +416,8 @@ def converge(solve, normal, movable: np.ndarray, x: np.ndarray, triangles: np.nd
                 return x, Convergence(step, False)     # even with the bound: stay
             near = partial = False
             continue
-        if decrement <= TOLERANCE * value or decrement < 1e-18:     # uphill beyond rounding: not a minimum
-            return x, Convergence(step, decrement >= -TOLERANCE * value)
+        if decrement <= tolerance * value or decrement < 1e-18:     # uphill beyond rounding: not a minimum
+            return x, Convergence(step, decrement >= -tolerance * value)
         if active.size == 0 and _reaches_optimum(areas, x, optimum, floor):
             return optimum, Convergence(step + 1, True)
         length = min(1.0, 1.8 * injectivity.max_step_of(areas, x, x + 2.0 * direction))

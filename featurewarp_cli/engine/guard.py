@@ -1,4 +1,4 @@
-"""The fold-over guard's policy: untangle near the folds, then globally, then relax features.
+"""The fold-over guard's policy: untangle near the folds, else follow the path from W, then relax features.
 
 The primitives (step limits, areas, penalty descent, windows) are in :mod:`injectivity`, the
 energy every result is converged to in :mod:`barrier`, the never-worse-than-plain step after
@@ -14,6 +14,7 @@ import numpy as np
 
 from . import barrier, injectivity, system
 from .grid import signed_areas
+from .path import BLOCKED_SHARE, converge_grid as _converge_grid, path_from_warp
 
 #: The guard untangles windows around the folds, reaching these many times the largest fold's
 #: extent beyond it (at least WINDOW_MIN_MARGIN quads), in at most WINDOW_ITERATIONS steps each,
@@ -49,6 +50,8 @@ class GuardRecord:
     untangle_iterations : int
     window_quads : int
         Quads the last successful window could reshape (0: no window pass).
+    path_steps : int
+        Predictor-corrector steps of the path from W (:mod:`path`; 0: the windows sufficed).
     release_rounds : int
         0: features kept their targets; 1 or 2: some were relaxed towards W.
     released_components : list of int
@@ -85,6 +88,7 @@ class GuardRecord:
     converged: bool = True
     drag_step: float = 1.0
     preview_eased: bool = False
+    path_steps: int = 0
 
     def count(self, how: barrier.Convergence) -> None:
         """Add one :func:`barrier.converge` run's Newton steps and convergence."""
@@ -198,8 +202,10 @@ def guard(problem: Problem, x: np.ndarray, record: GuardRecord) -> np.ndarray | 
 def _untangled(problem, start, floor, record):
     """Untangle in a window around the folds (a wider one next, from where the first left off
     if it has fewer folds; then the first with the ground around the tied features it reaches,
-    from ``start``; :func:`_untangle_window`), else on the whole grid from the best of the
-    first two; a preview stops after a window that gave up, or the first two; (x, no folds).
+    from ``start``; :func:`_untangle_window`), else follow the path of minima from W
+    (:func:`path.path_from_warp`: no untangling of the whole grid, whose first fold-free
+    iterate, or whether it found one in its steps, turned one ulp into 1.2-137 px); a preview
+    stops after a window that gave up, or the first two; (x, the features fit).
 
     The third window comes last: where a tied feature blocks the folds (the astronaut's head
     cut by the top edge under ``fish``), it opens them where the others cannot (12 MP: 1.4 s
@@ -224,12 +230,7 @@ def _untangled(problem, start, floor, record):
             break
     if problem.preview:
         return start, False
-    grid = problem.grid
-    x, iterations = injectivity.untangle(problem.solver(problem.systems, rhs, offset), problem.normal.dot, start,
-                                         tris, floor, problem.stiffness,
-                                         areas=lambda points: injectivity.grid_areas(grid, points))
-    record.untangle_iterations += iterations
-    return x, not injectivity.flipped(x, tris).any()
+    return path_from_warp(problem, floor, record)
 
 
 def _converged(problem, x, floor, record):
@@ -249,9 +250,11 @@ def _converged(problem, x, floor, record):
 
 
 def _release(problem: Problem, x, floor, record: GuardRecord):
-    """Untie the features near the folds (then all) and blend their targets towards W's."""
+    """Untie the features near where the path from W stopped (``x``: its triangles below
+    ``BLOCKED_SHARE`` of their floor; then all) and blend their targets towards W's."""
     features, tris = problem.features, problem.triangles
-    released = np.unique(features.component[injectivity.trouble_quads(problem.grid, x, tris)
+    blocked = injectivity.grid_areas(problem.grid, x) < BLOCKED_SHARE * floor
+    released = np.unique(features.component[injectivity.trouble_quads(problem.grid, blocked)
                                             & features.is_constrained])
     for round_ in (1, 2):
         record.release_rounds = round_
@@ -349,18 +352,6 @@ def blend_search(problem: Problem, released: np.ndarray, floor, record: GuardRec
             return settle(s, between), s
         x, s = trial, t
     return x, s
-
-
-def _converge_grid(problem, systems, rhs, offset, tied, x, floor, record, max_steps=None):
-    """(``x`` (no folds) moved to the barrier energy's minimum on the whole grid, how the run ended)."""
-    kappa = barrier.weights(problem.warped, problem.triangles, problem.stiffness, floor)
-    x, how = barrier.converge(problem.solver(systems, rhs, offset), problem.normal, ~problem.fixed & (tied < 0), x,
-                              problem.triangles, floor, kappa,
-                              areas=lambda points: injectivity.grid_areas(problem.grid, points),
-                              max_steps=PREVIEW_STEPS if problem.preview else max_steps,
-                              inverse=problem.inverse(systems), linear=problem.linear(systems))
-    record.count(how)
-    return x, how
 
 
 def _untangle_window(problem: Problem, rhs, offset, tied, x, floor, margin_factor: float, record,

@@ -128,10 +128,9 @@ def flipped(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     return signed_areas(points, triangles) <= 0
 
 
-def trouble_quads(grid: Grid, points: np.ndarray, triangles: np.ndarray, radius: int = 2) -> np.ndarray:
-    """Quads holding a flipped triangle, grown by ``radius`` quads: (K,) bool."""
+def trouble_quads(grid: Grid, bad: np.ndarray, radius: int = 2) -> np.ndarray:
+    """Quads holding a ``bad`` triangle ((M,) bool), grown by ``radius`` quads: (K,) bool."""
     n_quads = (grid.nx - 1) * (grid.ny - 1)
-    bad = flipped(points, triangles)
     quads = np.zeros(n_quads, np.uint8)
     quads[np.flatnonzero(bad) % n_quads] = 1      # triangles t and t + K share quad t
     quads = quads.reshape(grid.quad_shape)

@@ -178,6 +178,7 @@ class SolveRecord:
             "flipped_before_guard": guard.flipped_before,
             "untangle_iterations": guard.untangle_iterations,
             "untangle_window_quads": guard.window_quads,
+            "path_steps": guard.path_steps,
             "release_rounds": guard.release_rounds,
             "released_components": list(guard.released_components),
             "feature_blend": guard.feature_blend,

@@ -1,0 +1,111 @@
+"""The path of barrier minima from W: an injective start that is a continuous function of the inputs.
+
+Blend the least-squares targets from W's own (``s = 0``) to the solve's (``s = 1``): the edge
+targets' right-hand side, and the positions the solve holds or ties (a tied feature's shape,
+a held coordinate) from W's to the solve's. At ``s = 0`` the least-squares solution is W
+itself (its right-hand side is ``L W``), which has no fold; it is affine in ``s``, so the
+barrier energy's minima form a path from W. Followed by a predictor along the path's tangent
+(``(H + B)^-1 H`` times the least-squares line's, B the barrier's Hessian bound), up to where a
+triangle keeps half of its area (of its floor where it is above it: a root, not a count), and
+a corrector (:func:`barrier.converge` at the new ``s``), it ends at a minimum of the energy at
+``s = 1`` without untangling, windows or fold counts (Allgower and
+Georg, *Introduction to Numerical Continuation Methods*, 2003, ch. 2: predictor-corrector
+path following).
+
+Where the guard's windows cannot open the folds, it starts the barrier here instead of
+untangling the whole grid: the untangling's first fold-free iterate, or whether it found one
+within its steps, turned a one-ulp change of W into 1.2 px (the astronaut at 320 px under a
+rigid ``swirl --angle 230``) and 7-137 px (the 1 MP photo under ``swirl --angle 229.99999``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import barrier, injectivity
+
+#: Where the path's minimum leaves a triangle thinner than this share of its floor, the tied
+#: features do not fit (the minima crush the ground between them as ``s`` nears a limit below
+#: 1): the path stops and the guard releases them. The kept minima of the photos and the hard
+#: swirls keep 40-70 % (:data:`barrier.STIFFNESS`); lower follows a blocked path longer.
+BLOCKED_SHARE = 0.2
+#: The corrector's tolerance (the Newton decrement against the energy, as
+#: :data:`barrier.TOLERANCE`) before ``s = 1``; the last point is converged to
+#: :data:`barrier.TOLERANCE`. Looser is faster and follows the path less closely (at 0.1 the
+#: 1 MP photo's ``squeeze`` crushed a triangle on the way and released its features).
+PATH_TOLERANCE = 1e-3
+#: Predictor-corrector steps at most, a guard against a path whose minimum ends without a
+#: crushed triangle (treated as blocked). The hard cases' paths take 7-55.
+MAX_STEPS = 200
+
+
+def path_from_warp(problem, floor: np.ndarray, record) -> tuple[np.ndarray, bool]:
+    """(positions at the energy's minimum at ``s = 1`` reached from W, whether the path got there).
+
+    ``problem`` is a :class:`guard.Problem`; ``record`` a :class:`guard.GuardRecord` (its
+    ``newton_steps``, ``converged`` and ``path_steps``)."""
+    warped, systems = problem.warped, problem.systems
+    rhs_warp, offset_warp = _stacked(problem.normal, warped), warped
+    solution = systems.solve(problem.rhs, problem.offset)
+    along = solution - warped                    # d(least-squares solution)/ds
+    areas = lambda points: injectivity.grid_areas(problem.grid, points)    # noqa: E731
+    x, s = warped.copy(), 0.0
+    kappa = barrier.weights(warped, problem.triangles, problem.stiffness, floor)
+    for step in range(MAX_STEPS):
+        current = areas(x)
+        tangent = _tangent(problem, systems, x, current, floor, kappa, along)
+        share = injectivity.max_step(x, x + (1.0 - s) * tangent, problem.triangles,
+                                     injectivity.CRUSHED_SHARE * np.minimum(floor, current))
+        if not share > 0:
+            break
+        s_next = 1.0 if share >= 1.0 else s + share * (1.0 - s)
+        x = x + (s_next - s) * tangent
+        s = s_next
+        rhs = (1.0 - s) * rhs_warp + s * problem.rhs
+        offset = (1.0 - s) * offset_warp + s * problem.offset
+        x, how = converge_grid(problem, systems, rhs, offset, problem.tied, x, floor, record,
+                                tolerance=barrier.TOLERANCE if s == 1.0 else PATH_TOLERANCE)
+        record.path_steps = step + 1
+        if (areas(x) < BLOCKED_SHARE * floor).any():
+            return x, False                      # the features do not fit
+        if s == 1.0:
+            record.converged = how.converged
+            return x, True
+    return x, False
+
+
+def _stacked(normal, points: np.ndarray) -> np.ndarray:
+    """``L points`` per axis: the right-hand side whose least-squares solution is ``points``."""
+    return np.stack([normal.dot(points[:, 0]), normal.dot(points[:, 1])], axis=1)
+
+
+def _tangent(problem, systems, x, current, floor, kappa, along):
+    """d(minimum)/ds at a minimum ``x``: ``(H + B)^-1 H along`` = ``along - (H + B)^-1 B along``
+    (H the least-squares Hessian, B the barrier's, its positive semi-definite bound)."""
+    ratio = current / floor
+    active = np.flatnonzero(ratio < 1.0)
+    if active.size == 0:
+        return along
+    tris = problem.triangles[active]
+    blocks = barrier._hessians(x, tris, ratio[active], floor[active], kappa[active], exact=False)
+    part = np.einsum("kij,kj->ki", blocks, along[tris].reshape(-1, 6)).reshape(-1, 2)
+    pushed = np.stack([np.bincount(tris.ravel(), part[:, k], minlength=x.shape[0]) for k in range(2)], axis=1)
+    direction, ok, _ = barrier._direction(problem.inverse(systems), problem.linear(systems), problem.normal,
+                                          ~problem.fixed & (problem.tied < 0), x, tris, ratio[active],
+                                          floor[active], kappa[active], pushed, False, exact_first=False)
+    return along + direction if ok else along
+
+
+def converge_grid(problem, systems, rhs, offset, tied, x, floor, record, max_steps=None,
+                  tolerance=barrier.TOLERANCE):
+    """(``x`` (no folds) moved to the barrier energy's minimum on the whole grid, how the run ended)."""
+    from .guard import PREVIEW_STEPS            # it imports this module
+
+    kappa = barrier.weights(problem.warped, problem.triangles, problem.stiffness, floor)
+    x, how = barrier.converge(problem.solver(systems, rhs, offset), problem.normal, ~problem.fixed & (tied < 0), x,
+                              problem.triangles, floor, kappa,
+                              areas=lambda points: injectivity.grid_areas(problem.grid, points),
+                              max_steps=PREVIEW_STEPS if problem.preview else max_steps,
+                              inverse=problem.inverse(systems), linear=problem.linear(systems), tolerance=tolerance)
+    record.count(how)
+    return x, how

@@ -1,0 +1,60 @@
+"""The path of barrier minima from W (engine/path.py): where the guard's windows cannot open the
+folds, the barrier starts from a point that is a continuous function of the inputs (issue 21)."""
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from featurewarp_cli import FeatureWarper, load_warp
+from featurewarp_cli.engine import barrier, guard, path
+from featurewarp_cli.engine.grid import signed_areas
+
+SAMPLES = Path(__file__).resolve().parent.parent / "samples"
+PERSPECTIVE = {"tl": "20%,5%", "tr": "85%,0%", "br": "100%,100%", "bl": "0%,90%"}
+
+
+def _solve(preset, params, mode, mask_name, warp_wrapper=lambda warp: warp, size=256):
+    mask = cv2.resize(cv2.imread(str(SAMPLES / mask_name), cv2.IMREAD_GRAYSCALE), (size, size),
+                      interpolation=cv2.INTER_NEAREST) >= 128
+    warp = load_warp(preset)(size, size, **params)
+    return FeatureWarper(size, size, mask).solve(warp_wrapper(warp), mode), warp
+
+
+def test_the_path_starts_at_w_itself_and_ends_at_a_minimum_that_keeps_the_features(monkeypatch):
+    """The astronaut under the gallery's rigid perspective at 256 px: the windows cannot open
+    the folds (the whole grid was untangled, then the features near them released). The path's
+    right-hand side ``L W`` gives W itself at s = 0; it reaches s = 1 with every feature kept,
+    no fold, every triangle above BLOCKED_SHARE of its floor, converged."""
+    starts = []
+    follow = path.path_from_warp
+
+    def recorded(problem, floor, record):
+        rhs = path._stacked(problem.normal, problem.warped)
+        starts.append(np.abs(problem.systems.solve(rhs, problem.warped) - problem.warped).max())
+        return follow(problem, floor, record)
+    monkeypatch.setattr(guard, "path_from_warp", recorded)
+    mesh, warp = _solve("perspective", PERSPECTIVE, "rigid", "astronaut_mask.png")
+    record = mesh.record.guard
+    assert starts and max(starts) < 1e-9
+    assert record.path_steps > 1 and record.release_rounds == 0 and record.converged and mesh.flips() == 0
+    floor = barrier.SAFE_FRACTION * signed_areas(warp(mesh.source), mesh.triangles)
+    assert (signed_areas(mesh.target, mesh.triangles) / floor).min() >= path.BLOCKED_SHARE
+
+
+@pytest.mark.parametrize("preset, params, mode, mask_name, released", [
+    ("perspective", PERSPECTIVE, "rigid", "astronaut_mask.png", False),
+    ("stretch", {"sx": 0.6}, "rigid", "astronaut_body_mask.png", True),    # blocked: the body cannot fit
+])
+def test_one_ulp_of_w_moves_a_result_of_the_path_by_rounding_only(preset, params, mode, mask_name, released):
+    """Kept or blocked (the rigid body pressed to 0.6 of the width crushes the ground before s = 1;
+    the features near where it stopped are released), a one-ulp nudge of W in two patterns moves
+    the mesh by rounding only: the path's steps are roots and converged minima, not counts."""
+    from benchmarks.stability import Nudged
+
+    mesh, _ = _solve(preset, params, mode, mask_name)
+    assert mesh.record.guard.path_steps > 0 and bool(mesh.record.guard.release_rounds) == released
+    for pattern in ("up", "alternate"):
+        nudged, _ = _solve(preset, params, mode, mask_name, lambda warp: Nudged(warp, pattern))
+        assert np.abs(nudged.target - mesh.target).max() < 1e-6, pattern
