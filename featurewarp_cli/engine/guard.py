@@ -377,7 +377,7 @@ def _untangle_window(problem: Problem, rhs, offset, tied, x, floor, margin_facto
         return None, 0, 0
     moved, iterations = injectivity.untangle(window.solve, window.matrix.dot, x[window.nodes], window.triangles,
                                              window.floor(floor), problem.stiffness[window.nodes],
-                                             max_iterations=WINDOW_ITERATIONS, settle=False)
+                                             WINDOW_ITERATIONS)
     x = x.copy()
     x[window.nodes] = moved
     if not injectivity.flipped(moved, window.triangles).any():

@@ -181,9 +181,9 @@ def extent(grid: Grid, quads: np.ndarray) -> int:
     return int(stats[1:, cv2.CC_STAT_WIDTH:cv2.CC_STAT_HEIGHT + 1].max())
 
 
-#: A triangle below this share of its floor counts as crushed: the untangling lifts it, a
-#: release, a fallback and the tapered moves stop before it, the scale search's spread keeps
-#: above it. Lower lets those steps leave slivers; higher ends them (and releases) sooner.
+#: A triangle below this share of its floor counts as crushed: the windows untangle around it;
+#: the path from W's predictor, a release, a fallback and the tapered moves stop before it;
+#: the scale search's spread keeps above it. Lower lets those steps leave slivers; higher ends them (and releases) sooner.
 CRUSHED_SHARE = 0.5
 #: untangle gives up when, over this many steps, the fold count has not fallen below
 #: this fraction of what it was.
@@ -250,8 +250,7 @@ def line_search(phi, below: float, alpha: float) -> float:
 
 
 def untangle(solve, hessian, x: np.ndarray, triangles: np.ndarray, floor: np.ndarray,
-             stiffness: np.ndarray, max_iterations: int = 80, areas=None,
-             settle: bool = True) -> tuple[np.ndarray, int]:
+             stiffness: np.ndarray, max_iterations: int) -> tuple[np.ndarray, int]:
     """Open folded or crushed triangles while staying near the least-squares optimum.
 
     Minimises phi(x) = E(x) + sum_t kappa_t max(0, floor_t - area_t(x))^2, where E(x) =
@@ -260,9 +259,8 @@ def untangle(solve, hessian, x: np.ndarray, triangles: np.ndarray, floor: np.nda
     -grad(penalty)``, then a backtracking line search on phi (from twice the last step; E
     along the line is the exact quadratic ``a g.d + a^2/2 d.Hd``). kappa starts as stiff as
     the quadratic energy at each triangle and grows 4-fold (at most 8 times) when the
-    crushed set stops shrinking. Tied features stay exact. Stops when none is folded and
-    none is below half its floor (without ``settle``: none folded); gives up when the folds
-    stop falling.
+    crushed set stops shrinking. Tied features stay exact. Stops when none is folded (the
+    guard's windows then converge the barrier's energy); gives up when the folds stop falling.
 
     Parameters
     ----------
@@ -280,16 +278,12 @@ def untangle(solve, hessian, x: np.ndarray, triangles: np.ndarray, floor: np.nda
     stiffness : (N,) ndarray
         Diagonal of the quadratic energy's Hessian per node.
     max_iterations : int
-    areas : callable, optional
-        ``areas(x)`` -> signed area per triangle (default :func:`grid.signed_areas`).
-    settle : bool
-        Also lift the triangles crushed below half their floor once none is folded.
     Returns
     -------
     x, iterations : (N, 2) ndarray and int
         The last iterate (check it for folds) and the steps taken.
     """
-    areas = areas or (lambda points: signed_areas(points, triangles))
+    areas = lambda points: signed_areas(points, triangles)  # noqa: E731
     kappa = penalty_stiffness(x, triangles, stiffness)
 
     penalty = lambda points: area_penalty(areas(points), floor, kappa)  # noqa: E731
@@ -298,7 +292,7 @@ def untangle(solve, hessian, x: np.ndarray, triangles: np.ndarray, floor: np.nda
     gradient = hessian(x - optimum)                 # grad E(x) along admissible directions
     for iteration in range(max_iterations):
         current = areas(x)
-        if current.min() > 0 and (not settle or np.all(current >= CRUSHED_SHARE * floor)):
+        if current.min() > 0:
             return x, iteration
         if iteration % PROGRESS_EVERY == 0:
             folds = int(np.count_nonzero(current <= 0))
