@@ -18,7 +18,7 @@ from .path import BLOCKED_SHARE, converge_grid as _converge_grid, path_from_warp
 
 #: The guard untangles windows around the folds, reaching these many times the largest fold's
 #: extent beyond it (at least WINDOW_MIN_MARGIN quads), in at most WINDOW_ITERATIONS steps each,
-#: then the first with the ground around the tied features it reaches; else the whole grid. A
+#: then the first with the ground around the tied features it reaches; else the path from W. A
 #: window that opens its folds converges the barrier there, as does one around crushed ones.
 WINDOW_MARGINS = (0.5, 1.0)
 WINDOW_MIN_MARGIN = 8
@@ -35,7 +35,7 @@ BLEND_STEPS = 8
 #: crushed (the image pressed to 1 px: 530 steps, 35 s at 1 MP, then failing anyway) and ends
 #: more paths early; the steps on the photos and the other extremes converge in 4-35.
 TRIAL_STEPS = 100
-#: Windows larger than this fraction of the grid are left to the global pass.
+#: Windows larger than this fraction of the grid are left to the path from W (:mod:`path`).
 WINDOW_MAX_FRACTION = 0.5
 
 

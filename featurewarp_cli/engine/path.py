@@ -27,7 +27,7 @@ from . import barrier, injectivity
 #: Where the path's minimum leaves a triangle thinner than this share of its floor, the tied
 #: features do not fit (the minima crush the ground between them as ``s`` nears a limit below
 #: 1): the path stops and the guard releases them. The kept minima of the photos and the hard
-#: swirls keep 40-70 % (:data:`barrier.STIFFNESS`); lower follows a blocked path longer.
+#: swirls keep 25-70 % (:data:`barrier.STIFFNESS`); lower follows a blocked path longer.
 BLOCKED_SHARE = 0.2
 #: The corrector's tolerance (the Newton decrement against the energy, as
 #: :data:`barrier.TOLERANCE`) before ``s = 1``; the last point is converged to
@@ -35,7 +35,7 @@ BLOCKED_SHARE = 0.2
 #: 1 MP photo's ``squeeze`` crushed a triangle on the way and released its features).
 PATH_TOLERANCE = 1e-3
 #: Predictor-corrector steps at most, a guard against a path whose minimum ends without a
-#: crushed triangle (treated as blocked). The hard cases' paths take 7-55.
+#: crushed triangle (treated as blocked). The photos' and hard cases' paths take 7-69.
 MAX_STEPS = 200
 
 
@@ -49,7 +49,8 @@ def path_from_warp(problem, floor: np.ndarray, record) -> tuple[np.ndarray, bool
     solution = systems.solve(problem.rhs, problem.offset)
     along = solution - warped                    # d(least-squares solution)/ds
     areas = lambda points: injectivity.grid_areas(problem.grid, points)    # noqa: E731
-    x, s = warped.copy(), 0.0
+    x, s, converged = warped.copy(), 0.0, record.converged
+    held = np.stack([systems.x.unknown < 0, systems.y.unknown < 0], axis=1)
     kappa = barrier.weights(warped, problem.triangles, problem.stiffness, floor)
     for step in range(MAX_STEPS):
         current = areas(x)
@@ -63,14 +64,17 @@ def path_from_warp(problem, floor: np.ndarray, record) -> tuple[np.ndarray, bool
         s = s_next
         rhs = (1.0 - s) * rhs_warp + s * problem.rhs
         offset = (1.0 - s) * offset_warp + s * problem.offset
+        x = np.where(held, offset, x)            # exactly where the solve holds them, no drift
         x, how = converge_grid(problem, systems, rhs, offset, problem.tied, x, floor, record,
                                 tolerance=barrier.TOLERANCE if s == 1.0 else PATH_TOLERANCE)
         record.path_steps = step + 1
         if (areas(x) < BLOCKED_SHARE * floor).any():
+            record.converged = converged         # the release's runs are the result's
             return x, False                      # the features do not fit
         if s == 1.0:
             record.converged = how.converged
             return x, True
+    record.converged = converged
     return x, False
 
 
