@@ -191,11 +191,14 @@ def guard(problem: Problem, x: np.ndarray, record: GuardRecord) -> np.ndarray | 
         windowed = bool(record.window_quads)
     if ok and problem.preview and windowed:   # a preview: the window's minimum, in bounded time
         return x
+    if ok and record.path_steps:          # the path's end: the whole grid's minimum already
+        return x
     if ok:
         # A window's minimum holds the rest at the least-squares solution (up to 27 px from the
         # energy's minimum at 12 MP): it only starts the whole grid's, whose run says converged.
         record.converged = True
-        return _converge_grid(problem, problem.systems, problem.rhs, problem.offset, problem.tied, x, floor, record)[0]
+        return _converge_grid(problem, problem.systems, problem.rhs, problem.offset, problem.tied, x, floor, record,
+                              PREVIEW_STEPS if problem.preview else None)[0]
     return None if problem.preview else _release(problem, x, floor, record)
 
 
@@ -256,7 +259,7 @@ def _release(problem: Problem, x, floor, record: GuardRecord):
     blocked = injectivity.grid_areas(problem.grid, x) < BLOCKED_SHARE * floor
     released = np.unique(features.component[injectivity.trouble_quads(problem.grid, blocked)
                                             & features.is_constrained])
-    for round_ in (1, 2):
+    for round_ in (1, 2) if released.size else (2,):      # nothing blocked: all at once
         record.release_rounds = round_
         if round_ == 2:
             released = np.arange(features.n_components)
@@ -268,7 +271,7 @@ def _release(problem: Problem, x, floor, record: GuardRecord):
         return best
     from .plain_bound import furthest_move      # it imports this module
 
-    record.fallback = True                # nothing injective found: from W towards x, up to half a floor
+    record.fallback = True                # no blend passes: from W towards x, up to half a floor
     warped = problem.warped
     return furthest_move(lambda t: warped + t * (x - warped), lambda points: -1.0, tris, floor)[0]
 

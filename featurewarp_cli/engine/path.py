@@ -40,14 +40,29 @@ MAX_STEPS = 200
 
 
 def path_from_warp(problem, floor: np.ndarray, record) -> tuple[np.ndarray, bool]:
-    """(positions at the energy's minimum at ``s = 1`` reached from W, whether the path got there).
+    """Follow the path of the barrier energy's minima from W (``s = 0``) to the solve (``s = 1``).
 
-    ``problem`` is a :class:`guard.Problem`; ``record`` a :class:`guard.GuardRecord` (its
-    ``newton_steps``, ``converged`` and ``path_steps``)."""
+    Parameters
+    ----------
+    problem : guard.Problem
+        The solve's systems, constants and grid.
+    floor : (M,) ndarray
+        Each triangle's floor (:data:`barrier.SAFE_FRACTION` of its area under W).
+    record : guard.GuardRecord
+        Gets the Newton steps of every corrector, ``path_steps``, and ``converged`` of the
+        run at ``s = 1`` (left as it was where the path is blocked: the release's runs decide).
+
+    Returns
+    -------
+    x : (N, 2) ndarray
+        The minimum at ``s = 1``, or the last minimum reached (a triangle below
+        :data:`BLOCKED_SHARE` of its floor there, or none where the predictor could not move).
+    reached : bool
+        Whether the path got to ``s = 1``: the tied features fit.
+    """
     warped, systems = problem.warped, problem.systems
     rhs_warp, offset_warp = _stacked(problem.normal, warped), warped
-    solution = systems.solve(problem.rhs, problem.offset)
-    along = solution - warped                    # d(least-squares solution)/ds
+    along = systems.solve(problem.rhs, problem.offset) - warped      # d(least-squares solution)/ds
     areas = lambda points: injectivity.grid_areas(problem.grid, points)    # noqa: E731
     x, s, converged = warped.copy(), 0.0, record.converged
     held = np.stack([systems.x.unknown < 0, systems.y.unknown < 0], axis=1)
@@ -65,16 +80,15 @@ def path_from_warp(problem, floor: np.ndarray, record) -> tuple[np.ndarray, bool
         rhs = (1.0 - s) * rhs_warp + s * problem.rhs
         offset = (1.0 - s) * offset_warp + s * problem.offset
         x = np.where(held, offset, x)            # exactly where the solve holds them, no drift
-        x, how = converge_grid(problem, systems, rhs, offset, problem.tied, x, floor, record,
-                                tolerance=barrier.TOLERANCE if s == 1.0 else PATH_TOLERANCE)
+        x, how = converge_grid(problem, systems, rhs, offset, problem.tied, x, floor, record, kappa=kappa,
+                               tolerance=barrier.TOLERANCE if s == 1.0 else PATH_TOLERANCE)
         record.path_steps = step + 1
-        if (areas(x) < BLOCKED_SHARE * floor).any():
-            record.converged = converged         # the release's runs are the result's
-            return x, False                      # the features do not fit
-        if s == 1.0:
-            record.converged = how.converged
+        if s == 1.0:                             # a minimum of the energy, kept as a window's is
+            record.converged = converged and how.converged
             return x, True
-    record.converged = converged
+        if (areas(x) < BLOCKED_SHARE * floor).any():
+            break                                # the features do not fit
+    record.converged = converged                 # the release's runs are the result's
     return x, False
 
 
@@ -84,8 +98,15 @@ def _stacked(normal, points: np.ndarray) -> np.ndarray:
 
 
 def _tangent(problem, systems, x, current, floor, kappa, along):
-    """d(minimum)/ds at a minimum ``x``: ``(H + B)^-1 H along`` = ``along - (H + B)^-1 B along``
-    (H the least-squares Hessian, B the barrier's, its positive semi-definite bound)."""
+    """The path's tangent d(minimum)/ds at a minimum ``x``.
+
+    At a minimum, (H + B) dx/ds = H along (H the least-squares Hessian, B the barrier's, its
+    positive semi-definite bound), so dx/ds = along - (H + B)^-1 B along: one Newton
+    direction (:func:`barrier._direction`) with ``B along`` as the gradient. ``current``:
+    the triangles' areas at ``x``; ``along``: the least-squares solution's d/ds. Returns
+    (N, 2); ``along`` where no triangle is below its floor or the system is not positive
+    definite.
+    """
     ratio = current / floor
     active = np.flatnonzero(ratio < 1.0)
     if active.size == 0:
@@ -101,15 +122,34 @@ def _tangent(problem, systems, x, current, floor, kappa, along):
 
 
 def converge_grid(problem, systems, rhs, offset, tied, x, floor, record, max_steps=None,
-                  tolerance=barrier.TOLERANCE):
-    """(``x`` (no folds) moved to the barrier energy's minimum on the whole grid, how the run ended)."""
-    from .guard import PREVIEW_STEPS            # it imports this module
+                  tolerance=barrier.TOLERANCE, kappa=None):
+    """Converge the barrier energy on the whole grid from ``x`` (no folds).
 
-    kappa = barrier.weights(problem.warped, problem.triangles, problem.stiffness, floor)
+    Parameters
+    ----------
+    problem : guard.Problem
+    systems, rhs, offset, tied
+        The least-squares system and constants whose energy is minimised, and the component
+        each node is tied to (or -1).
+    x, floor : (N, 2), (M,) ndarray
+    record : guard.GuardRecord
+        Gets the run's Newton steps and convergence (:meth:`GuardRecord.count`).
+    max_steps, tolerance : int, float, optional
+        As :func:`barrier.converge` (a preview's few steps; a path's looser tolerance).
+    kappa : (M,) ndarray, optional
+        :func:`barrier.weights` for ``floor``, where the caller has it.
+
+    Returns
+    -------
+    x : (N, 2) ndarray
+    how : barrier.Convergence
+    """
+    if kappa is None:
+        kappa = barrier.weights(problem.warped, problem.triangles, problem.stiffness, floor)
     x, how = barrier.converge(problem.solver(systems, rhs, offset), problem.normal, ~problem.fixed & (tied < 0), x,
                               problem.triangles, floor, kappa,
                               areas=lambda points: injectivity.grid_areas(problem.grid, points),
-                              max_steps=PREVIEW_STEPS if problem.preview else max_steps,
-                              inverse=problem.inverse(systems), linear=problem.linear(systems), tolerance=tolerance)
+                              max_steps=max_steps, inverse=problem.inverse(systems),
+                              linear=problem.linear(systems), tolerance=tolerance)
     record.count(how)
     return x, how
