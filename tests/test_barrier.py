@@ -97,16 +97,16 @@ def test_bound_steps_doubled_while_the_energy_falls_reach_the_same_minimum_in_fe
 
 
 def test_the_partial_hessian_lies_between_the_bound_and_the_exact_one():
-    """``_hessians(exact=t)`` keeps the fraction t of what the bound drops: (1 - t) bound + t exact,
+    """``hessians(exact=t)`` keeps the fraction t of what the bound drops: (1 - t) bound + t exact,
     positive semi-definite at 0, indefinite at 1 for a crushed triangle."""
     points = np.array([[0.0, 0.0], [4.0, 0.0], [0.0, 4.0]])
     tris, floor, kappa = np.array([[0, 1, 2]]), np.array([20.0]), np.array([3.0])
     ratio = signed_areas(points, tris) / floor
     assert ratio[0] < 1.0
-    bound, exact, partial = (barrier._hessians(points, tris, ratio, floor, kappa, exact=t) for t in (0.0, 1.0, 0.9))
+    bound, exact, partial = (barrier.hessians(points, tris, ratio, floor, kappa, exact=t) for t in (0.0, 1.0, 0.9))
     assert np.allclose(partial, 0.1 * bound + 0.9 * exact, rtol=0, atol=1e-12 * np.abs(exact).max())
     assert np.linalg.eigvalsh(bound[0]).min() > -1e-12 and np.linalg.eigvalsh(exact[0]).min() < 0
-    assert np.array_equal(exact, barrier._hessians(points, tris, ratio, floor, kappa, exact=True))
+    assert np.array_equal(exact, barrier.hessians(points, tris, ratio, floor, kappa, exact=True))
 
 
 def test_directions_keeping_part_of_the_dropped_curvature_reach_the_bounds_minimum(monkeypatch):
@@ -114,8 +114,8 @@ def test_directions_keeping_part_of_the_dropped_curvature_reach_the_bounds_minim
     directions keep ``_PARTIAL`` of the area Hessian's part the bound drops, where that system is
     positive definite: the same minimum (1e-4 px) as the bound alone, in no more steps over four
     problems (154 against 158)."""
-    hessians, fractions, steps = barrier._hessians, [], {}
-    monkeypatch.setattr(barrier, "_hessians",
+    hessians, fractions, steps = barrier.hessians, [], {}
+    monkeypatch.setattr(barrier, "hessians",
                         lambda *a, exact: fractions.append(float(exact)) or hessians(*a, exact=exact))
     for partial in (barrier._PARTIAL, 0.0):
         monkeypatch.setattr(barrier, "_PARTIAL", partial)
@@ -774,6 +774,6 @@ def test_a_decrement_below_zero_within_the_tolerance_is_convergence_beyond_it_is
         step = gradient * (below * barrier.TOLERANCE * phi / float((gradient * gradient).sum()))
         return step, True, False                                  # decrement -below * TOLERANCE * Phi
 
-    monkeypatch.setattr(barrier, "_direction", uphill)
+    monkeypatch.setattr(barrier, "step_direction", uphill)
     x, how = barrier.converge(solve, normal, movable, minimum, tris, floor, kappa)
     assert how.steps == 0 and how.converged == converged and np.array_equal(x, minimum)

@@ -135,7 +135,7 @@ def weights(warped: np.ndarray, triangles: np.ndarray, stiffness: np.ndarray, fl
     return STIFFNESS * injectivity.penalty_stiffness(warped, triangles, stiffness) * floor * floor
 
 
-def _hessians(points, triangles, ratio, floor, kappa, exact: float) -> np.ndarray:
+def hessians(points, triangles, ratio, floor, kappa, exact: float) -> np.ndarray:
     """(K, 6, 6) Hessians of the barrier terms of ``triangles`` (corner coordinates interleaved):
     exact (``exact`` 1 or True), the bound (0 or False: the area Hessian's term projected to
     positive semi-definite), or the part the bound drops kept by the fraction ``exact``."""
@@ -337,7 +337,7 @@ def _direct_direction(rows: InverseRows, move, points, triangles, blocks, gradie
     swirl 90 at 256 px) and the identity subtracts nearly equal terms: the direction's residual
     is up to 1e-2 of the gradient there, an inexact Newton direction, and it can even point
     uphill (a one-ulp nudge of that swirl stopped on such a direction as if converged, 3.9 px
-    from the un-nudged result); :func:`_direction` then takes conjugate gradients instead."""
+    from the un-nudged result); :func:`step_direction` then takes conjugate gradients instead."""
     nodes, local = np.unique(triangles, return_inverse=True)
     u = nodes.size
     dof = (2 * local.reshape(-1, 3)[:, :, None] + np.arange(2)).reshape(-1, 6)
@@ -408,8 +408,8 @@ def converge(solve, normal, movable: np.ndarray, x: np.ndarray, triangles: np.nd
         active = np.flatnonzero(ratio < 1.0)
         tris, scale = triangles[active], kappa[active] / floor[active]
         gradient = normal.dot(x - optimum) + injectivity.penalty_force(x, tris, scale * clamped_log(ratio[active])[1])
-        direction, ok, direct = _direction(rows, move, normal, movable, x, tris, ratio[active], floor[active],
-                                           kappa[active], gradient, near, not bound, partial and not near)
+        direction, ok, direct = step_direction(rows, move, normal, movable, x, tris, ratio[active], floor[active],
+                                               kappa[active], gradient, near, not bound, partial and not near)
         decrement = -float((gradient * direction).sum()) if ok else 0.0
         if not ok or (partial and not near and not decrement > 0):     # not positive definite
             if not (near or partial):
@@ -464,7 +464,7 @@ def _reaches_optimum(areas, x: np.ndarray, optimum: np.ndarray, floor: np.ndarra
     return bool(np.all(areas(optimum) >= floor)) and injectivity.max_step_of(areas, x, optimum) >= 1.0
 
 
-def _direction(rows, move, normal, movable, x, triangles, ratio, floor, kappa, gradient, near,
+def step_direction(rows, move, normal, movable, x, triangles, ratio, floor, kappa, gradient, near,
                exact_first=True, partial=False):
     """(direction, ok, direct): the Newton direction by :func:`_direct_direction` where ``rows``
     is given and the barrier touches few nodes (the exact Hessian where the system is positive
@@ -477,7 +477,7 @@ def _direction(rows, move, normal, movable, x, triangles, ratio, floor, kappa, g
             and nodes.size * n <= _DIRECT_SOLVES and _factors(rows, nodes)):
         for exact in ((True, False) if exact_first else (False,)):
             direction = _direct_direction(rows, move, x, triangles,
-                                          _hessians(x, triangles, ratio, floor, kappa, exact=exact), gradient)
+                                          hessians(x, triangles, ratio, floor, kappa, exact=exact), gradient)
             if direction is None:                 # not positive definite with these blocks
                 continue
             if -float((gradient * direction).sum()) > 0:
@@ -485,7 +485,7 @@ def _direction(rows, move, normal, movable, x, triangles, ratio, floor, kappa, g
             break                                 # uphill (see _direct_direction): CG below
         else:
             return None, False, True
-    blocks = _hessians(x, triangles, ratio, floor, kappa, exact=1.0 if near else _PARTIAL if partial else 0.0)
+    blocks = hessians(x, triangles, ratio, floor, kappa, exact=1.0 if near else _PARTIAL if partial else 0.0)
     unknowns = rows.unknowns if rows is not None else np.stack([np.where(movable, np.arange(n), -1)] * 2)
     return (*_newton_direction(move, normal, unknowns, x, triangles, blocks, gradient, near, partial), False)
 

@@ -102,7 +102,7 @@ def _tangent(problem, systems, x, current, floor, kappa, along):
 
     At a minimum, (H + B) dx/ds = H along (H the least-squares Hessian, B the barrier's, its
     positive semi-definite bound), so dx/ds = along - (H + B)^-1 B along: one Newton
-    direction (:func:`barrier._direction`) with ``B along`` as the gradient. ``current``:
+    direction (:func:`barrier.step_direction`) with ``B along`` as the gradient. ``current``:
     the triangles' areas at ``x``; ``along``: the least-squares solution's d/ds. Returns
     (N, 2); ``along`` where no triangle is below its floor or the system is not positive
     definite.
@@ -112,12 +112,12 @@ def _tangent(problem, systems, x, current, floor, kappa, along):
     if active.size == 0:
         return along
     tris = problem.triangles[active]
-    blocks = barrier._hessians(x, tris, ratio[active], floor[active], kappa[active], exact=False)
+    blocks = barrier.hessians(x, tris, ratio[active], floor[active], kappa[active], exact=False)
     part = np.einsum("kij,kj->ki", blocks, along[tris].reshape(-1, 6)).reshape(-1, 2)
     pushed = np.stack([np.bincount(tris.ravel(), part[:, k], minlength=x.shape[0]) for k in range(2)], axis=1)
-    direction, ok, _ = barrier._direction(problem.inverse(systems), problem.linear(systems), problem.normal,
-                                          ~problem.fixed & (problem.tied < 0), x, tris, ratio[active],
-                                          floor[active], kappa[active], pushed, False, exact_first=False)
+    direction, ok, _ = barrier.step_direction(problem.inverse(systems), problem.linear(systems), problem.normal,
+                                              ~problem.fixed & (problem.tied < 0), x, tris, ratio[active],
+                                              floor[active], kappa[active], pushed, False, exact_first=False)
     return along + direction if ok else along
 
 
