@@ -55,6 +55,7 @@ def test_one_ulp_of_w_moves_a_result_of_the_path_by_rounding_only(preset, params
 
     mesh, _ = _solve(preset, params, mode, mask_name)
     assert mesh.record.guard.path_steps > 0 and bool(mesh.record.guard.release_rounds) == released
+    assert mesh.record.guard.converged            # a blocked path's loose runs are not the result's
     for pattern in ("up", "alternate"):
         nudged, _ = _solve(preset, params, mode, mask_name, lambda warp: Nudged(warp, pattern))
         assert np.abs(nudged.target - mesh.target).max() < 1e-6, pattern
