@@ -24,9 +24,12 @@ import numpy as np
 
 from . import barrier, injectivity
 
-#: Where the path's minimum leaves a triangle thinner than this share of its floor, the tied
-#: features do not fit (the minima crush the ground between them as ``s`` nears a limit below
-#: 1): the path stops and the guard releases them. The kept minima of the photos and the hard
+#: Where the path's minimum (converged to :data:`barrier.TOLERANCE` before it is judged) leaves
+#: a triangle thinner than this share of its floor, the tied features do not fit (the minima
+#: crush the ground between them as ``s`` nears a limit below 1): the path stops and the guard
+#: releases them. Judged on loosely converged points, the outcome alternated over a band of
+#: 4096 ulps of a swirl's angle; on converged minima, as the ground thins along the path, it
+#: is a function of the minimum at s = 1. The kept minima of the photos and the hard
 #: swirls keep 25-70 % (:data:`barrier.STIFFNESS`); lower follows a blocked path longer.
 BLOCKED_SHARE = 0.2
 #: The corrector's tolerance (the Newton decrement against the energy, as
@@ -83,11 +86,13 @@ def path_from_warp(problem, floor: np.ndarray, record) -> tuple[np.ndarray, bool
         x, how = converge_grid(problem, systems, rhs, offset, problem.tied, x, floor, record, kappa=kappa,
                                tolerance=barrier.TOLERANCE if s == 1.0 else PATH_TOLERANCE)
         record.path_steps = step + 1
-        if s == 1.0:                             # a minimum of the energy, kept as a window's is
-            record.converged = converged and how.converged
-            return x, True
+        if s < 1.0 and (areas(x) < BLOCKED_SHARE * floor).any():       # decided on the converged minimum
+            x, how = converge_grid(problem, systems, rhs, offset, problem.tied, x, floor, record, kappa=kappa)
         if (areas(x) < BLOCKED_SHARE * floor).any():
             break                                # the features do not fit
+        if s == 1.0:
+            record.converged = converged and how.converged
+            return x, True
     record.converged = converged                 # the release's runs are the result's
     return x, False
 
