@@ -897,3 +897,14 @@ def test_a_miss_far_from_any_feature_is_not_blamed_on_one_beside_it():
     warp = SimpleNamespace(handles=handles, carried=set(), rigid_map=RigidMap(200, 200, mask=mask))
     assert _cause(warp, 0, 0.5).startswith("a feature beside it keeps its shape")
     assert _cause(warp, 1, 0.5).startswith("the features kept in shape hold the ground it is on")
+
+
+def test_a_fold_cause_without_handles_names_the_warp_not_a_crash():
+    """A HandleWarp made from nodes alone (the API, no handles file) that folds: the cause is
+    said without handles to blame (it read the handles' angles of None: AttributeError)."""
+    from types import SimpleNamespace
+
+    from featurewarp_cli.engine.handle_review import fold_cause
+
+    cause = fold_cause(SimpleNamespace(handles=None, carried=set()))
+    assert "folds the image" in cause and "--mode plain" in cause

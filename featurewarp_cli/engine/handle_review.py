@@ -37,7 +37,9 @@ def fold_cause(warp, at=None) -> str:
     four bands of its box (a badge turned 40 degrees was blamed for a crease 400 px away), and
     a pin only where the crease lies nearer it than the carried feature's handle does."""
     handles = warp.handles
-    pins = np.zeros(0, bool) if handles is None else np.all(handles.points_from == handles.points_to, 1)
+    if handles is None:                   # no handle to blame (a warp without a handles file)
+        return "the warp folds the image where its map crosses itself; warp it less, or use --mode plain"
+    pins = np.all(handles.points_from == handles.points_to, 1)
     turned = ("; a pin without an angle turns with the handles' overall rotation: give it \"angle\": 0 in a "
               "version-2 handles file to hold it unturned") if np.any(pins & ~np.isfinite(handles.angles)) else ""
     carried = sorted(warp.carried)
