@@ -36,6 +36,14 @@ def test_identical_images(runner, pair):
     assert metrics(run) == {"rmse": "0", "psnr": "inf", "max_abs_diff": "0", "pixels_off": "0"}
 
 
+def test_a_tolerance_above_255_is_refused_every_sample_would_pass(runner, pair):
+    """--tolerance is on the 0..255 scale (16-bit samples scaled to it): above 255 nothing could
+    differ, so a CI job's typo (3000 for 30) is a usage error, not a silent pass."""
+    run = runner("diff", *pair, "--tolerance", "300")
+    assert run.code == 2 and len(run.lines) == 1 and "0 <= T <= 255" in run.stderr
+    assert runner("diff", *pair, "--tolerance", "255").code == 0
+
+
 def test_different_images_fail_by_default(runner, pair):
     run = runner("diff", *pair)
     assert run.code == 1 and len(run.lines) == 1 and "differ beyond tolerance" in run.stderr

@@ -43,8 +43,8 @@ MIN_PSNR = Param("min_psnr", float, None, "Pass if PSNR >= DB.", metavar="DB")
 MAX_PIXELS_OFF = Param("max_pixels_off", int, None,
                        "Pass if at most N pixels differ by more than --tolerance in some channel.",
                        min=0, metavar="N")
-TOLERANCE = Param("tolerance", float, 0.0, "Per-sample difference (0..255 scale) that still counts as equal.",
-                  min=0.0, metavar="T")
+TOLERANCE = Param("tolerance", float, 0.0, "Per-sample difference (0..255 scale, 16-bit samples scaled to it) that "
+                  "still counts as equal; at most 255, where every sample would pass.", min=0.0, max=255.0, metavar="T")
 
 #: ``-m/--mask``'s help (warp, deform, edit; compare and animate say "as for warp").
 MASK_HELP = ("Feature mask: an image of INPUT's width and height whose pixels with gray value >= 128 "
