@@ -50,3 +50,13 @@ def test_compare_keeps_the_inputs_profile_unless_strip(tmp_path):
         assert run.code == 0, run.stderr
     with Image.open(tmp_path / "p.png") as kept, Image.open(tmp_path / "s.png") as stripped:
         assert kept.info.get("icc_profile") == profile and not stripped.info.get("icc_profile")
+
+
+def test_compare_of_a_16_bit_input_says_its_panel_has_8_bits(tmp_path):
+    """The panel is 8-bit (its labels and tints); a 16-bit input's depth was dropped silently."""
+    image, mask = scenes.scene()
+    cv2.imwrite(str(tmp_path / "in.png"), image[::2, ::2].astype(np.uint16) * 257)
+    cv2.imwrite(str(tmp_path / "mask.png"), mask[::2, ::2].astype(np.uint8) * 255)
+    run = Runner()("compare", "swirl", str(tmp_path / "in.png"), str(tmp_path / "p.png"), "-m", str(tmp_path / "mask.png"))
+    assert run.code == 0 and "the comparison panel has 8" in run.stderr
+    assert cv2.imread(str(tmp_path / "p.png"), cv2.IMREAD_UNCHANGED).dtype == np.uint8

@@ -231,6 +231,8 @@ def compare_file(settings, input: str, output: str, mask: str | None = None,
     if mask is None:
         warnings.append("no --mask: the rigid and similarity views are the plain warp (--mask marks the features "
                         "they keep)")
+    if image.dtype == np.uint16:
+        warnings.append("the input has 16 bits a sample; the comparison panel has 8 (warp keeps 16 bits)")
     for mode in ("plain", "rigid", "similarity"):
         mesh = solve_within_budget(warper, warp, mode)
         check_solution(replace(settings, strict=False), mesh)
