@@ -123,7 +123,7 @@ def encode_image(image: np.ndarray, fmt: str, background=(255, 255, 255), qualit
     exif, xmp, dpi = bytes(exif) if exif else None, bytes(xmp) if xmp else None, dpi or None
     given = icc or exif or xmp or dpi
     icc = profiles.for_pixels(icc, 1 if image.ndim == 2 else image.shape[2])
-    if fmt == "jpg" and xmp and (len(xmp) > metadata.JPEG_XMP_BYTES or not metadata.pillow_xmp_jpeg()):
+    if fmt == "jpg" and xmp and metadata.jpeg_xmp_unfit(xmp):
         xmp = None                                # said before the work (metadata.unkept)
     if (given or lossless_alpha) and fmt in METADATA_FORMATS and image.dtype == np.uint8:
         return _pillow_encode(image, fmt, quality, icc, exif, xmp, dpi)

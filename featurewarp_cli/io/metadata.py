@@ -239,6 +239,14 @@ def pillow_xmp_jpeg() -> bool:
     return int(PIL.__version__.split(".")[0]) >= 11
 
 
+def jpeg_xmp_unfit(xmp: bytes) -> str | None:
+    """Why the XMP packet ``xmp`` cannot go into a JPEG (too large for its segment, or a
+    Pillow that writes none), or None where it can: one rule for the warning and the encoder."""
+    if len(xmp) > JPEG_XMP_BYTES:
+        return f"is more than a JPEG holds ({JPEG_XMP_BYTES})"
+    return None if pillow_xmp_jpeg() else "cannot be written into a JPEG by this Pillow (Pillow 11 can)"
+
+
 def unkept(header, fmt: str, strip: bool = False) -> list[str]:
     """Warnings for what of the input's colours and metadata the output cannot keep.
 
@@ -271,10 +279,8 @@ def unkept(header, fmt: str, strip: bool = False) -> list[str]:
     if fmt in BARE_FORMATS and held:
         return said + [f"{BARE_FORMATS[fmt]} output keeps none of the input's {', '.join(held)}: left out "
                        "(--strip leaves them out without this warning)"]
-    if fmt == "jpg" and xmp and (len(xmp) > JPEG_XMP_BYTES or not pillow_xmp_jpeg()):
-        reason = f"is more than a JPEG holds ({JPEG_XMP_BYTES})" if len(xmp) > JPEG_XMP_BYTES else \
-            "cannot be written into a JPEG by this Pillow (Pillow 11 can)"
-        said.append(f"the input's XMP ({len(xmp)} bytes) {reason}: left out")
+    if fmt == "jpg" and xmp and jpeg_xmp_unfit(xmp):
+        said.append(f"the input's XMP ({len(xmp)} bytes) {jpeg_xmp_unfit(xmp)}: left out")
     if header.iptc:
         said.append("the input's IPTC block is left out (no output keeps it; its XMP, where tools mirror the "
                     "IPTC fields, is kept)")
