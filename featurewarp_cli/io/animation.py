@@ -14,12 +14,11 @@ from __future__ import annotations
 import io
 import math
 import struct
-import zlib
 from fractions import Fraction
 
 import numpy as np
 
-from . import ImageError
+from . import ImageError, png
 from .encode import encode_image, rgb_order, webp_options
 
 #: The fastest frame rate a GIF plays as written: its delays are in 1/100 s, and browsers play
@@ -29,7 +28,6 @@ GIF_MAX_FPS = 50.0
 GIF_ALPHA_CUT = 128
 #: The GIF palette index of transparent pixels (the other 255 are the frame's colours).
 GIF_TRANSPARENT = 255
-_PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
 
 def frame_delays(fps: float, count: int, ticks: int) -> list[int]:
@@ -115,40 +113,27 @@ def apng_bytes(frames: list[np.ndarray], fps: float, **kept) -> bytes:
     looping: the frames' PNGs (:func:`featurewarp_cli.io.encode.encode_image`), the first with
     the metadata ``kept`` (``icc``, ``exif``, ``xmp``, ``dpi``) ahead of its pixels."""
     num, den = delay_fraction(fps)
-    first = _chunks(encode_image(frames[0], "png", **kept))
+    first = png.chunks(encode_image(frames[0], "png", **kept))
     at = next(k for k, (kind, _) in enumerate(first) if kind == b"IDAT")
     head, ihdr = first[1:at], first[0][1]
-    out = [_PNG_SIGNATURE, _chunk(b"IHDR", ihdr)] + [_chunk(kind, data) for kind, data in head]
-    out.append(_chunk(b"acTL", struct.pack(">II", len(frames), 0)))
+    out = [png.SIGNATURE, png.make_chunk(b"IHDR", ihdr)] + [png.make_chunk(kind, data) for kind, data in head]
+    out.append(png.make_chunk(b"acTL", struct.pack(">II", len(frames), 0)))
     sequence = 0
     for index, frame in enumerate(frames):
-        chunks = first if index == 0 else _chunks(encode_image(frame, "png"))
+        chunks = first if index == 0 else png.chunks(encode_image(frame, "png"))
         if chunks[0][1] != ihdr:
             raise ImageError("the animation's frames differ in size or colour type")
-        out.append(_chunk(b"fcTL", struct.pack(">IIIIIHHBB", sequence, frame.shape[1], frame.shape[0], 0, 0,
+        out.append(png.make_chunk(b"fcTL", struct.pack(">IIIIIHHBB", sequence, frame.shape[1], frame.shape[0], 0, 0,
                                                num, den, 0, 0)))
         sequence += 1
         for kind, data in chunks:
             if kind == b"IDAT" and index == 0:
-                out.append(_chunk(kind, data))
+                out.append(png.make_chunk(kind, data))
             elif kind == b"IDAT":
-                out.append(_chunk(b"fdAT", struct.pack(">I", sequence) + data))
+                out.append(png.make_chunk(b"fdAT", struct.pack(">I", sequence) + data))
                 sequence += 1
     tail = first[max(k for k, (kind, _) in enumerate(first) if kind == b"IDAT") + 1:]
-    out += [_chunk(kind, data) for kind, data in tail if kind != b"IEND"]
-    return b"".join(out + [_chunk(b"IEND", b"")])
+    out += [png.make_chunk(kind, data) for kind, data in tail if kind != b"IEND"]
+    return b"".join(out + [png.make_chunk(b"IEND", b"")])
 
 
-def _chunks(png: bytes) -> list[tuple[bytes, bytes]]:
-    """A PNG's chunks as (type, data), in order."""
-    chunks, at = [], len(_PNG_SIGNATURE)
-    while at + 8 <= len(png):
-        length, kind = struct.unpack(">I4s", png[at : at + 8])
-        chunks.append((kind, png[at + 8 : at + 8 + length]))
-        at += 12 + length
-    return chunks
-
-
-def _chunk(kind: bytes, data: bytes) -> bytes:
-    """One PNG chunk: length, type, data and CRC."""
-    return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))

@@ -27,6 +27,8 @@ import zlib
 from dataclasses import dataclass, field
 from fractions import Fraction
 
+from .png import make_chunk
+
 #: The tags of a TIFF's first directory that describe the picture rather than its layout:
 #: a TIFF's "EXIF" is that whole directory, and its layout tags (sample format, strips,
 #: compression...) written into another file made it unreadable (float samples declared).
@@ -205,22 +207,18 @@ def rational(value: float) -> Fraction:
     return Fraction(value).limit_denominator(10000)
 
 
-def _chunk(kind: bytes, payload: bytes) -> bytes:
-    return struct.pack(">I", len(payload)) + kind + payload + struct.pack(">I", zlib.crc32(kind + payload))
-
-
 def png_with(data: bytes, icc: bytes | None, exif: bytes | None, xmp: bytes | None, dpi) -> bytes:
     """PNG bytes (OpenCV's) with an iCCP, pHYs, eXIf and iTXt XMP chunk after the IHDR, as
     Pillow writes them (the profile deflated by zlib at its default level: the same bytes)."""
     chunks = b""
     if icc:
-        chunks += _chunk(b"iCCP", b"ICC Profile\0\0" + zlib.compress(icc))
+        chunks += make_chunk(b"iCCP", b"ICC Profile\0\0" + zlib.compress(icc))
     if dpi:
-        chunks += _chunk(b"pHYs", struct.pack(">IIB", *(round(v / 0.0254) for v in dpi), 1))
+        chunks += make_chunk(b"pHYs", struct.pack(">IIB", *(round(v / 0.0254) for v in dpi), 1))
     if exif:
-        chunks += _chunk(b"eXIf", exif[6:] if exif.startswith(b"Exif\0\0") else exif)
+        chunks += make_chunk(b"eXIf", exif[6:] if exif.startswith(b"Exif\0\0") else exif)
     if xmp:
-        chunks += _chunk(b"iTXt", b"XML:com.adobe.xmp\0\0\0\0\0" + xmp)
+        chunks += make_chunk(b"iTXt", b"XML:com.adobe.xmp\0\0\0\0\0" + xmp)
     at = 8 + 12 + int.from_bytes(data[8:12], "big")          # after the IHDR
     return data[:at] + chunks + data[at:]
 

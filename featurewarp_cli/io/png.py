@@ -11,6 +11,9 @@ came out transparent. :func:`with_gray_transparency` adds the alpha here, from t
 
 from __future__ import annotations
 
+import struct
+import zlib
+
 import numpy as np
 
 SIGNATURE = b"\x89PNG\r\n\x1a\n"
@@ -46,6 +49,21 @@ def chunk(data: bytes, kind: bytes, before: bytes = b"IEND") -> bytes | None:
             return None
         at += 12 + length
     return None
+
+
+def chunks(data: bytes) -> list[tuple[bytes, bytes]]:
+    """A PNG's chunks as (type, payload), in order (the signature skipped)."""
+    out, at = [], len(SIGNATURE)
+    while at + 8 <= len(data):
+        length, kind = struct.unpack(">I4s", data[at:at + 8])
+        out.append((kind, data[at + 8:at + 8 + length]))
+        at += 12 + length
+    return out
+
+
+def make_chunk(kind: bytes, payload: bytes) -> bytes:
+    """One PNG chunk: length, type, payload and CRC."""
+    return struct.pack(">I", len(payload)) + kind + payload + struct.pack(">I", zlib.crc32(kind + payload))
 
 
 def with_gray_transparency(image: np.ndarray, data: bytes) -> np.ndarray:
