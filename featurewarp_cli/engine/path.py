@@ -64,14 +64,14 @@ def path_from_warp(problem, floor: np.ndarray, record) -> tuple[np.ndarray, bool
         Whether the path got to ``s = 1``: the tied features fit.
     """
     warped, systems = problem.warped, problem.systems
-    rhs_warp, offset_warp = _stacked(problem.normal, warped), warped
+    rhs_warp = _stacked(problem.normal, warped)
     along = systems.solve(problem.rhs, problem.offset) - warped      # d(least-squares solution)/ds
     areas = lambda points: injectivity.grid_areas(problem.grid, points)    # noqa: E731
     x, s, converged = warped.copy(), 0.0, record.converged
     held = np.stack([systems.x.unknown < 0, systems.y.unknown < 0], axis=1)
     kappa = barrier.weights(warped, problem.triangles, problem.stiffness, floor)
+    current = areas(x)
     for step in range(MAX_STEPS):
-        current = areas(x)
         tangent = _tangent(problem, systems, x, current, floor, kappa, along)
         share = injectivity.max_step(x, x + (1.0 - s) * tangent, problem.triangles,
                                      injectivity.CRUSHED_SHARE * np.minimum(floor, current))
@@ -81,14 +81,15 @@ def path_from_warp(problem, floor: np.ndarray, record) -> tuple[np.ndarray, bool
         x = x + (s_next - s) * tangent
         s = s_next
         rhs = (1.0 - s) * rhs_warp + s * problem.rhs
-        offset = (1.0 - s) * offset_warp + s * problem.offset
+        offset = (1.0 - s) * warped + s * problem.offset
         x = np.where(held, offset, x)            # exactly where the solve holds them, no drift
         x, how = converge_grid(problem, systems, rhs, offset, problem.tied, x, floor, record, kappa=kappa,
                                tolerance=barrier.TOLERANCE if s == 1.0 else PATH_TOLERANCE)
-        record.path_steps = step + 1
-        if s < 1.0 and (areas(x) < BLOCKED_SHARE * floor).any():       # decided on the converged minimum
+        record.path_steps, current = step + 1, areas(x)
+        if s < 1.0 and (current < BLOCKED_SHARE * floor).any():        # decided on the converged minimum
             x, how = converge_grid(problem, systems, rhs, offset, problem.tied, x, floor, record, kappa=kappa)
-        if (areas(x) < BLOCKED_SHARE * floor).any():
+            current = areas(x)
+        if (current < BLOCKED_SHARE * floor).any():
             break                                # the features do not fit
         if s == 1.0:
             record.converged = converged and how.converged
