@@ -232,7 +232,7 @@ def _untangled(problem, start, floor, record):
         if problem.preview and iterations < WINDOW_ITERATIONS:      # it gave up: a preview eases instead
             break
     if problem.preview:
-        return start, False
+        return None, False                # guard() returns None: the caller eases the preview
     return path_from_warp(problem, floor, record)
 
 
@@ -293,9 +293,8 @@ def blend_search(problem: Problem, released: np.ndarray, floor, record: GuardRec
       not converged in :data:`TRIAL_STEPS` Newton steps ends the path at that point). Where
       one fails ``margin``, the furthest point between it and the last point that passed,
       converged at its blend (:func:`settle`). Without steps, the start likewise.
-    Each point is a continuous function of the inputs: roots, and a converged minimum that,
-    where it fails the margin, gives way to the chord towards it; whether a step converges in
-    TRIAL_STEPS is a discrete choice.
+    Each point is a continuous function of the inputs: roots, and a converged minimum that, where
+    it fails the margin, gives way to the chord towards it; a step converging in TRIAL_STEPS is not.
 
     Returns (positions, s), or None when the start at s = 0 (W's targets) fails ``margin``
     (it folds, or is too thin, with no ``origin``, or the minimum from ``origin`` fails too)."""
@@ -303,6 +302,7 @@ def blend_search(problem: Problem, released: np.ndarray, floor, record: GuardRec
 
     blend = np.isin(problem.features.component, released) & problem.features.is_constrained
     margin = thinnest_margin(problem, floor, margin or problem.margin or (lambda points: -1.0), thinnest)
+    kappa = barrier.weights(problem.warped, problem.triangles, problem.stiffness, floor)    # once, not a run
 
     def constants(s):
         edges = np.where(blend[:, None, None], s * problem.edges + (1.0 - s) * problem.warp_edges, problem.edges)
@@ -315,7 +315,7 @@ def blend_search(problem: Problem, released: np.ndarray, floor, record: GuardRec
         """(the minimum at blend ``t`` from ``start`` in at most ``steps`` Newton steps, its margin (inf
         where it stopped there), stopped); one failing the margin is not kept: its run does not count."""
         converged, args = record.converged, (systems, rhs + t * (rhs_own - rhs), offset + t * (offset_own - offset))
-        point, how = _converge_grid(problem, *args, tied, start, floor, record, steps)
+        point, how = _converge_grid(problem, *args, tied, start, floor, record, steps, kappa=kappa)
         stopped = steps is not None and not how.converged and how.steps >= steps
         value = np.inf if stopped else margin(point)      # a stopped run's point is not used
         if value > 0:
