@@ -243,7 +243,7 @@ def not_schedulers():
             peer.sendall(b"SSH-2.0-OpenSSH_9.6p1\r\n")
             threading.Timer(5, peer.close).start()
 
-    threading.Thread(target=http.serve_forever, daemon=True).start()
+    threading.Thread(target=http.serve_forever, args=(0.05,), daemon=True).start()     # shutdown() within 50 ms
     threading.Thread(target=greet, daemon=True).start()
     yield {"http": f"tcp://127.0.0.1:{http.server_address[1]}", "banner": f"127.0.0.1:{banner.getsockname()[1]}"}
     http.shutdown()

@@ -409,7 +409,7 @@ def bare_server():
 
     server = editor_module.EditorServer.__new__(editor_module.EditorServer)
     editor_module.EditorServer.__init__(server, Nothing(), 0)
-    threading.Thread(target=server.serve_forever, daemon=True).start()
+    threading.Thread(target=server.serve_forever, args=(0.05,), daemon=True).start()    # shutdown() within 50 ms
     try:
         yield server
     finally:

@@ -24,6 +24,9 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 IMAGE = os.path.join(ROOT, "samples", "astronaut.png")
 MASK = os.path.join(ROOT, "samples", "astronaut_mask.png")
 PINS = [{"from": [60, 470], "to": [60, 470]}, {"from": [450, 470], "to": [450, 470]}]
+#: Seconds between a test's server thread's looks for shutdown() (socketserver's default, 0.5 s,
+#: made each server.shutdown() below wait up to half a second).
+POLL = 0.05
 
 
 @pytest.fixture(scope="module")
@@ -111,7 +114,7 @@ def test_malformed_request_numbers_are_refused(session, body):
 def test_stale_answers_over_http(session):
     """Through the server: a stale answer is its 4-byte length and status, no positions."""
     server = EditorServer(session, 0)
-    threading.Thread(target=server.serve_forever, daemon=True).start()
+    threading.Thread(target=server.serve_forever, args=(POLL,), daemon=True).start()
     session.newest.clear()
     try:
         def solve(seq):
@@ -163,11 +166,11 @@ def test_a_failed_export_leaves_the_handles_file_and_the_output_as_they_were(tmp
 
     from featurewarp_cli.app.pipeline import WarpError
 
-    image, mask = str(tmp_path / "small.png"), str(tmp_path / "small_mask.png")     # 128 px: 15 s -> 1 s
-    cv2.imwrite(image, cv2.resize(cv2.imread(IMAGE), (128, 128), interpolation=cv2.INTER_AREA))
-    cv2.imwrite(mask, cv2.resize(cv2.imread(MASK, cv2.IMREAD_GRAYSCALE), (128, 128), interpolation=cv2.INTER_NEAREST))
-    crossing = {"version": 2, "points": [{"from": [25, 25], "to": [100, 25]}, {"from": [100, 25], "to": [25, 25]},
-                                         {"from": [25, 100], "to": [100, 100]}, {"from": [100, 100], "to": [25, 100]}]}
+    image, mask = str(tmp_path / "small.png"), str(tmp_path / "small_mask.png")     # 64 px: 0.6 s an export (512: 15 s)
+    cv2.imwrite(image, cv2.resize(cv2.imread(IMAGE), (64, 64), interpolation=cv2.INTER_AREA))
+    cv2.imwrite(mask, cv2.resize(cv2.imread(MASK, cv2.IMREAD_GRAYSCALE), (64, 64), interpolation=cv2.INTER_NEAREST))
+    crossing = {"version": 2, "points": [{"from": [12, 12], "to": [50, 12]}, {"from": [50, 12], "to": [12, 12]},
+                                         {"from": [12, 50], "to": [50, 50]}, {"from": [50, 50], "to": [12, 50]}]}
     for existed in (True, False):
         out, handles = tmp_path / "out.png", tmp_path / "out.handles.json"
         for path in (out, handles):
@@ -205,7 +208,7 @@ def test_refused_and_cut_short_requests_answer_json_and_leave_no_body_behind(ses
 
     monkeypatch.setattr(editor.EditorHandler, "timeout", 1.0)
     server = EditorServer(session, 0)
-    threading.Thread(target=server.serve_forever, daemon=True).start()
+    threading.Thread(target=server.serve_forever, args=(POLL,), daemon=True).start()
     port, token = server.url.split(":")[2].split("/")[0], server.url.split("token=")[1]
     head = f"Host: 127.0.0.1:{port}\r\nContent-Type: application/json\r\n"
     try:
@@ -277,7 +280,7 @@ def test_more_density_at_the_finest_cell_keeps_export_working(tmp_path, cell):
     session = EditorSession(Settings("deform", cell=cell), str(tmp_path / "in.png"), str(tmp_path / "mask.png"),
                             None, str(tmp_path / "out.png"))
     server = EditorServer(session, 0)
-    threading.Thread(target=server.serve_forever, daemon=True).start()
+    threading.Thread(target=server.serve_forever, args=(POLL,), daemon=True).start()
     try:
         status, state = _post(server, "density", {"density": "more"})
         assert status == 200 and state["density"] == "more" and state["cell"] >= 1.0, state
@@ -328,7 +331,7 @@ def test_load_warnings_are_kept_and_a_write_asks_before_dropping_what_the_file_h
     assert any("'colour'" in w for w in session.state()["warnings"])
     assert any("points[2].angel" in w for w in session.state()["warnings"])
     server = EditorServer(session, 0)
-    threading.Thread(target=server.serve_forever, daemon=True).start()
+    threading.Thread(target=server.serve_forever, args=(POLL,), daemon=True).start()
     try:
         body = {"handles": session.state()["handles"]}
         for route in ("save", "export"):
@@ -446,7 +449,7 @@ def test_a_write_error_names_the_file_not_its_temporary(tmp_path):
     session = EditorSession(Settings("deform"), image, mask, str(handles), str(out))
     shutil.rmtree(tmp_path / "gone")
     server = EditorServer(session, 0)
-    threading.Thread(target=server.serve_forever, daemon=True).start()
+    threading.Thread(target=server.serve_forever, args=(POLL,), daemon=True).start()
     try:
         saved = _post(server, "save", {"handles": SMALL})
         exported = _post(server, "export", {"handles": SMALL})

@@ -59,10 +59,22 @@ def test_extreme_swirl_plain_grid_does_not_fold(angle):
 
 
 @pytest.mark.slow
-def test_extreme_swirl_with_features_does_not_fold():
-    """Swirl 540 with features (the slowest case: sub-pixel grid, features relaxed towards W)."""
+def test_extreme_swirl_with_features_does_not_fold(monkeypatch):
+    """Swirl 540 with features (the slowest case: sub-pixel grid, features relaxed towards W):
+    the path from W runs out of steps, the guard gives it up and releases the features (two
+    rounds), and the result has no fold.
+
+    The path's step limit is 20 here: at the default (``path.MAX_STEPS``, 200) the path takes
+    all 200 steps without reaching s = 1 and the guard releases the same four features, in
+    40 s; its first 20 steps are the same steps, so the route (steps run out, the release, no
+    fold) is the same in 7 s."""
+    from featurewarp_cli.engine import path
+
+    monkeypatch.setattr(path, "MAX_STEPS", 20)
     mesh = FeatureWarper(W, H, blobs()).solve(load_warp("swirl")(W, H, angle=540))
+    guard = mesh.record.guard
     assert mesh.info["flipped_before_guard"] > 0
+    assert guard.path_steps == path.MAX_STEPS and guard.release_rounds == 2
     assert mesh.flips() == 0
 
 
