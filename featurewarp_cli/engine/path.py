@@ -5,12 +5,12 @@ targets' right-hand side, and the positions the solve holds or ties (a tied feat
 a held coordinate) from W's to the solve's. At ``s = 0`` the least-squares solution is W
 itself (its right-hand side is ``L W``), which has no fold; it is affine in ``s``, so the
 barrier energy's minima form a path from W. Followed by a predictor along the path's tangent
-(``(H + B)^-1 H`` times the least-squares line's, B the barrier's Hessian bound), up to where a
-triangle keeps half of its area (of its floor where it is above it: a root, not a count), and
-a corrector (:func:`barrier.converge` at the new ``s``), it ends at a minimum of the energy at
-``s = 1`` without untangling, windows or fold counts (Allgower and
-Georg, *Introduction to Numerical Continuation Methods*, 2003, ch. 2: predictor-corrector
-path following).
+(``(H + B)^-1 H`` times the least-squares line's, B the barrier's Hessian bound, taken where the
+last step's tangent takes the triangles: :func:`_resisting`), up to where a triangle keeps half
+of its area (of its floor where it is above it: a root, not a count), and a corrector
+(:func:`barrier.converge` at the new ``s``), it ends at a minimum of the energy at ``s = 1``
+without untangling, windows or fold counts (Allgower and Georg, *Introduction to Numerical
+Continuation Methods*, 2003, ch. 2: predictor-corrector path following).
 
 Where the guard's windows cannot open the folds, it starts the barrier here instead of
 untangling the whole grid: the untangling's first fold-free iterate, or whether it found one
@@ -70,14 +70,15 @@ def path_from_warp(problem, floor: np.ndarray, record) -> tuple[np.ndarray, bool
     x, s, converged = warped.copy(), 0.0, record.converged
     held = np.stack([systems.x.unknown < 0, systems.y.unknown < 0], axis=1)
     kappa = barrier.weights(warped, problem.triangles, problem.stiffness, floor)
-    current = areas(x)
+    current, ahead = areas(x), None
     for step in range(MAX_STEPS):
-        tangent = _tangent(problem, systems, x, current, floor, kappa, along)
+        tangent = _tangent(problem, systems, x, _resisting(current, ahead, floor), floor, kappa, along)
         share = injectivity.max_step(x, x + (1.0 - s) * tangent, problem.triangles,
                                      injectivity.CRUSHED_SHARE * np.minimum(floor, current))
         if not share > 0:
             break
         s_next = 1.0 if share >= 1.0 else s + share * (1.0 - s)
+        look = share * (1.0 - s_next) * tangent          # the same share of what is left, from the next point
         x = x + (s_next - s) * tangent
         s = s_next
         rhs = (1.0 - s) * rhs_warp + s * problem.rhs
@@ -85,7 +86,7 @@ def path_from_warp(problem, floor: np.ndarray, record) -> tuple[np.ndarray, bool
         x = np.where(held, offset, x)            # exactly where the solve holds them, no drift
         x, how = converge_grid(problem, systems, rhs, offset, problem.tied, x, floor, record, kappa=kappa,
                                tolerance=barrier.TOLERANCE if s == 1.0 else PATH_TOLERANCE)
-        record.path_steps, current = step + 1, areas(x)
+        record.path_steps, current, ahead = step + 1, areas(x), areas(x + look)
         if s < 1.0 and (current < BLOCKED_SHARE * floor).any():        # decided on the converged minimum
             x, how = converge_grid(problem, systems, rhs, offset, problem.tied, x, floor, record, kappa=kappa)
             current = areas(x)
@@ -103,17 +104,33 @@ def _stacked(normal, points: np.ndarray) -> np.ndarray:
     return np.stack([normal.dot(points[:, 0]), normal.dot(points[:, 1])], axis=1)
 
 
-def _tangent(problem, systems, x, current, floor, kappa, along):
+def _resisting(current: np.ndarray, ahead: np.ndarray | None, floor: np.ndarray) -> np.ndarray:
+    """The area ratios (to the floor) at which the predictor takes the barrier's curvature: the
+    triangles' own at the minimum (``current``), or lower where the last step's tangent, looked
+    along as far again from here, takes them lower (``ahead``; not below
+    :data:`injectivity.CRUSHED_SHARE`, the predictor's own limit).
+
+    A triangle that the least-squares direction is crushing resists only once it is below its
+    floor; predicted without that, the next triangle of a crease's front ended every step (1 MP
+    ``squeeze`` with her own mask: 18 steps, the limiting triangle each time the next one down
+    one column of quads). With the curvature it is about to have: 9 steps, the same minimum
+    (RMSE 0.0008); the 12 MP hard swirl and bulge on the whole grid 41 -> 20 and 56 -> 24."""
+    ratio = current / floor
+    if ahead is None:
+        return ratio
+    return np.minimum(ratio, np.maximum(ahead / floor, injectivity.CRUSHED_SHARE))
+
+
+def _tangent(problem, systems, x, ratio, floor, kappa, along):
     """The path's tangent d(minimum)/ds at a minimum ``x``.
 
     At a minimum, (H + B) dx/ds = H along (H the least-squares Hessian, B the barrier's, its
     positive semi-definite bound), so dx/ds = along - (H + B)^-1 B along: one Newton
-    direction (:func:`barrier.step_direction`) with ``B along`` as the gradient. ``current``:
-    the triangles' areas at ``x``; ``along``: the least-squares solution's d/ds. Returns
-    (N, 2); ``along`` where no triangle is below its floor or the system is not positive
-    definite.
+    direction (:func:`barrier.step_direction`) with ``B along`` as the gradient. ``ratio``:
+    the triangles' area ratios B is taken at (:func:`_resisting`); ``along``: the
+    least-squares solution's d/ds. Returns (N, 2); ``along`` where no triangle is below its
+    floor or the system is not positive definite.
     """
-    ratio = current / floor
     active = np.flatnonzero(ratio < 1.0)
     if active.size == 0:
         return along
