@@ -113,8 +113,8 @@ def _resisting(current: np.ndarray, ahead: np.ndarray | None, floor: np.ndarray)
     A triangle that the least-squares direction is crushing resists only once it is below its
     floor; predicted without that, the next triangle of a crease's front ended every step (1 MP
     ``squeeze`` with her own mask: 18 steps, the limiting triangle each time the next one down
-    one column of quads). With the curvature it is about to have: 9 steps, the same minimum
-    (RMSE 0.0008); the 12 MP hard swirl and bulge on the whole grid 41 -> 20 and 56 -> 24."""
+    one column of quads). With the curvature it is about to have: 9 steps, the same minimum (the
+    same pixels); the 12 MP hard swirl and bulge on the whole grid 41 -> 20 and 56 -> 24."""
     ratio = current / floor
     if ahead is None:
         return ratio
