@@ -325,7 +325,8 @@ def test_a_release_stops_on_its_path_of_minima_where_one_ulp_does_not_move_it():
     warp = load_warp("swirl")(size, size, angle=240)
     base = FeatureWarper(size, size, mask).solve(warp, "similarity")
     guard = base.record.guard
-    assert guard.release_rounds and 0 < guard.feature_blend < 1 and guard.converged and base.flips() == 0
+    assert guard.release_rounds == 2 and not guard.release_cut
+    assert 0 < guard.feature_blend < 1 and guard.converged and base.flips() == 0
     floor = barrier.SAFE_FRACTION * signed_areas(warp(base.source), base.triangles)
     thinnest = (signed_areas(base.target, base.triangles) / floor).min()
     assert thinnest >= injectivity.CRUSHED_SHARE * (1 - 1e-9)     # the path's stopping rule holds

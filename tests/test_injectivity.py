@@ -61,8 +61,9 @@ def test_extreme_swirl_plain_grid_does_not_fold(angle):
 @pytest.mark.slow
 def test_extreme_swirl_with_features_does_not_fold(monkeypatch):
     """Swirl 540 with features (the slowest case: sub-pixel grid, features relaxed towards W):
-    the path from W runs out of steps, the guard gives it up and releases the features (two
-    rounds), and the result has no fold.
+    the path from W runs out of steps with no triangle below its blocked share, so the guard
+    releases every feature at once (``release_rounds`` 2, round 1 skipped), and the result has
+    no fold.
 
     The path's step limit is 20 here: at the default (``path.MAX_STEPS``, 200) the path takes
     all 200 steps without reaching s = 1 and the guard releases the same four features, in

@@ -208,7 +208,8 @@ def _untangled(problem, start, floor, record):
     from ``start``; :func:`_untangle_window`), else follow the path of minima from W
     (:func:`path.path_from_warp`: no untangling of the whole grid, whose first fold-free
     iterate, or whether it found one in its steps, turned one ulp into 1.2-137 px); a preview
-    stops after a window that gave up, or the first two; (x, the features fit).
+    stops after a window that gave up, or the first two; (x, the features fit), (None, False) for
+    a preview whose windows fail.
 
     The third window comes last: where a tied feature blocks the folds (the astronaut's head
     cut by the top edge under ``fish``), it opens them where the others cannot (12 MP: 1.4 s
@@ -294,7 +295,7 @@ def blend_search(problem: Problem, released: np.ndarray, floor, record: GuardRec
       one fails ``margin``, the furthest point between it and the last point that passed,
       converged at its blend (:func:`settle`). Without steps, the start likewise.
     Each point is a continuous function of the inputs: roots, and a converged minimum that, where
-    it fails the margin, gives way to the chord towards it; a step converging in TRIAL_STEPS is not.
+    it fails the margin, gives way to the chord; whether a step converges in TRIAL_STEPS is not.
 
     Returns (positions, s), or None when the start at s = 0 (W's targets) fails ``margin``
     (it folds, or is too thin, with no ``origin``, or the minimum from ``origin`` fails too)."""

@@ -86,7 +86,7 @@ def path_from_warp(problem, floor: np.ndarray, record) -> tuple[np.ndarray, bool
         x = np.where(held, offset, x)            # exactly where the solve holds them, no drift
         x, how = converge_grid(problem, systems, rhs, offset, problem.tied, x, floor, record, kappa=kappa,
                                tolerance=barrier.TOLERANCE if s == 1.0 else PATH_TOLERANCE)
-        record.path_steps, current, ahead = step + 1, areas(x), areas(x + look)
+        record.path_steps, current = step + 1, areas(x)
         if s < 1.0 and (current < BLOCKED_SHARE * floor).any():        # decided on the converged minimum
             x, how = converge_grid(problem, systems, rhs, offset, problem.tied, x, floor, record, kappa=kappa)
             current = areas(x)
@@ -95,6 +95,7 @@ def path_from_warp(problem, floor: np.ndarray, record) -> tuple[np.ndarray, bool
         if s == 1.0:
             record.converged = converged and how.converged
             return x, True
+        ahead = areas(x + look)                  # from the point the next step starts at
     record.converged = converged                 # the release's runs are the result's
     return x, False
 
@@ -107,8 +108,8 @@ def _stacked(normal, points: np.ndarray) -> np.ndarray:
 def _resisting(current: np.ndarray, ahead: np.ndarray | None, floor: np.ndarray) -> np.ndarray:
     """The area ratios (to the floor) at which the predictor takes the barrier's curvature: the
     triangles' own at the minimum (``current``), or lower where the last step's tangent, looked
-    along as far again from here, takes them lower (``ahead``; not below
-    :data:`injectivity.CRUSHED_SHARE`, the predictor's own limit).
+    along from here by the same share of what is left of the path, takes them lower (``ahead``;
+    not below :data:`injectivity.CRUSHED_SHARE`, the predictor's own limit).
 
     A triangle that the least-squares direction is crushing resists only once it is below its
     floor; predicted without that, the next triangle of a crease's front ended every step (1 MP
@@ -122,14 +123,16 @@ def _resisting(current: np.ndarray, ahead: np.ndarray | None, floor: np.ndarray)
 
 
 def _tangent(problem, systems, x, ratio, floor, kappa, along):
-    """The path's tangent d(minimum)/ds at a minimum ``x``.
+    """The predictor's direction at a minimum ``x``: the path's tangent d(minimum)/ds there
+    where ``ratio`` is the triangles' own.
 
     At a minimum, (H + B) dx/ds = H along (H the least-squares Hessian, B the barrier's, its
     positive semi-definite bound), so dx/ds = along - (H + B)^-1 B along: one Newton
     direction (:func:`barrier.step_direction`) with ``B along`` as the gradient. ``ratio``:
-    the triangles' area ratios B is taken at (:func:`_resisting`); ``along``: the
-    least-squares solution's d/ds. Returns (N, 2); ``along`` where no triangle is below its
-    floor or the system is not positive definite.
+    the area ratios B is taken at (:func:`_resisting`: lower than the triangles' own where
+    the last step heads them below, so a triangle still above its floor may resist);
+    ``along``: the least-squares solution's d/ds. Returns (N, 2); ``along`` where no ratio is
+    below 1 or the system is not positive definite.
     """
     active = np.flatnonzero(ratio < 1.0)
     if active.size == 0:
