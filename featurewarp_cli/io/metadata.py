@@ -277,8 +277,8 @@ def unkept(header, fmt: str, strip: bool = False) -> list[str]:
     if fmt in BARE_FORMATS and held:
         return said + [f"{BARE_FORMATS[fmt]} output keeps none of the input's {', '.join(held)}: left out "
                        "(--strip leaves them out without this warning)"]
-    if fmt == "jpg" and xmp and jpeg_xmp_unfit(xmp):
-        said.append(f"the input's XMP ({len(xmp)} bytes) {jpeg_xmp_unfit(xmp)}: left out")
+    if fmt == "jpg" and xmp and (reason := jpeg_xmp_unfit(xmp)):
+        said.append(f"the input's XMP ({len(xmp)} bytes) {reason}: left out")
     if header.iptc:
         said.append("the input's IPTC block is left out (no output keeps it; its XMP, where tools mirror the "
                     "IPTC fields, is kept)")

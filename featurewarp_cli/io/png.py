@@ -39,26 +39,26 @@ def chunk(data: bytes, kind: bytes, before: bytes = b"IEND") -> bytes | None:
     bytes or None
         None where there is no such chunk. Chunk headers only are read, the pixels are skipped.
     """
-    at = 8
-    while at + 8 <= len(data):
-        length = int.from_bytes(data[at:at + 4], "big")
-        name = data[at + 4:at + 8]
+    for name, start, length in _walk(data):
         if name == kind:
-            return data[at + 8:at + 8 + length]
+            return data[start:start + length]
         if name in (before, b"IEND"):
             return None
-        at += 12 + length
     return None
+
+
+def _walk(data: bytes):
+    """(type, payload start, payload length) of each chunk of PNG bytes, in order; headers only."""
+    at = len(SIGNATURE)
+    while at + 8 <= len(data):
+        length, kind = struct.unpack(">I4s", data[at:at + 8])
+        yield kind, at + 8, length
+        at += 12 + length
 
 
 def chunks(data: bytes) -> list[tuple[bytes, bytes]]:
     """A PNG's chunks as (type, payload), in order (the signature skipped)."""
-    out, at = [], len(SIGNATURE)
-    while at + 8 <= len(data):
-        length, kind = struct.unpack(">I4s", data[at:at + 8])
-        out.append((kind, data[at + 8:at + 8 + length]))
-        at += 12 + length
-    return out
+    return [(kind, data[start:start + length]) for kind, start, length in _walk(data)]
 
 
 def make_chunk(kind: bytes, payload: bytes) -> bytes:
