@@ -115,8 +115,10 @@ def test_directions_keeping_part_of_the_dropped_curvature_reach_the_bounds_minim
     positive definite: the same minimum (1e-4 px) as the bound alone, in no more steps over four
     problems (154 against 158)."""
     hessians, fractions, steps = barrier.hessians, [], {}
-    monkeypatch.setattr(barrier, "hessians",
-                        lambda *a, exact: fractions.append(float(exact)) or hessians(*a, exact=exact))
+    def recorded(*a, exact, below=0.0):
+        fractions.append(float(exact))
+        return hessians(*a, exact=exact, below=below)
+    monkeypatch.setattr(barrier, "hessians", recorded)
     for partial in (barrier._PARTIAL, 0.0):
         monkeypatch.setattr(barrier, "_PARTIAL", partial)
         fractions.clear()

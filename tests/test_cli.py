@@ -144,7 +144,11 @@ def test_report_is_written(runner, tmp_path):
     report = json.loads((tmp_path / "r.json").read_text())
     assert report["preset"] == "bulge" and report["output"]["width"] == SIZE[0]
     assert set(report["fold_guard"]) >= {"flipped_before", "flipped_after", "untangle_iterations",
-                                         "window_quads", "feature_blend"}
+                                         "window_quads", "window", "feature_blend"}
+    from featurewarp_cli.engine import guard                # the window's settings, as the guard runs them
+    assert report["fold_guard"]["window"] == {"margin": guard.WINDOW_MARGIN, "min_margin": guard.WINDOW_MIN_MARGIN,
+                                              "max_steps": guard.WINDOW_STEPS,
+                                              "continued_below": list(guard.CONTINUED_BELOW)}
 
 
 # --- pipes ----------------------------------------------------------------------------------

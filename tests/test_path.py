@@ -22,11 +22,21 @@ def _solve(preset, params, mode, mask_name, warp_wrapper=lambda warp: warp, size
     return FeatureWarper(size, size, mask).solve(warp_wrapper(warp), mode), warp
 
 
+def _path_only(monkeypatch):
+    """Switch the guard's window off (:func:`guard._open_window`), so that the path from W opens
+    the folds: these cases' windows open them since 2026-11-28 (until then the windows'
+    untangling could not, and the path ran)."""
+    monkeypatch.setattr(guard, "_open_window", lambda problem, x, floor, record: (None, 0, 0))
+
+
 def test_the_path_starts_at_w_itself_and_ends_at_a_minimum_that_keeps_the_features(monkeypatch):
-    """The astronaut under the gallery's rigid perspective at 256 px: the windows cannot open
-    the folds (the whole grid was untangled, then the features near them released). The path's
+    """The astronaut under the gallery's rigid perspective at 256 px, the window off: the path's
     right-hand side ``L W`` gives W itself at s = 0; it reaches s = 1 with every feature kept,
-    no fold, every triangle above BLOCKED_SHARE of its floor, converged."""
+    no fold, every triangle above BLOCKED_SHARE of its floor, converged: the minimum the window
+    reaches (1.8e-7 px apart), in 13 steps against the window's 38 Newton steps."""
+    windowed, _ = _solve("perspective", PERSPECTIVE, "rigid", "astronaut_mask.png")
+    assert windowed.record.guard.window_quads > 0 and not windowed.record.guard.path_steps
+    _path_only(monkeypatch)
     starts = []
     follow = path.path_from_warp
 
@@ -41,18 +51,22 @@ def test_the_path_starts_at_w_itself_and_ends_at_a_minimum_that_keeps_the_featur
     assert record.path_steps > 1 and record.release_rounds == 0 and record.converged and mesh.flips() == 0
     floor = barrier.SAFE_FRACTION * signed_areas(warp(mesh.source), mesh.triangles)
     assert (signed_areas(mesh.target, mesh.triangles) / floor).min() >= path.BLOCKED_SHARE
+    assert np.abs(mesh.target - windowed.target).max() < 1e-5
 
 
 @pytest.mark.parametrize("preset, params, mode, mask_name, released", [
     ("perspective", PERSPECTIVE, "rigid", "astronaut_mask.png", False),
     ("stretch", {"sx": 0.6}, "rigid", "astronaut_body_mask.png", True),    # blocked: the body cannot fit
 ])
-def test_one_ulp_of_w_moves_a_result_of_the_path_by_rounding_only(preset, params, mode, mask_name, released):
+def test_one_ulp_of_w_moves_a_result_of_the_path_by_rounding_only(monkeypatch, preset, params, mode, mask_name,
+                                                                  released):
     """Kept or blocked (the rigid body pressed to 0.6 of the width crushes the ground before s = 1;
     the features near where it stopped are released), a one-ulp nudge of W in two patterns moves
-    the mesh by rounding only: the path's steps are roots and converged minima, not counts."""
+    the mesh by rounding only: the path's steps are roots and converged minima, not counts (the
+    window off: :func:`_path_only`)."""
     from benchmarks.stability import Nudged
 
+    _path_only(monkeypatch)
     mesh, _ = _solve(preset, params, mode, mask_name)
     assert mesh.record.guard.path_steps > 0 and bool(mesh.record.guard.release_rounds) == released
     assert mesh.record.guard.converged            # a blocked path's loose runs are not the result's
@@ -71,8 +85,9 @@ def test_the_predictor_takes_the_curvature_the_last_step_predicts_and_ends_at_th
     (:func:`path._resisting`: never above its own ratio, never below CRUSHED_SHARE): a triangle
     a crease is about to crush resists in the prediction, so fewer steps end on the next cell
     of the front. At 256 px, the astronaut under the gallery's rigid perspective (kept: 25 ->
-    13 steps) and her body pressed to 0.6 of the width (blocked: 30 -> 21): fewer steps than
-    with the triangles' own ratios, the same decision and the same result."""
+    13 steps) and her body pressed to 0.6 of the width (blocked: 30 -> 21), the window off
+    (:func:`_path_only`): fewer steps than with the triangles' own ratios, the same decision and
+    the same result."""
     from featurewarp_cli.engine import injectivity
 
     current, floor = np.array([3.0, 1.0, 0.8, 0.6]), np.ones(4)
@@ -82,6 +97,7 @@ def test_the_predictor_takes_the_curvature_the_last_step_predicts_and_ends_at_th
     assert np.all(ratio <= current) and np.all(ratio >= np.minimum(current, injectivity.CRUSHED_SHARE))
     assert ratio.tolist() == [0.5, injectivity.CRUSHED_SHARE, 0.8, 0.6]
 
+    _path_only(monkeypatch)
     looked, _ = _solve(preset, params, mode, mask_name)
     monkeypatch.setattr(path, "_resisting", lambda current, ahead, floor: current / floor)
     own, _ = _solve(preset, params, mode, mask_name)

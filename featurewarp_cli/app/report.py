@@ -91,27 +91,34 @@ def build_report(input_path, output_path, image, result, warp, mesh, timings, fm
         "grown": info["grown"],
         "warnings": info["warnings"],
         "flipped_triangles": info["flipped_triangles"],
-        "fold_guard": {
-            "flipped_before": info.get("flipped_before_guard", 0),
-            "flipped_after": info["flipped_triangles"],
-            "untangle_iterations": info.get("untangle_iterations", 0),
-            "window_quads": info.get("untangle_window_quads", 0),
-            "path": {"steps": info.get("path_steps", 0), "blocked_share": fold_path.BLOCKED_SHARE,
-                     "tolerance": fold_path.PATH_TOLERANCE, "max_steps": fold_path.MAX_STEPS},
-            "release_rounds": info.get("release_rounds", 0),
-            "released_components": info.get("released_components", []),
-            "feature_blend": info.get("feature_blend", 1.0),
-            "release": {"blend_steps": fold_guard.BLEND_STEPS, "thinnest": fold_guard.injectivity.CRUSHED_SHARE,
-                        "trial_steps": fold_guard.TRIAL_STEPS, "cut": info.get("release_cut", False)},
-            "fallback": info.get("fallback", False),
-            "plain_blend": info.get("plain_blend", 1.0),
-            "degraded_components": info.get("degraded_components", []),
-            "barrier": {"safe_fraction": barrier.SAFE_FRACTION, "stiffness": barrier.STIFFNESS,
-                        "tolerance": barrier.TOLERANCE, "max_steps": barrier.MAX_STEPS,
-                        "newton_steps": info.get("newton_steps", 0),
-                        "converged": info.get("barrier_converged", True)},
-        },
+        "fold_guard": _fold_guard(info),
         "quality": info["quality"],
+    }
+
+
+def _fold_guard(info: dict) -> dict:
+    """The report's ``fold_guard``: the guard's figures from the solve's ``info`` and its settings."""
+    return {
+        "flipped_before": info.get("flipped_before_guard", 0),
+        "flipped_after": info["flipped_triangles"],
+        "untangle_iterations": info.get("untangle_iterations", 0),
+        "window_quads": info.get("untangle_window_quads", 0),
+        "window": {"margin": fold_guard.WINDOW_MARGIN, "min_margin": fold_guard.WINDOW_MIN_MARGIN,
+                   "max_steps": fold_guard.WINDOW_STEPS, "continued_below": list(fold_guard.CONTINUED_BELOW)},
+        "path": {"steps": info.get("path_steps", 0), "blocked_share": fold_path.BLOCKED_SHARE,
+                 "tolerance": fold_path.PATH_TOLERANCE, "max_steps": fold_path.MAX_STEPS},
+        "release_rounds": info.get("release_rounds", 0),
+        "released_components": info.get("released_components", []),
+        "feature_blend": info.get("feature_blend", 1.0),
+        "release": {"blend_steps": fold_guard.BLEND_STEPS, "thinnest": fold_guard.injectivity.CRUSHED_SHARE,
+                    "trial_steps": fold_guard.TRIAL_STEPS, "cut": info.get("release_cut", False)},
+        "fallback": info.get("fallback", False),
+        "plain_blend": info.get("plain_blend", 1.0),
+        "degraded_components": info.get("degraded_components", []),
+        "barrier": {"safe_fraction": barrier.SAFE_FRACTION, "stiffness": barrier.STIFFNESS,
+                    "tolerance": barrier.TOLERANCE, "max_steps": barrier.MAX_STEPS,
+                    "newton_steps": info.get("newton_steps", 0),
+                    "converged": info.get("barrier_converged", True)},
     }
 
 

@@ -35,6 +35,14 @@ bound made too short); once a full step is taken with a decrement below ``_EXACT
 Phi, the exact Hessian (quadratic convergence), back to the bound wherever the exact system is
 not positive definite. A full step of the bound by conjugate gradients is doubled while the
 energy falls (:func:`_extended`): the bound over-estimates the curvature along the valleys.
+
+Where the start folds (the least-squares solution in the guard's window around its folds), the
+same solver minimises Phi with b continued below a ratio by its second-order Taylor polynomial
+there (``below``; finite for folded triangles, convex in the ratio: the quadratic extrapolation
+of the log in Ben-Tal and Zibulevsky's penalty/barrier methods, SIAM J. Optim. 7, 1997): one
+energy converged from the folded start, no first fold-free iterate. Where its minimum keeps
+every triangle at that ratio or above, Phi and the continued energy agree around it, so it is
+a minimum of Phi itself.
 """
 
 from __future__ import annotations
@@ -45,6 +53,7 @@ import numpy as np
 
 from . import injectivity
 from .grid import signed_areas
+from .inverse_rows import MAX_NODES as _DIRECT_NODES, InverseRows
 
 #: Fraction of its area under W below which the barrier pushes a triangle open (f_t above).
 #: Lower lets features push the background thinner before it resists.
@@ -65,13 +74,12 @@ MAX_STEPS = 600
 #: Exact barrier Hessians (not projected) once a full step was taken and the decrement fell
 #: below this fraction of Phi: quadratic convergence near the minimum.
 _EXACT_BELOW = 1e-5
-#: Newton systems whose barrier touches at most _DIRECT_NODES nodes, whose dense work ((2
-#: nodes)^3) is at most _DIRECT_WORK times the nodes of the grid or window and whose unit-force
-#: back-substitutions (one a node) take at most _DIRECT_SOLVES node-columns, are solved exactly
-#: (Woodbury, :func:`_direct_direction`); beyond, conjugate gradients cost less. The
-#: back-substitutions go in chunks of at most _DIRECT_BYTES of right-hand sides (a 1 MP grid:
-#: 20 columns), so they stay within the memory limit's share per node.
-_DIRECT_NODES, _DIRECT_WORK, _DIRECT_SOLVES, _DIRECT_BYTES = 600, 2000, 2e7, 2 ** 23
+#: Newton systems whose barrier touches at most _DIRECT_NODES nodes (:mod:`inverse_rows`),
+#: whose dense work ((2 nodes)^3) is at most _DIRECT_WORK times the nodes of the grid or window
+#: and whose unit-force back-substitutions (one a node) take at most _DIRECT_SOLVES
+#: node-columns, are solved exactly (Woodbury, :func:`_direct_direction`); beyond, conjugate
+#: gradients cost less.
+_DIRECT_WORK, _DIRECT_SOLVES = 2000, 2e7
 #: How far along a bound step's ray :func:`_extended` looks for the first fold (in steps).
 _FAR = 1024.0
 #: Once :func:`_extended` lengthened a step (the bound over-estimates the curvature), the CG
@@ -108,15 +116,21 @@ class Convergence:
     converged: bool = True
 
 
-def clamped_log(ratio: np.ndarray, safe: float = 1.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def clamped_log(ratio: np.ndarray, safe: float = 1.0, below: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """IPC's clamped log barrier b(r) = -(r - s)^2 ln(r / s) (0 for r >= s, ``s = safe``) and
-    its first two derivatives, elementwise. ``ratio`` must be positive. The rigid map's barrier
+    its first two derivatives, elementwise. ``ratio`` must be positive, except with ``below``
+    > 0: below that ratio b is continued by its second-order Taylor polynomial there (finite for
+    any ratio, a folded triangle's too: :func:`converge`). The rigid map's barrier
     (:mod:`rigid_energy`, s = its SAFE_AREA) is the same function.
 
     >>> [float(v[0]) for v in clamped_log(np.array([1.0]))]
     [0.0, 0.0, 0.0]
     """
     ratio = np.asarray(ratio, dtype=np.float64)
+    if below > 0:
+        value, first, second = clamped_log(np.maximum(ratio, below), safe)
+        gap = np.minimum(ratio - below, 0.0)
+        return value + (first + 0.5 * second * gap) * gap, first + second * gap, second
     value, first, second = (np.zeros_like(ratio) for _ in range(3))
     on = ratio < safe
     r = ratio[on]
@@ -135,11 +149,12 @@ def weights(warped: np.ndarray, triangles: np.ndarray, stiffness: np.ndarray, fl
     return STIFFNESS * injectivity.penalty_stiffness(warped, triangles, stiffness) * floor * floor
 
 
-def hessians(points, triangles, ratio, floor, kappa, exact: float) -> np.ndarray:
+def hessians(points, triangles, ratio, floor, kappa, exact: float, below: float = 0.0) -> np.ndarray:
     """(K, 6, 6) Hessians of the barrier terms of ``triangles`` (corner coordinates interleaved):
     exact (``exact`` 1 or True), the bound (0 or False: the area Hessian's term projected to
-    positive semi-definite), or the part the bound drops kept by the fraction ``exact``."""
-    _, first, second = clamped_log(ratio)
+    positive semi-definite), or the part the bound drops kept by the fraction ``exact``; the
+    barrier continued below ``below`` (:func:`clamped_log`)."""
+    _, first, second = clamped_log(ratio, below=below)
     grads = injectivity.area_gradients(points, triangles).reshape(-1, 6)
     area = -_AREA_HESSIAN if exact == 1 else _AREA_HESSIAN_NEGATIVE - float(exact) * _AREA_HESSIAN_POSITIVE
     area_term = (-kappa * first / floor)[:, None, None] * area
@@ -259,69 +274,6 @@ def _newton_direction(move, normal, unknowns, points, triangles, blocks, gradien
     return (None, False) if near else (direction, True)
 
 
-class InverseRows:
-    """The least-squares inverse S between some nodes (G = P' S P per axis), from
-    back-substitutions of unit forces (``inverse(rows, columns)`` -> (2, r, c) entries), kept
-    as the barrier's active set grows: S is the factored system's, the same for every
-    :func:`converge` run on it (a release's path of minima passes one instance to each).
-    ``unknowns`` ((2, N) int) is the solve's unknown of each node in x and in y (-1 held; the
-    nodes of a tied feature share one): it says which nodes' rows of S are zero or the same."""
-
-    def __init__(self, inverse, unknowns: np.ndarray):
-        self.inverse, self.unknowns = inverse, np.asarray(unknowns)
-        n = self.unknowns.shape[1]
-        self.index = np.full(n, -1)
-        self.known = np.zeros(0, dtype=np.int64)
-        self.block = np.zeros((2, 0, 0))
-        self.last = None
-
-    def rows(self, nodes: np.ndarray) -> np.ndarray:
-        """(2, u, u): S's entries between ``nodes`` (sorted, unique) for x and for y."""
-        new = nodes[self.index[nodes] < 0]
-        if self.known.size + new.size > 2 * _DIRECT_NODES:       # the active set moved on: start over
-            self.index[self.known] = -1
-            self.known, self.block, new = np.zeros(0, dtype=np.int64), np.zeros((2, 0, 0)), nodes
-        size = int(np.clip(_DIRECT_BYTES // (8 * self.index.size), 1, 256))
-        for start in range(0, new.size, size):
-            chunk = new[start:start + size]
-            known, old = np.concatenate([self.known, chunk]), self.known.size
-            columns = self.inverse(known, chunk)                     # (2, k, c)
-            grown = np.zeros((2, known.size, known.size))
-            grown[:, :old, :old] = self.block
-            grown[:, :, old:] = columns
-            grown[:, old:, :old] = np.transpose(columns[:, :old], (0, 2, 1))
-            self.block, self.known = grown, known
-            self.index[chunk] = np.arange(old, known.size)
-        at = self.index[nodes]
-        return self.block[:, at][:, :, at]
-
-    def factor(self, nodes: np.ndarray) -> np.ndarray:
-        """(2u, r) C with C C' = G (interleaved x, y coordinates of ``nodes``); the last one is
-        kept for the same nodes. Per axis, G's rows are S's between one node of each unknown
-        (positive definite: the inverse of the reduced system, restricted), Cholesky-factored,
-        and repeated for the nodes that share the unknown (zero for held nodes).
-
-        Raises
-        ------
-        numpy.linalg.LinAlgError
-            Where rounding left that block not numerically positive definite."""
-        key = nodes.tobytes()
-        if self.last is None or self.last[0] != key:
-            parts = []
-            for block, unknown in zip(self.rows(nodes), self.unknowns[:, nodes]):
-                ids, first, group = np.unique(unknown, return_index=True, return_inverse=True)
-                moving = ids >= 0
-                lower = np.linalg.cholesky(block[np.ix_(first[moving], first[moving])])
-                part = np.zeros((nodes.size, lower.shape[1]))
-                on = unknown >= 0
-                part[on] = lower[(np.cumsum(moving) - 1)[group.ravel()[on]]]
-                parts.append(part)
-            factor = np.zeros((2 * nodes.size, parts[0].shape[1] + parts[1].shape[1]))
-            factor[0::2, :parts[0].shape[1]], factor[1::2, parts[0].shape[1]:] = parts
-            self.last = (key, factor)
-        return self.last[1]
-
-
 def _direct_direction(rows: InverseRows, move, points, triangles, blocks, gradient):
     """The Newton direction -(H + B)^-1 g exactly, by the Woodbury identity on the barrier's
     active nodes, or None where H + B is not positive definite.
@@ -359,8 +311,11 @@ def _direct_direction(rows: InverseRows, move, points, triangles, blocks, gradie
 
 def converge(solve, normal, movable: np.ndarray, x: np.ndarray, triangles: np.ndarray, floor: np.ndarray,
              kappa: np.ndarray, areas=None, max_steps: int | None = None,
-             inverse=None, linear=None, tolerance: float = TOLERANCE) -> tuple[np.ndarray, Convergence]:
-    """Minimise Phi (module docstring) from the injective positions ``x``.
+             inverse=None, linear=None, tolerance=TOLERANCE, below=0.0) -> tuple[np.ndarray, Convergence]:
+    """Minimise Phi (module docstring) from the injective positions ``x``: (x, :class:`Convergence`).
+    With ``below`` > 0, Phi with b continued below that ratio (:func:`clamped_log`), from any
+    ``x``, no step bounded by a fold: a minimum that keeps every triangle at ``below`` or above
+    is a minimum of Phi too (the two energies agree around it).
 
     Parameters
     ----------
@@ -372,10 +327,10 @@ def converge(solve, normal, movable: np.ndarray, x: np.ndarray, triangles: np.nd
     movable : (N,) bool ndarray
         Nodes ``solve`` moves one by one (not held, not tied; used without ``inverse``).
     x, triangles, floor, kappa : (N, 2), (M, 3), (M,), (M,) ndarray
-        Start (no triangle folded), the triangles, f_t and kappa_t (:func:`weights`).
-    areas, max_steps, tolerance : callable, int, float, optional
+        Start (no triangle folded, unless ``below``), the triangles, f_t and kappa_t (:func:`weights`).
+    areas, max_steps, tolerance, below : callable, int, float, float, optional
         ``areas(points)`` -> signed area per triangle (default :func:`grid.signed_areas`); Newton
-        steps at most (default :data:`MAX_STEPS`; a preview: a few); a path's looser tolerance.
+        steps at most (default :data:`MAX_STEPS`; a preview: a few); a path's looser tolerance; ``below``.
     inverse : InverseRows, optional
         ``solve``'s linear part between nodes, as far as earlier runs on the same system filled
         it: with it, a Newton system whose barrier touches few nodes is solved exactly.
@@ -384,11 +339,6 @@ def converge(solve, normal, movable: np.ndarray, x: np.ndarray, triangles: np.nd
         The default, ``solve(force) - solve(0)``, subtracts positions: 1e-14 apart on a tied
         feature, times reaction forces of 1e4, spoiled CG (the coins under swirl 90 at 256 px
         "converged" 0.044 px off the solve's positions).
-
-    Returns
-    -------
-    x : (N, 2) ndarray
-    Convergence
     """
     areas = areas or (lambda points: signed_areas(points, triangles))
     max_steps = MAX_STEPS if max_steps is None else max_steps
@@ -397,19 +347,21 @@ def converge(solve, normal, movable: np.ndarray, x: np.ndarray, triangles: np.nd
 
     def energy(points):
         current = areas(points)
-        if current.min() <= 0:
+        if current.min() <= 0 and not below:
             return np.inf
         offset = points - optimum
-        return 0.5 * float((normal.dot(offset) * offset).sum()) + float((kappa * clamped_log(current / floor)[0]).sum())
+        return 0.5 * float((normal.dot(offset) * offset).sum()) + float(
+            (kappa * clamped_log(current / floor, below=below)[0]).sum())
 
     near, bound, partial, value, rows = False, False, False, energy(x), inverse
     for step in range(max_steps):
         ratio = areas(x) / floor
         active = np.flatnonzero(ratio < 1.0)
         tris, scale = triangles[active], kappa[active] / floor[active]
-        gradient = normal.dot(x - optimum) + injectivity.penalty_force(x, tris, scale * clamped_log(ratio[active])[1])
+        slopes = scale * clamped_log(ratio[active], below=below)[1]
+        gradient = normal.dot(x - optimum) + injectivity.penalty_force(x, tris, slopes)
         direction, ok, direct = step_direction(rows, move, normal, movable, x, tris, ratio[active], floor[active],
-                                               kappa[active], gradient, near, not bound, partial and not near)
+                                               kappa[active], gradient, near, not bound, partial and not near, below)
         decrement = -float((gradient * direction).sum()) if ok else 0.0
         if not ok or (partial and not near and not decrement > 0):     # not positive definite
             if not (near or partial):
@@ -420,7 +372,7 @@ def converge(solve, normal, movable: np.ndarray, x: np.ndarray, triangles: np.nd
             return x, Convergence(step, decrement >= -tolerance * value)
         if active.size == 0 and _reaches_optimum(areas, x, optimum, floor):
             return optimum, Convergence(step + 1, True)
-        length = min(1.0, 1.8 * injectivity.max_step_of(areas, x, x + 2.0 * direction))
+        length = 1.0 if below else min(1.0, 1.8 * injectivity.max_step_of(areas, x, x + 2.0 * direction))
         trial = energy(x + length * direction)
         while length > 1e-12 and not trial <= value - 1e-4 * length * decrement:
             length *= 0.5
@@ -431,7 +383,7 @@ def converge(solve, normal, movable: np.ndarray, x: np.ndarray, triangles: np.nd
                 continue
             return x, Convergence(step, False)     # no descent along the bound's direction: stay
         if length == 1.0 and not near and not direct:
-            length, trial = _extended(energy, areas, x, direction, trial)
+            length, trial = _extended(energy, areas if not below else None, x, direction, trial)
         partial = partial or length > 1.0          # the bound over-estimated the curvature: see _PARTIAL
         near, bound = length >= 1.0 and decrement < _EXACT_BELOW * value, False
         x, value = x + length * direction, trial
@@ -441,13 +393,13 @@ def converge(solve, normal, movable: np.ndarray, x: np.ndarray, triangles: np.nd
 def _extended(energy, areas, x: np.ndarray, direction: np.ndarray, value: float) -> tuple[float, float]:
     """(length, energy) of the step along ``direction`` from ``x``: a full step (energy ``value``)
     doubled while that lowers the energy, up to 0.9 of the way to the first fold along the ray
-    and at most 0.9 :data:`_FAR` (512 steps).
+    (``areas`` None: the continued barrier, no fold to stop at) and at most 0.9 :data:`_FAR`.
 
     The bound's Hessian over-estimates the curvature where the barrier's area term has a
     negative part, so its full steps fall short along the valleys of the energy (the
     astronaut's fish at 12 MP with the head + helmet mask converged at 0.8-0.9 a step; the
     1 MP swirl 180 with her head, patch and shuttle at cell 4 took 388 steps, 203 with this)."""
-    reach = 0.9 * _FAR * injectivity.max_step_of(areas, x, x + _FAR * direction)
+    reach = 0.9 * _FAR * (injectivity.max_step_of(areas, x, x + _FAR * direction) if areas else 1.0)
     length = 1.0
     while 2.0 * length <= reach:
         longer = energy(x + 2.0 * length * direction)
@@ -465,7 +417,7 @@ def _reaches_optimum(areas, x: np.ndarray, optimum: np.ndarray, floor: np.ndarra
 
 
 def step_direction(rows, move, normal, movable, x, triangles, ratio, floor, kappa, gradient, near,
-               exact_first=True, partial=False):
+               exact_first=True, partial=False, below=0.0):
     """(direction, ok, direct): the Newton direction by :func:`_direct_direction` where ``rows``
     is given and the barrier touches few nodes (the exact Hessian where the system is positive
     definite with it and ``exact_first``, else the bound), else by :func:`_newton_direction`
@@ -477,7 +429,8 @@ def step_direction(rows, move, normal, movable, x, triangles, ratio, floor, kapp
             and nodes.size * n <= _DIRECT_SOLVES and _factors(rows, nodes)):
         for exact in ((True, False) if exact_first else (False,)):
             direction = _direct_direction(rows, move, x, triangles,
-                                          hessians(x, triangles, ratio, floor, kappa, exact=exact), gradient)
+                                          hessians(x, triangles, ratio, floor, kappa, exact=exact, below=below),
+                                          gradient)
             if direction is None:                 # not positive definite with these blocks
                 continue
             if -float((gradient * direction).sum()) > 0:
@@ -485,7 +438,8 @@ def step_direction(rows, move, normal, movable, x, triangles, ratio, floor, kapp
             break                                 # uphill (see _direct_direction): CG below
         else:
             return None, False, True
-    blocks = hessians(x, triangles, ratio, floor, kappa, exact=1.0 if near else _PARTIAL if partial else 0.0)
+    blocks = hessians(x, triangles, ratio, floor, kappa, exact=1.0 if near else _PARTIAL if partial else 0.0,
+                      below=below)
     unknowns = rows.unknowns if rows is not None else np.stack([np.where(movable, np.arange(n), -1)] * 2)
     return (*_newton_direction(move, normal, unknowns, x, triangles, blocks, gradient, near, partial), False)
 

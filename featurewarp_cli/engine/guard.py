@@ -1,6 +1,6 @@
-"""The fold-over guard's policy: untangle near the folds, else follow the path from W, then relax features.
+"""The fold-over guard's policy: a window's minimum around the folds, else the path from W, then relax features.
 
-The primitives (step limits, areas, penalty descent, windows) are in :mod:`injectivity`, the
+The primitives (step limits, areas, windows) are in :mod:`injectivity`, the
 energy every result is converged to in :mod:`barrier`, the never-worse-than-plain step after
 the guard in :mod:`plain_bound`. A :class:`Problem` is what the guard needs to re-solve.
 """
@@ -16,13 +16,22 @@ from . import barrier, injectivity, system
 from .grid import signed_areas
 from .path import BLOCKED_SHARE, converge_grid as _converge_grid, path_from_warp
 
-#: The guard untangles windows around the folds, reaching these many times the largest fold's
-#: extent beyond it (at least WINDOW_MIN_MARGIN quads), in at most WINDOW_ITERATIONS steps each,
-#: then the first with the ground around the tied features it reaches; else the path from W. A
-#: window that opens its folds converges the barrier there, as does one around crushed ones.
-WINDOW_MARGINS = (0.5, 1.0)
+#: Where the least-squares solution folds, the guard converges the energy in a window around
+#: the crushed triangles, reaching WINDOW_MARGIN times their largest cluster's extent beyond
+#: them (at least WINDOW_MIN_MARGIN quads) and the ground around the tied features it reaches;
+#: a run not converged in WINDOW_STEPS Newton steps leaves the folds to the path from W (a speed
+#: limit, and a count that decides: the path may end elsewhere, or be blocked; the windows take
+#: 6-55 steps on the hard cases and photos, one whose minimum folds can crawl for hundreds).
+#: Wider is slower a step and holds less of the grid at the least-squares solution.
+WINDOW_MARGIN = 0.5
 WINDOW_MIN_MARGIN = 8
-WINDOW_ITERATIONS = 150
+WINDOW_STEPS = 60
+#: The shares of the floor below which the window's runs continue the barrier, in turn
+#: (:func:`_open_window`): the softest first (fewer Newton steps: the 12 MP hard bulge 30
+#: against 86 at 0.2), a stiffer one from its minimum where that still folds (the astronaut's
+#: head by the top edge under ``fish`` at 256 px: 0.125; the close-up under ``flag`` at 192
+#: px: 0.03). Each lower share is closer to the barrier itself (unbounded at 0).
+CONTINUED_BELOW = tuple(injectivity.CRUSHED_SHARE / 4 ** k for k in range(3))
 #: Newton steps of a preview's convergence (``Problem.preview``): slivers lifted part of the way,
 #: in bounded time (the editor's hard release: 35 steps, 0.6 s, to converge).
 PREVIEW_STEPS = 4
@@ -48,8 +57,9 @@ class GuardRecord:
     flipped_before : int
         Folded triangles of the least-squares solution.
     untangle_iterations : int
+        Newton steps of the window's run from the folded least-squares solution (:func:`_open_window`).
     window_quads : int
-        Quads the last successful window could reshape (0: no window pass).
+        Quads the window could reshape where it opened the folds (0: no window, or it did not).
     path_steps : int
         Predictor-corrector steps of the path from W (:mod:`path`; 0: the windows sufficed).
     release_rounds : int
@@ -120,8 +130,8 @@ class Problem:
         than under W, or fixable by a tapered move (:func:`blend_search`,
         :func:`plain_bound.release_margin`).
     preview : bool
-        An interactive update (``FeatureWarper.solve(quick=True)``): windows only, and
-        :func:`guard` returns None where they fail (see :func:`_untangled`).
+        An interactive update (``FeatureWarper.solve(quick=True)``): the window only, and
+        :func:`guard` returns None where it fails (see :func:`_unfolded`).
     """
 
     grid: object
@@ -187,7 +197,7 @@ def guard(problem: Problem, x: np.ndarray, record: GuardRecord) -> np.ndarray | 
         if windowed is None:
             return x                      # no triangle below its floor: x is the energy's minimum
     else:
-        x, ok = _untangled(problem, x, floor, record)
+        x, ok = _unfolded(problem, x, floor, record)
         windowed = bool(record.window_quads)
     if ok and problem.preview and windowed:   # a preview: the window's minimum, in bounded time
         return x
@@ -202,36 +212,17 @@ def guard(problem: Problem, x: np.ndarray, record: GuardRecord) -> np.ndarray | 
     return None if problem.preview else _release(problem, x, floor, record)
 
 
-def _untangled(problem, start, floor, record):
-    """Untangle in a window around the folds (a wider one next, from where the first left off
-    if it has fewer folds; then the first with the ground around the tied features it reaches,
-    from ``start``; :func:`_untangle_window`), else follow the path of minima from W
-    (:func:`path.path_from_warp`: no untangling of the whole grid, whose first fold-free
-    iterate, or whether it found one in its steps, turned one ulp into 1.2-137 px); a preview
-    stops after a window that gave up, or the first two; (x, the features fit), (None, False) for
-    a preview whose windows fail.
-
-    The third window comes last: where a tied feature blocks the folds (the astronaut's head
-    cut by the top edge under ``fish``), it opens them where the others cannot (12 MP: 1.4 s
-    instead of 9 s on the whole grid), but tried first it also opened folds that the release
-    relaxes with less distortion (a close-up under ``flag``: 0.165 against 0.118)."""
-    tris, rhs, offset, tied = problem.triangles, problem.rhs, problem.offset, problem.tied
-    folds, solution = int(np.count_nonzero(injectivity.flipped(start, tris))), start
-    passes = [(margin, False) for margin in WINDOW_MARGINS] + [(WINDOW_MARGINS[0], True)] * (not problem.preview)
-    for margin, around_ties in passes:
-        x, iterations, window_quads = _untangle_window(problem, rhs, offset, tied, solution if around_ties else start,
-                                                       floor, margin, record, around_ties)
-        record.untangle_iterations += iterations
-        if x is None:
-            continue
-        left = int(np.count_nonzero(injectivity.flipped(x, tris)))
-        if left == 0:
-            record.window_quads = window_quads
-            return x, True
-        if left < folds and not around_ties:
-            start, folds = x, left
-        if problem.preview and iterations < WINDOW_ITERATIONS:      # it gave up: a preview eases instead
-            break
+def _unfolded(problem, start, floor, record):
+    """The energy's minimum in a window around the folds (:func:`_open_window`), else the path of
+    minima from W (:func:`path.path_from_warp`); (x, the features fit), (None, False) for a
+    preview whose window does not open its folds (the caller eases it). No untangling: not the
+    first fold-free iterate of a descent, whose choice, or whether it found one before fold
+    counts gave up, turned one ulp into 1.2-137 px on the whole grid."""
+    x, steps, quads = _open_window(problem, start, floor, record)
+    record.untangle_iterations += steps
+    if x is not None:
+        record.window_quads = quads
+        return x, True
     if problem.preview:
         return None, False                # guard() returns None: the caller eases the preview
     return path_from_warp(problem, floor, record)
@@ -358,35 +349,55 @@ def blend_search(problem: Problem, released: np.ndarray, floor, record: GuardRec
     return x, s
 
 
-def _untangle_window(problem: Problem, rhs, offset, tied, x, floor, margin_factor: float, record,
-                     around_ties: bool = False):
-    """:func:`injectivity.untangle` on a window around the folded or crushed triangles (below
-    half their floor), converged there (:meth:`Window.converge`) once nothing is folded: the
-    nodes within ``margin_factor`` times the largest fold's extent of them, everything else
-    held (with ``around_ties``, the ground around the tied features they reach: :func:`_window`).
+def _open_window(problem: Problem, x, floor, record):
+    """Converge the energy with the barrier continued below a share of the floor
+    (:func:`barrier.converge` with ``below``; the shares of :data:`CONTINUED_BELOW` in turn, the
+    next from the last one's minimum where that folds) from the least-squares solution ``x`` (it
+    folds) in the window of :func:`_window` around the triangles below
+    :data:`injectivity.CRUSHED_SHARE` of their floor, reaching WINDOW_MARGIN times their extent
+    and the ground around the tied features it reaches (not where that would take in more than
+    WINDOW_MAX_FRACTION of the grid: large features on a small image).
+
+    A minimum that folds nothing opens the folds: where it keeps every triangle at the share or
+    above, it is the barrier energy's own minimum; else that is converged from it (no fold:
+    :meth:`Window.converge`). Each outcome is decided on a converged minimum, but for a run cut
+    at :data:`WINDOW_STEPS`.
 
     Returns
     -------
     x : (N, 2) ndarray or None
-        New positions; None where :func:`_window` gives none.
-    iterations : int
+        New positions; None where there is no window, or a run did not converge in
+        :data:`WINDOW_STEPS`, or the last minimum folds.
+    steps : int
+        Newton steps of the run from ``x``.
     quads : int
         Quads whose shape the window may change.
     """
     crushed = injectivity.grid_areas(problem.grid, x) < injectivity.CRUSHED_SHARE * floor
-    margin = max(WINDOW_MIN_MARGIN, int(margin_factor * injectivity.extent(problem.grid, np.flatnonzero(crushed)
-                                                                           % problem.features.weight.size)))
-    window = _window(problem, rhs, offset, tied, x, crushed, margin, around_ties)
+    margin = max(WINDOW_MIN_MARGIN, int(WINDOW_MARGIN * injectivity.extent(problem.grid, np.flatnonzero(crushed)
+                                                                         % problem.features.weight.size)))
+    window = (_window(problem, problem.rhs, problem.offset, problem.tied, x, crushed, margin, around_ties=True)
+              or _window(problem, problem.rhs, problem.offset, problem.tied, x, crushed, margin))
     if window is None:
         return None, 0, 0
-    moved, iterations = injectivity.untangle(window.solve, window.matrix.dot, x[window.nodes], window.triangles,
-                                             window.floor(floor), problem.stiffness[window.nodes],
-                                             WINDOW_ITERATIONS)
+    local_floor = window.floor(floor)
+    kappa = barrier.weights(window.warped, window.triangles, window.stiffness, local_floor)
+    moved, steps = x[window.nodes], 0
+    for below in CONTINUED_BELOW:
+        moved, how = barrier.converge(window.solve, window.matrix, window.movable, moved, window.triangles,
+                                      local_floor, kappa, max_steps=WINDOW_STEPS, inverse=window.inverse,
+                                      linear=window.linear, below=below)
+        record.newton_steps, steps = record.newton_steps + how.steps, steps + how.steps
+        ratio = signed_areas(moved, window.triangles) / local_floor
+        if not how.converged or ratio.min() > 0:
+            break
+    if not (how.converged and ratio.min() > 0):
+        return None, steps, 0
     x = x.copy()
     x[window.nodes] = moved
-    if not injectivity.flipped(moved, window.triangles).any():
+    if ratio.min() < below:               # in the last run's continued part: the barrier's own minimum
         x[window.nodes] = window.converge(x, floor, record)
-    return x, iterations, int(window.quads.size)
+    return x, steps, int(window.quads.size)
 
 
 @dataclass
@@ -440,24 +451,21 @@ def _window(problem: Problem, rhs, offset, tied, x, crushed: np.ndarray, margin:
     """The :class:`Window` of the quads within ``margin`` quads of those with a ``crushed``
     triangle ((M,) bool), holding every other node at ``x``, except that a tied feature
     reaching into it keeps its shared unknown (it may shift as a whole); None when nothing
-    could move, when it would take in more than WINDOW_MAX_FRACTION of the grid, or (with
-    ``around_ties``) when it would be the window without it.
+    could move or when it would take in more than WINDOW_MAX_FRACTION of the grid.
 
     With ``around_ties`` (once), a tied feature that reaches into the window brings its quads
     and ``margin`` quads around them: it can only shift if the ground around all of it may
-    follow. Without (the astronaut's head cut by the top edge under ``fish``, ``squeeze``),
-    the whole grid untangled (12 MP: 6-10 s instead of 1.1-2.0 s) or features were released."""
+    follow. Without, a window could not open the folds by the astronaut's head cut by the top
+    edge under ``fish`` (1 MP: 600 Newton steps, not converged; with its ground, 22)."""
     grid, n_quads = problem.grid, problem.features.weight.size
     quads = np.zeros(n_quads, bool)
     quads[np.flatnonzero(crushed) % n_quads] = True
-    inside, near, inner = injectivity.window(grid, quads, margin)
+    _, near, inner = injectivity.window(grid, quads, margin)
     corners = grid.quads()
     def reached(nodes):                   # the nodes of every tied feature with a node in ``nodes``
         return np.isin(tied, np.unique(tied[nodes & (tied >= 0)])) & (tied >= 0)
     if around_ties:
-        grown, near, inner = injectivity.window(grid, quads | reached(near)[corners].any(axis=1), margin)
-        if np.array_equal(grown, inside):
-            return None
+        _, near, inner = injectivity.window(grid, quads | reached(near)[corners].any(axis=1), margin)
     moving = (inner & ~problem.fixed & (tied < 0)) | reached(near)
     touched = moving[corners].any(axis=1)
     ties = tied[corners]

@@ -181,18 +181,11 @@ def extent(grid: Grid, quads: np.ndarray) -> int:
     return int(stats[1:, cv2.CC_STAT_WIDTH:cv2.CC_STAT_HEIGHT + 1].max())
 
 
-#: A triangle below this share of its floor counts as crushed: the windows untangle around it;
-#: the path from W's predictor, a release, a fallback and the tapered moves stop before it;
-#: the scale search's spread keeps above it. Lower lets those steps leave slivers; higher ends them (and releases) sooner.
+#: A triangle below this share of its floor counts as crushed: the guard's window is around
+#: it and continues the barrier below it (:func:`guard._open_window`); the path from W's
+#: predictor, a release, a fallback and the tapered moves stop before it; the scale search's
+#: spread keeps above it. Lower lets those steps leave slivers; higher ends them (and releases) sooner.
 CRUSHED_SHARE = 0.5
-#: untangle gives up when, over this many steps, the fold count has not fallen below
-#: this fraction of what it was.
-PROGRESS_EVERY = 20
-PROGRESS_RATIO = 0.9
-#: untangle stiffens the penalty when, over this many steps, the number of crushed
-#: triangles has not fallen below this fraction of what it was.
-STALL_STEPS = 3
-STALL_RATIO = 0.8
 
 
 def area_gradients(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
@@ -231,91 +224,10 @@ def penalty_force(x: np.ndarray, triangles: np.ndarray, slopes: np.ndarray) -> n
 
 
 def penalty_stiffness(x: np.ndarray, triangles: np.ndarray, stiffness: np.ndarray) -> np.ndarray:
-    """Per triangle, the kappa at which the area penalty is as stiff as the quadratic energy at its corners."""
+    """Per triangle, the kappa at which kappa (area)^2 is as stiff as the quadratic energy at its corners
+    (:func:`barrier.weights` scales it)."""
     grads = area_gradients(x, triangles)
     return stiffness[triangles].mean(axis=1) / np.maximum(2.0 * (grads * grads).sum(axis=(1, 2)), 1e-12)
-
-
-def area_penalty(current: np.ndarray, floor: np.ndarray, kappa: np.ndarray):
-    """(sum_t kappa_t max(0, floor_t - area_t)^2, the deficits) for the areas ``current``."""
-    deficit = np.maximum(0.0, floor - current)
-    return float((kappa * deficit * deficit).sum()), deficit
-
-
-def line_search(phi, below: float, alpha: float) -> float:
-    """Halve ``alpha`` until ``phi(alpha) < below``; a result <= 1e-6 means no step was found."""
-    while alpha > 1e-6 and not phi(alpha) < below:
-        alpha *= 0.5
-    return alpha
-
-
-def untangle(solve, hessian, x: np.ndarray, triangles: np.ndarray, floor: np.ndarray,
-             stiffness: np.ndarray, max_iterations: int) -> tuple[np.ndarray, int]:
-    """Open folded or crushed triangles while staying near the least-squares optimum.
-
-    Minimises phi(x) = E(x) + sum_t kappa_t max(0, floor_t - area_t(x))^2, where E(x) =
-    1/2 x.Hx - b.x is the least-squares energy, by gradient descent preconditioned with the
-    factored quadratic energy: the direction is ``solve(force) - x`` with ``force =
-    -grad(penalty)``, then a backtracking line search on phi (from twice the last step; E
-    along the line is the exact quadratic ``a g.d + a^2/2 d.Hd``). kappa starts as stiff as
-    the quadratic energy at each triangle and grows 4-fold (at most 8 times) when the
-    crushed set stops shrinking. Tied features stay exact. Stops when none is folded (the
-    guard's windows then converge the barrier's energy); gives up when the folds stop falling.
-
-    Parameters
-    ----------
-    solve : callable
-        ``solve(force)`` -> (N, 2) minimiser of E(x) - force . x over the
-        admissible positions (fixed nodes held, tied ones moving together).
-    hessian : callable
-        ``hessian(d)`` -> H d for (N, 2) displacements d: the normal matrix's
-        product (exact on the rows of the nodes that ``solve`` moves).
-    x : (N, 2) ndarray
-        Starting point: admissible, e.g. the unconstrained optimum ``solve(0)``.
-    triangles : (M, 3) ndarray of int
-    floor : (M,) ndarray
-        Area each triangle should keep (> 0).
-    stiffness : (N,) ndarray
-        Diagonal of the quadratic energy's Hessian per node.
-    max_iterations : int
-    Returns
-    -------
-    x, iterations : (N, 2) ndarray and int
-        The last iterate (check it for folds) and the steps taken.
-    """
-    areas = lambda points: signed_areas(points, triangles)  # noqa: E731
-    kappa = penalty_stiffness(x, triangles, stiffness)
-
-    penalty = lambda points: area_penalty(areas(points), floor, kappa)  # noqa: E731
-    stalled, boosts, alpha, checkpoint, reference = 0, 0, 0.5, None, None
-    optimum = solve(np.zeros_like(x))
-    gradient = hessian(x - optimum)                 # grad E(x) along admissible directions
-    for iteration in range(max_iterations):
-        current = areas(x)
-        if current.min() > 0:
-            return x, iteration
-        if iteration % PROGRESS_EVERY == 0:
-            folds = int(np.count_nonzero(current <= 0))
-            if checkpoint is not None and folds > PROGRESS_RATIO * checkpoint:
-                return x, iteration          # not converging: let the caller relax the features
-            checkpoint = folds
-        pen, deficit = area_penalty(current, floor, kappa)
-        active = np.flatnonzero(deficit > 0)
-        if reference is None or active.size < STALL_RATIO * reference:
-            reference, stalled = active.size, 0
-        direction = solve(penalty_force(x, triangles[active], 2.0 * kappa[active] * deficit[active])) - x
-        curvature = hessian(direction)
-        b, c = float((gradient * direction).sum()), float((curvature * direction).sum())
-        alpha = line_search(lambda a: a * b + 0.5 * a * a * c + penalty(x + a * direction)[0], pen,
-                            min(1.0, 2.0 * alpha))
-        if alpha > 1e-6:
-            x = x + alpha * direction
-            gradient += alpha * curvature
-        stalled += 1
-        if (stalled >= STALL_STEPS or alpha <= 1e-6) and boosts < 8:
-            kappa *= 4.0
-            stalled, boosts, reference = 0, boosts + 1, active.size
-    return x, max_iterations
 
 
 def border_crossings(source: np.ndarray, target: np.ndarray) -> int:
