@@ -4,7 +4,7 @@ The 12 MP photo of :mod:`benchmarks.run` (samples/astronaut.png upscaled to 4000
 with samples/astronaut_helmet_mask.png upscaled alike: her head and the helmet she
 holds, 22 % of the frame, the helmet cut by the bottom and right edges. The bench's
 own mask (head, patch, shuttle) barely folds under these warps; this one does
-(swirl 180: some 6 000 flipped triangles before the guard, about 100 untangle steps).
+(swirl 180: some 2 000 flipped triangles before the guard, about 20 Newton steps in its window).
 
 Each featurewarp command (whole process: wall seconds, peak RSS, and its --report's
 guard figures and stage seconds) runs right before ImageMagick's counterpart on the
@@ -63,7 +63,7 @@ def bench_hard(runs: int, exe: Path, photo: Path, samples: Path, tmp: Path, with
         show(f"12MP portrait featurewarp {preset} {' '.join(ours_args)}", ours, runs)
         g = ours["guard"]
         if g:
-            print(f"    guard: {g['flipped_before']} flipped before, {g['untangle_iterations']} untangle steps, "
+            print(f"    guard: {g['flipped_before']} flipped before, {g['untangle_iterations']} window steps, "
                   f"{g['release_rounds']} release rounds, feature blend {g['feature_blend']}")
         if magick:
             theirs = repeat(["convert", str(photo), *magick_args, str(tmp / f"hard-magick-{preset}.png")], runs)

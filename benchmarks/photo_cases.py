@@ -276,7 +276,7 @@ LEGEND = """Keypoint affine fit input -> output, per mask component (joined by '
   <=pl    loc90 <= ploc90 + 0.02 (never worse than plain)
   face, pface     the face probe (an ellipse over the face) fitted alone, ours and plain
 bg max: largest background triangle area ratio canvas / W (--save-grid)
-guard: fold guard flipped triangles before / untangle steps / feature blend; w: stderr lines"""
+guard: fold guard flipped triangles before / window Newton steps / feature blend; w: stderr lines"""
 
 
 def side_by_side(pictures: list[np.ndarray], captions: list[str], scale: float) -> np.ndarray:

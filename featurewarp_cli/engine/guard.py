@@ -21,7 +21,7 @@ from .path import BLOCKED_SHARE, converge_grid as _converge_grid, path_from_warp
 #: them (at least WINDOW_MIN_MARGIN quads) and the ground around the tied features it reaches;
 #: a run not converged in WINDOW_STEPS Newton steps leaves the folds to the path from W (a speed
 #: limit, and a count that decides: the path may end elsewhere, or be blocked; the windows take
-#: 6-55 steps on the hard cases and photos, one whose minimum folds can crawl for hundreds).
+#: 7-72 steps on the hard cases and photos, one whose minimum folds can crawl for hundreds).
 #: Wider is slower a step and holds less of the grid at the least-squares solution.
 WINDOW_MARGIN = 0.5
 WINDOW_MIN_MARGIN = 8
@@ -376,25 +376,25 @@ def _open_window(problem: Problem, x, floor, record):
     crushed = injectivity.grid_areas(problem.grid, x) < injectivity.CRUSHED_SHARE * floor
     margin = max(WINDOW_MIN_MARGIN, int(WINDOW_MARGIN * injectivity.extent(problem.grid, np.flatnonzero(crushed)
                                                                          % problem.features.weight.size)))
-    window = (_window(problem, problem.rhs, problem.offset, problem.tied, x, crushed, margin, around_ties=True)
+    window = (_window(problem, problem.rhs, problem.offset, problem.tied, x, crushed, margin, not problem.preview)
               or _window(problem, problem.rhs, problem.offset, problem.tied, x, crushed, margin))
     if window is None:
         return None, 0, 0
     local_floor = window.floor(floor)
     kappa = barrier.weights(window.warped, window.triangles, window.stiffness, local_floor)
     moved, steps = x[window.nodes], 0
-    for below in CONTINUED_BELOW:
+    for below in CONTINUED_BELOW:                # a preview: PREVIEW_STEPS a run, its last point taken
         moved, how = barrier.converge(window.solve, window.matrix, window.movable, moved, window.triangles,
-                                      local_floor, kappa, max_steps=WINDOW_STEPS, inverse=window.inverse,
-                                      linear=window.linear, below=below)
+                                      local_floor, kappa, max_steps=window.max_steps or WINDOW_STEPS,
+                                      inverse=window.inverse, linear=window.linear, below=below)
         record.newton_steps, steps = record.newton_steps + how.steps, steps + how.steps
         ratio = signed_areas(moved, window.triangles) / local_floor
-        if not how.converged or ratio.min() > 0:
+        if not (how.converged or problem.preview) or ratio.min() > 0:
             break
-    if not (how.converged and ratio.min() > 0):
-        return None, steps, 0
     x = x.copy()
-    x[window.nodes] = moved
+    x[window.nodes] = moved                     # outside the window x is held: the whole grid checked
+    if not ((how.converged or problem.preview) and ratio.min() > 0) or injectivity.flipped(x, problem.triangles).any():
+        return None, steps, 0
     if ratio.min() < below:               # in the last run's continued part: the barrier's own minimum
         x[window.nodes] = window.converge(x, floor, record)
     return x, steps, int(window.quads.size)
