@@ -1,4 +1,4 @@
-"""The path of barrier minima from W (engine/path.py): where the guard's windows cannot open the
+"""The path of barrier minima from W (engine/path.py): where the guard's window cannot open the
 folds, the barrier starts from a point that is a continuous function of the inputs (issue 21)."""
 
 from pathlib import Path

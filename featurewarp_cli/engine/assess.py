@@ -55,7 +55,7 @@ def assess(state, target, warped, tied, unpinned, warp, record: SolveRecord, not
         record.outline_departure, record.outline_departure_at = canvas.outline_departure(
             target, warped, grid.nx, grid.ny, past)
     if record.guard.drag_step < 1.0:        # a drag's update or a preview: solved in full later
-        where, later = (("folds the fold guard's windows could not open", "Export solves") if record.guard.preview_eased
+        where, later = (("folds the fold guard's window could not open", "Export solves") if record.guard.preview_eased
                         else ("the folds they would make", "the release untangles them where it can and Export "
                               "solves"))
         record.warnings.append(f"{'preview' if record.guard.preview_eased else 'dragging'}: the features are eased to "

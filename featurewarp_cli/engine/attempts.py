@@ -44,7 +44,7 @@ def guarded(warper, state, warped, record: SolveRecord, attempt: Attempt, scale_
     """The least-squares solution ``attempt.solved`` guarded against folds and kept no worse
     than plain (:mod:`guard`); where features were relaxed, smaller similarities (towards
     ``low()``) are tried first. With ``ease`` (x -> (eased x, share)), an interactive update's
-    preview (see ``guard.Problem``): where its windows do not open the folds, the solution
+    preview (see ``guard.Problem``): where its window does not open the folds, the solution
     is eased instead. Returns (x, tied, unpinned)."""
     ties, ab, (x, edges, rhs, offset) = attempt.ties, attempt.ab, attempt.solved
     grid, features = state.grid, state.features

@@ -30,7 +30,7 @@ WINDOW_STEPS = 60
 #: (:func:`_open_window`): the softest first (fewer Newton steps: the 12 MP hard bulge 30
 #: against 86 at 0.2), a stiffer one from its minimum where that still folds (the astronaut's
 #: head by the top edge under ``fish`` at 256 px: 0.125; the close-up under ``flag`` at 192
-#: px: 0.03). Each lower share is closer to the barrier itself (unbounded at 0).
+#: px: 0.03; quarters of CRUSHED_SHARE). Each lower share is closer to the barrier itself.
 CONTINUED_BELOW = tuple(injectivity.CRUSHED_SHARE / 4 ** k for k in range(3))
 #: Newton steps of a preview's convergence (``Problem.preview``): slivers lifted part of the way,
 #: in bounded time (the editor's hard release: 35 steps, 0.6 s, to converge).
@@ -61,7 +61,7 @@ class GuardRecord:
     window_quads : int
         Quads the window could reshape where it opened the folds (0: no window, or it did not).
     path_steps : int
-        Predictor-corrector steps of the path from W (:mod:`path`; 0: the windows sufficed).
+        Predictor-corrector steps of the path from W (:mod:`path`; 0: the window sufficed).
     release_rounds : int
         0: features kept their targets; 1 or 2: some were relaxed towards W.
     released_components : list of int
@@ -79,7 +79,7 @@ class GuardRecord:
         Newton steps of :func:`barrier.converge` (all its runs), and whether the runs behind
         the result (not the release's trials it did not keep) met its tolerance.
     drag_step, preview_eased : float, bool
-        Below 1: a drag's update (``FeatureWarper.solve(drag=True)``), or a preview whose windows
+        Below 1: a drag's update (``FeatureWarper.solve(drag=True)``), or a preview whose window
         could not open its folds (``preview_eased``), eased: the nodes around the folds moved this
         far from W towards the least-squares solution, all the way ``DRAG_REACH`` cells out.
     """
@@ -185,7 +185,7 @@ def _timed(timings: dict, function):
 
 def guard(problem: Problem, x: np.ndarray, record: GuardRecord) -> np.ndarray | None:
     """Positions with no folded triangle, as close to ``x`` (the least-squares solution) as found;
-    None for a preview whose folds the windows do not open (the caller eases it instead)."""
+    None for a preview whose folds the window does not open (the caller eases it instead)."""
     tris = problem.triangles
     record.flipped_before = int(np.count_nonzero(injectivity.flipped(x, tris)))
     warp_areas = signed_areas(problem.warped, tris)

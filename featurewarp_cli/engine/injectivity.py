@@ -204,14 +204,16 @@ def area_gradients(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
 
 
 def penalty_force(x: np.ndarray, triangles: np.ndarray, slopes: np.ndarray) -> np.ndarray:
-    """The force that opens ``triangles``: sum of ``slopes`` times their area gradients, per node.
+    """Sum of ``slopes`` times the ``triangles``' area gradients, per node: the gradient of
+    sum_t f_t(area_t) for slopes f_t'(area_t) (the barrier's, :func:`barrier.converge`), or the
+    force that opens them for slopes of the opposite sign.
 
     Parameters
     ----------
     x : (N, 2) ndarray
     triangles : (M, 3) ndarray of int
     slopes : (M,) ndarray
-        d penalty / d (-area) of each triangle.
+        d energy / d area of each triangle.
 
     Returns
     -------

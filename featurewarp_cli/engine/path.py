@@ -12,7 +12,7 @@ of its area (of its floor where it is above it: a root, not a count), and a corr
 without untangling, windows or fold counts (Allgower and Georg, *Introduction to Numerical
 Continuation Methods*, 2003, ch. 2: predictor-corrector path following).
 
-Where the guard's windows cannot open the folds, it starts the barrier here instead of
+Where the guard's window cannot open the folds, it starts the barrier here instead of
 untangling the whole grid: the untangling's first fold-free iterate, or whether it found one
 within its steps, turned a one-ulp change of W into 1.2 px (the astronaut at 320 px under a
 rigid ``swirl --angle 230``) and 7-137 px (the 1 MP photo under ``swirl --angle 229.99999``).

@@ -282,7 +282,7 @@ class FeatureWarper:
         quick : bool
             For interactive updates: the given or base cell, the least-squares similarities
             without the scale search's safeguards, the guard only where the result folds
-            and as a preview (windows only; where they fail the features are eased as for
+            and as a preview (its window only; where it fails the features are eased as for
             ``drag``, with a warning), and only the per-component quality figures.
         drag : bool
             With ``quick``, an update while a handle is dragged: a least-squares solution
@@ -384,7 +384,7 @@ class FeatureWarper:
             return x, ties.tied, ties.unpinned & ties.tied
         if not self.injective or (quick and np.all(signed_areas(x, state.triangles) > 0)):
             return x, ties.tied, ties.unpinned & ties.tied
-        def ease(x):                            # a drag's update, or a preview its guard's windows left folded
+        def ease(x):                            # a drag's update, or a preview its guard's window left folded
             return injectivity.eased(grid, warped, x, state.triangles, DRAG_STEP, DRAG_REACH)
 
         if drag and np.all(signed_areas(warped, state.triangles) > 0):
