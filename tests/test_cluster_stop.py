@@ -12,7 +12,7 @@ import uuid
 import pytest
 
 from featurewarp_cli.app import batch, cluster_run
-from featurewarp_cli.app.cluster import cluster_job, stop_flag
+from featurewarp_cli.app.cluster import NotWritten, cluster_job, stop_flag
 from test_cluster import cluster, featurewarp, fresh_env, make_inputs, summary_lines, wait_for  # noqa: F401
 
 
@@ -88,6 +88,7 @@ def test_a_worker_that_joins_after_the_stop_writes_nothing(tmp_path, cluster, cl
         cluster.scale(2)
         wait_for(lambda: len(client.scheduler_info()["workers"]) == 2)
     assert all("the batch was stopped before this file was written" in error for error in errors), errors
+    assert all(isinstance(error, NotWritten) for error in errors), errors   # not a failure of the file
     assert os.listdir(out) == ["img00.png"]
 
 
@@ -105,6 +106,33 @@ def test_a_scheduler_the_gate_cannot_ask_fails_the_job_clearly(tmp_path, cluster
     error = client.submit(cluster_job, batch.Settings("swirl"), job, "test-run", pure=False).result()[0]
     assert error.startswith("not written: the Dask scheduler did not answer whether the batch goes on (OSError"), error
     assert os.listdir(out) == []
+
+
+class _Arrived:
+    """A finished future for :meth:`ClusterRun._arrived`: its key and the job's result."""
+
+    status = "finished"
+
+    def __init__(self, key: str, error):
+        self.key, self.error = key, error
+
+    def result(self):
+        return None, "tcp://worker", (self.error, None, 0.5)
+
+
+def test_after_a_signal_a_job_that_refused_to_write_is_unfinished_not_failed():
+    """Under load, a job reached its write stage after the signal's stop: its refusal came back as
+    a result, and the stopping command printed it as a failed file (and put it in the summary).
+    It is left unfinished, as a job that never ran; a job that failed on its own is still said."""
+    run = cluster_run.ClusterRun.__new__(cluster_run.ClusterRun)
+    run.warned = set()
+    run.futures = [_Arrived("a", None), _Arrived("b", NotWritten("RunStopped: the batch was stopped")),
+                   _Arrived("c", "c.png: not a picture")]
+    run.unfinished = {0, 1, 2}
+    jobs = [batch.Job(f"{name}.png", f"out/{name}.png", None) for name in "abc"]
+    arrived = list(run._arrived(jobs, jobs, {"a": 0, "b": 1, "c": 2}))
+    assert [(i, error) for i, _, error, _, _ in arrived] == [(0, None), (2, "c.png: not a picture")]
+    assert run.unfinished == {1}
 
 
 def _close_while_writing(tmp_path, cluster, client):  # noqa: F811

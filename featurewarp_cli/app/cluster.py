@@ -56,6 +56,12 @@ class RunStopped(Exception):
     """Raised at a job's write stage when its run is over: the job writes nothing."""
 
 
+class NotWritten(str):
+    """The error of a job that refused to write because its run was stopped: not a failure of
+    its file. The stopping command leaves it out of its messages and its summary, as a job
+    that never ran (``--resume`` runs it)."""
+
+
 def _worker():
     """The Dask worker running this thread's task, or None."""
     try:
@@ -120,13 +126,14 @@ def _flag_is_set(run_id: str, worker) -> bool:
 @contextlib.contextmanager
 def _write_gate(run_id: str | None):
     """While the block runs a job of ``run_id``: its write stage raises :class:`RunStopped` when the
-    job may not write, and marks it as writing (until the block ends) when it may.
+    job may not write, and marks it as writing (until the block ends) when it may. The block
+    gets a list, not empty once the write was refused so.
 
     The job is marked as writing before it asks the scheduler's flag, not after: a command that
     sets the flag, then asks the workers (:func:`stop_run`), hears of every job that found the
     flag not set. The question is asked outside ``_GATE``: :func:`stop_run` runs on the
     worker's event loop, which answers it."""
-    entry = []
+    entry, refused = [], []
 
     def at_stage(name: str) -> None:
         if name != "write" or entry:
@@ -134,6 +141,7 @@ def _write_gate(run_id: str | None):
         worker = _worker()
         with _GATE:
             if not _may_write(run_id, worker):
+                refused.append(True)
                 raise RunStopped("the batch was stopped before this file was written")
             entry.extend([worker.get_current_task() if worker else None, True])
             _remember(_LAST_WRITER, run_id, entry)
@@ -149,14 +157,15 @@ def _write_gate(run_id: str | None):
         if stopped:
             with _GATE:
                 _remember(_STOPPED, run_id, None)   # the run's next jobs here refuse without asking
+            refused.append(True)
             raise RunStopped("the batch was stopped before this file was written")
 
     if run_id is None:
-        yield
+        yield refused
         return
     stages.listen(at_stage)
     try:
-        yield
+        yield refused
     finally:
         stages.forget(at_stage)
         with _GATE:
@@ -202,7 +211,8 @@ def cluster_job(settings, job, run_id: str | None = None):
     Returns
     -------
     (str or None, dict or None, float)
-        As :func:`featurewarp_cli.app.batch.timed_job`.
+        As :func:`featurewarp_cli.app.batch.timed_job`; the error a :class:`NotWritten` when the
+        job refused to write because its run was stopped.
     """
     global _malloc_tuned
     from ..io import limits
@@ -219,5 +229,6 @@ def cluster_job(settings, job, run_id: str | None = None):
             libc.mallopt(_M_TRIM_THRESHOLD, _TRIM_BYTES)
         except (OSError, AttributeError):
             pass                                    # not glibc: nothing to undo
-    with _ONE_AT_A_TIME, _write_gate(run_id):       # stderr capture is per process: one job at a time
-        return timed_job(settings, job)
+    with _ONE_AT_A_TIME, _write_gate(run_id) as refused:   # stderr capture is per process: one job at a time
+        error, summary, seconds = timed_job(settings, job)
+    return (NotWritten(error) if refused else error), summary, seconds

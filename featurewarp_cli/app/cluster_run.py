@@ -34,7 +34,7 @@ import time
 from collections.abc import Iterator
 
 from .. import __version__, stages
-from .cluster import cluster_job, stop_flag, stop_run
+from .cluster import NotWritten, cluster_job, stop_flag, stop_run
 from .pipeline import WarpError
 from .scheduler import connect, distributed_module, resolve
 
@@ -418,12 +418,13 @@ class ClusterRun:
             _bounded(lambda: client.cancel(pending, force=True), STOP_CALL)
 
     def _arrived(self, jobs: list, sent: list, index: dict):
-        """After a signal: the results that had arrived and were not yielded yet."""
+        """After a signal: the results that had arrived and were not yielded yet (not those of jobs
+        that refused to write because the run was stopped: they stay unfinished)."""
         for future in self.futures:
             i = index[future.key]
             if i in self.unfinished and future.status == "finished":
                 outcome = _bounded(lambda: self._outcome(future), STOP_CALL)
-                if outcome is not None:
+                if outcome is not None and not isinstance(outcome[0], NotWritten):
                     self.unfinished.discard(i)
                     yield (i, jobs[i], *_renamed(outcome, jobs[i], sent[i]))
 
