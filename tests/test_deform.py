@@ -220,8 +220,9 @@ def test_a_preview_release_is_eased_in_bounded_time_where_export_converges(monke
     assert preview.record.guard.newton_steps == len(guard.CONTINUED_BELOW) * guard.PREVIEW_STEPS
 
 
-def _coins_drag():
-    """issue 23's 'onto a feature' drag on the coins sample: (deformer after the drag, handles)."""
+def _coins():
+    """issue 23's 'onto a feature' drag on the coins sample: (mask, where the drag starts and
+    ends, the handles with the dragged one at a given point)."""
     mask = cv2.imread("samples/coins_mask.png", cv2.IMREAD_GRAYSCALE) >= 128
     h, w = mask.shape
     scale = np.array([(w - 1) / 999, (h - 1) / 999])
@@ -231,6 +232,13 @@ def _coins_drag():
     def handles(to):
         return {"version": 1, "points": pins + [{"from": list(start), "to": [float(v) for v in to]}]}
 
+    return mask, start, end, handles
+
+
+def _coins_drag():
+    """issue 23's 'onto a feature' drag on the coins sample: (deformer after the drag, handles)."""
+    mask, start, end, handles = _coins()
+    h, w = mask.shape
     deformer = Deformer(w, h, mask, quick=True, rigid_steps=1)
     deformer.solve(handles(start))
     factored = deformer.warper.factorizations
@@ -239,7 +247,17 @@ def _coins_drag():
     return deformer, handles(end), factored
 
 
-def test_the_editor_keeps_its_tie_decisions_per_handle_set_so_no_update_is_factored_anew():
+@pytest.fixture(scope="module")
+def coins_full():
+    """(Deformer, mesh): the full solve of the coins drag's end, a Deformer of its own (no drag
+    behind it). The two tests below only read it: solved once for both (each solved it anew,
+    most of each test's time)."""
+    mask, _, end, handles = _coins()
+    full = Deformer(mask.shape[1], mask.shape[0], mask)
+    return full, full.solve(handles(end))
+
+
+def test_the_editor_keeps_its_tie_decisions_per_handle_set_so_no_update_is_factored_anew(coins_full):
     """Issue 23: on the coins photo a coin near the border stopped fitting its border pins
     half-way through a drag; the update untied it and factored the systems anew (a 250 ms
     update at 1 MP, and 140 ms more in the release). A quick Deformer decides the ties once
@@ -248,15 +266,14 @@ def test_the_editor_keeps_its_tie_decisions_per_handle_set_so_no_update_is_facto
     assert deformer.warper.factorizations == factored
     deformer.solve(handles)                                  # the release
     assert deformer.warper.factorizations == factored
-    full = Deformer(deformer.warper.width, deformer.warper.height, deformer.warper.mask)
-    full.solve(handles)
+    full, _ = coins_full
     assert full.warper._decided[1][1].any() and not deformer.warper._decided[1][1].any()   # a coin let go
     more = {**handles, "points": handles["points"] + [{"from": [20.0, 150.0], "to": [22.0, 150.0]}]}
     deformer.solve(more, drag=True)                 # a new handle set, dragged at once: decided anew
     assert deformer.warper._decided[1][1].any()
 
 
-def test_a_preview_whose_windows_cannot_open_the_folds_is_eased_and_says_so():
+def test_a_preview_whose_windows_cannot_open_the_folds_is_eased_and_says_so(coins_full):
     """Issue 23: the release of a drag onto the coins ran the whole-grid pass, the release
     rounds and the shrink retry: up to 3 s at 1 MP. A preview stops after the windows and
     eases the rest, as a drag's update does, and says so; Export's full solve goes on."""
@@ -267,7 +284,7 @@ def test_a_preview_whose_windows_cannot_open_the_folds_is_eased_and_says_so():
     assert guard.preview_eased and 0.0 <= guard.drag_step < 1.0 and guard.release_rounds == 0
     assert released.flips() == 0
     assert any(w.startswith("preview: the features are eased") for w in released.record.warnings)
-    full = Deformer(deformer.warper.width, deformer.warper.height, deformer.warper.mask).solve(handles)
+    _, full = coins_full
     assert not full.record.guard.preview_eased and full.record.guard.drag_step == 1.0 and full.flips() == 0
 
 

@@ -20,6 +20,8 @@ import urllib.request
 
 import pytest
 
+from test_cli import Runner
+
 pytestmark = pytest.mark.slow
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -150,10 +152,9 @@ def test_editor_add_drag_save_export(editor, browser, tmp_path):
 
     browser.find_element(By.ID, "export").click()
     wait_for(browser, "return featurewarp.exported", timeout=120)
-    again = tmp_path / "deform.png"
-    run = subprocess.run([sys.executable, "-m", "featurewarp_cli", "deform", IMAGE, str(again), "-m", MASK,
-                          "--handles", str(tmp_path / "h.json")], capture_output=True, timeout=120)
-    assert run.returncode == 0, run.stderr
+    again = tmp_path / "deform.png"                    # the command in this process (its bytes, not its process)
+    run = Runner()("deform", IMAGE, again, "-m", MASK, "--handles", tmp_path / "h.json")
+    assert run.code == 0, run.stderr
     assert (tmp_path / "exported.png").read_bytes() == again.read_bytes()
 
 
@@ -316,8 +317,8 @@ def test_export_saves_the_handles_and_prints_the_command_that_reproduces_it(tmp_
         assert "--mode" in command and "rigid" in command
         again = tmp_path / "again.png"
         command[3] = str(again)
-        run = subprocess.run([sys.executable, "-m", "featurewarp_cli", *command[1:]], capture_output=True, timeout=120)
-        assert run.returncode == 0, run.stderr
+        run = Runner()(*command[1:])                   # the printed command, run in this process
+        assert run.code == 0, run.stderr
         assert again.read_bytes() == (tmp_path / "exported.png").read_bytes()
     finally:
         process.send_signal(signal.SIGINT)

@@ -18,6 +18,7 @@ import sys
 
 import pytest
 
+from test_cli import Runner
 from test_editor import IMAGE, MASK, browser, screen, settled, start_editor, wait_for  # noqa: F401
 
 pytestmark = pytest.mark.slow
@@ -320,7 +321,7 @@ def editor_in(folder, driver, *args):
         process.wait(timeout=10)
 
 
-def test_export_without_handles_writes_the_file_its_command_names(tmp_path, browser):  # noqa: F811
+def test_export_without_handles_writes_the_file_its_command_names(tmp_path, browser, monkeypatch):  # noqa: F811
     """Started without --handles, Export writes OUT.handles.json and prints a command that
     replays as printed (run from the same folder, it rewrites the same bytes)."""
     driver = browser
@@ -336,13 +337,13 @@ def test_export_without_handles_writes_the_file_its_command_names(tmp_path, brow
         assert "the same bytes as: " + exported["command"] in driver.find_element("id", "status").text
         first = (tmp_path / "out.png").read_bytes()
         (tmp_path / "out.png").unlink()
-        run = subprocess.run([sys.executable, "-m", "featurewarp_cli", *command[1:]], cwd=tmp_path,
-                             capture_output=True, timeout=120)
-        assert run.returncode == 0, run.stderr
+        monkeypatch.chdir(tmp_path)                    # the printed command, run in this process from there
+        run = Runner()(*command[1:])
+        assert run.code == 0, run.stderr
         assert (tmp_path / "out.png").read_bytes() == first
 
 
-def test_the_mask_brush_paints_erases_undoes_and_saves_a_mask_deform_reads(tmp_path, browser):  # noqa: F811
+def test_the_mask_brush_paints_erases_undoes_and_saves_a_mask_deform_reads(tmp_path, browser, monkeypatch):  # noqa: F811
     """Started without a mask: paint a feature, erase part of it, undo the erase; Save writes
     OUT.mask.png, and Export's command (-m OUT.mask.png) gives the same bytes."""
     from selenium.webdriver.support.ui import Select
@@ -384,9 +385,9 @@ def test_the_mask_brush_paints_erases_undoes_and_saves_a_mask_deform_reads(tmp_p
         command = shlex.split(exported["command"])
         assert command[command.index("-m") + 1] == "out.mask.png"
         command[3] = "again.png"
-        run = subprocess.run([sys.executable, "-m", "featurewarp_cli", *command[1:]], cwd=tmp_path,
-                             capture_output=True, timeout=120)
-        assert run.returncode == 0, run.stderr
+        monkeypatch.chdir(tmp_path)                    # the printed command, run in this process from there
+        run = Runner()(*command[1:])
+        assert run.code == 0, run.stderr
         assert (tmp_path / "again.png").read_bytes() == (tmp_path / "out.png").read_bytes()
 
 

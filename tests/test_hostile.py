@@ -277,7 +277,9 @@ def test_progress_line_names_the_stages_and_is_erased(monkeypatch):
     stages.listen(line.enter)
     line.thread.start()
     stages.enter("guard")
-    time.sleep(0.5)
+    deadline = time.monotonic() + 5.0              # drawn at once (DELAY 0), then every INTERVAL
+    while "\rfeaturewarp: guard" not in stream.getvalue() and time.monotonic() < deadline:
+        time.sleep(0.01)
     stages.forget(line.enter)
     line.close()
     text = stream.getvalue()

@@ -22,9 +22,10 @@ SWEEP = [
 ]
 
 
-def blobs():
-    """Discs and a square, one near the centre, one cut by the border."""
-    y, x = np.mgrid[0:H, 0:W]
+def blobs(scale=1.0):
+    """Discs and a square, one near the centre, one cut by the border (of a W x H image; at
+    ``scale``, of a scale * W x scale * H one, every figure scaled with it)."""
+    y, x = np.mgrid[0:round(H * scale), 0:round(W * scale)] / scale
     mask = (x - 80) ** 2 + (y - 60) ** 2 < 18**2
     mask |= (x - 35) ** 2 + (y - 35) ** 2 < 14**2
     mask |= (abs(x - 125) < 15) & (abs(y - 80) < 15)
@@ -32,21 +33,39 @@ def blobs():
     return mask
 
 
-MASKS = {"none": None, "blobs": blobs()}
+#: The sweep with features runs at 3/4 size (120 x 90, the blobs scaled): half the time of W x
+#: H, most of it in the guard's path from W. The bare grid is swept at W x H (0.4 s in all).
+SWEEP_SCALE = 0.75
+MASKS = {"none": (None, 1.0), "blobs": (blobs(SWEEP_SCALE), SWEEP_SCALE)}
 
 
 #: (mask, w_F): w_F does not matter without features, so the bare grid is swept once.
 SWEEP_SETTINGS = [("none", 10.0), ("blobs", 10.0), ("blobs", 100.0)]
 
+#: Which cases of SWEEP fold before the guard (``F``: the least-squares solution has a folded
+#: triangle, so the guard must find another; ``.``: it has none), similarity then rigid. At
+#: 120 x 90 every case that folds at 160 x 120 folds, and two more: bulge 2.95 rigid at w_F 10
+#: and bulge -0.95 similarity at w_F 100 (``.`` at 160 x 120).
+FOLDS = {
+    ("none", 10.0): ".. " * len(SWEEP),
+    ("blobs", 10.0): "FF FF FF FF FF .. FF FF FF .. .. .. FF .F .. FF FF ..",
+    ("blobs", 100.0): "FF FF FF FF FF .. FF FF FF F. .. F. FF .F .. FF FF ..",
+}
+
 
 @pytest.mark.parametrize("preset,params", SWEEP, ids=[f"{p}-{v}" for p, v in SWEEP])
 @pytest.mark.parametrize("mask_name,feature_weight", SWEEP_SETTINGS, ids=[f"{m}-wF{w:g}" for m, w in SWEEP_SETTINGS])
 def test_sweep_has_no_fold_overs(preset, params, mask_name, feature_weight):
-    """Every preset over its declared range, with and without features, at w_F 10 and 100."""
-    mask = MASKS[mask_name]
-    warper = FeatureWarper(W, H, mask, feature_weight=feature_weight)
-    for mode in ("similarity", "rigid"):
-        mesh = warper.solve(load_warp(preset)(W, H, **params), mode)
+    """Every preset over its declared range, with and without features, at w_F 10 and 100; with
+    features at 120 x 90 (SWEEP_SCALE), where the guard has folds to undo in every case it has
+    at 160 x 120 (FOLDS)."""
+    mask, scale = MASKS[mask_name]
+    width, height = round(W * scale), round(H * scale)
+    folds = FOLDS[mask_name, feature_weight].split()[SWEEP.index((preset, params))]
+    warper = FeatureWarper(width, height, mask, feature_weight=feature_weight)
+    for mode, folded in zip(("similarity", "rigid"), folds):
+        mesh = warper.solve(load_warp(preset)(width, height, **params), mode)
+        assert (mesh.info["flipped_before_guard"] > 0) == (folded == "F"), (mode, mesh.info["flipped_before_guard"])
         assert mesh.flips() == 0, mesh.info
         assert np.isfinite(mesh.target).all()
 

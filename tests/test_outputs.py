@@ -188,7 +188,9 @@ def test_batch_workers_die_with_their_parent(picture, tmp_path):
     everyone = _children(process.pid)
     process.send_signal(signal.SIGTERM)
     process.wait(10)
-    time.sleep(2.0)
+    deadline = time.monotonic() + 2.0                  # each worker gone within 2 s (asked every 50 ms)
+    while [pid for pid in everyone if _alive(pid)] and time.monotonic() < deadline:
+        time.sleep(0.05)
     assert not [pid for pid in everyone if _alive(pid)]
     assert list(out_dir.iterdir()) == []
 
@@ -203,6 +205,14 @@ def test_batch_refuses_to_write_over_another_jobs_input(tmp_path):
     assert run.exit_code == 2 and "also reads" in run.output
 
 
+def _waits_on_a_pipe(pid: int) -> bool:
+    """Whether process ``pid`` sleeps in a write to a full pipe (False where the kernel does not say)."""
+    try:
+        return Path(f"/proc/{pid}/wchan").read_text().endswith("pipe_write")
+    except OSError:
+        return False
+
+
 def test_a_short_write_to_an_unbuffered_stdout_is_finished_or_is_an_error(picture, tmp_path):
     """With ``PYTHONUNBUFFERED`` stdout is a raw file: a write may take part of the bytes (a pipe,
     a nearly full disk). The rest is written; where the pipe is closed early that is exit 1 with
@@ -211,9 +221,12 @@ def test_a_short_write_to_an_unbuffered_stdout_is_finished_or_is_an_error(pictur
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     whole = subprocess.run(args, capture_output=True, env=env, check=True).stdout
     assert cv2.imdecode(np.frombuffer(whole, np.uint8), cv2.IMREAD_UNCHANGED).shape[1] == 2 * 160
-    reader = "import os, sys, time; os.read(0, 10); os.close(0); time.sleep(2)"
+    reader = "import os; os.read(0, 10); os.close(0)"
     process = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
     subprocess.run([sys.executable, "-c", reader], stdin=process.stdout, check=True)
+    deadline = time.monotonic() + 2.0                # until it waits on the full pipe, mid-image (2 s at most)
+    while process.poll() is None and time.monotonic() < deadline and not _waits_on_a_pipe(process.pid):
+        time.sleep(0.01)
     process.stdout.close()
     assert process.wait(timeout=60) == 1
     assert process.stderr.read().decode().strip().endswith("cannot write -: Broken pipe")

@@ -38,9 +38,9 @@ def closeup():
     return sample("closeup.png"), sample("closeup_mask.png") >= 128
 
 
-def warped(image, mask, preset, mode="similarity", **params):
+def warped(image, mask, preset, mode="similarity", cell=None, **params):
     h, w = mask.shape
-    warper = FeatureWarper(w, h, mask)
+    warper = FeatureWarper(w, h, mask, cell=cell)
     mesh = warper.solve(load_warp(preset)(w, h, **params), mode)
     return warper.render(image, mesh, background=(255, 255, 255)), mesh
 
@@ -83,14 +83,19 @@ def test_frame_cut_portrait_keeps_its_shape_in_the_image(portrait, mode, params)
 
 def test_rigid_portrait_that_cannot_fit_warns_and_is_no_worse_than_plain(portrait):
     """Rigid --sx 0.6: a subject wider than the new canvas cannot keep its size: the tool says
-    so and the subject is no more distorted than under the plain stretch."""
+    so and the subject is no more distorted than under the plain stretch.
+
+    Solved on an 8 px grid (a quarter of the solve's time on the automatic 4 px one): the same
+    route, the fold guard's path from W ends in one release round that lets the subject go."""
     image, mask = portrait
-    out, mesh = warped(image, mask, "stretch", "rigid", sx=0.6)
+    out, mesh = warped(image, mask, "stretch", "rigid", cell=8.0, sx=0.6)
+    guard = mesh.record.guard
+    assert guard.path_steps > 0 and guard.release_rounds == 1 and guard.released_components == [0]
     assert any("not kept" in line for line in mesh.info["warnings"])
     for component in mesh.info["components"]:
         assert component["anisotropy_worst"] <= component["plain_anisotropy_worst"] + 1e-6
     fit = measure(image, out, mask)[0]
-    plain_fit = measure(image, warped(image, mask, "stretch", "plain", sx=0.6)[0], mask)[0]
+    plain_fit = measure(image, warped(image, mask, "stretch", "plain", cell=8.0, sx=0.6)[0], mask)[0]
     assert fit.distortion < plain_fit.distortion
 
 
@@ -133,13 +138,19 @@ def test_frame_filling_closeup_swirl_warns_that_the_output_is_the_input(closeup)
 
 def test_frame_filling_closeup_arc_is_no_worse_than_plain(closeup):
     """arc 300: no component comes out more distorted than under the plain arc; the tool says
-    that the feature was not kept."""
+    that the feature was not kept.
+
+    Solved on an 8 px grid (an eighth of the time on the automatic 4 px one): the same route,
+    the fold guard's path from W, then the feature moved back towards W (plain_blend below 1)
+    as more distorted than under it."""
     image, mask = closeup
-    _, mesh = warped(image, mask, "arc", angle=300)
+    _, mesh = warped(image, mask, "arc", cell=8.0, angle=300)
+    guard = mesh.record.guard
+    assert guard.path_steps > 0 and 0 < guard.plain_blend < 1 and guard.degraded_components == [0]
     assert mesh.flips() == 0
     for component in mesh.info["components"]:
         assert component["anisotropy_worst"] <= component["plain_anisotropy_worst"] + 1e-6
-    assert mesh.info["warnings"]
+    assert any("not kept" in line for line in mesh.info["warnings"])
 
 
 def test_arc_300_keeps_the_head_exact_when_only_the_frame_cut_helmet_must_give(portrait):
@@ -199,10 +210,20 @@ def test_new_photos_keep_the_canvas_and_are_no_worse_than_plain(name, preset, mo
     the trees at the bottom right, 44 % of the frame; a dahlia cut by the top and right edges,
     80 %): at the preset's defaults the outline is the plain warp's, the canvas covers what it
     covers, and every component is no worse than under it by the report's two figures
-    (``benchmarks/photo_acceptance.py`` checks all presets and the keypoints too)."""
+    (``benchmarks/photo_acceptance.py`` checks all presets and the keypoints too).
+
+    The pagoda's arc is solved on a 5 px grid (about half the time of the automatic 4 px one,
+    the slowest two cases here): the same route, its two components both, the fold guard's
+    path from W ending in two release rounds, then component 1 moved back towards W
+    (``degraded_components``)."""
     mask = sample(f"{name}_mask.png") >= 128
     h, w = mask.shape
-    record = FeatureWarper(w, h, mask).solve(load_warp(preset)(w, h), mode).record
+    cell = 5.0 if (name, preset) == ("china", "arc") else None
+    record = FeatureWarper(w, h, mask, cell=cell).solve(load_warp(preset)(w, h), mode).record
+    if cell:
+        guard = record.guard
+        assert len(record.components) == 2 and guard.path_steps > 0 and guard.release_rounds == 2, guard
+        assert guard.degraded_components == [1] and guard.plain_blend < 1, guard
     assert record.outline_departure <= 1.0 and record.blank_share <= record.plain_blank_share + 0.005
     for component in record.components:
         assert component.distortion <= component.plain_distortion + 1e-6, component
