@@ -117,7 +117,7 @@ class _Arrived:
         self.key, self.error = key, error
 
     def result(self):
-        return None, "tcp://worker", (self.error, None, 0.5)
+        return cluster_run.__version__, "tcp://worker", (self.error, None, 0.5)
 
 
 def test_after_a_signal_a_job_that_refused_to_write_is_unfinished_not_failed():

@@ -141,7 +141,8 @@ def _write_gate(run_id: str | None):
         worker = _worker()
         with _GATE:
             if not _may_write(run_id, worker):
-                refused.append(True)
+                if run_id in _STOPPED:              # not a worker closing nor a task cancelled
+                    refused.append(True)
                 raise RunStopped("the batch was stopped before this file was written")
             entry.extend([worker.get_current_task() if worker else None, True])
             _remember(_LAST_WRITER, run_id, entry)
