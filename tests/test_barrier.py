@@ -733,7 +733,13 @@ def test_the_local_preconditioner_solves_the_reduced_system_on_its_unknowns_tied
     factors = rng.normal(size=(len(active), 6, 3))
     blocks = factors @ np.transpose(factors, (0, 2, 1))                   # positive semi-definite
     r = rng.normal(size=(n, 2))
-    z = barrier._local_solver(normal, unknowns, active, blocks)(r)
+    z = barrier._local_solver(barrier.summed_between(normal, unknowns), unknowns, active, blocks)(r)
+    from featurewarp_cli.engine.solver import AxisSystems
+
+    systems = AxisSystems(normal, *unknowns)          # the factored matrix's entries: the same solve
+    assert systems.x.ordering == "grid-nested-dissection"       # its unknowns in elimination order
+    assert np.allclose(barrier._local_solver(systems.normal_between, unknowns, active, blocks)(r), z,
+                       rtol=1e-12, atol=1e-12 * np.abs(z).max())
 
     columns = [np.flatnonzero(u >= 0) for u in unknowns]
     sizes = [int(u.max()) + 1 for u in unknowns]

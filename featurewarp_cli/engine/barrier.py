@@ -165,16 +165,17 @@ def hessians(points, triangles, ratio, floor, kappa, exact: float, below: float 
     return (kappa * second / floor ** 2)[:, None, None] * grads[:, :, None] * grads[:, None, :] + area_term
 
 
-def _local_solver(normal, unknowns: np.ndarray, triangles: np.ndarray, blocks: np.ndarray):
+def _local_solver(between, unknowns: np.ndarray, triangles: np.ndarray, blocks: np.ndarray):
     """``r -> z``: the Newton system restricted to the solve's unknowns that the corners of
     ``triangles`` (the barrier's active ones) take, everything else held, solved exactly (one
     small factorization). ``unknowns`` ((2, N) int, -1 held) is the solve's numbering per axis:
     a tied feature with a corner among them enters with its shared translation (all its nodes
     move with it), so a feature pressed against crushed triangles is preconditioned by the
     barrier's stiffness too, not by the least-squares energy alone (which is 1e11 times softer
-    there: CG then needed its full 100 iterations and still pointed uphill). The matrix is a
-    principal submatrix of the reduced Newton system: where it is not positive definite,
-    neither is the whole."""
+    there: CG then needed its full 100 iterations and still pointed uphill). ``between(axis,
+    ids)`` gives the least-squares part, the reduced matrix between those unknowns
+    (:attr:`InverseRows.between`). The matrix is a principal submatrix of the reduced Newton
+    system: where it is not positive definite, neither is the whole."""
     import scipy.sparse as sp                 # SciPy: imported by the solves that need it
 
     from .solver import spd_solver
@@ -183,22 +184,22 @@ def _local_solver(normal, unknowns: np.ndarray, triangles: np.ndarray, blocks: n
     on = np.zeros(n, bool)
     on[triangles.ravel()] = True
     column, size = np.full((n, 2), -1), 0     # the local unknown of each node's x and y
+    rows, cols, data, same = [], [], [], np.array_equal(unknowns[0], unknowns[1])
     for axis, unknown in enumerate(unknowns):
         ids = np.unique(unknown[on & (unknown >= 0)])
         lookup = np.full(int(unknown.max()) + 2, -1)
         lookup[ids] = size + np.arange(ids.size)
         column[:, axis] = np.where(unknown >= 0, lookup[unknown], -1)
+        if ids.size and not (axis and same):  # one system for both axes: the same block
+            block = between(axis, ids).tocoo()
+        if ids.size:
+            rows.append(block.row + size)
+            cols.append(block.col + size)
+            data.append(block.data)
         size += ids.size
     if size == 0:
         return lambda r: np.zeros_like(r)
     mapped = [np.flatnonzero(column[:, axis] >= 0) for axis in range(2)]
-    rows, cols, data = [], [], []
-    for axis, nodes in enumerate(mapped):     # P' H P per axis: entries summed per unknown pair
-        if axis == 0 or not np.array_equal(nodes, mapped[0]):
-            block = normal[nodes][:, nodes].tocoo()   # the same slice for both axes where they map alike
-        rows.append(column[nodes[block.row], axis])
-        cols.append(column[nodes[block.col], axis])
-        data.append(block.data)
     dof = column[triangles].reshape(-1, 6)
     dof_rows, dof_cols = np.broadcast_to(dof[:, :, None], blocks.shape), np.broadcast_to(dof[:, None, :], blocks.shape)
     keep = (dof_rows >= 0) & (dof_cols >= 0)
@@ -218,7 +219,21 @@ def _local_solver(normal, unknowns: np.ndarray, triangles: np.ndarray, blocks: n
     return local
 
 
-def _newton_direction(move, normal, unknowns, points, triangles, blocks, gradient, near: bool,
+def summed_between(normal, unknowns: np.ndarray):
+    """``between(axis, ids)`` for :func:`_local_solver` where no factored system has it: P' H P
+    between the unknowns ``ids`` of ``unknowns[axis]``, ``normal``'s rows summed over their nodes."""
+    import scipy.sparse as sp                 # SciPy: imported by the solves that need it
+
+    def between(axis, ids):
+        unknown = unknowns[axis]
+        nodes = np.flatnonzero(np.isin(unknown, ids))
+        block = normal[nodes][:, nodes].tocoo()
+        at = np.searchsorted(ids, unknown[nodes])
+        return sp.csc_matrix((block.data, (at[block.row], at[block.col])), shape=(ids.size, ids.size))
+    return between
+
+
+def _newton_direction(move, normal, unknowns, between, points, triangles, blocks, gradient, near: bool,
                       indefinite: bool = False):
     """Conjugate gradients on (H + barrier Hessian) d = -gradient, preconditioned by a local
     solve, a back-substitution of the factored H and the local solve again; (d, ok), ok False
@@ -243,7 +258,7 @@ def _newton_direction(move, normal, unknowns, points, triangles, blocks, gradien
     from . import cholmod                     # scikit-sparse: imported by the solves that need it
 
     try:
-        local = _local_solver(normal, unknowns, triangles, blocks)
+        local = _local_solver(between, unknowns, triangles, blocks)
     except cholmod.NotPositiveDefinite:
         return None, False
 
@@ -445,7 +460,8 @@ def step_direction(rows, move, normal, movable, x, triangles, ratio, floor, kapp
     blocks = hessians(x, triangles, ratio, floor, kappa, exact=1.0 if near else _PARTIAL if partial else 0.0,
                       below=below)
     unknowns = rows.unknowns if rows is not None else np.stack([np.where(movable, np.arange(n), -1)] * 2)
-    return (*_newton_direction(move, normal, unknowns, x, triangles, blocks, gradient, near, partial), False)
+    between = rows.between if rows is not None and rows.between is not None else summed_between(normal, unknowns)
+    return (*_newton_direction(move, normal, unknowns, between, x, triangles, blocks, gradient, near, partial), False)
 
 
 def _factors(rows: InverseRows, nodes: np.ndarray) -> bool:

@@ -160,7 +160,7 @@ class Problem:
         if id(systems) not in self.inverses:
             unknowns = np.stack([systems.x.unknown, systems.y.unknown])
             self.inverses[id(systems)] = (systems, barrier.InverseRows(_timed(self.timings, systems.entries),
-                                                                       unknowns))
+                                                                       unknowns, systems.normal_between))
         return self.inverses[id(systems)][1]
 
     def solver(self, systems, rhs, offset):
@@ -199,10 +199,8 @@ def guard(problem: Problem, x: np.ndarray, record: GuardRecord) -> np.ndarray | 
     else:
         x, ok = _unfolded(problem, x, floor, record)
         windowed = bool(record.window_quads)
-    if ok and problem.preview and windowed:   # a preview: the window's minimum, in bounded time
-        return x
-    if ok and record.path_steps:          # the path's end: the whole grid's minimum already
-        return x
+    if ok and ((problem.preview and windowed) or record.path_steps):
+        return x                          # a preview's window minimum (bounded time); the path's end: the grid's
     if ok:
         # A window's minimum holds the rest at the least-squares solution (up to 27 px from the
         # energy's minimum at 12 MP): it only starts the whole grid's, whose run says converged.
@@ -236,7 +234,7 @@ def _converged(problem, x, floor, record):
     crushed = injectivity.grid_areas(problem.grid, x) < floor
     if not crushed.any():
         return x, None
-    window = _window(problem, problem.rhs, problem.offset, problem.tied, x, crushed, WINDOW_MIN_MARGIN)
+    window = _window(problem, x, crushed, WINDOW_MIN_MARGIN)
     if window is None:
         return x, False
     x = x.copy()
@@ -262,7 +260,6 @@ def _release(problem: Problem, x, floor, record: GuardRecord):
         record.released_components = [int(c) for c in released]
         return best
     from .plain_bound import furthest_move      # it imports this module
-
     record.fallback = True                # no blend passes: from W towards x, up to half a floor
     warped = problem.warped
     return furthest_move(lambda t: warped + t * (x - warped), lambda points: -1.0, tris, floor)[0]
@@ -376,10 +373,10 @@ def _open_window(problem: Problem, x, floor, record):
     crushed = injectivity.grid_areas(problem.grid, x) < injectivity.CRUSHED_SHARE * floor
     margin = max(WINDOW_MIN_MARGIN, int(WINDOW_MARGIN * injectivity.extent(problem.grid, np.flatnonzero(crushed)
                                                                          % problem.features.weight.size)))
-    window = (_window(problem, problem.rhs, problem.offset, problem.tied, x, crushed, margin, not problem.preview)
-              or _window(problem, problem.rhs, problem.offset, problem.tied, x, crushed, margin))
-    if window is None or (problem.preview and window.nodes.size > WINDOW_MAX_FRACTION * x.shape[0]):
-        return None, 0, 0                       # a preview's runs there: 0.8 s of 12 steps that open nothing
+    window = (not problem.preview and _window(problem, x, crushed, margin, around_ties=True)
+              or _window(problem, x, crushed, margin))
+    if window is None:
+        return None, 0, 0
     local_floor = window.floor(floor)
     kappa = barrier.weights(window.warped, window.triangles, window.stiffness, local_floor)
     moved, steps = x[window.nodes], 0
@@ -446,18 +443,18 @@ class Window:
         return moved
 
 
-def _window(problem: Problem, rhs, offset, tied, x, crushed: np.ndarray, margin: int,
-            around_ties: bool = False) -> Window | None:
+def _window(problem: Problem, x, crushed: np.ndarray, margin: int, around_ties: bool = False) -> Window | None:
     """The :class:`Window` of the quads within ``margin`` quads of those with a ``crushed``
     triangle ((M,) bool), holding every other node at ``x``, except that a tied feature
     reaching into it keeps its shared unknown (it may shift as a whole); None when nothing
-    could move or when it would take in more than WINDOW_MAX_FRACTION of the grid.
+    could move or when it would take in more than WINDOW_MAX_FRACTION of the grid's quads (a
+    preview's: of its nodes, tied features' included).
 
     With ``around_ties`` (once), a tied feature that reaches into the window brings its quads
     and ``margin`` quads around them: it can only shift if the ground around all of it may
     follow. Without, a window could not open the folds by the astronaut's head cut by the top
     edge under ``fish`` (1 MP: 600 Newton steps, not converged; with its ground, 22)."""
-    grid, n_quads = problem.grid, problem.features.weight.size
+    grid, n_quads, tied = problem.grid, problem.features.weight.size, problem.tied
     quads = np.zeros(n_quads, bool)
     quads[np.flatnonzero(crushed) % n_quads] = True
     _, near, inner = injectivity.window(grid, quads, margin)
@@ -476,19 +473,22 @@ def _window(problem: Problem, rhs, offset, tied, x, crushed: np.ndarray, margin:
     in_system = np.zeros(grid.n_nodes, bool)
     in_system[corners[touched].ravel()] = True
     nodes = np.flatnonzero(in_system)
+    if problem.preview and nodes.size > WINDOW_MAX_FRACTION * grid.n_nodes:
+        return None                       # a preview's runs there: 0.8 s of 12 steps that open nothing
     local_moving = moving[nodes]
     unknown = system.number_unknowns(~local_moving, np.where(local_moving, tied[nodes], -1))
     from .solver import ReducedSystem         # SciPy: imported by the solves that need it
 
     matrix = problem.normal[nodes][:, nodes]
     reduced = ReducedSystem(matrix, unknown)
-    held = np.where(local_moving[:, None], offset[nodes], x[nodes])
-    local_rhs, timings = rhs[nodes], problem.timings
+    held = np.where(local_moving[:, None], problem.offset[nodes], x[nodes])
+    local_rhs, timings = problem.rhs[nodes], problem.timings
 
     solve = _timed(timings, lambda force: reduced.solve(local_rhs + force, held))
     linear = _timed(timings, reduced.move)
     inverse = barrier.InverseRows(_timed(timings, lambda rows, columns: np.broadcast_to(
-        reduced.entries(rows, columns), (2, rows.size, columns.size))), np.stack([unknown, unknown]))
+        reduced.entries(rows, columns), (2, rows.size, columns.size))), np.stack([unknown, unknown]),
+        lambda axis, ids: reduced.normal_between(ids))   # one system for both axes
 
     local = np.full(grid.n_nodes, -1)
     local[nodes] = np.arange(nodes.size)

@@ -22,10 +22,13 @@ class InverseRows:
     as the barrier's active set grows: S is the factored system's, the same for every
     :func:`barrier.converge` run on it (a release's path of minima passes one instance to each).
     ``unknowns`` ((2, N) int) is the solve's unknown of each node in x and in y (-1 held; the
-    nodes of a tied feature share one): it says which nodes' rows of S are zero or the same."""
+    nodes of a tied feature share one): it says which nodes' rows of S are zero or the same.
+    ``between(axis, ids)`` -> (k, k) sparse: the reduced system's matrix P' H P between the
+    unknowns ``ids`` of that axis (entries of the factored matrix,
+    :meth:`solver.ReducedSystem.normal_between`), for the barrier's local preconditioner."""
 
-    def __init__(self, inverse, unknowns: np.ndarray):
-        self.inverse, self.unknowns = inverse, np.asarray(unknowns)
+    def __init__(self, inverse, unknowns: np.ndarray, between=None):
+        self.inverse, self.unknowns, self.between = inverse, np.asarray(unknowns), between
         n = self.unknowns.shape[1]
         self.index = np.full(n, -1)
         self.known = np.zeros(0, dtype=np.int64)

@@ -184,6 +184,7 @@ class ReducedSystem:
         self.n_unknowns = n = int(unknown.max()) + 1 if unknown.size else 0
         self.matrix = matrix
         self._solve = None
+        self._lower, self._rank = None, None
         self.method = "none"
         self.ordering = "default"
         if n == 0:
@@ -205,11 +206,12 @@ class ReducedSystem:
             rank[_unknown_order(unknown, n, nx)] = np.arange(n)
             ur, uc = rank[ur], rank[uc]
             position = rank[position]
-            self.ordering = "grid-nested-dissection"
+            self.ordering, self._rank = "grid-nested-dissection", rank
         self._set_projection(unknown, position, n)
         # The reduced lower triangle (duplicates summed), in the elimination order.
         lower = sp.csc_matrix((val, (np.maximum(ur, uc), np.minimum(ur, uc))), shape=(n, n))
         lower.sort_indices()
+        self._lower = lower
         if cholmod.AVAILABLE:
             self.method = "cholmod"
             factor = _cholmod_factor(lower, natural=nx is not None)
@@ -282,6 +284,14 @@ class ReducedSystem:
         z[:n] = self._solve(gathered.T)                               # (n, k), F-ordered: no copy
         return np.take(z, self._scatter, axis=0)
 
+    def normal_between(self, ids: np.ndarray):
+        """(k, k) CSC matrix: P' L P (the reduced system's own matrix) between the unknowns
+        ``ids`` (sorted, unique), in their order: a slice of the factored matrix, so a tied
+        feature's thousands of nodes cost nothing here (summing their rows of L did, per step)."""
+        at = ids if self._rank is None else self._rank[ids]
+        block = self._lower[:, at].tocsr()[at]          # the lower triangle's entries among ``ids``
+        return (block + block.T - sp.diags(block.diagonal())).tocsc()
+
     def entries(self, rows: np.ndarray, columns: np.ndarray) -> np.ndarray:
         """(r, c): the moves of the nodes ``rows`` under a unit force on each node of ``columns``
         (the solve's linear part, the inverse's entries; one back-substitution for all columns;
@@ -347,6 +357,10 @@ class AxisSystems:
             if np.abs(moved[~on]).max(initial=0.0) > tolerance or (high - low).max(initial=0.0) > tolerance:
                 return False
         return True
+
+    def normal_between(self, axis: int, ids: np.ndarray):
+        """:meth:`ReducedSystem.normal_between` of the x (``axis`` 0) or the y system."""
+        return (self.x, self.y)[axis].normal_between(ids)
 
     def entries(self, rows: np.ndarray, columns: np.ndarray) -> np.ndarray:
         """(2, r, c): :meth:`ReducedSystem.entries` for x and for y."""
