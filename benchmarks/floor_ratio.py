@@ -65,7 +65,9 @@ def bench_floor(runs: int, exe: Path, photos: dict, samples: Path, tmp: Path, re
         rows = []
         for preset in PRESETS:
             for name, mask in masks.items():
-                floor["seconds"] += repeat(floor_cmd, 1)["seconds"]       # sampled all along the section
+                sample = repeat(floor_cmd, 1)                              # sampled all along the section
+                floor.update(seconds=floor["seconds"] + sample["seconds"], ok=floor["ok"] and sample["ok"],
+                             peak_mb=max(floor["peak_mb"], sample["peak_mb"]))
                 r = repeat([str(exe), "warp", preset, str(photo), str(tmp / f"floor-{preset}.png"),
                             "--mask", str(mask), "-q"], runs)
                 r.update(preset=preset, mask=name)
