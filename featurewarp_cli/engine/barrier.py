@@ -309,20 +309,23 @@ def _direct_direction(rows: InverseRows, move, points, triangles, blocks, gradie
     is up to 1e-2 of the gradient there, an inexact Newton direction, and it can even point
     uphill (a one-ulp nudge of that swirl stopped on such a direction as if converged, 3.9 px
     from the un-nudged result); :func:`step_direction` then takes conjugate gradients instead."""
+    import scipy.sparse as sp                 # SciPy: imported by the solves that need it
+    from scipy.linalg import cho_solve
+
     nodes, local = np.unique(triangles, return_inverse=True)
     u = nodes.size
     dof = (2 * local.reshape(-1, 3)[:, :, None] + np.arange(2)).reshape(-1, 6)
-    coupling = np.zeros((2 * u, 2 * u))
-    np.add.at(coupling, (dof[:, :, None], dof[:, None, :]), blocks)
+    coupling = sp.csr_matrix((blocks.ravel(), (np.repeat(dof, 6, axis=1).ravel(), np.tile(dof, 6).ravel())),
+                             shape=(2 * u, 2 * u))                  # D: 6 x 6 blocks, summed
     factor = rows.factor(nodes)                                     # (2u, r): G = C C'
-    reduced = factor.T @ coupling                                   # C' D
+    reduced = (coupling @ factor).T                                 # C' D (D symmetric)
     try:
         lower = np.linalg.cholesky(np.eye(factor.shape[1]) + reduced @ factor)
     except np.linalg.LinAlgError:
         return None
     moved = move(gradient)                                          # S g
     v = moved[nodes].reshape(-1)
-    inner = np.linalg.solve(lower.T, np.linalg.solve(lower, reduced @ v))
+    inner = cho_solve((lower, True), reduced @ v)                   # M^-1 C' D v, two triangular solves
     force = np.zeros_like(points)
     force[nodes] = (coupling @ v - reduced.T @ inner).reshape(u, 2)
     return move(force) - moved
