@@ -267,7 +267,7 @@ def test_the_move_towards_plain_stops_at_the_first_root_of_a_margin_that_turns_b
         return (points[1, 0] - 10.2) * (points[1, 0] - 10.5) * (points[1, 0] - 10.8)
 
     _, t = furthest_move(lambda t: warped + t * (target - warped), margin, triangle, floor)
-    assert t == pytest.approx(0.2, abs=1e-9) and t <= 0.2
+    assert t == pytest.approx(0.2, abs=1e-8) and t <= 0.2     # the root within ROOT_TOLERANCE, backed off 4x
 
 
 def test_a_margin_that_passes_again_where_a_triangle_reaches_its_floor_is_not_jumped():
@@ -288,7 +288,7 @@ def test_a_margin_that_passes_again_where_a_triangle_reaches_its_floor_is_not_ju
         return (t - 0.2) * (0.5 - t)                    # fails between 0.2 and 0.5 only
 
     _, t = furthest_move(lambda t: warped + t * (target - warped), margin, triangle, floor)
-    assert t == pytest.approx(0.2, abs=1e-9) and t <= 0.2
+    assert t == pytest.approx(0.2, abs=1e-8) and t <= 0.2     # the root within ROOT_TOLERANCE, backed off 4x
 
 
 def test_the_move_stops_just_before_a_noisy_root_not_at_the_last_sample():
@@ -305,7 +305,7 @@ def test_the_move_stops_just_before_a_noisy_root_not_at_the_last_sample():
 
     def margin(points):
         t = points[1, 0] - 10.0
-        return (t - 0.3) + 3e-12 * np.cos(1e13 * t)       # noise three times the root search's xtol
+        return (t - 0.3) + 3e-12 * np.cos(1e13 * t)       # noise: 3e-12, the rounding of crushed areas
 
     _, t = furthest_move(lambda t: warped + t * (target - warped), margin, triangle, floor)
     assert 0.3 - 1e-6 <= t <= 0.3 and margin(warped + t * (target - warped)) <= 0
