@@ -221,7 +221,8 @@ def _local_solver(between, unknowns: np.ndarray, triangles: np.ndarray, blocks: 
 
 def summed_between(normal, unknowns: np.ndarray):
     """``between(axis, ids)`` for :func:`_local_solver` where no factored system has it: P' H P
-    between the unknowns ``ids`` of ``unknowns[axis]``, ``normal``'s rows summed over their nodes."""
+    between the unknowns ``ids`` (sorted, unique) of ``unknowns[axis]``, ``normal``'s rows summed
+    over their nodes."""
     import scipy.sparse as sp                 # SciPy: imported by the solves that need it
 
     def between(axis, ids):
@@ -244,7 +245,8 @@ def _newton_direction(move, normal, unknowns, between, points, triangles, blocks
     Hessians): a preconditioner that is not positive definite is a failure too.
 
     ``move``: the solve's linear part (:func:`converge`'s ``linear``): every preconditioned
-    residual, and so the direction, is exactly on the solve's positions."""
+    residual, and so the direction, is exactly on the solve's positions. ``unknowns`` and
+    ``between``: the solve's numbering per axis and its reduced matrix (:func:`_local_solver`)."""
     n = points.shape[0]
     corners = triangles.ravel()
 
@@ -310,7 +312,6 @@ def _direct_direction(rows: InverseRows, move, points, triangles, blocks, gradie
     uphill (a one-ulp nudge of that swirl stopped on such a direction as if converged, 3.9 px
     from the un-nudged result); :func:`step_direction` then takes conjugate gradients instead."""
     import scipy.sparse as sp                 # SciPy: imported by the solves that need it
-    from scipy.linalg import cho_solve
 
     nodes, local = np.unique(triangles, return_inverse=True)
     u = nodes.size
@@ -319,13 +320,14 @@ def _direct_direction(rows: InverseRows, move, points, triangles, blocks, gradie
                              shape=(2 * u, 2 * u))                  # D: 6 x 6 blocks, summed
     factor = rows.factor(nodes)                                     # (2u, r): G = C C'
     reduced = (coupling @ factor).T                                 # C' D (D symmetric)
+    small = np.eye(factor.shape[1]) + reduced @ factor              # M
     try:
-        lower = np.linalg.cholesky(np.eye(factor.shape[1]) + reduced @ factor)
+        np.linalg.cholesky(small)                                   # positive definite, or H + B is not
     except np.linalg.LinAlgError:
         return None
     moved = move(gradient)                                          # S g
     v = moved[nodes].reshape(-1)
-    inner = cho_solve((lower, True), reduced @ v)                   # M^-1 C' D v, two triangular solves
+    inner = np.linalg.solve(small, reduced @ v)                     # M^-1 C' D v (scipy.linalg: 0.1 s to import)
     force = np.zeros_like(points)
     force[nodes] = (coupling @ v - reduced.T @ inner).reshape(u, 2)
     return move(force) - moved

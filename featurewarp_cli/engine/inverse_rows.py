@@ -25,7 +25,8 @@ class InverseRows:
     nodes of a tied feature share one): it says which nodes' rows of S are zero or the same.
     ``between(axis, ids)`` -> (k, k) sparse: the reduced system's matrix P' H P between the
     unknowns ``ids`` of that axis (entries of the factored matrix,
-    :meth:`solver.ReducedSystem.normal_between`), for the barrier's local preconditioner."""
+    :meth:`solver.ReducedSystem.normal_between`), for the barrier's local preconditioner; None:
+    :func:`barrier.step_direction` sums the node-space matrix's rows (:func:`barrier.summed_between`)."""
 
     def __init__(self, inverse, unknowns: np.ndarray, between=None):
         self.inverse, self.unknowns, self.between = inverse, np.asarray(unknowns), between

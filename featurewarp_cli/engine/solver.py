@@ -145,6 +145,25 @@ def _splu_solve(lower):
         raise cholmod.NotPositiveDefinite(f"the matrix is singular ({error})") from None
 
 
+def _unknown_entries(matrix, unknown: np.ndarray):
+    """(row, col, val, ur, uc): the lower triangle's entries of L between nodes that have an
+    unknown, and those unknowns; an edge between two nodes of one unknown counts twice (it lands
+    twice on that unknown's diagonal, once from each triangle of L)."""
+    row, col, val = _lower_entries(matrix)
+    ur, uc = unknown[row], unknown[col]
+    keep = np.flatnonzero((ur >= 0) & (uc >= 0))
+    row, col, val, ur, uc = row[keep], col[keep], val[keep], ur[keep], uc[keep]
+    return row, col, np.where((ur == uc) & (row != col), 2 * val, val), ur, uc
+
+
+def _reduced_lower(val, ur: np.ndarray, uc: np.ndarray, n: int):
+    """The reduced lower triangle P' L P as a CSC matrix (duplicates summed, indices sorted)
+    from entries on unknowns ``ur``, ``uc`` numbered in the elimination order."""
+    lower = sp.csc_matrix((val, (np.maximum(ur, uc), np.minimum(ur, uc))), shape=(n, n))
+    lower.sort_indices()
+    return lower
+
+
 def _lower_entries(matrix) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(rows, cols, vals) of the lower triangle (rows >= cols) of a sparse matrix."""
     coo = matrix.tocoo()
@@ -189,13 +208,7 @@ class ReducedSystem:
         self.ordering = "default"
         if n == 0:
             return
-        # Lower triangle of L on the unknowns; an edge between two nodes of one
-        # unknown lands twice on its diagonal (once from each triangle of L).
-        row, col, val = _lower_entries(matrix)
-        ur, uc = unknown[row], unknown[col]
-        keep = np.flatnonzero((ur >= 0) & (uc >= 0))
-        row, col, val, ur, uc = row[keep], col[keep], val[keep], ur[keep], uc[keep]
-        val = np.where((ur == uc) & (row != col), 2 * val, val)
+        row, col, val, ur, uc = _unknown_entries(matrix, unknown)
         nx = _grid_width(row, col, matrix.shape[0])
         shared = np.count_nonzero(np.bincount(unknown[unknown >= 0], minlength=n) > 1)
         if shared > MAX_SHARED_LAST:
@@ -208,10 +221,7 @@ class ReducedSystem:
             position = rank[position]
             self.ordering, self._rank = "grid-nested-dissection", rank
         self._set_projection(unknown, position, n)
-        # The reduced lower triangle (duplicates summed), in the elimination order.
-        lower = sp.csc_matrix((val, (np.maximum(ur, uc), np.minimum(ur, uc))), shape=(n, n))
-        lower.sort_indices()
-        self._lower = lower
+        lower = _reduced_lower(val, ur, uc, n)
         if cholmod.AVAILABLE:
             self.method = "cholmod"
             factor = _cholmod_factor(lower, natural=nx is not None)
@@ -286,8 +296,17 @@ class ReducedSystem:
 
     def normal_between(self, ids: np.ndarray):
         """(k, k) CSC matrix: P' L P (the reduced system's own matrix) between the unknowns
-        ``ids`` (sorted, unique), in their order: a slice of the factored matrix, so a tied
-        feature's thousands of nodes cost nothing here (summing their rows of L did, per step)."""
+        ``ids`` (unique), in their order: a slice of the factored matrix, so a tied
+        feature's thousands of nodes cost nothing here (summing their rows of L did, per step).
+        That matrix is built again at the first call (the factorization does not keep it: 39
+        bytes an unknown) and kept for the later ones."""
+        if self.n_unknowns == 0:
+            return sp.csc_matrix((ids.size, ids.size))
+        if self._lower is None:
+            _, _, val, ur, uc = _unknown_entries(self.matrix, self.unknown)
+            if self._rank is not None:
+                ur, uc = self._rank[ur], self._rank[uc]
+            self._lower = _reduced_lower(val, ur, uc, self.n_unknowns)
         at = ids if self._rank is None else self._rank[ids]
         block = self._lower[:, at].tocsr()[at]          # the lower triangle's entries among ``ids``
         return (block + block.T - sp.diags(block.diagonal())).tocsc()
