@@ -360,7 +360,8 @@ def _zero_under_transparent(out: np.ndarray) -> np.ndarray:
     if out.ndim != 3 or out.shape[2] not in (2, 4):
         return out
     bits = 8 * out.dtype.itemsize * out.shape[2]
-    if sys.byteorder == "little" and out.dtype.kind == "u" and out.dtype.isnative and out.flags.c_contiguous and bits in (16, 32, 64):
+    packed = out.dtype.kind == "u" and out.dtype.isnative and out.flags.c_contiguous and bits in (16, 32, 64)
+    if packed and sys.byteorder == "little":
         # One pixel as one unsigned integer, its alpha the top bits: 0.19 s -> 0.01 s at 15 MP
         pixels = out.view(f"<u{bits // 8}").reshape(out.shape[:2])
         np.copyto(pixels, 0, where=pixels < 1 << (bits - 8 * out.dtype.itemsize))
