@@ -29,6 +29,19 @@ def _path_only(monkeypatch):
     monkeypatch.setattr(guard, "_open_window", lambda problem, x, floor, record: (None, 0, 0))
 
 
+_PATH_ONLY_MESHES = {}
+
+
+def _path_only_solve(monkeypatch, preset, params, mode, mask_name):
+    """:func:`_solve` with the window off (:func:`_path_only`), the window left off; each case
+    solved once for the tests of this module (1-3 s a case), the mesh only read."""
+    _path_only(monkeypatch)
+    key = (preset, repr(params), mode, mask_name)
+    if key not in _PATH_ONLY_MESHES:
+        _PATH_ONLY_MESHES[key] = _solve(preset, params, mode, mask_name)[0]
+    return _PATH_ONLY_MESHES[key]
+
+
 def test_the_path_starts_at_w_itself_and_ends_at_a_minimum_that_keeps_the_features(monkeypatch):
     """The astronaut under the gallery's rigid perspective at 256 px, the window off: the path's
     right-hand side ``L W`` gives W itself at s = 0; it reaches s = 1 with every feature kept,
@@ -66,8 +79,7 @@ def test_one_ulp_of_w_moves_a_result_of_the_path_by_rounding_only(monkeypatch, p
     window off: :func:`_path_only`)."""
     from benchmarks.stability import Nudged
 
-    _path_only(monkeypatch)
-    mesh, _ = _solve(preset, params, mode, mask_name)
+    mesh = _path_only_solve(monkeypatch, preset, params, mode, mask_name)
     assert mesh.record.guard.path_steps > 0 and bool(mesh.record.guard.release_rounds) == released
     assert mesh.record.guard.converged            # a blocked path's loose runs are not the result's
     for pattern in ("up", "alternate"):
@@ -97,8 +109,7 @@ def test_the_predictor_takes_the_curvature_the_last_step_predicts_and_ends_at_th
     assert np.all(ratio <= current) and np.all(ratio >= np.minimum(current, injectivity.CRUSHED_SHARE))
     assert ratio.tolist() == [0.5, injectivity.CRUSHED_SHARE, 0.8, 0.6]
 
-    _path_only(monkeypatch)
-    looked, _ = _solve(preset, params, mode, mask_name)
+    looked = _path_only_solve(monkeypatch, preset, params, mode, mask_name)
     monkeypatch.setattr(path, "_resisting", lambda current, ahead, floor: current / floor)
     own, _ = _solve(preset, params, mode, mask_name)
     assert 0 < looked.record.guard.path_steps < own.record.guard.path_steps
