@@ -26,6 +26,10 @@ from test_cli import Runner
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SAMPLES = os.path.join(ROOT, "samples")
+#: The connect timeout the tests give (the command's is 20 s): an address that refuses is given up
+#: at 0.5 s (it gets a second less than the whole, at least 0.5), one that never answers at 1.5 s,
+#: the same second apart as with 2 s, where the refusal took 1 s and the silence 2 s.
+CONNECT_TIMEOUT = 1.5
 
 
 @pytest.fixture(scope="module")
@@ -152,7 +156,7 @@ def test_summary_and_resume_locally(tmp_path):
 def test_bad_schedulers_are_one_line_errors(tmp_path, monkeypatch, scheduler, code, words):
     from featurewarp_cli.app import scheduler as scheduler_module
 
-    monkeypatch.setattr(scheduler_module, "CONNECT_TIMEOUT", 2)
+    monkeypatch.setattr(scheduler_module, "CONNECT_TIMEOUT", CONNECT_TIMEOUT)
     inputs = make_inputs(tmp_path / "in", 1)
     result = CliRunner().invoke(cli, ["batch", "swirl", *inputs, "--out-dir", str(tmp_path), "--scheduler", scheduler])
     assert result.exit_code == code, result.output
@@ -174,12 +178,13 @@ def test_a_missing_or_folder_input_fails_alone_and_is_named_as_the_input(tmp_pat
 
 
 def test_the_memory_budget_is_the_whole_batchs(tmp_path):
-    """--max-memory is shared by the --jobs processes: a budget one job fits in, split four ways,
-    refuses the jobs (and says so), where one process at a time warps them all."""
+    """--max-memory is shared by the --jobs processes: a budget one job fits in, split two ways,
+    refuses the jobs (and says so), where one process at a time warps them all. (Two processes,
+    not four: each is a fresh Python, spawned; 3M fits a job, 1.5M does not.)"""
     inputs = make_inputs(tmp_path / "in", 4)
     args = ["batch", "swirl", *inputs, "--out-dir", str(tmp_path / "out"), "--max-memory", "3M"]
     assert CliRunner().invoke(cli, args).exit_code == 0
-    split = CliRunner().invoke(cli, args + ["--jobs", "4", "--out-dir", str(tmp_path / "out4")])
+    split = CliRunner().invoke(cli, args + ["--jobs", "2", "--out-dir", str(tmp_path / "out2")])
     assert split.exit_code == 1 and "--max-memory" in split.output
 
 
@@ -202,6 +207,23 @@ def wait_for(condition, seconds: float = 60) -> None:
 def invoke(*args):
     """``featurewarp batch swirl ARGS`` as the console script runs it (one-line errors on stderr)."""
     return Runner()("batch", "swirl", *args)
+
+
+def all_jobs_gone(cluster) -> None:
+    """Wait until no task of a featurewarp run is left on the scheduler nor on a worker (queued,
+    running, or cancelled and still running): no file of a run can be written after that. (A
+    fixed wait instead gave a job still running a second or so to show itself.)"""
+    from distributed import Client
+
+    def on_workers(dask_worker):            # nested: Dask sends it by value
+        return [str(key) for key in dask_worker.state.tasks if str(key).startswith("featurewarp-")]
+
+    def on_scheduler(dask_scheduler):
+        return [str(key) for key in dask_scheduler.tasks if str(key).startswith("featurewarp-")]
+
+    with Client(cluster.scheduler_address, set_as_default=False) as client:
+        wait_for(lambda: not client.run_on_scheduler(on_scheduler)
+                 and not any(client.run(on_workers, on_error="return").values()) or time.sleep(0.02))
 
 
 def test_relative_paths_are_resolved_where_the_command_runs(tmp_path, cluster, monkeypatch):
@@ -257,7 +279,7 @@ def test_what_is_not_a_scheduler_fails_in_one_line_within_the_timeout(tmp_path, 
 
     from featurewarp_cli.app import scheduler as scheduler_module
 
-    monkeypatch.setattr(scheduler_module, "CONNECT_TIMEOUT", 2)
+    monkeypatch.setattr(scheduler_module, "CONNECT_TIMEOUT", CONNECT_TIMEOUT)
     inputs = make_inputs(tmp_path / "in", 1)
     with Client(cluster.scheduler_address, set_as_default=False) as client:
         worker = next(iter(client.scheduler_info()["workers"]))
@@ -321,7 +343,7 @@ def test_a_run_that_cannot_start_leaves_the_summary_as_it_was(tmp_path, monkeypa
     """The summary was emptied before --scheduler was checked or the cluster reached."""
     from featurewarp_cli.app import scheduler as scheduler_module
 
-    monkeypatch.setattr(scheduler_module, "CONNECT_TIMEOUT", 2)
+    monkeypatch.setattr(scheduler_module, "CONNECT_TIMEOUT", CONNECT_TIMEOUT)
     summary = tmp_path / "keep.jsonl"
     summary.write_text('{"job": 0, "status": "failed"}\n' * 3)
     inputs = make_inputs(tmp_path / "in", 2)
@@ -340,11 +362,16 @@ def test_jobs_and_scheduler_exclude_each_other(tmp_path, cluster):
     assert not (tmp_path / "out").exists()
 
 
-def test_a_lost_scheduler_is_one_line_and_the_summary_matches_the_disk(tmp_path, cluster, capfd):
+def test_a_lost_scheduler_is_one_line_and_the_summary_matches_the_disk(tmp_path, cluster, capfd, monkeypatch):
     """The connection to the scheduler cut mid-run: Dask's traceback and one FutureCancelledError
-    line per file (internal keys, a literal \\n) were printed, and files on disk were 'failed'."""
+    line per file (internal keys, a literal \\n) were printed, and files on disk were 'failed'.
+    (The writes begun before the cut are given 1 s, not the command's 2: writing a 640 x 480 PNG
+    takes well under 0.1 s; nothing is written once every job of the run is gone from the cluster.)"""
     from distributed import Client
 
+    from featurewarp_cli.app import cluster_run
+
+    monkeypatch.setattr(cluster_run, "LOST_GRACE", 1.0)
     inputs = make_inputs(tmp_path / "in", 12, size=(640, 480))
     out = tmp_path / "out"
 
@@ -360,7 +387,7 @@ def test_a_lost_scheduler_is_one_line_and_the_summary_matches_the_disk(tmp_path,
                     "--summary", tmp_path / "s.jsonl")
     cutter.join()
     at_exit = sorted(os.listdir(out))
-    time.sleep(1)
+    all_jobs_gone(cluster)
     assert result.code == 1
     assert result.stderr.startswith("featurewarp: error: lost the connection to the Dask scheduler at ")
     assert result.stderr.count("\n") == 1 and "files not finished" in result.stderr, result.stderr
@@ -376,19 +403,33 @@ def test_a_lost_scheduler_is_one_line_and_the_summary_matches_the_disk(tmp_path,
 
 def test_a_scheduler_without_workers_is_said_once_and_waited_for(tmp_path, monkeypatch):
     """A scheduler whose workers are still queued kept the command waiting in silence. (A scheduler
-    in this process, with no worker until one thread worker joins: no process is started.)"""
+    in this process, with no worker until one thread worker joins, once the command has said it
+    waits (at most 10 s on): no process is started.)"""
     from distributed import LocalCluster
 
+    from featurewarp_cli import stages
     from featurewarp_cli.app import scheduler as scheduler_module
 
     monkeypatch.setattr(scheduler_module, "WORKERS_NOTICE", 0.3)
+    said, notice = threading.Event(), stages.notice
+
+    def noticed(text):
+        notice(text)
+        if text.startswith("waiting for workers"):
+            said.set()
+
+    def join_when_said():
+        said.wait(10)
+        empty.scale(1)
+
+    monkeypatch.setattr(stages, "notice", noticed)
     inputs = make_inputs(tmp_path / "in", 1)
     with LocalCluster(n_workers=0, processes=False, protocol="tcp://", host="127.0.0.1", dashboard_address=None,
                       scheduler_kwargs={"dashboard_address": "127.0.0.1:0"}) as empty:
-        timer = threading.Timer(2, empty.scale, (1,))
-        timer.start()
+        joiner = threading.Thread(target=join_when_said)
+        joiner.start()
         result = invoke(*inputs, "--out-dir", tmp_path / "out", "--scheduler", empty.scheduler_address)
-        timer.join()
+        joiner.join()
     assert result.code == 0, result.stderr
     assert result.stderr == (f"featurewarp: waiting for workers on {empty.scheduler_address}: the Dask scheduler "
                              "has none yet (Ctrl-C stops)\n")
@@ -429,13 +470,14 @@ def test_local_n_starts_no_dashboard_and_silences_dask(tmp_path, cluster, monkey
 
 
 def test_a_summary_that_cannot_be_written_stops_the_cluster_jobs(tmp_path, cluster):
-    """--summary /dev/full: an anonymous OSError, and the jobs already sent went on writing."""
+    """--summary /dev/full: an anonymous OSError, and the jobs already sent went on writing (none
+    writes after the command: the files once every job of the run is gone are those at its exit)."""
     inputs = make_inputs(tmp_path / "in", 12, size=(640, 480))
     out = tmp_path / "out"
     result = invoke(*inputs, "--out-dir", out, "--angle", "120", "--scheduler", cluster.scheduler_address,
                     "--summary", "/dev/full")
     at_exit = sorted(os.listdir(out))
-    time.sleep(1.5)
+    all_jobs_gone(cluster)
     assert result.code == 1
     assert result.stderr == ("featurewarp: error: --summary: cannot write /dev/full (No space left on device); "
                              "the batch was stopped\n")

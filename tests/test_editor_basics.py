@@ -19,7 +19,7 @@ import sys
 import pytest
 
 from test_cli import Runner
-from test_editor import IMAGE, MASK, browser, screen, settled, start_editor, wait_for  # noqa: F401
+from test_editor import IMAGE, MASK, MOVE_MS, browser, screen, settled, start_editor, wait_for  # noqa: F401
 
 pytestmark = pytest.mark.slow
 
@@ -42,10 +42,6 @@ def page(shared_editor, browser):  # noqa: F811
     browser.get(url)
     settled(browser)
     return browser, browser.find_element(By.ID, "overlay"), folder
-
-
-#: Milliseconds a pointer move takes (Selenium's default, 250, would make a drag of 40 moves last 10 s).
-MOVE_MS = 10
 
 
 def click_at(driver, overlay, point, keys=()):
@@ -121,12 +117,12 @@ def test_wheel_zooms_around_the_pointer_and_space_or_middle_drag_pans(page):
     x2, y2 = screen(driver, (300, 200))
     assert abs(x2 - x) < 2 and abs(y2 - y) < 2                  # the pixel under the pointer stays there
     ox, oy = js(driver, "[featurewarp.view.ox, featurewarp.view.oy]")
-    ActionChains(driver).key_down(Keys.SPACE).move_to_element_with_offset(overlay, 0, 0).click_and_hold() \
-        .move_by_offset(60, 25).release().key_up(Keys.SPACE).perform()
+    ActionChains(driver, duration=MOVE_MS).key_down(Keys.SPACE).move_to_element_with_offset(overlay, 0, 0) \
+        .click_and_hold().move_by_offset(60, 25).release().key_up(Keys.SPACE).perform()
     ox2, oy2 = js(driver, "[featurewarp.view.ox, featurewarp.view.oy]")
     assert abs(ox2 - ox - 60) < 2 and abs(oy2 - oy - 25) < 2
     assert js(driver, "featurewarp.handles.points.length") == 0     # panning added no handle
-    action = ActionBuilder(driver)
+    action = ActionBuilder(driver, duration=MOVE_MS)
     action.pointer_action.move_to(overlay, 10, 10).pointer_down(MouseButton.MIDDLE).move_to(overlay, -30, 50) \
         .pointer_up(MouseButton.MIDDLE)
     action.perform()
@@ -343,7 +339,8 @@ def test_export_without_handles_writes_the_file_its_command_names(tmp_path, brow
         assert (tmp_path / "out.png").read_bytes() == first
 
 
-def test_the_mask_brush_paints_erases_undoes_and_saves_a_mask_deform_reads(tmp_path, browser, monkeypatch):  # noqa: F811
+def test_the_mask_brush_paints_erases_undoes_and_saves_a_mask_deform_reads(tmp_path, browser,  # noqa: F811
+                                                                           monkeypatch):
     """Started without a mask: paint a feature, erase part of it, undo the erase; Save writes
     OUT.mask.png, and Export's command (-m OUT.mask.png) gives the same bytes."""
     from selenium.webdriver.support.ui import Select

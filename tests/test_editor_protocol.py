@@ -5,6 +5,7 @@ caps the fallback, the painted mask and the density are checked."""
 from __future__ import annotations
 
 import base64
+import contextlib
 import json
 import os
 import threading
@@ -27,6 +28,18 @@ PINS = [{"from": [60, 470], "to": [60, 470]}, {"from": [450, 470], "to": [450, 4
 #: Seconds between a test's server thread's looks for shutdown() (socketserver's default, 0.5 s,
 #: made each server.shutdown() below wait up to half a second).
 POLL = 0.05
+
+
+@contextlib.contextmanager
+def served(session):
+    """An EditorServer of ``session`` serving in a thread while the block runs."""
+    server = EditorServer(session, 0)
+    threading.Thread(target=server.serve_forever, args=(POLL,), daemon=True).start()
+    try:
+        yield server
+    finally:
+        server.shutdown()
+        server.server_close()
 
 
 @pytest.fixture(scope="module")
@@ -113,10 +126,9 @@ def test_malformed_request_numbers_are_refused(session, body):
 
 def test_stale_answers_over_http(session):
     """Through the server: a stale answer is its 4-byte length and status, no positions."""
-    server = EditorServer(session, 0)
-    threading.Thread(target=server.serve_forever, args=(POLL,), daemon=True).start()
-    session.newest.clear()
-    try:
+    with served(session) as server:
+        session.newest.clear()
+
         def solve(seq):
             data = json.dumps(request(seq)).encode()
             req = urllib.request.Request(server.url.replace("/?", "/solve?"), data=data, method="POST",
@@ -130,9 +142,6 @@ def test_stale_answers_over_http(session):
         status, rest = solve(31)
         assert status["seq"] == 31 and rest > 0 and rest % 8 == 0              # float32 x, y per node
         assert solve(30) == ({"stale": True, "seq": 30}, 0)
-    finally:
-        server.shutdown()
-        server.server_close()
 
 
 def test_the_painted_mask_is_checked_before_it_is_decoded(session):
@@ -162,15 +171,11 @@ def test_density_and_the_exact_cell_in_the_printed_command(tmp_path):
 def test_a_failed_export_leaves_the_handles_file_and_the_output_as_they_were(tmp_path):
     """Export writes the handles file first (its printed command names it): where the warp then
     fails (handles that lay the image over itself), that file is put back as it was, or removed."""
-    import cv2
-
     from featurewarp_cli.app.pipeline import WarpError
 
-    image, mask = str(tmp_path / "small.png"), str(tmp_path / "small_mask.png")     # 64 px: 0.6 s an export (512: 15 s)
-    cv2.imwrite(image, cv2.resize(cv2.imread(IMAGE), (64, 64), interpolation=cv2.INTER_AREA))
-    cv2.imwrite(mask, cv2.resize(cv2.imread(MASK, cv2.IMREAD_GRAYSCALE), (64, 64), interpolation=cv2.INTER_NEAREST))
-    crossing = {"version": 2, "points": [{"from": [12, 12], "to": [50, 12]}, {"from": [50, 12], "to": [12, 12]},
-                                         {"from": [12, 50], "to": [50, 50]}, {"from": [50, 50], "to": [12, 50]}]}
+    image, mask = _small(tmp_path, 40)             # 40 px: 0.35 s an export (64: 0.75 s, 512: 15 s)
+    crossing = {"version": 2, "points": [{"from": [8, 8], "to": [32, 8]}, {"from": [32, 8], "to": [8, 8]},
+                                         {"from": [8, 32], "to": [32, 32]}, {"from": [32, 32], "to": [8, 32]}]}
     for existed in (True, False):
         out, handles = tmp_path / "out.png", tmp_path / "out.handles.json"
         for path in (out, handles):
@@ -203,15 +208,14 @@ def _raw(server, text: bytes, timeout=5.0) -> bytes:
 def test_refused_and_cut_short_requests_answer_json_and_leave_no_body_behind(session, monkeypatch):
     """A refused POST left its body unread on the kept-alive connection (taken as the next
     request line); Content-Length "²" got no answer at all; a body shorter than its length was
-    a 500 after the socket timeout; a 5000-digit number quoted CPython's digit limit."""
+    a 500 after the socket timeout (0.5 s here: each request is sent whole at once, and the short
+    body waits it out); a 5000-digit number quoted CPython's digit limit."""
     from featurewarp_cli.app import editor
 
-    monkeypatch.setattr(editor.EditorHandler, "timeout", 1.0)
-    server = EditorServer(session, 0)
-    threading.Thread(target=server.serve_forever, args=(POLL,), daemon=True).start()
-    port, token = server.url.split(":")[2].split("/")[0], server.url.split("token=")[1]
-    head = f"Host: 127.0.0.1:{port}\r\nContent-Type: application/json\r\n"
-    try:
+    monkeypatch.setattr(editor.EditorHandler, "timeout", 0.5)
+    with served(session) as server:
+        port, token = server.url.split(":")[2].split("/")[0], server.url.split("token=")[1]
+        head = f"Host: 127.0.0.1:{port}\r\nContent-Type: application/json\r\n"
         body = b'{"a":1}'
         follow = f"GET /state?token={token} HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\n\r\n".encode()
         for path in (f"/nope?token={token}", "/solve?token=wrong"):
@@ -227,19 +231,19 @@ def test_refused_and_cut_short_requests_answer_json_and_leave_no_body_behind(ses
         answer = _raw(server, f"POST /save?token={token} HTTP/1.1\r\n{head}Content-Length: {len(huge)}\r\n"
                       "Connection: close\r\n\r\n".encode() + huge)
         assert answer.startswith(b"HTTP/1.1 400") and b"a number is too long" in answer and b"sys." not in answer
-    finally:
-        server.shutdown()
-        server.server_close()
 
 
 def test_saved_handles_are_what_a_reloaded_page_starts_from_and_exports_run_one_at_a_time(tmp_path):
     """/state gave the start-up handles after a Save (a reload then saved them over the file);
-    two Exports at once could leave the handles file of one beside the image of the other."""
-    session = EditorSession(Settings("deform"), IMAGE, MASK, str(tmp_path / "h.json"), str(tmp_path / "out.png"))
-    turned = {"version": 1, "points": PINS + [{"from": [130, 60], "to": [150, 60]}]}
+    two Exports at once could leave the handles file of one beside the image of the other. (The
+    astronaut at 128 px: an Export takes about 0.15 s, one that did not wait would show in 0.3 s.)"""
+    image, mask = _small(tmp_path)
+    session = EditorSession(Settings("deform"), image, mask, str(tmp_path / "h.json"), str(tmp_path / "out.png"))
+    pins = SMALL["points"][:1] + [{"from": [100, 100], "to": [100, 100]}]
+    turned = {"version": 1, "points": pins + [{"from": [30, 15], "to": [37, 15]}]}
     session.save({"handles": turned})
     assert session.state()["handles"] == json.loads((tmp_path / "h.json").read_text())
-    other = {"version": 1, "points": PINS + [{"from": [130, 60], "to": [110, 80]}]}
+    other = {"version": 1, "points": pins + [{"from": [30, 15], "to": [25, 20]}]}
     saved = (tmp_path / "h.json").read_bytes()
     calls = [threading.Thread(target=session.export, args=({"handles": h},)) for h in (turned, other)]
     calls.append(threading.Thread(target=session.save, args=({"handles": other},)))
@@ -250,11 +254,10 @@ def test_saved_handles_are_what_a_reloaded_page_starts_from_and_exports_run_one_
     assert held and not (tmp_path / "out.png").exists()           # all wait for the one holding the files
     assert (tmp_path / "h.json").read_bytes() == saved
     session.files.release()
-    exports = calls
-    for thread in exports:
+    for thread in calls:
         thread.join()
     written = json.loads((tmp_path / "h.json").read_text())
-    assert written["points"][2]["to"] in ([150, 60], [110, 80]) and session.state()["handles"] == written
+    assert written["points"][2]["to"] in ([37, 15], [25, 20]) and session.state()["handles"] == written
 
 
 def _post(server, route: str, body: dict) -> tuple[int, dict]:
@@ -273,24 +276,15 @@ def test_more_density_at_the_finest_cell_keeps_export_working(tmp_path, cell):
     """Hostile review D8: started with --cell 1 (or 1.5), "more" asked for a 0.5 px cell: 400
     'cell must be ... at least 1, not 0.5', but the session had stored it, and every later
     Export failed the same way. The cell stops at 1 px; Export writes."""
-    small = cv2.resize(cv2.imread(IMAGE), (64, 64), interpolation=cv2.INTER_AREA)
-    cv2.imwrite(str(tmp_path / "in.png"), small)
-    cv2.imwrite(str(tmp_path / "mask.png"), cv2.resize(cv2.imread(MASK, cv2.IMREAD_GRAYSCALE), (64, 64),
-                                                       interpolation=cv2.INTER_NEAREST))
-    session = EditorSession(Settings("deform", cell=cell), str(tmp_path / "in.png"), str(tmp_path / "mask.png"),
-                            None, str(tmp_path / "out.png"))
-    server = EditorServer(session, 0)
-    threading.Thread(target=server.serve_forever, args=(POLL,), daemon=True).start()
-    try:
+    image, mask = _small(tmp_path, 64)
+    session = EditorSession(Settings("deform", cell=cell), image, mask, None, str(tmp_path / "out.png"))
+    with served(session) as server:
         status, state = _post(server, "density", {"density": "more"})
         assert status == 200 and state["density"] == "more" and state["cell"] >= 1.0, state
         handles = {"version": 1, "points": [{"from": [2, 2], "to": [2, 2]}, {"from": [40, 40], "to": [45, 42]}]}
         status, answer = _post(server, "export", {"handles": handles})
         assert status == 200 and answer["exported"] == str(tmp_path / "out.png"), answer
         assert cv2.imread(str(tmp_path / "out.png")) is not None
-    finally:
-        server.shutdown()
-        server.server_close()
 
 
 def test_a_density_that_fails_leaves_the_session_as_it_was(session, monkeypatch):
@@ -330,9 +324,7 @@ def test_load_warnings_are_kept_and_a_write_asks_before_dropping_what_the_file_h
     session = EditorSession(Settings("deform"), IMAGE, MASK, str(path), str(tmp_path / "out.png"), loaded)
     assert any("'colour'" in w for w in session.state()["warnings"])
     assert any("points[2].angel" in w for w in session.state()["warnings"])
-    server = EditorServer(session, 0)
-    threading.Thread(target=server.serve_forever, args=(POLL,), daemon=True).start()
-    try:
+    with served(session) as server:
         body = {"handles": session.state()["handles"]}
         for route in ("save", "export"):
             status, answer = _post(server, route, body)
@@ -342,9 +334,6 @@ def test_load_warnings_are_kept_and_a_write_asks_before_dropping_what_the_file_h
         status, answer = _post(server, "save", {**body, "drop_ignored": True})
         assert status == 200 and answer["saved"] == str(path)
         assert _post(server, "save", body)[0] == 200                  # confirmed once: the file is the editor's now
-    finally:
-        server.shutdown()
-        server.server_close()
     lines = path.read_text().splitlines()
     assert [json.loads(line.rstrip(",")) for line in lines[3:6]] == body["handles"]["points"]
     assert json.loads(path.read_text()) == body["handles"]
@@ -448,14 +437,9 @@ def test_a_write_error_names_the_file_not_its_temporary(tmp_path):
     handles, out = tmp_path / "gone" / "h.json", tmp_path / "gone" / "out.png"
     session = EditorSession(Settings("deform"), image, mask, str(handles), str(out))
     shutil.rmtree(tmp_path / "gone")
-    server = EditorServer(session, 0)
-    threading.Thread(target=server.serve_forever, args=(POLL,), daemon=True).start()
-    try:
+    with served(session) as server:
         saved = _post(server, "save", {"handles": SMALL})
         exported = _post(server, "export", {"handles": SMALL})
-    finally:
-        server.shutdown()
-        server.server_close()
     assert saved == (500, {"error": f"cannot write {handles}: the folder {tmp_path / 'gone'}/ no longer exists"})
     assert exported[0] in (400, 500) and str(tmp_path / "gone") in exported[1]["error"], exported
     assert ".tmp" not in exported[1]["error"]
