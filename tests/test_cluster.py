@@ -403,8 +403,8 @@ def test_a_lost_scheduler_is_one_line_and_the_summary_matches_the_disk(tmp_path,
 
 def test_a_scheduler_without_workers_is_said_once_and_waited_for(tmp_path, monkeypatch):
     """A scheduler whose workers are still queued kept the command waiting in silence. (A scheduler
-    in this process, with no worker until one thread worker joins, once the command has said it
-    waits (at most 10 s on): no process is started.)"""
+    in this process, with no worker until one thread worker joins, a second after the command has
+    said it waits (at most 10 s on): no process is started.)"""
     from distributed import LocalCluster
 
     from featurewarp_cli import stages
@@ -418,8 +418,9 @@ def test_a_scheduler_without_workers_is_said_once_and_waited_for(tmp_path, monke
         if text.startswith("waiting for workers"):
             said.set()
 
-    def join_when_said():
+    def join_when_said():                    # a second after the notice: the command must go on waiting
         said.wait(10)
+        time.sleep(1.0)
         empty.scale(1)
 
     monkeypatch.setattr(stages, "notice", noticed)

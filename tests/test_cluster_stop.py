@@ -155,9 +155,9 @@ def _close_while_writing(tmp_path, cluster, client):  # noqa: F811
 def test_a_write_longer_than_the_results_wait_is_waited_for(tmp_path, cluster, client, monkeypatch):  # noqa: F811
     """A write that took longer than the stop's fixed wait (10 s) went on after the command had
     exited: now the command waits while a worker says it is writing. (Here the wait is 0.25 s and
-    each write 0.75 s, three times as long, as 0.5 and 1.5 s were.)"""
+    each write 1.25 s: a write still runs a second after the wait, as with 0.5 and 1.5 s.)"""
     monkeypatch.setattr(cluster_run, "STOP_WAIT", 0.25)
-    slow_writes(client, 0.75)
+    slow_writes(client, 1.25)
     at_close = _close_while_writing(tmp_path, cluster, client)
     assert writing_now(client) == []                   # nothing being written, and nothing will start
     assert 2 <= len(at_close) < 6 and sorted(os.listdir(tmp_path / "out")) == at_close
@@ -165,9 +165,9 @@ def test_a_write_longer_than_the_results_wait_is_waited_for(tmp_path, cluster, c
 
 def test_a_write_longer_than_the_write_wait_is_named(tmp_path, cluster, client, monkeypatch, capsys):  # noqa: F811
     """Past WRITE_WAIT (0.2 s) the command stops waiting, and names the files that may still appear
-    (each write takes 1.5 s: the stop, some 0.3 s from the write's start, ends long before it)."""
+    (each write takes 2 s: the stop, some 0.3 s from the write's start, ends long before it)."""
     monkeypatch.setattr(cluster_run, "WRITE_WAIT", 0.2)
-    slow_writes(client, 1.5)
+    slow_writes(client, 2)
     at_close = _close_while_writing(tmp_path, cluster, client)
     said = capsys.readouterr().err
     assert "still being written on the Dask workers when the batch stopped, and may still appear" in said, said
@@ -179,9 +179,9 @@ def test_a_write_longer_than_the_write_wait_is_named(tmp_path, cluster, client, 
 def test_a_signal_stops_the_cluster_jobs_and_the_summary_keeps_what_finished(tmp_path, client):
     """SIGINT: the jobs running on the workers went on writing after the command had exited, and
     the files finished before the signal were missing from the summary. The signal comes while a
-    file is being written (each write takes 1 s; the signal comes within some 0.1 s of its start),
+    file is being written (each write takes 2 s; the signal comes within some 0.1 s of its start),
     and the command waits for it."""
-    slow_writes(client, 1)
+    slow_writes(client, 2)
     inputs = make_inputs(tmp_path / "in", 12, size=(160, 120))
     out = tmp_path / "out"
     process = subprocess.Popen(featurewarp("batch", "swirl", *inputs, "--out-dir", out, "--angle", "120",

@@ -95,6 +95,7 @@ def test_extreme_swirl_with_features_does_not_fold(monkeypatch):
     guard = mesh.record.guard
     assert mesh.info["flipped_before_guard"] > 0
     assert guard.path_steps == path.MAX_STEPS and guard.release_rounds == 2
+    assert sorted(guard.released_components) == [0, 1, 2, 3]          # all four features
     assert mesh.flips() == 0
 
 
