@@ -36,6 +36,18 @@ CHROMIUM_FLAGS = ["--headless=new", "--no-sandbox", "--disable-gpu", "--use-angl
 MOVE_MS = 10
 
 
+def small_astronaut(folder, size=128):
+    """The astronaut and its mask at ``size`` px in ``folder``: (image, mask) paths (an Export in
+    a second or less, not 15)."""
+    import cv2
+
+    image, mask = str(folder / "small.png"), str(folder / "small_mask.png")
+    cv2.imwrite(image, cv2.resize(cv2.imread(IMAGE), (size, size), interpolation=cv2.INTER_AREA))
+    cv2.imwrite(mask, cv2.resize(cv2.imread(MASK, cv2.IMREAD_GRAYSCALE), (size, size),
+                                 interpolation=cv2.INTER_NEAREST))
+    return image, mask
+
+
 def start_editor(tmp_path, *extra, image=IMAGE, mask=MASK):
     """``featurewarp edit`` in a subprocess; returns (process, url)."""
     process = subprocess.Popen(
@@ -329,11 +341,7 @@ def test_export_saves_the_handles_and_prints_the_command_that_reproduces_it(tmp_
     bytes (on the astronaut at 128 px: two warps of it, not of 512 px)."""
     import shlex
 
-    import cv2
-
-    image, mask = str(tmp_path / "small.png"), str(tmp_path / "small_mask.png")
-    cv2.imwrite(image, cv2.resize(cv2.imread(IMAGE), (128, 128), interpolation=cv2.INTER_AREA))
-    cv2.imwrite(mask, cv2.resize(cv2.imread(MASK, cv2.IMREAD_GRAYSCALE), (128, 128), interpolation=cv2.INTER_NEAREST))
+    image, mask = small_astronaut(tmp_path)
     process, url = start_editor(tmp_path, "--cell", "8", "--background", "black", image=image, mask=mask)
     try:
         handles = {"version": 1, "points": [{"from": [8, 8], "to": [8, 8]}, {"from": [120, 120], "to": [125, 122]}]}

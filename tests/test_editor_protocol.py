@@ -20,6 +20,7 @@ from featurewarp_cli.app import editor_session
 from featurewarp_cli.app.editor import EditorServer
 from featurewarp_cli.app.editor_session import EditorSession, options_given
 from featurewarp_cli.app.pipeline import Settings
+from test_editor import small_astronaut
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 IMAGE = os.path.join(ROOT, "samples", "astronaut.png")
@@ -173,7 +174,7 @@ def test_a_failed_export_leaves_the_handles_file_and_the_output_as_they_were(tmp
     fails (handles that lay the image over itself), that file is put back as it was, or removed."""
     from featurewarp_cli.app.pipeline import WarpError
 
-    image, mask = _small(tmp_path, 40)             # 40 px: 0.35 s an export (64: 0.75 s, 512: 15 s)
+    image, mask = small_astronaut(tmp_path, 40)             # 40 px: 0.35 s an export (64: 0.75 s, 512: 15 s)
     crossing = {"version": 2, "points": [{"from": [8, 8], "to": [32, 8]}, {"from": [32, 8], "to": [8, 8]},
                                          {"from": [8, 32], "to": [32, 32]}, {"from": [32, 32], "to": [8, 32]}]}
     for existed in (True, False):
@@ -237,7 +238,7 @@ def test_saved_handles_are_what_a_reloaded_page_starts_from_and_exports_run_one_
     """/state gave the start-up handles after a Save (a reload then saved them over the file);
     two Exports at once could leave the handles file of one beside the image of the other. (The
     astronaut at 128 px: an Export takes about 0.15 s, one that did not wait would show in 0.3 s.)"""
-    image, mask = _small(tmp_path)
+    image, mask = small_astronaut(tmp_path)
     session = EditorSession(Settings("deform"), image, mask, str(tmp_path / "h.json"), str(tmp_path / "out.png"))
     pins = SMALL["points"][:1] + [{"from": [100, 100], "to": [100, 100]}]
     turned = {"version": 1, "points": pins + [{"from": [30, 15], "to": [37, 15]}]}
@@ -276,7 +277,7 @@ def test_more_density_at_the_finest_cell_keeps_export_working(tmp_path, cell):
     """Hostile review D8: started with --cell 1 (or 1.5), "more" asked for a 0.5 px cell: 400
     'cell must be ... at least 1, not 0.5', but the session had stored it, and every later
     Export failed the same way. The cell stops at 1 px; Export writes."""
-    image, mask = _small(tmp_path, 64)
+    image, mask = small_astronaut(tmp_path, 64)
     session = EditorSession(Settings("deform", cell=cell), image, mask, None, str(tmp_path / "out.png"))
     with served(session) as server:
         status, state = _post(server, "density", {"density": "more"})
@@ -339,15 +340,6 @@ def test_load_warnings_are_kept_and_a_write_asks_before_dropping_what_the_file_h
     assert json.loads(path.read_text()) == body["handles"]
 
 
-def _small(tmp_path, size=128):
-    """The astronaut and its mask at ``size`` px (an Export in a second, not 15)."""
-    image, mask = str(tmp_path / "small.png"), str(tmp_path / "small_mask.png")
-    cv2.imwrite(image, cv2.resize(cv2.imread(IMAGE), (size, size), interpolation=cv2.INTER_AREA))
-    cv2.imwrite(mask, cv2.resize(cv2.imread(MASK, cv2.IMREAD_GRAYSCALE), (size, size),
-                                 interpolation=cv2.INTER_NEAREST))
-    return image, mask
-
-
 SMALL = {"version": 1, "points": [{"from": [5, 5], "to": [5, 5]}, {"from": [100, 100], "to": [104, 98]}]}
 
 
@@ -355,7 +347,7 @@ def test_ctrl_c_during_an_export_puts_its_files_back_and_the_export_writes_nothi
     """Finding 3: Ctrl-C while an Export ran left its new handles file beside the old image.
     The handles are written after the image; abandon() puts every file back; the Export, when it
     comes back from the warp, writes no handles and restores what it wrote."""
-    image, mask = _small(tmp_path)
+    image, mask = small_astronaut(tmp_path)
     out, handles = tmp_path / "out.png", tmp_path / "out.handles.json"
     out.write_bytes(b"OLD IMAGE")
     handles.write_bytes(b"OLD HANDLES")
@@ -432,7 +424,7 @@ def test_a_write_error_names_the_file_not_its_temporary(tmp_path):
     Export name the file they could not write, and why."""
     import shutil
 
-    image, mask = _small(tmp_path)
+    image, mask = small_astronaut(tmp_path)
     (tmp_path / "gone").mkdir()
     handles, out = tmp_path / "gone" / "h.json", tmp_path / "gone" / "out.png"
     session = EditorSession(Settings("deform"), image, mask, str(handles), str(out))
@@ -449,7 +441,7 @@ def test_the_printed_command_keeps_max_memory_and_versions_tell_pages_what_anoth
     """Finding 10: --max-memory was left out of the printed command. Finding 4: a density or a
     mask set by one page shows in every later answer's versions (the other page reloads)."""
     assert options_given(Settings("deform", max_memory=300 * 2**20)) == ["--max-memory", str(300 * 2**20)]
-    image, mask = _small(tmp_path)
+    image, mask = small_astronaut(tmp_path)
     session = EditorSession(Settings("deform"), image, mask, None, None)
     assert session.state()["versions"] == {"grid": 0, "mask": 0}
     session.set_density({"density": "fewer"})
