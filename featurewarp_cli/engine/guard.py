@@ -7,7 +7,6 @@ the guard in :mod:`plain_bound`. A :class:`Problem` is what the guard needs to r
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -15,26 +14,21 @@ import numpy as np
 from . import barrier, injectivity, system
 from .grid import signed_areas
 from .path import BLOCKED_SHARE, converge_grid as _converge_grid, path_from_warp
+from .window import PREVIEW_STEPS, WINDOW_STEPS, timed as _timed, window_around as _window
 
 #: Where the least-squares solution folds, the guard converges the energy in a window around
 #: the crushed triangles, reaching WINDOW_MARGIN times their largest cluster's extent beyond
-#: them (at least WINDOW_MIN_MARGIN quads) and the ground around the tied features it reaches;
-#: a run not converged in WINDOW_STEPS Newton steps leaves the folds to the path from W (a speed
-#: limit, and a count that decides: the path may end elsewhere, or be blocked; the windows take
-#: 7-72 steps on the hard cases and photos, one whose minimum folds can crawl for hundreds).
-#: Wider is slower a step and holds less of the grid at the least-squares solution.
+#: them (at least WINDOW_MIN_MARGIN quads) and the ground around the tied features it reaches
+#: (:mod:`window`: WINDOW_STEPS, WINDOW_MAX_FRACTION). Wider is slower a step and holds less of
+#: the grid at the least-squares solution.
 WINDOW_MARGIN = 0.5
 WINDOW_MIN_MARGIN = 8
-WINDOW_STEPS = 60
 #: The shares of the floor below which the window's runs continue the barrier, in turn
 #: (:func:`_open_window`): the softest first (fewer Newton steps: the 12 MP hard bulge 30
 #: against 86 at 0.2), a stiffer one from its minimum where that still folds (the astronaut's
 #: head by the top edge under ``fish`` at 256 px: 0.125; the close-up under ``flag`` at 192
 #: px: 0.03; quarters of CRUSHED_SHARE). Each lower share is closer to the barrier itself.
 CONTINUED_BELOW = tuple(injectivity.CRUSHED_SHARE / 4 ** k for k in range(3))
-#: Newton steps of a preview's convergence (``Problem.preview``): slivers lifted part of the way,
-#: in bounded time (the editor's hard release: 35 steps, 0.6 s, to converge).
-PREVIEW_STEPS = 4
 #: Even steps of the blend from where the least-squares solution stops passing the margin up
 #: to the released features' own targets (:func:`blend_search`); more follow the path of
 #: minima more closely (the stop is interpolated between two of them) at more Newton steps.
@@ -44,8 +38,6 @@ BLEND_STEPS = 8
 #: crushed (the image pressed to 1 px: 530 steps, 35 s at 1 MP, then failing anyway) and ends
 #: more paths early; the steps on the photos and the other extremes converge in 4-35.
 TRIAL_STEPS = 100
-#: Windows larger than this fraction of the grid go to the path from W; a preview's (nodes) is eased.
-WINDOW_MAX_FRACTION = 0.5
 
 
 @dataclass
@@ -171,16 +163,6 @@ class Problem:
         """``move(force)``: the solve's linear part, the positions' change under a force per node
         (exactly 0 where held, one value per tied unknown; :func:`barrier.converge`)."""
         return _timed(self.timings, systems.move)
-
-
-def _timed(timings: dict, function):
-    """``function``, adding its wall time to ``timings["solve"]`` (the report's solve stage)."""
-    def timed(*args):
-        t0 = time.perf_counter()
-        result = function(*args)
-        timings["solve"] = timings.get("solve", 0.0) + time.perf_counter() - t0
-        return result
-    return timed
 
 
 def guard(problem: Problem, x: np.ndarray, record: GuardRecord) -> np.ndarray | None:
@@ -350,15 +332,15 @@ def _open_window(problem: Problem, x, floor, record):
     """Converge the energy with the barrier continued below a share of the floor
     (:func:`barrier.converge` with ``below``; the shares of :data:`CONTINUED_BELOW` in turn, the
     next from the last one's minimum where that folds) from the least-squares solution ``x`` (it
-    folds) in the window of :func:`_window` around the triangles below
+    folds) in the window of :func:`window.window_around` around the triangles below
     :data:`injectivity.CRUSHED_SHARE` of their floor, reaching WINDOW_MARGIN times their extent
     and the ground around the tied features it reaches (not where that would take in more than
     WINDOW_MAX_FRACTION of the grid: large features on a small image; a preview: of its nodes).
 
     A minimum that folds nothing opens the folds: where it keeps every triangle at the share or
     above, it is the barrier energy's own minimum; else that is converged from it (no fold:
-    :meth:`Window.converge`). Each outcome is decided on a converged minimum, but for a run cut
-    at :data:`WINDOW_STEPS`.
+    :meth:`window.Window.converge`). Each outcome is decided on a minimum (:meth:`window.Window.continued`), but
+    for a run cut at :data:`WINDOW_STEPS`.
 
     Returns
     -------
@@ -381,9 +363,7 @@ def _open_window(problem: Problem, x, floor, record):
     kappa = barrier.weights(window.warped, window.triangles, window.stiffness, local_floor)
     moved, steps = x[window.nodes], 0
     for below in CONTINUED_BELOW:                # a preview: PREVIEW_STEPS a run, its last point taken
-        moved, how = barrier.converge(window.solve, window.matrix, window.movable, moved, window.triangles,
-                                      local_floor, kappa, max_steps=window.max_steps or WINDOW_STEPS,
-                                      inverse=window.inverse, linear=window.linear, below=below)
+        moved, how = window.continued(moved, local_floor, kappa, below)
         record.newton_steps, steps = record.newton_steps + how.steps, steps + how.steps
         ratio = signed_areas(moved, window.triangles) / local_floor
         if not (how.converged or problem.preview) or ratio.min() > 0:
@@ -395,105 +375,3 @@ def _open_window(problem: Problem, x, floor, record):
     if ratio.min() < below:               # in the last run's continued part: the barrier's own minimum
         x[window.nodes] = window.converge(x, floor, record)
     return x, steps, int(window.quads.size)
-
-
-@dataclass
-class Window:
-    """The nodes around some quads, everything else held, and their least-squares system.
-
-    Attributes
-    ----------
-    nodes : (n,) int ndarray
-        The window's nodes (its moving ones and the held ones around them).
-    quads : (q,) int ndarray
-        Quads whose shape the window may change; ``triangles`` are theirs, in window indices.
-    matrix, solve, linear
-        The normal matrix's rows for the nodes, ``solve(force)`` -> (n, 2) positions, and its
-        linear part (the change of the positions under ``force``).
-    movable : (n,) bool ndarray
-        Nodes moved one by one (not held, not tied to a feature).
-    warped, stiffness : (n, 2), (n,) ndarray
-    """
-
-    nodes: np.ndarray
-    quads: np.ndarray
-    triangles: np.ndarray
-    matrix: object
-    solve: object
-    movable: np.ndarray
-    warped: np.ndarray
-    stiffness: np.ndarray
-    max_steps: int | None = None
-    inverse: object = None
-    linear: object = None
-
-    def floor(self, floor: np.ndarray) -> np.ndarray:
-        """The window's triangles' entries of a per-triangle array of the grid."""
-        n_quads = floor.size // 2
-        return np.concatenate([floor[self.quads], floor[self.quads + n_quads]])
-
-    def converge(self, x: np.ndarray, floor: np.ndarray, record: GuardRecord) -> np.ndarray:
-        """The window's nodes at the barrier energy's minimum from ``x`` (grid positions, no fold)."""
-        local_floor = self.floor(floor)
-        kappa = barrier.weights(self.warped, self.triangles, self.stiffness, local_floor)
-        moved, how = barrier.converge(self.solve, self.matrix, self.movable, x[self.nodes], self.triangles,
-                                      local_floor, kappa, max_steps=self.max_steps, inverse=self.inverse,
-                                      linear=self.linear)
-        record.count(how)
-        return moved
-
-
-def _window(problem: Problem, x, crushed: np.ndarray, margin: int, around_ties: bool = False) -> Window | None:
-    """The :class:`Window` of the quads within ``margin`` quads of those with a ``crushed``
-    triangle ((M,) bool), holding every other node at ``x``, except that a tied feature
-    reaching into it keeps its shared unknown (it may shift as a whole); None when nothing
-    could move or when it would take in more than WINDOW_MAX_FRACTION of the grid's quads (a
-    preview's: of its nodes, tied features' included).
-
-    With ``around_ties`` (once), a tied feature that reaches into the window brings its quads
-    and ``margin`` quads around them: it can only shift if the ground around all of it may
-    follow. Without, a window could not open the folds by the astronaut's head cut by the top
-    edge under ``fish`` (1 MP: 600 Newton steps, not converged; with its ground, 22)."""
-    grid, n_quads, tied = problem.grid, problem.features.weight.size, problem.tied
-    quads = np.zeros(n_quads, bool)
-    quads[np.flatnonzero(crushed) % n_quads] = True
-    _, near, inner = injectivity.window(grid, quads, margin)
-    corners = grid.quads()
-    def reached(nodes):                   # the nodes of every tied feature with a node in ``nodes``
-        return np.isin(tied, np.unique(tied[nodes & (tied >= 0)])) & (tied >= 0)
-    if around_ties:
-        _, near, inner = injectivity.window(grid, quads | reached(near)[corners].any(axis=1), margin)
-    moving = (inner & ~problem.fixed & (tied < 0)) | reached(near)
-    touched = moving[corners].any(axis=1)
-    ties = tied[corners]
-    rigid = (ties[:, 0] >= 0) & (ties == ties[:, :1]).all(axis=1)    # inside one tied feature
-    changing = np.flatnonzero(touched & ~rigid)
-    if changing.size == 0 or changing.size > WINDOW_MAX_FRACTION * n_quads:
-        return None
-    in_system = np.zeros(grid.n_nodes, bool)
-    in_system[corners[touched].ravel()] = True
-    nodes = np.flatnonzero(in_system)
-    if problem.preview and nodes.size > WINDOW_MAX_FRACTION * grid.n_nodes:
-        return None                       # a preview's runs there: 0.8 s of 12 steps that open nothing
-    local_moving = moving[nodes]
-    unknown = system.number_unknowns(~local_moving, np.where(local_moving, tied[nodes], -1))
-    from .solver import ReducedSystem         # SciPy: imported by the solves that need it
-
-    matrix = problem.normal[nodes][:, nodes]
-    reduced = ReducedSystem(matrix, unknown)
-    held = np.where(local_moving[:, None], problem.offset[nodes], x[nodes])
-    local_rhs, timings = problem.rhs[nodes], problem.timings
-
-    solve = _timed(timings, lambda force: reduced.solve(local_rhs + force, held))
-    linear = _timed(timings, reduced.move)
-    inverse = barrier.InverseRows(_timed(timings, lambda rows, columns: np.broadcast_to(
-        reduced.entries(rows, columns), (2, rows.size, columns.size))), np.stack([unknown, unknown]),
-        lambda axis, ids: reduced.normal_between(ids))   # one system for both axes
-
-    local = np.full(grid.n_nodes, -1)
-    local[nodes] = np.arange(nodes.size)
-    quad_corners = local[corners[changing]]
-    triangles = np.concatenate([quad_corners[:, [0, 1, 2]], quad_corners[:, [0, 2, 3]]])
-    return Window(nodes, changing, triangles, matrix, solve, local_moving & (tied[nodes] < 0),
-                  problem.warped[nodes], problem.stiffness[nodes], PREVIEW_STEPS if problem.preview else None, inverse,
-                  linear)
