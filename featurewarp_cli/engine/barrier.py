@@ -393,7 +393,7 @@ def converge(solve, normal, movable: np.ndarray, x: np.ndarray, triangles: np.nd
             near = partial = False
             continue
         if decrement <= tolerance * value or decrement < 1e-18:     # uphill beyond rounding: not a minimum
-            return x, Convergence(step, decrement >= -tolerance * value)
+            return x, Convergence(step, decrement >= -TOLERANCE * value)    # a loose run's too
         if active.size == 0 and _reaches_optimum(areas, x, optimum, floor):
             return optimum, Convergence(step + 1, True)
         length = 1.0 if below else min(1.0, 1.8 * injectivity.max_step_of(areas, x, x + 2.0 * direction))

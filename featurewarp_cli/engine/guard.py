@@ -14,7 +14,7 @@ import numpy as np
 from . import barrier, injectivity, system
 from .grid import signed_areas
 from .path import BLOCKED_SHARE, converge_grid as _converge_grid, path_from_warp
-from .window import PREVIEW_STEPS, WINDOW_STEPS, timed as _timed, window_around as _window
+from .window import PREVIEW_STEPS, WINDOW_STEPS, timed as _timed, window_around as _window  # noqa: F401 (the report's)
 
 #: Where the least-squares solution folds, the guard converges the energy in a window around
 #: the crushed triangles, reaching WINDOW_MARGIN times their largest cluster's extent beyond
@@ -210,9 +210,10 @@ def _unfolded(problem, start, floor, record):
 
 def _converged(problem, x, floor, record):
     """(positions, windowed): ``x`` (no folds) as it is where no triangle is below its floor
-    (windowed None: x is the energy's minimum); else moved to the barrier energy's minimum in
-    a window around its crushed triangles (windowed True), or not at all where that window
-    would not be much smaller than the grid (False); :func:`guard` converges the whole grid."""
+    (windowed None: x is the energy's minimum); else moved towards the barrier energy's minimum
+    in a window around its crushed triangles (to :attr:`window.Window.tolerance`; windowed True),
+    or not at all where that window would not be much smaller than the grid (False);
+    :func:`guard` converges the whole grid."""
     crushed = injectivity.grid_areas(problem.grid, x) < floor
     if not crushed.any():
         return x, None
@@ -339,8 +340,10 @@ def _open_window(problem: Problem, x, floor, record):
 
     A minimum that folds nothing opens the folds: where it keeps every triangle at the share or
     above, it is the barrier energy's own minimum; else that is converged from it (no fold:
-    :meth:`window.Window.converge`). Each outcome is decided on a minimum (:meth:`window.Window.continued`), but
-    for a run cut at :data:`WINDOW_STEPS`.
+    :meth:`window.Window.converge`). Each outcome is decided on a minimum, but for a run cut at
+    :data:`WINDOW_STEPS`; a result that keeps every triangle at the share or above may be a point
+    converged to the path's tolerance only (:meth:`window.Window.continued`): the whole grid is
+    converged from it, outside a preview.
 
     Returns
     -------

@@ -18,7 +18,7 @@ from .path import PATH_TOLERANCE
 
 #: Newton steps of one of :func:`guard._open_window`'s runs at most: one not converged in as many
 #: leaves the folds to the path from W (a speed limit, and a count that decides: the path may end
-#: elsewhere, or be blocked; the windows take 5-30 steps on the hard cases and photos, one whose
+#: elsewhere, or be blocked; the windows of the 28 ``floor`` solves at 1 MP take 5-23, one whose
 #: minimum folds can crawl for hundreds).
 WINDOW_STEPS = 60
 #: Newton steps of a preview's convergence (``Problem.preview``): slivers lifted part of the way,
@@ -55,14 +55,14 @@ class Window:
         Nodes moved one by one (not held, not tied to a feature).
     warped, stiffness : (n, 2), (n,) ndarray
     max_steps : int or None
-        A preview's Newton steps a run (:data:`PREVIEW_STEPS`); None: to convergence.
+        A preview's Newton steps a run (:data:`PREVIEW_STEPS`); None: :data:`WINDOW_STEPS` for
+        :meth:`continued`, :data:`barrier.MAX_STEPS` for :meth:`converge`.
     inverse : barrier.InverseRows
     tolerance : float
         Of the runs: :data:`path.PATH_TOLERANCE` where the guard converges the whole grid from the
-        window's minimum (the window only starts it, as a corrector of the path starts the next
+        window's result (the window only starts it, as a corrector of the path starts the next
         step; the whole grid's run meets :data:`barrier.TOLERANCE`), :data:`barrier.TOLERANCE` for
-        a preview, whose window's minimum is its result. The same minima (the 28 ``floor`` solves at
-        1 MP: at most one grey level in a few pixels), 10-45 % fewer Newton steps in the window.
+        a preview, whose window's minimum is its result.
     """
 
     nodes: np.ndarray
@@ -84,8 +84,8 @@ class Window:
         return np.concatenate([floor[self.quads], floor[self.quads + n_quads]])
 
     def converge(self, x: np.ndarray, floor: np.ndarray, record) -> np.ndarray:
-        """The window's nodes at the barrier energy's minimum from ``x`` (grid positions, no fold);
-        ``record`` (:class:`guard.GuardRecord`) counts the run."""
+        """The window's nodes at the barrier energy's minimum from ``x`` (grid positions, no fold),
+        to :attr:`tolerance`; ``record`` (:class:`guard.GuardRecord`) counts the run."""
         local_floor = self.floor(floor)
         kappa = barrier.weights(self.warped, self.triangles, self.stiffness, local_floor)
         moved, how = barrier.converge(self.solve, self.matrix, self.movable, x[self.nodes], self.triangles,
@@ -97,15 +97,20 @@ class Window:
     def continued(self, moved: np.ndarray, floor: np.ndarray, kappa: np.ndarray, below: float):
         """One run of :func:`guard._open_window`: (the window's nodes, :class:`barrier.Convergence`) of the
         barrier continued below ``below`` from ``moved``, converged to :attr:`tolerance` and, where that
-        point still folds, on to :data:`barrier.TOLERANCE` (a failure is decided on the minimum, as the
-        path's stop is), in :data:`WINDOW_STEPS` Newton steps in all (a preview's :attr:`max_steps`)."""
+        point has a triangle below ``below`` of its ``floor`` (folded, or in the continued part), on to
+        :data:`barrier.TOLERANCE`, in :data:`WINDOW_STEPS` Newton steps in all (a preview's
+        :attr:`max_steps`). So whether the window opens the folds, and whether the barrier's own
+        minimum must be converged from its result, are decided on the minimum, as the path's stop
+        is (a loosely converged point moves with one ulp of the input by more than rounding); a
+        point left there keeps every triangle at ``below`` or above, where the two energies agree."""
         def run(start, steps, tolerance):
             return barrier.converge(self.solve, self.matrix, self.movable, start, self.triangles, floor, kappa,
                                     max_steps=steps, inverse=self.inverse, linear=self.linear, below=below,
                                     tolerance=tolerance)
         cap = self.max_steps or WINDOW_STEPS
         moved, how = run(moved, cap, self.tolerance)
-        if how.converged and self.tolerance > barrier.TOLERANCE and signed_areas(moved, self.triangles).min() <= 0:
+        if how.converged and self.tolerance > barrier.TOLERANCE and (signed_areas(moved, self.triangles)
+                                                                     / floor).min() < below:
             moved, more = run(moved, cap - how.steps, barrier.TOLERANCE)
             how = barrier.Convergence(how.steps + more.steps, more.converged)
         return moved, how
