@@ -146,9 +146,11 @@ def test_report_is_written(runner, tmp_path):
     assert set(report["fold_guard"]) >= {"flipped_before", "flipped_after", "untangle_iterations",
                                          "window_quads", "window", "feature_blend"}
     from featurewarp_cli.engine import guard                # the window's settings, as the guard runs them
+    from featurewarp_cli.engine.window import PATH_TOLERANCE
     assert report["fold_guard"]["window"] == {"margin": guard.WINDOW_MARGIN, "min_margin": guard.WINDOW_MIN_MARGIN,
                                               "max_steps": guard.WINDOW_STEPS,
-                                              "continued_below": list(guard.CONTINUED_BELOW)}
+                                              "continued_below": list(guard.CONTINUED_BELOW),
+                                              "tolerance": PATH_TOLERANCE}
 
 
 # --- pipes ----------------------------------------------------------------------------------

@@ -25,7 +25,7 @@ WINDOW_MARGIN = 0.5
 WINDOW_MIN_MARGIN = 8
 #: The shares of the floor below which the window's runs continue the barrier, in turn
 #: (:func:`_open_window`): the softest first (fewer Newton steps: the 12 MP hard bulge 30
-#: against 86 at 0.2), a stiffer one from its minimum where that still folds (the astronaut's
+#: against 86 at 0.2, both to 1e-12), a stiffer one from its minimum where that still folds (the astronaut's
 #: head by the top edge under ``fish`` at 256 px: 0.125; the close-up under ``flag`` at 192
 #: px: 0.03; quarters of CRUSHED_SHARE). Each lower share is closer to the barrier itself.
 CONTINUED_BELOW = tuple(injectivity.CRUSHED_SHARE / 4 ** k for k in range(3))
