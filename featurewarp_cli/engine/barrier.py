@@ -354,7 +354,9 @@ def converge(solve, normal, movable: np.ndarray, x: np.ndarray, triangles: np.nd
         Start (no triangle folded, unless ``below``), the triangles, f_t and kappa_t (:func:`weights`).
     areas, max_steps, tolerance, below : callable, int, float, float, optional
         ``areas(points)`` -> signed area per triangle (default :func:`grid.signed_areas`); Newton
-        steps at most (default :data:`MAX_STEPS`; a preview: a few); a path's looser tolerance; ``below``.
+        steps at most (default :data:`MAX_STEPS`; a preview: a few); a looser tolerance for a point
+        that a later run converges from (the path's correctors, a window's runs; an uphill direction
+        still counts as converged only within :data:`TOLERANCE`); ``below``.
     inverse : InverseRows, optional
         ``solve``'s linear part between nodes, as far as earlier runs on the same system filled
         it: with it, a Newton system whose barrier touches few nodes is solved exactly.

@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import barrier, injectivity, system
+from . import barrier, injectivity
 from .grid import signed_areas
 from .path import BLOCKED_SHARE, converge_grid as _converge_grid, path_from_warp
 from .window import PREVIEW_STEPS, WINDOW_STEPS, timed as _timed, window_around as _window  # noqa: F401 (the report's)
@@ -193,7 +193,8 @@ def guard(problem: Problem, x: np.ndarray, record: GuardRecord) -> np.ndarray | 
 
 
 def _unfolded(problem, start, floor, record):
-    """The energy's minimum in a window around the folds (:func:`_open_window`), else the path of
+    """The energy's minimum (outside a preview: a point the whole grid's run converges from) in a
+    window around the folds (:func:`_open_window`), else the path of
     minima from W (:func:`path.path_from_warp`); (x, the features fit), (None, False) for a
     preview whose window does not open its folds (the caller eases it). No untangling: not the
     first fold-free iterate of a descent, whose choice, or whether it found one before fold

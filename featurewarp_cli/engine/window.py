@@ -2,7 +2,8 @@
 least-squares system, and the runs of the barrier's energy on them (:func:`guard._open_window`).
 
 Outside the window the grid stays where it was; the guard converges the whole grid from a
-window's minimum (but for a preview, whose window's minimum is its result).
+window's result (converged to the path's tolerance where that keeps every triangle at the
+continuation's share; else to the barrier's), but for a preview, whose window's minimum is its result.
 """
 
 from __future__ import annotations
@@ -18,8 +19,8 @@ from .path import PATH_TOLERANCE
 
 #: Newton steps of one of :func:`guard._open_window`'s runs at most: one not converged in as many
 #: leaves the folds to the path from W (a speed limit, and a count that decides: the path may end
-#: elsewhere, or be blocked; the windows of the 28 ``floor`` solves at 1 MP take 5-23, one whose
-#: minimum folds can crawl for hundreds).
+#: elsewhere, or be blocked; the windows of the 28 ``floor`` solves at 1 MP take 5-23 with the
+#: runs of :meth:`Window.continued`, 7-20 to 1e-12; one whose minimum folds can crawl for hundreds).
 WINDOW_STEPS = 60
 #: Newton steps of a preview's convergence (``Problem.preview``): slivers lifted part of the way,
 #: in bounded time (the editor's hard release: 35 steps, 0.6 s, to converge).
@@ -99,10 +100,11 @@ class Window:
         barrier continued below ``below`` from ``moved``, converged to :attr:`tolerance` and, where that
         point has a triangle below ``below`` of its ``floor`` (folded, or in the continued part), on to
         :data:`barrier.TOLERANCE`, in :data:`WINDOW_STEPS` Newton steps in all (a preview's
-        :attr:`max_steps`). So whether the window opens the folds, and whether the barrier's own
-        minimum must be converged from its result, are decided on the minimum, as the path's stop
-        is (a loosely converged point moves with one ulp of the input by more than rounding); a
-        point left there keeps every triangle at ``below`` or above, where the two energies agree."""
+        :attr:`max_steps`). So a window fails, or leaves a triangle in the continued part, only on
+        a minimum, as the path's stop is decided (a loosely converged point moves with one ulp of
+        the input by more than rounding); it is accepted on a loose point only where that keeps
+        every triangle at ``below`` or above (a whole share of the floor from a fold; there the two
+        energies agree), and the whole grid is converged from it."""
         def run(start, steps, tolerance):
             return barrier.converge(self.solve, self.matrix, self.movable, start, self.triangles, floor, kappa,
                                     max_steps=steps, inverse=self.inverse, linear=self.linear, below=below,
