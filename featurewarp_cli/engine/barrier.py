@@ -354,9 +354,7 @@ def converge(solve, normal, movable: np.ndarray, x: np.ndarray, triangles: np.nd
         Start (no triangle folded, unless ``below``), the triangles, f_t and kappa_t (:func:`weights`).
     areas, max_steps, tolerance, below : callable, int, float, float, optional
         ``areas(points)`` -> signed area per triangle (default :func:`grid.signed_areas`); Newton
-        steps at most (default :data:`MAX_STEPS`; a preview: a few); a looser tolerance for a point
-        that a later run converges from (the path's correctors, a window's runs; an uphill direction
-        still counts as converged only within :data:`TOLERANCE`); ``below``.
+        steps at most (default :data:`MAX_STEPS`; a preview: a few); looser where a run goes on; ``below``.
     inverse : InverseRows, optional
         ``solve``'s linear part between nodes, as far as earlier runs on the same system filled
         it: with it, a Newton system whose barrier touches few nodes is solved exactly.
@@ -395,7 +393,7 @@ def converge(solve, normal, movable: np.ndarray, x: np.ndarray, triangles: np.nd
             near = partial = False
             continue
         if decrement <= tolerance * value or decrement < 1e-18:     # uphill beyond rounding: not a minimum
-            return x, Convergence(step, decrement >= -TOLERANCE * value)    # a loose run's too
+            return x, Convergence(step, decrement >= -TOLERANCE * value)    # a looser run's: the same
         if active.size == 0 and _reaches_optimum(areas, x, optimum, floor):
             return optimum, Convergence(step + 1, True)
         length = 1.0 if below else min(1.0, 1.8 * injectivity.max_step_of(areas, x, x + 2.0 * direction))
