@@ -775,8 +775,8 @@ def test_a_release_does_not_start_from_positions_its_untied_system_would_hold_el
                       interpolation=cv2.INTER_NEAREST) >= 128
     seen = {}
     guard_of, parametrize = release.guard, components.parametrize
-    monkeypatch.setattr(release, "guard", lambda problem, x, record: seen.setdefault("guard", (
-        problem, guard_of(problem, x, record)))[1])
+    monkeypatch.setattr(release, "guard", lambda problem, x, record, *hook: seen.setdefault("guard", (
+        problem, guard_of(problem, x, record, *hook)))[1])
     monkeypatch.setattr(components, "parametrize", lambda *a, **k: seen.setdefault("ties", parametrize(*a, **k)))
     w, h = shape
     FeatureWarper(w, h, mask, boundary="release").solve(load_warp("flag")(w, h), "similarity")

@@ -126,7 +126,7 @@ def test_local_folds_are_opened_in_a_window_that_starts_the_whole_grids_minimum(
     raw = FeatureWarper(500, 360, mask, injective=False).solve(warp)
     seen = []
     guard_of = guard.guard
-    monkeypatch.setattr(guard, "guard", lambda problem, x, record: seen.append(problem) or guard_of(problem, x, record))
+    monkeypatch.setattr(guard, "guard", lambda problem, x, record, *hook: seen.append(problem) or guard_of(problem, x, record, *hook))
     mesh = FeatureWarper(500, 360, mask).solve(warp)
     assert raw.flips() > 0 and mesh.flips() == 0
     assert 0 < mesh.info["untangle_window_quads"] < 0.2 * mesh.info["grid"]["quads"]

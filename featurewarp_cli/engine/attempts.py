@@ -63,21 +63,26 @@ def guarded(warper, state, warped, record: SolveRecord, attempt: Attempt, scale_
     counted = sum(warper.timings.get(k, 0.0) for k in ("solve", "factor", "rhs"))
     stages.enter("guard")
     t0 = time.perf_counter()
-    x = guard.guard(problem, x, record.guard)
-    if x is None:                                # a preview: eased, as a drag's update is
+    shrunk = []
+
+    def smaller() -> bool:
+        """Where the features cannot keep their shape at this scale, before any is released: do
+        they at a smaller one? (The release's result went unused where they did.)"""
+        shrunk.append(scale_search.shrink_to_fit(attempt.solve, low(), ab, attempt.solved, state.triangles, warped))
+        return shrunk[0] is not None
+
+    x = guard.guard(problem, x, record.guard, smaller if scale_solver is not None and scale_solver.n_columns else None)
+    if shrunk and shrunk[0] is not None:
+        ab, (x, edges, rhs, offset) = shrunk[0]
+        record.guard = guard.GuardRecord()
+        problem.rhs, problem.offset, problem.edges = rhs, offset, edges
+        x = guard.guard(problem, x, record.guard)
+    elif x is None:                              # a preview: eased, as a drag's update is
         x, record.guard.drag_step = ease(attempt.solved[0])
         record.guard.preview_eased = True
         inner = sum(warper.timings.get(k, 0.0) for k in ("solve", "factor", "rhs")) - counted
         warper.timings["guard"] = warper.timings.get("guard", 0.0) + time.perf_counter() - t0 - inner
         return x, ties.tied, ties.unpinned & ties.tied
-    if record.guard.release_rounds and scale_solver is not None and scale_solver.n_columns:
-        # The features could not keep their shape at this scale: smaller, do they?
-        shrunk = scale_search.shrink_to_fit(attempt.solve, low(), ab, attempt.solved, state.triangles, warped)
-        if shrunk is not None:
-            ab, (x, edges, rhs, offset) = shrunk
-            record.guard = guard.GuardRecord()
-            problem.rhs, problem.offset, problem.edges = rhs, offset, edges
-            x = guard.guard(problem, x, record.guard)
     if warper.formulation == "exact":            # the paper's soft targets are kept as published
         x = plain_bound.no_worse_than_plain(state, x, warped, record.guard, problem)
     inner = sum(warper.timings.get(k, 0.0) for k in ("solve", "factor", "rhs")) - counted

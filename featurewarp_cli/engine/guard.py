@@ -165,9 +165,11 @@ class Problem:
         return _timed(self.timings, systems.move)
 
 
-def guard(problem: Problem, x: np.ndarray, record: GuardRecord) -> np.ndarray | None:
+def guard(problem: Problem, x: np.ndarray, record: GuardRecord, before_release=None) -> np.ndarray | None:
     """Positions with no folded triangle, as close to ``x`` (the least-squares solution) as found;
-    None for a preview whose folds the window does not open (the caller eases it instead)."""
+    None for a preview whose folds the window does not open (the caller eases it instead), and
+    where the features do not fit and ``before_release()`` (asked then, once) returns True: the
+    caller has another solution to guard (smaller similarities), and no feature is released."""
     tris = problem.triangles
     record.flipped_before = int(np.count_nonzero(injectivity.flipped(x, tris)))
     warp_areas = signed_areas(problem.warped, tris)
@@ -189,7 +191,9 @@ def guard(problem: Problem, x: np.ndarray, record: GuardRecord) -> np.ndarray | 
         record.converged = True
         return _converge_grid(problem, problem.systems, problem.rhs, problem.offset, problem.tied, x, floor, record,
                               PREVIEW_STEPS if problem.preview else None)[0]
-    return None if problem.preview else _release(problem, x, floor, record)
+    if problem.preview or (before_release is not None and before_release()):
+        return None
+    return _release(problem, x, floor, record)
 
 
 def _unfolded(problem, start, floor, record):
