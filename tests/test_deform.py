@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 from pathlib import Path
@@ -15,10 +16,20 @@ from featurewarp_cli import Deformer, Handles
 from featurewarp_cli.engine.arap import RigidDeformer, embed
 from featurewarp_cli.engine.deform import RigidMap
 from featurewarp_cli.engine.grid import Grid, signed_areas
-from samples.scenes import SHAPES, scene
+from samples.scenes import SHAPES, scene as make_scene
 from shapes import distortions
 
 W, H = 500, 360
+
+
+@functools.lru_cache(maxsize=None)
+def scene():
+    """(image, mask): the tests' 500 x 360 shapes scene, drawn once (some 20 calls drew it anew,
+    25 ms each) and read-only, so that no test can change what the next one gets."""
+    image, mask = make_scene()
+    image.flags.writeable = False
+    mask.flags.writeable = False
+    return image, mask
 
 
 def similarity(angle_deg, scale, shift, centre=(W / 2, H / 2)):
