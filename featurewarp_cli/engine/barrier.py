@@ -173,8 +173,10 @@ def _local_solver(between, unknowns: np.ndarray, triangles: np.ndarray, blocks: 
     move with it), so a feature pressed against crushed triangles is preconditioned by the
     barrier's stiffness too, not by the least-squares energy alone (which is 1e11 times softer
     there: CG then needed its full 100 iterations and still pointed uphill). ``between(axis,
-    ids)`` gives the least-squares part, the reduced matrix between those unknowns
-    (:attr:`InverseRows.between`). The matrix is a principal submatrix of the reduced Newton
+    ids)`` gives the least-squares part, the lower triangle of the reduced matrix between those
+    unknowns (:attr:`InverseRows.between`); only lower triangles are assembled and factored
+    (whole symmetric matrices, then their lower triangles, took 40 % longer). The matrix
+    is a principal submatrix of the reduced Newton
     system: where it is not positive definite, neither is the whole."""
     import scipy.sparse as sp                 # SciPy: imported by the solves that need it
 
@@ -191,7 +193,7 @@ def _local_solver(between, unknowns: np.ndarray, triangles: np.ndarray, blocks: 
         lookup[ids] = size + np.arange(ids.size)
         column[:, axis] = np.where(unknown >= 0, lookup[unknown], -1)
         if ids.size and not (axis and same):  # one system for both axes: the same block
-            block = between(axis, ids).tocoo()
+            block = between(axis, ids)
         if ids.size:
             rows.append(block.row + size)
             cols.append(block.col + size)
@@ -202,11 +204,11 @@ def _local_solver(between, unknowns: np.ndarray, triangles: np.ndarray, blocks: 
     mapped = [np.flatnonzero(column[:, axis] >= 0) for axis in range(2)]
     dof = column[triangles].reshape(-1, 6)
     dof_rows, dof_cols = np.broadcast_to(dof[:, :, None], blocks.shape), np.broadcast_to(dof[:, None, :], blocks.shape)
-    keep = (dof_rows >= 0) & (dof_cols >= 0)
-    matrix = sp.csc_matrix((np.concatenate(data + [blocks[keep]]),
-                            (np.concatenate(rows + [dof_rows[keep]]), np.concatenate(cols + [dof_cols[keep]]))),
-                           shape=(size, size))
-    solve = spd_solver(matrix)
+    keep = (dof_cols >= 0) & (dof_rows >= dof_cols)          # the lower triangle (a tied pair's both)
+    lower = sp.csc_matrix((np.concatenate(data + [blocks[keep]]),
+                           (np.concatenate(rows + [dof_rows[keep]]), np.concatenate(cols + [dof_cols[keep]]))),
+                          shape=(size, size))
+    solve = spd_solver(lower, lower=True)
 
     def local(r):
         rhs = sum(np.bincount(column[mapped[axis], axis], r[mapped[axis], axis], minlength=size)
@@ -220,9 +222,9 @@ def _local_solver(between, unknowns: np.ndarray, triangles: np.ndarray, blocks: 
 
 
 def summed_between(normal, unknowns: np.ndarray):
-    """``between(axis, ids)`` for :func:`_local_solver` where no factored system has it: P' H P
-    between the unknowns ``ids`` (sorted, unique) of ``unknowns[axis]``, ``normal``'s rows summed
-    over their nodes."""
+    """``between(axis, ids)`` for :func:`_local_solver` where no factored system has it: the lower
+    triangle of P' H P between the unknowns ``ids`` (sorted, unique) of ``unknowns[axis]``,
+    ``normal``'s rows summed over their nodes."""
     import scipy.sparse as sp                 # SciPy: imported by the solves that need it
 
     def between(axis, ids):
@@ -230,7 +232,8 @@ def summed_between(normal, unknowns: np.ndarray):
         nodes = np.flatnonzero(np.isin(unknown, ids))
         block = normal[nodes][:, nodes].tocoo()
         at = np.searchsorted(ids, unknown[nodes])
-        return sp.csc_matrix((block.data, (at[block.row], at[block.col])), shape=(ids.size, ids.size))
+        return sp.tril(sp.csc_matrix((block.data, (at[block.row], at[block.col])), shape=(ids.size, ids.size)),
+                       format="coo")
     return between
 
 

@@ -23,8 +23,8 @@ class InverseRows:
     :func:`barrier.converge` run on it (a release's path of minima passes one instance to each).
     ``unknowns`` ((2, N) int) is the solve's unknown of each node in x and in y (-1 held; the
     nodes of a tied feature share one): it says which nodes' rows of S are zero or the same.
-    ``between(axis, ids)`` -> (k, k) sparse: the reduced system's matrix P' H P between the
-    unknowns ``ids`` of that axis (entries of the factored matrix,
+    ``between(axis, ids)`` -> (k, k) sparse: the lower triangle of the reduced system's matrix
+    P' H P between the unknowns ``ids`` of that axis (entries of the factored matrix,
     :meth:`solver.ReducedSystem.normal_between`), for the barrier's local preconditioner; None:
     :func:`barrier.step_direction` sums the node-space matrix's rows (:func:`barrier.summed_between`)."""
 

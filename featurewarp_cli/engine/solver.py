@@ -295,21 +295,22 @@ class ReducedSystem:
         return np.take(z, self._scatter, axis=0)
 
     def normal_between(self, ids: np.ndarray):
-        """(k, k) CSC matrix: P' L P (the reduced system's own matrix) between the unknowns
-        ``ids`` (unique), in their order: a slice of the factored matrix, so a tied
-        feature's thousands of nodes cost nothing here (summing their rows of L did, per step).
-        That matrix is built again at the first call (the factorization does not keep it: 39
-        bytes an unknown) and kept for the later ones."""
+        """(k, k) COO matrix: the lower triangle of P' L P (the reduced system's own matrix)
+        between the unknowns ``ids`` (unique), in their order, each entry once: a slice of the
+        factored matrix, so a tied feature's thousands of nodes cost nothing here (summing
+        their rows of L did, per step). That matrix is built again at the first call (the
+        factorization does not keep it: 39 bytes an unknown) and kept for the later ones."""
         if self.n_unknowns == 0:
-            return sp.csc_matrix((ids.size, ids.size))
+            return sp.coo_matrix((ids.size, ids.size))
         if self._lower is None:
             _, _, val, ur, uc = _unknown_entries(self.matrix, self.unknown)
             if self._rank is not None:
                 ur, uc = self._rank[ur], self._rank[uc]
             self._lower = _reduced_lower(val, ur, uc, self.n_unknowns)
         at = ids if self._rank is None else self._rank[ids]
-        block = self._lower[:, at].tocsr()[at]          # the lower triangle's entries among ``ids``
-        return (block + block.T - sp.diags(block.diagonal())).tocsc()
+        block = self._lower[:, at].tocsr()[at].tocoo()   # each pair once, below in elimination order
+        return sp.coo_matrix((block.data, (np.maximum(block.row, block.col), np.minimum(block.row, block.col))),
+                             shape=block.shape)      # folded onto the lower triangle in ``ids``' order
 
     def entries(self, rows: np.ndarray, columns: np.ndarray) -> np.ndarray:
         """(r, c): the moves of the nodes ``rows`` under a unit force on each node of ``columns``
@@ -387,12 +388,13 @@ class AxisSystems:
         return np.stack([x, x if self.y is self.x else self.y.entries(rows, columns)])
 
 
-def spd_solver(matrix):
-    """``solve(b)`` for a symmetric positive definite sparse ``matrix``, factored once
-    (CHOLMOD with its default ordering, or SciPy's sparse LU without scikit-sparse).
+def spd_solver(matrix, lower: bool = False):
+    """``solve(b)`` for a symmetric positive definite sparse ``matrix`` (``lower``: its lower
+    triangle only, CSC), factored once (CHOLMOD with its default ordering, or SciPy's sparse LU
+    without scikit-sparse).
 
     ``b``: (n,) or (n, k) ndarray. Raises :class:`cholmod.NotPositiveDefinite`."""
-    lower = sp.tril(matrix, format="csc")
+    lower = matrix if lower else sp.tril(matrix, format="csc")
     lower.sort_indices()
     if not cholmod.AVAILABLE:
         return _splu_solve(lower)
