@@ -109,20 +109,6 @@ class EditorSession:
         self.deformer = Deformer(self.width, self.height, mask, quick=True, cell=self.cell,
                                  rigid_steps=EDITOR_RIGID_STEPS, feature_weight=settings.feature_weight,
                                  decay=settings.decay, scale_prior=settings.scale_prior)
-        self.preparing = threading.Thread(target=self._prepare, args=(self.deformer,), name="featurewarp-prepare",
-                                          daemon=True)
-        self.preparing.start()
-
-    def _prepare(self, deformer) -> None:
-        """:meth:`Deformer.prepare` of ``deformer`` while the page loads, unless another one
-        replaced it first (a density or mask change). The caches it fills do not change any
-        result; a failure is left to the page's first solve, which reports it."""
-        with self.lock:
-            if self.deformer is deformer:
-                try:
-                    deformer.prepare(self.settings.mode)
-                except Exception:      # noqa: BLE001 - the same solve, asked by the page, says what
-                    pass
 
     def _mask_image(self) -> np.ndarray:
         """The feature mask as 8 bits (0 or 255), at the image's size."""

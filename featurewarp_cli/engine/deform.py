@@ -214,11 +214,6 @@ class RigidMap:
         self._last = None
         self._embeddings = {}
 
-    def forget(self) -> None:
-        """Drop the handle set's factorization and last map (the embeddings cache stays: it is
-        a function of the points alone); the next :meth:`deformation` starts afresh."""
-        self.rigid, self._key, self._last = None, None, None
-
     def deformation(self, handles: Handles, warm: bool = True, steps: int | None = None) -> HandleWarp:
         """The map W of ``handles``, a preset-like warp (factoring anew only when the handles'
         sources changed; a fold the handles ask for is noted in its ``notes``); ``warm``: from
@@ -395,10 +390,6 @@ class Deformer:
         if not isinstance(handles, Handles):
             raise TypeError(f"handles must be Handles, a handles dict or a handles file's path, not "
                             f"{type(handles).__name__}")
-        return self._solve(handles, mode, drag)
-
-    def _solve(self, handles: Handles, mode: str | None, drag: bool) -> Mesh:
-        """:meth:`solve` of checked ``handles``."""
         self.handles = handles
         factored = self.rigid.rigid
         self.warp = self.rigid.deformation(handles, warm=drag or self.quick)     # a full solve: no history
@@ -408,20 +399,6 @@ class Deformer:
             mesh = self.warp.land(mesh, lambda warp: self.warper.solve(warp, mode or self.mode))
         mesh.record.warnings.extend(self.warp.review(mesh, self.quick))
         return mesh
-
-    def prepare(self, mode: str | None = None) -> None:
-        """Build what the first solve of every handle set needs and keeps: the feature grid's
-        features and normal matrix, and the factored systems and scale solver of the features'
-        ties under the identity map (a solve of two pins at opposite corners, then forgotten).
-        The editor runs it while its page loads, so that the page's first update factors only
-        its own handle set (1 MP: about 0.2 s instead of 0.5). What it fills are caches keyed
-        by what they are built from, and the handle-set state is dropped after it (the rigid
-        map's factorization and last map, :attr:`handles`), so no later result changes."""
-        w, h = self.warper.width, self.warper.height
-        pins = [{"from": [0, 0], "to": [0, 0]}, {"from": [w - 1, h - 1], "to": [w - 1, h - 1]}]
-        self._solve(Handles.from_dict({"version": 1, "canvas": "input", "points": pins}, w, h), mode, False)
-        self.rigid.forget()
-        self.handles = self.warp = None
 
     def move(self, targets: np.ndarray, mode: str | None = None) -> Mesh:
         """The mesh with the last handles' points moved to ``targets`` ((K, 2), in their order);
