@@ -38,6 +38,7 @@ scikit-sparse holds the GIL while CHOLMOD factors.
 from __future__ import annotations
 
 import hashlib
+import threading
 from collections import OrderedDict
 
 import numpy as np
@@ -65,6 +66,8 @@ _SIMPLICIAL_MAX = 400_000
 #: sparsity pattern) and grid orderings (keyed by the tied nodes).
 _SYMBOLIC_CACHE_SIZE = 8
 _symbolic_cache: OrderedDict = OrderedDict()
+#: Solves may run in two threads (the editor's Export beside a preview): one at a time in the cache.
+_cache_lock = threading.Lock()
 
 
 def _grid_width(row: np.ndarray, col: np.ndarray, n: int) -> int | None:
@@ -91,12 +94,15 @@ def _digest(*arrays: np.ndarray) -> str:
 def _cached(key: tuple, compute):
     """``_symbolic_cache[key]``, computed by ``compute()`` when missing (least recently
     used entries dropped)."""
-    if key in _symbolic_cache:
-        _symbolic_cache.move_to_end(key)
-        return _symbolic_cache[key]
-    value = _symbolic_cache[key] = compute()
-    while len(_symbolic_cache) > _SYMBOLIC_CACHE_SIZE:
-        _symbolic_cache.popitem(last=False)
+    with _cache_lock:
+        if key in _symbolic_cache:
+            _symbolic_cache.move_to_end(key)
+            return _symbolic_cache[key]
+    value = compute()                       # outside the lock: two threads may both compute it
+    with _cache_lock:
+        _symbolic_cache[key] = value
+        while len(_symbolic_cache) > _SYMBOLIC_CACHE_SIZE:
+            _symbolic_cache.popitem(last=False)
     return value
 
 
