@@ -81,3 +81,26 @@ def test_the_loose_runs_reach_the_same_minima_in_fewer_newton_steps(monkeypatch)
         assert a.newton_steps <= b.newton_steps
     assert sum(m.record.guard.newton_steps for m in loose.values()) < sum(
         m.record.guard.newton_steps for m in tight.values())
+
+
+def test_a_triangle_crushed_to_nothing_but_not_folded_is_opened_as_a_fold_is():
+    """At bend 13.771263431715989 the fish's least-squares solution crushes a triangle of the
+    256 px astronaut to 4e-12 of its floor without folding it (a step further, it folds). The
+    barrier is too steep to start from there: its Newton steps stopped, the triangle left at that
+    area, not converged, and one ulp of W moved the mesh 1.5 px. A triangle below the
+    continuation's share now sends the solution to the window's continued energy, as a fold
+    does: converged, every triangle at 0.87 of its floor or more, one ulp moving it by rounding."""
+    from benchmarks.stability import Nudged
+
+    bend = 13.771263431715989
+    mask = cv2.imread(str(SAMPLES / "astronaut_mask.png"), cv2.IMREAD_GRAYSCALE)
+    mask = cv2.resize(mask, (256, 256), interpolation=cv2.INTER_NEAREST) >= 128
+    warp = load_warp("fish")(256, 256, bend=bend)
+    base = FeatureWarper(256, 256, mask).solve(warp, "similarity")
+    floor = barrier.SAFE_FRACTION * signed_areas(warp(base.source), base.triangles)
+    guard = base.record.guard
+    assert guard.flipped_before == 0 and guard.window_quads > 0 and guard.converged
+    assert (signed_areas(base.target, base.triangles) / floor).min() > 0.8
+    for pattern in ("up", "alternate"):
+        nudged = FeatureWarper(256, 256, mask).solve(Nudged(warp, pattern), "similarity")
+        assert np.abs(nudged.target - base.target).max() < 1e-6, pattern

@@ -176,7 +176,10 @@ def guard(problem: Problem, x: np.ndarray, record: GuardRecord, before_release=N
     if warp_areas.min() <= 0:
         return x                          # the grid cannot follow the warp: nothing injective to keep
     floor = barrier.SAFE_FRACTION * warp_areas
-    if record.flipped_before == 0:        # crushed but not folded: the barrier's minimum all the same
+    # Folded, or crushed below the continuation's share: the window's continued energy, smooth
+    # across a zero area (the barrier itself is too steep to start from there: a triangle left at
+    # 4e-12 of its floor stopped its Newton steps, and one ulp flipped the route at the fold).
+    if not (signed_areas(x, tris) < injectivity.CRUSHED_SHARE * floor).any():
         (x, windowed), ok = _converged(problem, x, floor, record), True
         if windowed is None:
             return x                      # no triangle below its floor: x is the energy's minimum
@@ -338,7 +341,7 @@ def _open_window(problem: Problem, x, floor, record):
     """Converge the energy with the barrier continued below a share of the floor
     (:func:`barrier.converge` with ``below``; the shares of :data:`CONTINUED_BELOW` in turn, the
     next from the last one's minimum where that folds) from the least-squares solution ``x`` (it
-    folds) in the window of :func:`window.window_around` around the triangles below
+    folds, or crushes a triangle below the share) in the window of :func:`window.window_around` around the triangles below
     :data:`injectivity.CRUSHED_SHARE` of their floor, reaching WINDOW_MARGIN times their extent
     and the ground around the tied features it reaches (not where that would take in more than
     WINDOW_MAX_FRACTION of the grid: large features on a small image; a preview: of its nodes).
