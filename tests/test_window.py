@@ -104,3 +104,13 @@ def test_a_triangle_crushed_to_nothing_but_not_folded_is_opened_as_a_fold_is():
     for pattern in ("up", "alternate"):
         nudged = FeatureWarper(256, 256, mask).solve(Nudged(warp, pattern), "similarity")
         assert np.abs(nudged.target - base.target).max() < 1e-6, pattern
+
+
+def test_a_guard_that_stops_before_its_energy_converged_says_so(monkeypatch):
+    """Fold-free all the same, but not the energy's minimum: a warning, and the report's flag."""
+    assert not any("stopped before its energy converged" in w for w in _solve("swirl", {"angle": 180}).record.warnings)
+    monkeypatch.setattr(barrier, "MAX_STEPS", 3)
+    mesh = _solve("swirl", {"angle": 180})
+    assert mesh.flips() == 0 and not mesh.record.guard.converged
+    assert any("the fold guard stopped before its energy converged" in w for w in mesh.record.warnings)
+    assert mesh.record.to_dict()["barrier_converged"] is False          # the report's fold_guard.barrier.converged

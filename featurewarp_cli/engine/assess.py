@@ -63,6 +63,10 @@ def assess(state, target, warped, tied, unpinned, warp, record: SolveRecord, not
                                f"{where}; {later} them in full")
     if record.mode != "plain" and not quick:
         record.warnings.extend(warnings_for(record, state.nodes, target, warped, warp))
+        if not record.guard.converged:       # fold-free all the same, but not the energy's minimum
+            record.warnings.append(f"the fold guard stopped before its energy converged ({record.guard.newton_steps} "
+                                   f"Newton steps): the result folds nothing but is not that energy's minimum, so "
+                                   f"another machine may give a different one")
         coverage = float(np.mean(features.is_feature))
         if coverage > MASK_COVERAGE:
             record.warnings.append(f"the mask's features cover {100 * coverage:.0f} % of the grid: little background "
