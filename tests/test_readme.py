@@ -40,6 +40,15 @@ def test_the_readme_has_commands_to_run():
     assert ("sh", quick_start()) in blocks() and "featurewarp warp" in quick_start()
 
 
+def test_every_code_fence_is_closed_where_its_block_ends():
+    """A fence closes the block it follows; a stray one turns the prose after it into code."""
+    fences = [(number, line) for number, line in enumerate((ROOT / "README.md").read_text().splitlines(), 1)
+              if line.startswith("```")]
+    closers = fences[1::2]
+    assert len(fences) % 2 == 0 and all(line == "```" for _, line in closers), [
+        number for number, line in closers if line != "```"] or "an opening fence is never closed"
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("index", range(len(blocks())))
 def test_readme_block_runs_as_written(tmp_path, index):
