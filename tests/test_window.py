@@ -114,3 +114,23 @@ def test_a_guard_that_stops_before_its_energy_converged_says_so(monkeypatch):
     assert mesh.flips() == 0 and not mesh.record.guard.converged
     assert any("the fold guard stopped before its energy converged" in w for w in mesh.record.warnings)
     assert mesh.record.to_dict()["barrier_converged"] is False          # the report's fold_guard.barrier.converged
+
+
+def test_the_guards_back_substitutions_are_its_seconds_as_the_progress_line_shows(monkeypatch):
+    """The report's ``solve`` stops growing when the guard begins: its back-substitutions (the
+    Newton steps' solves) are ``guard``, the stage the progress line shows throughout; only the
+    factorizations a release asks for are ``factor`` (engine/attempts.py)."""
+    from featurewarp_cli.engine import attempts, guard
+
+    seen, run = {}, guard.guard
+
+    def recorded(problem, *args, **kwargs):
+        seen.setdefault("solve", problem.timings.get("solve", 0.0))
+        return run(problem, *args, **kwargs)
+    monkeypatch.setattr(guard, "guard", recorded)
+    mesh = _solve("swirl", {"angle": 180})
+    assert mesh.record.guard.newton_steps > 0 and mesh.record.timings["guard"] > 0
+    assert mesh.record.timings["solve"] == seen["solve"]
+    timings = {"solve": 5.0, "factor": 1.0, "rhs": 0.5, "guard": 0.25}
+    attempts._guard_seconds(timings, {"solve": 2.0, "factor": 0.5, "rhs": 0.25}, 10.0)
+    assert timings == {"solve": 2.0, "factor": 1.0, "rhs": 0.25, "guard": 9.75}
