@@ -115,7 +115,7 @@ def test_stdin_and_errors(runner, pair, tmp_path):
     assert missing.code == 2 and "nope.png does not exist" in missing.stderr
     (tmp_path / "junk.png").write_bytes(b"junk")
     junk = runner("diff", pair[0], tmp_path / "junk.png")
-    assert junk.code == 1 and "cannot be decoded" in junk.stderr and len(junk.lines) == 1
+    assert junk.code == 2 and "cannot be decoded" in junk.stderr and len(junk.lines) == 1    # trouble, not "differ"
     assert runner("diff", *pair, "--diff-image", tmp_path / "d.xyz").code == 2
     assert runner("diff", *pair, "--max-rmse", "nan").code == 2
 

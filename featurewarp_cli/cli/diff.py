@@ -36,7 +36,8 @@ def diff_command(a, b, max_rmse, min_psnr, max_pixels_off, tolerance, diff_image
     included (the colour under fully transparent pixels counts as 0). Gray is
     compared as R = G = B and no alpha as opaque. Animations and multi-page files
     are compared frame by frame; differing frame counts or frame durations fail.
-    Exit 0 within tolerance, 1 beyond it or when the sizes or frame counts differ.
+    Exit 0 within tolerance, 1 beyond it or when the sizes or frame counts differ,
+    2 when A or B cannot be read (as cmp and diff) or the command is misused.
     Without --max-rmse, --min-psnr or --max-pixels-off, or with --tolerance and no
     --max-pixels-off, the images must match within --tolerance everywhere. One of
     A and B may be '-' (stdin).
@@ -57,8 +58,10 @@ def diff_command(a, b, max_rmse, min_psnr, max_pixels_off, tolerance, diff_image
     try:
         first, second = (_read_within_budget(path, name) for path, name in ((a, "A"), (b, "B")))
         result, reason = _compare(first, second, tolerance)
-    except WarpError as err:
-        raise click_error(err) from err
+    except WarpError as err:            # trouble, as cmp and diff say it: 2, never "differ" (1)
+        error = click_error(err)
+        error.exit_code = 2
+        raise error from err
     if reason:
         if as_json and not quiet:         # a CI job parses the failure as it parses any other
             click.echo(_as_json(a, b, None, [f"cannot be compared: {reason}"], tolerance))
