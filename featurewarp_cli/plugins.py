@@ -129,6 +129,9 @@ class Param:
         Also accept a percentage: ``150%`` is 1.5 (scale factors).
     choices : tuple of str
         The words a ``str`` parameter takes (``lower``, ``upper``), matched without regard to case.
+    overrides : tuple of str
+        Parameters this one replaces when both are given (``width`` overrides ``sx``): the
+        command line says so rather than drop one silently.
     """
 
     name: str
@@ -142,6 +145,7 @@ class Param:
     metavar: str = "F"
     percent: bool = False
     choices: tuple[str, ...] = ()
+    overrides: tuple[str, ...] = ()
 
     def range_text(self) -> str:
         """Human-readable range, e.g. ``0 < F <= 360``."""

@@ -450,3 +450,16 @@ def test_an_option_the_mode_leaves_unused_is_noted(runner, tmp_path):
     assert "does nothing" not in runner("warp", "stretch", image, tmp_path / "o.png", "--sx", "1.2").stderr
     run = runner("warp", "stretch", image, tmp_path / "o.png", "--sx", "1.2", "--decay", "2")     # no mask
     assert "--decay does nothing without --mask" in run.stderr
+
+
+def test_an_option_another_overrides_is_noted(runner, tmp_path):
+    """--sx 2 --width 100 wrote 100 px wide and said nothing of the 2."""
+    image = save(tmp_path / "in.png", textured(SIZE))
+    run = runner("warp", "stretch", image, tmp_path / "o.png", "--sx", "2", "--width", "100")
+    assert run.code == 0 and run.stderr.count("does nothing") == 1
+    assert "--sx does nothing with --width, which overrides it" in run.stderr
+    assert decode.read_image(str(tmp_path / "o.png")).shape[1] == 100
+    run = runner("warp", "stretch", image, tmp_path / "o.png", "--size", "50x40", "--sx", "3", "--height", "50")
+    assert "--sx does nothing with --size" in run.stderr and "--height does nothing with --size" in run.stderr
+    for alone in (("--width", "100"), ("--sx", "2", "--height", "50")):
+        assert "does nothing" not in runner("warp", "stretch", image, tmp_path / "o.png", *alone).stderr

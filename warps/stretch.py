@@ -26,10 +26,12 @@ class Stretch(Warp):
               percent=True),
         Param("sy", float, 1.0, "Vertical scale factor, or a percentage (150%).", min=0, min_open=True, max=100,
               percent=True),
-        Param("width", int, None, "Target width in pixels (overrides --sx).", min=1, max=65535, metavar="PX"),
-        Param("height", int, None, "Target height in pixels (overrides --sy).", min=1, max=65535, metavar="PX"),
+        Param("width", int, None, "Target width in pixels (overrides --sx).", min=1, max=65535, metavar="PX",
+              overrides=("sx",)),
+        Param("height", int, None, "Target height in pixels (overrides --sy).", min=1, max=65535, metavar="PX",
+              overrides=("sy",)),
         Param("size", tuple, None, "Target size WxH in pixels or percentages (800x600, 150%x100%); "
-              "overrides the others.", metavar="WxH"),
+              "overrides the others.", metavar="WxH", overrides=("sx", "sy", "width", "height")),
     )
 
     def _setup(self, sx, sy, width, height, size):

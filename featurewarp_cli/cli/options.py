@@ -251,7 +251,7 @@ def settings_from(preset, kwargs: dict):
     stages.quiet = quiet
     params = {p.name: kwargs.pop(p.name) for p in preset.params}
     settings = Settings(preset.name, params, **{k: kwargs.pop(k) for k in SETTINGS})
-    _note_unused(settings)
+    _note_unused(settings, preset.params)
     return settings, quiet, verbose
 
 
@@ -260,9 +260,10 @@ UNUSED_IN = {"feature_weight": ("plain",), "decay": ("plain",), "formulation": (
              "scale_prior": ("plain", "rigid"), "grow_past_edge": ("plain",)}
 
 
-def _note_unused(settings) -> None:
+def _note_unused(settings, params=()) -> None:
     """A notice for each option given on the command line that ``settings.mode`` leaves unused
-    (--scale-prior under rigid: features keep their size there)."""
+    (--scale-prior under rigid: features keep their size there), or that another given one of
+    the preset's ``params`` overrides (:attr:`plugins.Param.overrides`: --sx under --width)."""
     from .. import stages
 
     context = click.get_current_context(silent=True)
@@ -277,3 +278,9 @@ def _note_unused(settings) -> None:
             stages.notice(f"{option_flag(name)} does nothing with --mode {settings.mode}")
         elif maskless:
             stages.notice(f"{option_flag(name)} does nothing without --mask (the plain warp)")
+    for param in params:
+        if source(param.name) == click.core.ParameterSource.COMMANDLINE:
+            for name in param.overrides:
+                if source(name) == click.core.ParameterSource.COMMANDLINE:
+                    stages.notice(f"{option_flag(name)} does nothing with {option_flag(param.name)}, "
+                                  f"which overrides it")
