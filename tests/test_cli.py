@@ -334,6 +334,16 @@ def test_warps_json(runner):
             assert {"name", "type", "default", "min", "max", "help"} <= set(p)
 
 
+def test_warps_lists_the_presets_it_is_given(runner):
+    """'featurewarp warps swirl' said "Got unexpected extra argument"."""
+    run = runner("warps", "swirl", "arc", "--json")
+    assert run.code == 0 and [e["name"] for e in json.loads(run.stdout)] == ["swirl", "arc"]
+    text = runner("warps", "swirl").stdout.decode()
+    assert text.startswith("swirl  ") and "--angle" in text and "\narc  " not in text
+    wrong = runner("warps", "swrl")
+    assert wrong.code == 2 and "did you mean 'swirl'?" in wrong.stderr and len(wrong.lines) == 1
+
+
 def test_help_is_fast():
     code = "import sys, featurewarp_cli.cli.main; print('cv2' in sys.modules, 'PIL' in sys.modules)"
     imported = subprocess.run([sys.executable, "-c", code], capture_output=True, timeout=60)

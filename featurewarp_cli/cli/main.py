@@ -204,20 +204,29 @@ def schema_command(kind):
 
 
 @cli.command("warps", short_help="List the presets with their options, defaults and ranges.")
+@click.argument("names", nargs=-1, metavar="[PRESET]...")
 @click.option("--json", "as_json", is_flag=True, help="Print machine-readable JSON.")
-def list_warps(as_json):
-    """List every registered preset with its options, defaults and ranges.
+def list_warps(names, as_json):
+    """List every registered preset, or the PRESETs named, with its options, defaults and ranges.
 
     Each preset's border default (--boundary) is listed too.
 
     \b
-    Example:
+    Examples:
+      featurewarp warps swirl
       featurewarp warps --json
     """
     for name, value in plugins.shadowing():
         say(f"featurewarp: warning: a plugin registers the built-in name {name!r} ({value}); the built-in is used")
+    for name in names:
+        if name not in plugins.names():
+            import difflib
+
+            close = difflib.get_close_matches(name, plugins.names(), n=1)
+            hint = f"did you mean {close[0]!r}? " if close else ""
+            raise click.UsageError(f"unknown preset {name!r}; {hint}available: {', '.join(plugins.names())}")
     entries = []
-    for name in plugins.names():
+    for name in names or plugins.names():
         try:
             preset = plugins.load(name)
         except plugins.UnknownPreset as err:
