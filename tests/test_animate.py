@@ -91,6 +91,8 @@ def test_each_frames_compromises_are_said_with_its_number_and_the_rest_counted(f
 
 
 @pytest.mark.parametrize("vary,message", [("angle", "NAME=START:END"), ("spin=0:1", "no parameter 'spin'"),
+                                          ("angel=0:1", "did you mean 'angle'? it can vary: angle, radius"),
+                                          ("center=0:1", "cannot vary (it can: angle, radius)"),
                                           ("angle=0:nan", "finite")])
 def test_bad_vary_is_a_usage_error(files, vary, message):
     """A malformed --vary, an unknown parameter or a bad value: one line, exit 2, no file."""

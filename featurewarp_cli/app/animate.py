@@ -43,6 +43,7 @@ FRAME_PIXEL_BYTES = 8
 def parse_vary(texts, preset) -> dict[str, tuple[float, float]]:
     """``NAME=START:END`` strings -> {name: (start, end)}, checked against the preset's parameters."""
     names = {p.cli_name: p for p in preset.params}
+    numeric = [name for name, p in names.items() if p.type in (int, float)]
     ranges = {}
     for text in texts:
         match = re.fullmatch(r"\s*([\w-]+)\s*=\s*([^:]+):([^:]+)\s*", text)
@@ -50,13 +51,18 @@ def parse_vary(texts, preset) -> dict[str, tuple[float, float]]:
             raise WarpError(f"{text!r} is not NAME=START:END", "--vary", usage=True)
         name, start, end = match.groups()
         if name not in names:
-            raise WarpError(f"{preset.name} has no parameter {name!r} (it has: {', '.join(names)})",
+            import difflib
+
+            close = difflib.get_close_matches(name, numeric, n=1)
+            hint = f"did you mean {close[0]!r}? " if close else ""
+            raise WarpError(f"{preset.name} has no parameter {name!r}; {hint}it can vary: {', '.join(numeric)}",
                             "--vary", usage=True)
         param = names[name]
         if param.name in ranges:
             raise WarpError(f"{name} is given twice", "--vary", usage=True)
         if param.type not in (int, float):
-            raise WarpError(f"{name} is not a number and cannot vary", "--vary", usage=True)
+            raise WarpError(f"{name} is not a number and cannot vary (it can: {', '.join(numeric)})", "--vary",
+                            usage=True)
         try:
             ranges[param.name] = (param.check(start), param.check(end))
         except ParamError as err:               # named as --vary names it: NAME=START:END
