@@ -384,6 +384,13 @@ def test_max_distortion_makes_measure_a_check(runner, tmp_path, astronaut):
     above = runner(*base, "--max-distortion", "0.5")
     assert above.code == 1 and "component 1 (around" in above.stderr and "above 0.5" in above.stderr
     assert len(above.stdout.decode().splitlines()) == 3                   # the figures, all the same
+    cv2.imwrite(str(tmp_path / "empty.png"), np.zeros(mask.shape, np.uint8))
+    empty = runner("measure", paths["in"], paths["out"], "-m", tmp_path / "empty.png")
+    assert empty.code == 0 and "marks no feature" in empty.stderr and "nothing to measure" in empty.stderr
+    assert "plain warp" not in empty.stderr                 # measure warps nothing
+    for value in ("nan", "inf", "1e999", "-1"):        # nan passed every region: the check was off
+        refused = runner(*base, "--max-distortion", value)
+        assert refused.code == 2 and len(refused.lines) == 1 and refused.stdout == b"", value
     nothing = runner("measure", paths["in"], paths["flat"], "-m", paths["mask"], "--max-distortion", "1")
     assert nothing.code == 1 and nothing.stderr.count("could not be measured (0 keypoint matches") == 3
     frames = [Image.fromarray(cv2.cvtColor(picture, cv2.COLOR_BGR2RGB)) for picture in (output, output[::-1])]

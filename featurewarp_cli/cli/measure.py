@@ -11,7 +11,8 @@ import os
 
 import click
 
-from .options import max_memory_option, max_pixels_option
+from ..plugins import Param
+from .options import max_memory_option, max_pixels_option, option
 
 
 def component_line(fit) -> str:
@@ -40,10 +41,10 @@ def component_line(fit) -> str:
               help="Print machine-readable JSON: input, output, mask, worst_distortion and per component "
                    "its figures (label, pixels, bbox, centre, distortion, noise, scale, rotation, rms_px, "
                    "local_p90, explained, ...; null where not measured, with the reason).")
-@click.option("--max-distortion", type=click.FloatRange(min=0.0), metavar="D",
-              help="A check for CI: exit 1 when a region's distortion is above D (0.02: the report's "
-                   "'kept'), or a region could not be measured or landed on another's place (each named on "
-                   "stderr); the figures are printed all the same.")
+@option(Param("max_distortion", float, None,
+             "A check for CI: exit 1 when a region's distortion is above D (0.02: the report's 'kept'), or a "
+             "region could not be measured or landed on another's place (each named on stderr); the figures "
+             "are printed all the same.", min=0.0, metavar="D"))
 def measure_command(input, output, mask, as_json, max_distortion, max_pixels, max_memory):
     """Measure how each masked region of INPUT came out in OUTPUT.
 
@@ -92,7 +93,8 @@ def measure_command(input, output, mask, as_json, max_distortion, max_pixels, ma
     except WarpError as err:
         raise click_error(err) from err
     _warn([line.replace("the input has several frames", f"INPUT {input} has several frames")
-           .replace("; the first is used", "; the first is measured") for line in warnings])
+           .replace("; the first is used", "; the first is measured")
+           .replace(": plain warp", ": nothing to measure") for line in warnings])
     try:
         fits = measure.measure(image, result, feature_mask)
     except ValueError as err:
