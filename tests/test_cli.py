@@ -344,6 +344,15 @@ def test_warps_lists_the_presets_it_is_given(runner):
     assert wrong.code == 2 and "did you mean 'swirl'?" in wrong.stderr and len(wrong.lines) == 1
 
 
+@pytest.mark.skipif(not os.path.exists("/dev/full"), reason="needs /dev/full")
+def test_a_stdout_that_cannot_be_written_is_named(tmp_path):
+    """'featurewarp warps > /dev/full' said "OSError: [Errno 28] No space left on device" and named no file."""
+    with open("/dev/full", "w") as full:
+        run = subprocess.run([sys.executable, "-m", "featurewarp_cli", "schema", "report"], stdout=full,
+                             stderr=subprocess.PIPE, text=True, timeout=60)
+    assert run.returncode == 1 and run.stderr == "featurewarp: error: cannot write stdout: No space left on device\n"
+
+
 def test_help_is_fast():
     code = "import sys, featurewarp_cli.cli.main; print('cv2' in sys.modules, 'PIL' in sys.modules)"
     imported = subprocess.run([sys.executable, "-c", code], capture_output=True, timeout=60)

@@ -116,6 +116,8 @@ def test_stdin_and_errors(runner, pair, tmp_path):
     (tmp_path / "junk.png").write_bytes(b"junk")
     junk = runner("diff", pair[0], tmp_path / "junk.png")
     assert junk.code == 2 and "cannot be decoded" in junk.stderr and len(junk.lines) == 1    # trouble, not "differ"
+    full = runner("diff", *pair[:1], pair[0], "--diff-image", "png:/dev/full")
+    assert full.code == 2 and full.lines[-1] == "featurewarp: error: cannot write /dev/full: No space left on device"
     assert runner("diff", *pair, "--diff-image", tmp_path / "d.xyz").code == 2
     assert runner("diff", *pair, "--max-rmse", "nan").code == 2
 

@@ -37,7 +37,8 @@ def diff_command(a, b, max_rmse, min_psnr, max_pixels_off, tolerance, diff_image
     compared as R = G = B and no alpha as opaque. Animations and multi-page files
     are compared frame by frame; differing frame counts or frame durations fail.
     Exit 0 within tolerance, 1 beyond it or when the sizes or frame counts differ,
-    2 when A or B cannot be read (as cmp and diff) or the command is misused.
+    2 when A or B cannot be read, the results cannot be written (as cmp and diff) or
+    the command is misused.
     Without --max-rmse, --min-psnr or --max-pixels-off, or with --tolerance and no
     --max-pixels-off, the images must match within --tolerance everywhere. One of
     A and B may be '-' (stdin).
@@ -71,10 +72,13 @@ def diff_command(a, b, max_rmse, min_psnr, max_pixels_off, tolerance, diff_image
         click.echo(f"featurewarp: note: {note}", err=True)
     broken = diff.failures(result, max_rmse, min_psnr, max_pixels_off, tolerance_given)
     broken += _durations_differ(first.durations, second.durations)
-    if as_json and not quiet:
-        click.echo(_as_json(a, b, result, broken))
-    elif not quiet:
-        click.echo("\n".join(result.lines()))
+    try:
+        if as_json and not quiet:
+            click.echo(_as_json(a, b, result, broken))
+        elif not quiet:
+            click.echo("\n".join(result.lines()))
+    except OSError as err:                 # the metrics not written is trouble (2), not "differ" (1)
+        raise _trouble(f"cannot write stdout: {err.strerror or err}") from err
     if target:
         _write_highlight(target, diff.highlight(first.image, result.off))
     if broken:
@@ -127,7 +131,14 @@ def _write_highlight(target: tuple[str, str], picture) -> None:
     try:
         write.write_atomic(path, encode.encode_image(picture, fmt))
     except (ImageError, OSError) as err:
-        raise click.ClickException(f"cannot write {path}: {err}") from err
+        raise _trouble(f"cannot write {path}: {getattr(err, 'strerror', None) or err}") from err
+
+
+def _trouble(message: str) -> click.ClickException:
+    """An error of the comparison itself, not of the images: exit 2, as cmp and diff."""
+    error = click.ClickException(message)
+    error.exit_code = 2
+    return error
 
 
 def _as_json(a: str, b: str, result, broken: list[str], tolerance: float | None = None) -> str:

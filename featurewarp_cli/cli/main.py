@@ -343,12 +343,29 @@ def main(argv=None):
             traceback.print_exception(err, file=sys.stderr)
         if isinstance(err, click.ClickException):
             message, code = err.format_message(), err.exit_code
+        elif _writing_stdout(err):
+            message, code = f"cannot write stdout: {err.strerror}", 1
         else:
             message, code = f"{_error_name(err)}: {' '.join(str(err).split())} (--debug shows a traceback)", 1
         say(f"featurewarp: error: {message}")
     finally:
         stages.quiet = False               # -q was this run's: a process that goes on (tests, the API) speaks
     sys.exit(code if isinstance(code, int) else 0)
+
+
+def _writing_stdout(err: Exception) -> bool:
+    """Whether ``err`` is an OSError of writing stdout (``featurewarp warps > /dev/full``): raised
+    in click.echo to it, or in flushing it; it read "OSError: [Errno 28] ..." with no file named."""
+    if not isinstance(err, OSError) or err.filename is not None or not err.strerror:
+        return False
+    tb = err.__traceback__
+    while tb is not None:
+        frame = tb.tb_frame
+        if frame.f_code.co_name in ("echo", "flush", "write") and frame.f_locals.get("self", frame.f_locals.get(
+                "file")) in (sys.stdout, sys.__stdout__, getattr(sys.stdout, "buffer", None)):
+            return True
+        tb = tb.tb_next
+    return False
 
 
 def _error_name(err: Exception) -> str:
