@@ -318,6 +318,19 @@ def test_a_warp_that_moves_nothing_says_so(preset, params, still):
     assert bool(said) == still, mesh.record.warnings
 
 
+def test_a_grid_too_coarse_to_see_the_warp_is_not_called_a_warp_that_moves_nothing():
+    """--cell 10000 on 80 x 60: one quad, whose corners a swirl leaves in place, though it moves pixels
+    by 18 px between them; it said "the warp moves no pixel" (no_effect true) and asked whether the mask
+    was inverted. Now the grid's stray says it all, and the coverage warning names the cell."""
+    mask = np.zeros((60, 80), bool)
+    mask[20:40, 30:50] = True
+    mesh = FeatureWarper(80, 60, mask, cell=10000).solve(load_warp("swirl")(80, 60, angle=90))
+    assert mesh.record.grid["pl_error_px"] > 5 and not mesh.record.no_effect, mesh.record.warnings
+    assert not any("moves no pixel" in w for w in mesh.record.warnings), mesh.record.warnings
+    assert any("strays up to" in w for w in mesh.record.warnings)
+    assert any("or --cell 10000 too coarse for the mask's features?" in w for w in mesh.record.warnings)
+
+
 def test_a_mask_over_all_the_warp_moves_is_not_called_a_warp_that_moves_nothing():
     """A bulge whose whole region the mask covers came out as the input, and besides the right
     warning said "the warp moves no pixel ... (options at their identity ...?)": it tested the

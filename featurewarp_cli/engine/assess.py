@@ -69,14 +69,18 @@ def assess(state, target, warped, tied, unpinned, warp, record: SolveRecord, not
                                    f"another machine may give a different one")
         coverage = float(np.mean(features.is_feature))
         if coverage > MASK_COVERAGE:
+            causes = "the mask inverted, or a JPEG whose noise crosses the threshold"
             record.warnings.append(f"the mask's features cover {100 * coverage:.0f} % of the grid: little background "
-                                   f"is left to take the warp (is the mask inverted, or a JPEG whose "
-                                   f"noise crosses the threshold?)")
+                                   f"is left to take the warp (is {causes}" + (
+                                       f", or --cell {record.grid['cell']:.6g} too coarse for the mask's "
+                                       f"features?)" if chosen_cell else "?)"))
+    error = record.grid.get("pl_error_px", 0.0)
+    # Nothing moves by more than the nodes' largest move plus the grid's stray from W (a swirl
+    # under a one-quad --cell moves no node and pixels by 55 px).
     if not quick and tuple(warp.canvas) == (state.grid.width, state.grid.height) and \
-            np.max(np.abs(warped - state.nodes), initial=0.0) <= STILL_PX:     # W itself (a covering mask: above)
+            np.max(np.abs(warped - state.nodes), initial=0.0) + error <= STILL_PX:    # a covering mask: above
         record.warnings.append(f"{STILL} by more than {STILL_PX:g} px: the output is the input "
                                f"(options at their identity, a centre far off the image, or handles that stay put?)")
-    error = record.grid.get("pl_error_px", 0.0)
     if not quick and error > fidelity.MAX_PL_ERROR:          # NaN (a preview's grid) is not above
         chosen = "the given cell's grid" if chosen_cell else "the finest automatic grid (800 000 nodes at most)"
         record.warnings.append(f"{chosen} (cell {record.grid['cell']:.4g} px) strays up to {error:.1f} px from "
