@@ -65,6 +65,18 @@ def corrupted(data: bytes, at: int, junk: bytes = b"x" * 40) -> bytes:
 PNG = encode.encode_image(textured(), "png")
 JPG = encode.encode_image(textured(), "jpg")
 
+
+def lab_tiff() -> bytes:
+    """A CIELab TIFF (photometric 8), which OpenCV decodes as if its L*, a*, b* were colours."""
+    import io
+
+    from PIL import Image
+
+    out = io.BytesIO()
+    Image.fromarray(cv2.cvtColor(textured(), cv2.COLOR_BGR2RGB)).convert("LAB").save(out, "TIFF")
+    return out.getvalue()
+
+
 #: Input files by name: their bytes.
 FILES = {
     "ok.png": PNG,
@@ -84,6 +96,7 @@ FILES = {
     "huge.png": png_bytes(np.zeros((2, 2), np.uint8), 0, size=(20000, 20000)),
     "huge.jpg": huge_jpeg(),
     "zero.png": png_bytes(np.zeros((2, 2), np.uint8), 0, size=(0, 5)),
+    "lab.tif": lab_tiff(),
 }
 
 # (id, arguments, exit code, words the message must contain). {name} is a file of FILES,
@@ -135,6 +148,7 @@ CASES = [
      ["output canvas", "4800x3600", "--max-pixels"]),
     ("corrupt mask", "swirl {ok.png} {out} -m {corrupt.png}", 1, ["--mask", "corrupt.png"]),
     ("empty mask file", "swirl {ok.png} {out} -m {empty.png}", 1, ["--mask", "is empty"]),
+    ("lab tiff", "swirl {lab.tif} {out}", 1, ["lab.tif", "CIELab", "convert it to RGB"]),   # was wrong colours, exit 0
 ]
 
 

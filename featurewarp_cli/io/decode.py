@@ -406,6 +406,10 @@ def decode_image(data: bytes, name: str, max_pixels: int | None = MAX_PIXELS,
     header = read_header(data)
     if header is not None:
         check_size(header.width, header.height, name, max_pixels, max_memory)
+        if header.mode == "LAB":              # OpenCV reads L*a*b* as if it were RGB: wrong colours, no error
+            raise ImageError(f"{name} holds CIELab colours (a Lab TIFF), which featurewarp does not read; convert "
+                             f"it to RGB first (ImageMagick: convert {os.path.basename(name)} -colorspace sRGB "
+                             f"rgb.tif)")
     scans = data.count(b"\xff\xda") if data.startswith(b"\xff\xd8") else 0
     if scans > MAX_JPEG_SCANS:
         raise ImageError(f"{name} has {scans} JPEG scans, above {MAX_JPEG_SCANS} (a progressive JPEG has about "
