@@ -338,6 +338,8 @@ def test_embedding_reproduces_points():
     ({"version": 1, "border": {"top": [[0, 0], [1e9, 0]]}}, r"^border\.top\[1\] \(1e\+09, 0\) lies more than"),
     ({"version": 1, "curves": [{"from": [[1, 2], [3, 4]], "to": [[1, 2], [3, float("inf")]]}]},
      r"^curves\[0\]\.to\[1\]: expected a point \[x, y\] of two finite numbers, got \[3, Infinity\]$"),
+    ({"version": 2, "points": [{"from": [1, 2], "to": [1, 2], "angle": 1e308}]},      # a turn of rounding noise
+     r"^points\[0\]\.angle: expected a finite number of degrees within \+-3600, got 1e\+308$"),
 ])
 def test_bad_handles_name_the_problem(data, message):
     with pytest.raises(ValueError, match=message):

@@ -309,9 +309,14 @@ def _unknown_keys(data: dict, version: int) -> list[str]:
             for key in item if key not in keys]
 
 
+#: Largest turn of a point handle's disc, in degrees (ten turns): beyond, a turn is rounding noise
+#: (1e308 degrees turned the disc by whatever 1e308 mod 360 rounds to).
+MAX_ANGLE = 3600
+
+
 def _angles(points: list, version: int, notes: list) -> np.ndarray:
     """Each point's ``angle`` in radians (NaN where none is given; in a version-1 file it is
-    ignored, with a warning); ValueError for one that is not finite."""
+    ignored, with a warning); ValueError for one that is not finite or beyond :data:`MAX_ANGLE`."""
     angles = np.full(len(points), np.nan)
     for k, point in enumerate(points):
         if "angle" not in point:
@@ -319,10 +324,10 @@ def _angles(points: list, version: int, notes: list) -> np.ndarray:
         if version < 2:
             notes.append(f"handles: ignoring points[{k}].angle (version 2 reads it; this file says version 1)")
             continue
-        if not _finite(point["angle"]):
+        if not _finite(point["angle"]) or abs(point["angle"]) > MAX_ANGLE:
             from .. import schema
 
-            raise ValueError(f"points[{k}].angle: expected a finite number of degrees, got "
+            raise ValueError(f"points[{k}].angle: expected a finite number of degrees within +-{MAX_ANGLE}, got "
                              f"{schema.shown(point['angle'])}")
         angles[k] = math.radians(point["angle"])
     return angles
