@@ -180,7 +180,7 @@ class Param:
             raise ParamError(self.name, f"{value!r} is not a number")
         text = value.strip() if isinstance(value, str) else None
         try:
-            number = float(text[:-1]) / 100.0 if self.percent and text and text.endswith("%") else float(value)
+            number = _decimal(text[:-1]) / 100.0 if self.percent and text and text.endswith("%") else _decimal(value)
         except (TypeError, ValueError):
             raise ParamError(self.name, f"{value!r} is not a number") from None
         if not math.isfinite(number):
@@ -202,7 +202,7 @@ class Param:
         try:
             if len(parts) != 2:
                 raise ValueError
-            numbers = [float(str(part).strip().removesuffix("%")) for part in parts]
+            numbers = [_decimal(str(part).strip().removesuffix("%")) for part in parts]
         except (TypeError, ValueError):
             raise ParamError(self.name, f"{value!r} is not {self.metavar} "
                                         f"(two numbers of pixels or percentages)") from None
@@ -371,6 +371,14 @@ def check_canvas_side(size: tuple[int, int], name: str, hint: str = "") -> None:
 #: arithmetic overflows or its grid cannot follow it: ``--center 1e308,1e308``).
 PAIR_PIXEL_LIMIT = 1e5
 PAIR_PERCENT_LIMIT = 1e3
+
+
+def _decimal(value) -> float:
+    """``float(value)``, but for text Python's own syntax takes and a number does not: digits
+    grouped by underscores (``--angle 1_0`` ran as 10)."""
+    if isinstance(value, str) and "_" in value:
+        raise ValueError(value)
+    return float(value)
 
 
 def resolve_pair(pair: tuple[str, str], width: int, height: int, position: bool = False) -> tuple[float, float]:

@@ -114,6 +114,8 @@ CASES = [
     ("zero scale", "stretch {ok.png} {out} --sx 0", 2, ["--sx", "out of range"]),
     ("cell too small", "swirl {ok.png} {out} --cell 0.5", 2, ["--cell", "out of range (1 <= PX)"]),
     ("not a number", "swirl {ok.png} {out} --angle ninety", 2, ["--angle", "not a number"]),
+    ("python's digit grouping", "swirl {ok.png} {out} --angle 1_0", 2, ["--angle", "'1_0' is not a number"]),
+    ("digit grouping in a pair", "swirl {ok.png} {out} --center 5_0,10", 2, ["--center", "'5_0,10' is not X,Y"]),
     ("not a whole number", "stretch {ok.png} {out} --width 10.5", 2, ["--width", "whole number"]),
     ("max pixels zero", "swirl {ok.png} {out} --max-pixels 0", 2, ["--max-pixels", "out of range (1 <= N <= 1099511627776)"]),
     ("output folder missing", "swirl {ok.png} {dir}/nowhere/o.png", 2, ["nowhere", "does not exist"]),
