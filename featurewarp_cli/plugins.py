@@ -463,14 +463,11 @@ def load(name: str):
     """
     matches = [] if name in BUILTIN else [ep for ep in entry_points() if ep.name == name]
     if name not in BUILTIN and not matches:
-        import difflib
-
         from .styles import style_owners       # it reads the presets' summaries through this module
 
         owners = [(preset, style) for preset, style, _ in style_owners(name)]
-        close = difflib.get_close_matches(name, names(), n=1)
         hint = (" and ".join(f"{style} is {preset}'s style" for preset, style in owners) + "; " if owners else
-                f"did you mean {close[0]!r}? " if close else "")
+                did_you_mean(name, names()))
         raise UnknownPreset(f"unknown preset {name!r}; {hint}available: {', '.join(names()) or 'none'}")
     try:
         if matches:
@@ -479,3 +476,11 @@ def load(name: str):
         return getattr(importlib.import_module(module), attribute)
     except Exception as err:  # a broken third-party plugin must not take the CLI down
         raise UnknownPreset(f"preset {name!r} failed to load: {type(err).__name__}: {err}") from None
+
+
+def did_you_mean(word: str, words) -> str:
+    """``"did you mean 'swirl'? "`` for the closest of ``words`` to a misspelt ``word``, or ``""``."""
+    import difflib
+
+    close = difflib.get_close_matches(word, list(words), n=1)
+    return f"did you mean {close[0]!r}? " if close else ""

@@ -26,7 +26,7 @@ from ..io.colours import TRANSPARENT
 from ..io.depth import to_eight_bit
 from ..io.encode import encode_image, flatten
 from ..io.metadata import Metadata
-from ..plugins import ParamError
+from ..plugins import ParamError, did_you_mean
 from .outputs import background_colour, check_encodable, kept_metadata, rendered
 from .pipeline import (Settings, WarpError, check_solution, load_image_and_mask, make_warper,
                        prefetch_engine, solve_within_budget)
@@ -51,12 +51,8 @@ def parse_vary(texts, preset) -> dict[str, tuple[float, float]]:
             raise WarpError(f"{text!r} is not NAME=START:END", "--vary", usage=True)
         name, start, end = match.groups()
         if name not in names:
-            import difflib
-
-            close = difflib.get_close_matches(name, numeric, n=1)
-            hint = f"did you mean {close[0]!r}? " if close else ""
-            raise WarpError(f"{preset.name} has no parameter {name!r}; {hint}it can vary: {', '.join(numeric)}",
-                            "--vary", usage=True)
+            raise WarpError(f"{preset.name} has no parameter {name!r}; {did_you_mean(name, numeric)}it can vary: "
+                            f"{', '.join(numeric)}", "--vary", usage=True)
         param = names[name]
         if param.name in ranges:
             raise WarpError(f"{name} is given twice", "--vary", usage=True)

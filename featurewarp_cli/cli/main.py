@@ -220,11 +220,10 @@ def list_warps(names, as_json):
         say(f"featurewarp: warning: a plugin registers the built-in name {name!r} ({value}); the built-in is used")
     for name in names:
         if name not in plugins.names():
-            import difflib
-
-            close = difflib.get_close_matches(name, plugins.names(), n=1)
-            hint = f"did you mean {close[0]!r}? " if close else ""
-            raise click.UsageError(f"unknown preset {name!r}; {hint}available: {', '.join(plugins.names())}")
+            try:
+                plugins.load(name)              # raises, saying what the name may have meant
+            except plugins.UnknownPreset as err:
+                raise click.UsageError(str(err)) from None
     entries = []
     for name in names or plugins.names():
         try:

@@ -462,15 +462,12 @@ class PresetGroup(click.Group):
             return super().resolve_command(ctx, args)
         except click.UsageError:
             if args and args[0] not in plugins.names():
-                import difflib
-
                 from ..styles import style_hint
 
                 style = style_hint(ctx.info_name, args[0], args[1:], lambda preset: self.get_command(ctx, preset))
                 if style is not None:                # 'fisheye' is bulge's, not 'fish'
                     raise click.UsageError(style, ctx) from None
-                close = difflib.get_close_matches(args[0], plugins.names(), n=1)
-                hint = f"did you mean {close[0]!r}? " if close else ""
+                hint = plugins.did_you_mean(args[0], plugins.names())
                 raise click.UsageError(
                     f"unknown preset {args[0]!r}; {hint}available: {', '.join(plugins.names())} "
                     "(see 'featurewarp warps')", ctx) from None
