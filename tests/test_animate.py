@@ -90,6 +90,13 @@ def test_each_frames_compromises_are_said_with_its_number_and_the_rest_counted(f
     assert strict.code == 1 and "--strict: frame 1: " in strict.stderr and not (files / "strict.gif").exists()
 
 
+def test_a_preset_with_nothing_to_vary_says_so(files):
+    """perspective's corners are pairs: the errors listed what can vary as an empty list."""
+    for vary in ("tl=0:1", "tx=0:1"):
+        out = run("perspective", str(files / "in.png"), str(files / "bad.gif"), "--vary", vary)
+        assert out.code == 2 and "perspective has no parameter that can vary" in out.stderr, out.stderr
+
+
 @pytest.mark.parametrize("vary,message", [("angle", "NAME=START:END"), ("spin=0:1", "no parameter 'spin'"),
                                           ("angel=0:1", "did you mean 'angle'? it can vary: angle, radius"),
                                           ("center=0:1", "cannot vary (it can: angle, radius)"),

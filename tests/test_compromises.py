@@ -318,15 +318,17 @@ def test_a_warp_that_moves_nothing_says_so(preset, params, still):
     assert bool(said) == still, mesh.record.warnings
 
 
-def test_a_grid_too_coarse_to_see_the_warp_is_not_called_a_warp_that_moves_nothing():
+def test_a_grid_too_coarse_to_see_the_warp_is_named_as_the_cause_of_an_output_that_is_the_input():
     """--cell 10000 on 80 x 60: one quad, whose corners a swirl leaves in place, though it moves pixels
-    by 18 px between them; it said "the warp moves no pixel" (no_effect true) and asked whether the mask
-    was inverted. Now the grid's stray says it all, and the coverage warning names the cell."""
+    by 18 px between them; the output is the input (no_effect stays true), but the warning blamed the
+    options and asked whether the mask was inverted. Now it names the coarse grid, and the coverage
+    warning names the cell."""
     mask = np.zeros((60, 80), bool)
     mask[20:40, 30:50] = True
     mesh = FeatureWarper(80, 60, mask, cell=10000).solve(load_warp("swirl")(80, 60, angle=90))
-    assert mesh.record.grid["pl_error_px"] > 5 and not mesh.record.no_effect, mesh.record.warnings
-    assert not any("moves no pixel" in w for w in mesh.record.warnings), mesh.record.warnings
+    assert mesh.record.grid["pl_error_px"] > 5 and mesh.record.no_effect, mesh.record.warnings
+    still = [w for w in mesh.record.warnings if "moves no pixel" in w]
+    assert len(still) == 1 and "the grid is too coarse to follow the warp" in still[0] and "options" not in still[0]
     assert any("strays up to" in w for w in mesh.record.warnings)
     assert any("or --cell 10000 too coarse for the mask's features?" in w for w in mesh.record.warnings)
 

@@ -278,3 +278,21 @@ def test_an_opaque_alpha_channel_is_left_out_of_the_metrics(runner, tmp_path):
     alpha = metrics(runner("diff", save(tmp_path / "c.png", np.dstack([rgb, opaque])),
                            save(tmp_path / "d.png", np.dstack([changed, opaque])), "--max-rmse", "99"))
     assert plain["rmse"] == alpha["rmse"] and float(plain["rmse"]) > 0
+
+
+def test_a_closed_pipe_is_left_to_the_command_line_and_a_full_stdout_is_trouble(monkeypatch):
+    """diff's figures not written are trouble (2); a reader gone away is not (main says nothing)."""
+    import click
+
+    from featurewarp_cli.cli import diff as command
+
+    for error, expected in ((BrokenPipeError(32, "Broken pipe"), BrokenPipeError),
+                            (OSError(28, "No space left on device"), click.ClickException)):
+        def failing(text, error=error):
+            raise error
+        monkeypatch.setattr(command.click, "echo", failing)
+        with pytest.raises(expected) as caught:
+            command._echo("rmse 0")
+        if expected is click.ClickException:
+            assert caught.value.exit_code == 2 and "No space left" in caught.value.message
+

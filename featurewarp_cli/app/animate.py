@@ -51,14 +51,14 @@ def parse_vary(texts, preset) -> dict[str, tuple[float, float]]:
             raise WarpError(f"{text!r} is not NAME=START:END", "--vary", usage=True)
         name, start, end = match.groups()
         if name not in names:
-            raise WarpError(f"{preset.name} has no parameter {name!r}; {did_you_mean(name, numeric)}it can vary: "
-                            f"{', '.join(numeric)}", "--vary", usage=True)
+            hint = did_you_mean(name, numeric) + _can_vary(preset.name, numeric)
+            raise WarpError(f"{preset.name} has no parameter {name!r}; {hint}", "--vary", usage=True)
         param = names[name]
         if param.name in ranges:
             raise WarpError(f"{name} is given twice", "--vary", usage=True)
         if param.type not in (int, float):
-            raise WarpError(f"{name} is not a number and cannot vary (it can: {', '.join(numeric)})", "--vary",
-                            usage=True)
+            others = f"it can: {', '.join(numeric)}" if numeric else _can_vary(preset.name, numeric)
+            raise WarpError(f"{name} is not a number and cannot vary ({others})", "--vary", usage=True)
         try:
             ranges[param.name] = (param.check(start), param.check(end))
         except ParamError as err:               # named as --vary names it: NAME=START:END
@@ -66,6 +66,11 @@ def parse_vary(texts, preset) -> dict[str, tuple[float, float]]:
     if not ranges:
         raise WarpError("give at least one NAME=START:END", "--vary", usage=True)
     return ranges
+
+
+def _can_vary(preset: str, numeric: list) -> str:
+    """What ``--vary`` can take of ``preset``: ``it can vary: angle, radius``, or that nothing can."""
+    return f"it can vary: {', '.join(numeric)}" if numeric else f"{preset} has no parameter that can vary"
 
 
 def frame_params(settings: Settings, ranges: dict, frames: int) -> list[dict]:

@@ -65,20 +65,17 @@ def diff_command(a, b, max_rmse, min_psnr, max_pixels_off, tolerance, diff_image
         raise error from err
     if reason:
         if as_json and not quiet:         # a CI job parses the failure as it parses any other
-            click.echo(_as_json(a, b, None, [f"cannot be compared: {reason}"], tolerance))
+            _echo(_as_json(a, b, None, [f"cannot be compared: {reason}"], tolerance))
         unwritten = f"; {diff_image} not written" if diff_image else ""
         raise click.ClickException(f"{a} and {b} cannot be compared: {reason}{unwritten}")
     for note in result.notes:
         click.echo(f"featurewarp: note: {note}", err=True)
     broken = diff.failures(result, max_rmse, min_psnr, max_pixels_off, tolerance_given)
     broken += _durations_differ(first.durations, second.durations)
-    try:
-        if as_json and not quiet:
-            click.echo(_as_json(a, b, result, broken))
-        elif not quiet:
-            click.echo("\n".join(result.lines()))
-    except OSError as err:                 # the metrics not written is trouble (2), not "differ" (1)
-        raise _trouble(f"cannot write stdout: {err.strerror or err}") from err
+    if as_json and not quiet:
+        _echo(_as_json(a, b, result, broken))
+    elif not quiet:
+        _echo("\n".join(result.lines()))
     if target:
         _write_highlight(target, diff.highlight(first.image, result.off))
     if broken:
@@ -132,6 +129,17 @@ def _write_highlight(target: tuple[str, str], picture) -> None:
         write.write_atomic(path, encode.encode_image(picture, fmt))
     except (ImageError, OSError) as err:
         raise _trouble(f"cannot write {path}: {getattr(err, 'strerror', None) or err}") from err
+
+
+def _echo(text: str) -> None:
+    """The figures on stdout; not written is trouble (2), not "differ" (1). A reader that went away
+    (a closed pipe) is the command line's, as for every command."""
+    try:
+        click.echo(text)
+    except BrokenPipeError:
+        raise
+    except OSError as err:
+        raise _trouble(f"cannot write stdout: {err.strerror or err}") from err
 
 
 def _trouble(message: str) -> click.ClickException:

@@ -75,12 +75,15 @@ def assess(state, target, warped, tied, unpinned, warp, record: SolveRecord, not
                                        f", or --cell {record.grid['cell']:.6g} too coarse for the mask's "
                                        f"features?)" if chosen_cell else "?)"))
     error = record.grid.get("pl_error_px", 0.0)
-    # Nothing moves by more than the nodes' largest move plus the grid's stray from W (a swirl
-    # under a one-quad --cell moves no node and pixels by 55 px).
     if not quick and tuple(warp.canvas) == (state.grid.width, state.grid.height) and \
-            np.max(np.abs(warped - state.nodes), initial=0.0) + error <= STILL_PX:    # a covering mask: above
-        record.warnings.append(f"{STILL} by more than {STILL_PX:g} px: the output is the input "
-                               f"(options at their identity, a centre far off the image, or handles that stay put?)")
+            np.max(np.abs(warped - state.nodes), initial=0.0) <= STILL_PX:     # W at the nodes (a covering mask: above)
+        # The output is the input all the same; where the grid strays from W, the grid is why (a
+        # swirl under a one-quad --cell leaves its corners in place and moves pixels by 55 px).
+        coarse = error > STILL_PX
+        where, cause = ((" at the grid's nodes", f"the grid is too coarse to follow the warp, which moves pixels by up "
+                         f"to {error:.1f} px between them") if coarse else
+                        ("", "options at their identity, a centre far off the image, or handles that stay put?"))
+        record.warnings.append(f"{STILL} by more than {STILL_PX:g} px{where}: the output is the input ({cause})")
     if not quick and error > fidelity.MAX_PL_ERROR:          # NaN (a preview's grid) is not above
         chosen = "the given cell's grid" if chosen_cell else "the finest automatic grid (800 000 nodes at most)"
         record.warnings.append(f"{chosen} (cell {record.grid['cell']:.4g} px) strays up to {error:.1f} px from "
