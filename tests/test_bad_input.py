@@ -77,6 +77,15 @@ def lab_tiff() -> bytes:
     return out.getvalue()
 
 
+def lab_tiff_16() -> bytes:
+    """A 16-bit CIELab TIFF, which Pillow cannot open (so its header says nothing) and OpenCV
+    decodes to 8-bit RGB of the wrong colours."""
+    from featurewarp_cli.io import tiff
+
+    samples = textured().astype(np.uint16) * 257
+    return tiff.with_tags(encode.encode_image(samples, "tiff"), {tiff.PHOTOMETRIC: (tiff.SHORT, [8])})
+
+
 #: Input files by name: their bytes.
 FILES = {
     "ok.png": PNG,
@@ -97,6 +106,7 @@ FILES = {
     "huge.jpg": huge_jpeg(),
     "zero.png": png_bytes(np.zeros((2, 2), np.uint8), 0, size=(0, 5)),
     "lab.tif": lab_tiff(),
+    "lab16.tif": lab_tiff_16(),
 }
 
 # (id, arguments, exit code, words the message must contain). {name} is a file of FILES,
@@ -151,6 +161,7 @@ CASES = [
     ("corrupt mask", "swirl {ok.png} {out} -m {corrupt.png}", 1, ["--mask", "corrupt.png"]),
     ("empty mask file", "swirl {ok.png} {out} -m {empty.png}", 1, ["--mask", "is empty"]),
     ("lab tiff", "swirl {lab.tif} {out}", 1, ["lab.tif", "CIELab", "convert it to RGB"]),   # was wrong colours, exit 0
+    ("16-bit lab tiff", "swirl {lab16.tif} {out}", 1, ["lab16.tif", "CIELab", "convert it to RGB"]),
 ]
 
 
@@ -364,6 +375,23 @@ def test_palette_png(runner, tmp_path, transparent):
     assert np.array_equal(out[:, :, :3][shown], palette[index][:, :, ::-1][shown])
     if transparent:
         assert (out[:, :, 3][~shown] == 0).all() and (out[:, :, 3][shown] == 255).all()
+
+
+def test_a_lab_tiff_mask_is_read_for_its_lightness(runner, tmp_path):
+    """A mask's colours do not matter: a CIELab TIFF mask (refused as INPUT) marks what its RGB twin marks."""
+    import io
+
+    from PIL import Image
+
+    from featurewarp_cli.engine.arrays import mask_file
+
+    out = io.BytesIO()
+    Image.fromarray(square_mask()).convert("RGB").convert("LAB").save(out, "TIFF")
+    (tmp_path / "mask.tif").write_bytes(out.getvalue())
+    assert np.array_equal(mask_file(tmp_path / "mask.tif", square_mask().shape), square_mask() >= 128)
+    save(tmp_path / "in.png", textured())
+    assert runner("warp", "swirl", tmp_path / "in.png", tmp_path / "o.png", "-m", tmp_path / "mask.tif").code == 0
+    check_refused(runner("warp", "swirl", tmp_path / "mask.tif", tmp_path / "o.png"), 1, ["CIELab"])
 
 
 def test_sixteen_bit_mask(runner, tmp_path):

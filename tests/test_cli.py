@@ -10,6 +10,7 @@ test files (``from test_cli import ...``).
 from __future__ import annotations
 
 import inspect
+import io
 import json
 import os
 import subprocess
@@ -347,10 +348,21 @@ def test_warps_lists_the_presets_it_is_given(runner):
 @pytest.mark.skipif(not os.path.exists("/dev/full"), reason="needs /dev/full")
 def test_a_stdout_that_cannot_be_written_is_named(tmp_path):
     """'featurewarp warps > /dev/full' said "OSError: [Errno 28] No space left on device" and named no file."""
-    with open("/dev/full", "w") as full:
-        run = subprocess.run([sys.executable, "-m", "featurewarp_cli", "schema", "report"], stdout=full,
-                             stderr=subprocess.PIPE, text=True, timeout=60)
-    assert run.returncode == 1 and run.stderr == "featurewarp: error: cannot write stdout: No space left on device\n"
+    for encoding in ("utf-8", "ascii"):          # with ASCII, click writes through its own wrapper of stdout
+        with open("/dev/full", "w") as full:
+            run = subprocess.run([sys.executable, "-m", "featurewarp_cli", "schema", "report"], stdout=full,
+                                 stderr=subprocess.PIPE, text=True, timeout=60,
+                                 env={**os.environ, "PYTHONIOENCODING": encoding})
+        assert run.returncode == 1 and run.stderr == "featurewarp: error: cannot write stdout: No space left on device\n"
+
+
+def test_only_a_stream_on_stdout_is_stdout(tmp_path):
+    """No stdout at all (None, as under pythonw) is not a stream that failed to be written."""
+    from featurewarp_cli.cli.main import _is_stdout
+
+    with open(tmp_path / "f", "w") as other:
+        assert not _is_stdout(None) and not _is_stdout(other) and not _is_stdout(io.StringIO())
+    assert _is_stdout(os.fdopen(1, "w", closefd=False))
 
 
 def test_help_is_fast():
@@ -480,5 +492,8 @@ def test_an_option_another_overrides_is_noted(runner, tmp_path):
     assert decode.read_image(str(tmp_path / "o.png")).shape[1] == 100
     run = runner("warp", "stretch", image, tmp_path / "o.png", "--size", "50x40", "--sx", "3", "--height", "50")
     assert "--sx does nothing with --size" in run.stderr and "--height does nothing with --size" in run.stderr
+    run = runner("warp", "stretch", image, tmp_path / "o.png", "--sx", "2", "--width", "100", "--size", "50x40")
+    assert run.stderr.count("does nothing") == 2 and "--sx does nothing with --size, which overrides it" in run.stderr
+    assert "--width does nothing with --size" in run.stderr       # --sx is not named against --width, which loses too
     for alone in (("--width", "100"), ("--sx", "2", "--height", "50")):
         assert "does nothing" not in runner("warp", "stretch", image, tmp_path / "o.png", *alone).stderr

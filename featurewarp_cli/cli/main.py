@@ -360,11 +360,21 @@ def _writing_stdout(err: Exception) -> bool:
     tb = err.__traceback__
     while tb is not None:
         frame = tb.tb_frame
-        if frame.f_code.co_name in ("echo", "flush", "write") and frame.f_locals.get("self", frame.f_locals.get(
-                "file")) in (sys.stdout, sys.__stdout__, getattr(sys.stdout, "buffer", None)):
+        if frame.f_code.co_name in ("echo", "flush", "write") and _is_stdout(
+                frame.f_locals.get("self", frame.f_locals.get("file"))):
             return True
         tb = tb.tb_next
     return False
+
+
+def _is_stdout(stream) -> bool:
+    """Whether ``stream`` writes to file descriptor 1: sys.stdout, its buffer, or the text wrapper
+    click puts around them where stdout's encoding is ASCII (``PYTHONIOENCODING=ascii``); not
+    None, where there is no stdout at all."""
+    try:
+        return stream is not None and stream.fileno() == 1
+    except (AttributeError, OSError, ValueError):   # io.UnsupportedOperation is both of the last two
+        return False
 
 
 def _error_name(err: Exception) -> str:

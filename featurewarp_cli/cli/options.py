@@ -278,9 +278,10 @@ def _note_unused(settings, params=()) -> None:
             stages.notice(f"{option_flag(name)} does nothing with --mode {settings.mode}")
         elif maskless:
             stages.notice(f"{option_flag(name)} does nothing without --mask (the plain warp)")
-    for param in params:
-        if source(param.name) == click.core.ParameterSource.COMMANDLINE:
-            for name in param.overrides:
-                if source(name) == click.core.ParameterSource.COMMANDLINE:
-                    stages.notice(f"{option_flag(name)} does nothing with {option_flag(param.name)}, "
-                                  f"which overrides it")
+    given = {param.name: param for param in params if source(param.name) == click.core.ParameterSource.COMMANDLINE}
+    for name in given:
+        over = [other for other in given.values() if name in other.overrides]
+        last = [other.name for other in over if not any(other.name in top.overrides for top in over)]
+        if last:                              # --sx under --width and --size: --size is what wins
+            stages.notice(f"{option_flag(name)} does nothing with {' and '.join(map(option_flag, last))}, "
+                          f"which {'override' if len(last) > 1 else 'overrides'} it")

@@ -367,7 +367,7 @@ def _full_range(image: np.ndarray, maxval: int | None, name: str) -> np.ndarray:
 
 
 def decode_image(data: bytes, name: str, max_pixels: int | None = MAX_PIXELS,
-                 max_memory: int | None = None) -> np.ndarray:
+                 max_memory: int | None = None, colours: bool = True) -> np.ndarray:
     """Decode image bytes (format sniffed from them) keeping depth and alpha, upright.
 
     The size in the header is checked against ``max_pixels`` before decoding;
@@ -387,6 +387,9 @@ def decode_image(data: bytes, name: str, max_pixels: int | None = MAX_PIXELS,
     max_memory : int or None
         Memory budget in bytes: an image whose header claims more than it can hold
         (:func:`featurewarp_cli.io.limits.check_memory`) is refused before decoding.
+    colours : bool
+        Whether the colours are used: a CIELab TIFF, whose colours OpenCV's decoding gets wrong,
+        is refused where they are, and read where only its lightness is (a mask).
 
     Returns
     -------
@@ -406,10 +409,10 @@ def decode_image(data: bytes, name: str, max_pixels: int | None = MAX_PIXELS,
     header = read_header(data)
     if header is not None:
         check_size(header.width, header.height, name, max_pixels, max_memory)
-        if header.mode == "LAB":              # OpenCV reads L*a*b* as if it were RGB: wrong colours, no error
-            raise ImageError(f"{name} holds CIELab colours (a Lab TIFF), which featurewarp does not read; convert "
-                             f"it to RGB first (ImageMagick: convert {os.path.basename(name)} -colorspace sRGB "
-                             f"rgb.tif)")
+    if colours and tiff.holds_lab(data):      # OpenCV's L*a*b* to RGB: wrong colours, no error
+        raise ImageError(f"{name} holds CIELab colours (a Lab TIFF), which featurewarp does not read; convert "
+                         f"it to RGB first (ImageMagick: convert {os.path.basename(name)} -colorspace sRGB "
+                         f"rgb.tif)")
     scans = data.count(b"\xff\xda") if data.startswith(b"\xff\xd8") else 0
     if scans > MAX_JPEG_SCANS:
         raise ImageError(f"{name} has {scans} JPEG scans, above {MAX_JPEG_SCANS} (a progressive JPEG has about "
@@ -428,10 +431,12 @@ def decode_image(data: bytes, name: str, max_pixels: int | None = MAX_PIXELS,
     return image
 
 
-def read_image(path: str, max_pixels: int | None = MAX_PIXELS, max_bytes: int | None = None) -> np.ndarray:
+def read_image(path: str, max_pixels: int | None = MAX_PIXELS, max_bytes: int | None = None,
+               colours: bool = True) -> np.ndarray:
     """Read and decode an image file (``-``: stdin, at most ``max_bytes``, the memory budget,
     which its header's size must also fit); see :func:`decode_image`."""
-    return decode_image(read_bytes(path, max_bytes), "stdin" if path == "-" else path, max_pixels, max_bytes)
+    return decode_image(read_bytes(path, max_bytes), "stdin" if path == "-" else path, max_pixels, max_bytes,
+                        colours)
 
 
 def brightest_gray(image: np.ndarray) -> tuple[int, bool]:

@@ -16,6 +16,8 @@ from . import ImageError
 
 #: ExtraSamples, and its values: associated (premultiplied) and unassociated alpha.
 EXTRA_SAMPLES, ASSOCIATED, UNASSOCIATED = 338, 1, 2
+#: PhotometricInterpretation, and its values for L*a*b* samples: CIELab, ICCLab, ITULab.
+PHOTOMETRIC, LAB_PHOTOMETRICS = 262, (8, 9, 10)
 
 
 def first_directory(data: bytes) -> tuple[str, int, list[bytes], bool] | None:
@@ -36,8 +38,9 @@ def first_directory(data: bytes) -> tuple[str, int, list[bytes], bool] | None:
     return order, first, [data[start + size * k:start + size * (k + 1)] for k in range(entries)], big
 
 
-def extra_samples(data: bytes) -> int | None:
-    """The first ExtraSamples value of a TIFF's first page, or None (no such tag, not a TIFF)."""
+def first_short(data: bytes, wanted: int) -> int | None:
+    """The first value of the SHORT tag ``wanted`` on a TIFF's first page, or None (no such tag,
+    not a TIFF)."""
     found = first_directory(data)
     if found is None:
         return None
@@ -45,9 +48,20 @@ def extra_samples(data: bytes) -> int | None:
     for entry in entries:
         tag, kind = struct.unpack_from(order + "HH", entry)
         (count,) = struct.unpack_from(order + ("Q" if big else "I"), entry, 4)
-        if tag == EXTRA_SAMPLES and kind == 3 and count >= 1:
+        if tag == wanted and kind == 3 and count >= 1:
             return struct.unpack_from(order + "H", entry, 12 if big else 8)[0]   # inline, left-justified
     return None
+
+
+def extra_samples(data: bytes) -> int | None:
+    """The first ExtraSamples value of a TIFF's first page, or None (no such tag, not a TIFF)."""
+    return first_short(data, EXTRA_SAMPLES)
+
+
+def holds_lab(data: bytes) -> bool:
+    """Whether a TIFF's first page holds L*a*b* samples (read from its tag, also where Pillow
+    cannot open the file, as a 16-bit CIELab TIFF)."""
+    return first_short(data, PHOTOMETRIC) in LAB_PHOTOMETRICS
 
 
 #: TIFF field types written here: (code, struct format of one value, or None for bytes).
