@@ -221,6 +221,9 @@ def test_stdin_errors(runner, tmp_path):
     # stdin to stdout: what is wrong with stdin, not that its format is not one featurewarp writes
     check_refused(runner("warp", "swirl", "-", "-", input=b""), 1, ["stdin is empty"])
     check_refused(runner("warp", "swirl", "-", "-", input=b"hello\n"), 1, ["stdin", "cannot be decoded"])
+    # the hint's command reads stdin as the failed one did, not a file named "stdin"
+    check_refused(runner("warp", "swirl", "-", tmp_path / "o.png", input=FILES["lab.tif"]), 1,
+                  ["stdin holds CIELab", "convert - -colorspace sRGB"])
 
 
 def test_huge_image_is_refused_before_decoding(runner, inputs, monkeypatch):

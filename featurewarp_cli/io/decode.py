@@ -20,6 +20,7 @@ import io
 import logging
 import os
 import re
+import shlex
 import sys
 import threading
 import warnings
@@ -411,8 +412,7 @@ def decode_image(data: bytes, name: str, max_pixels: int | None = MAX_PIXELS,
         check_size(header.width, header.height, name, max_pixels, max_memory)
     if colours and tiff.holds_lab(data):      # OpenCV's L*a*b* to RGB: wrong colours, no error
         raise ImageError(f"{name} holds CIELab colours (a Lab TIFF), which featurewarp does not read; convert "
-                         f"it to RGB first (ImageMagick: convert {os.path.basename(name)} -colorspace sRGB "
-                         f"rgb.tif)")
+                         f"it to RGB first (ImageMagick: convert {_shell_word(name)} -colorspace sRGB rgb.tif)")
     scans = data.count(b"\xff\xda") if data.startswith(b"\xff\xd8") else 0
     if scans > MAX_JPEG_SCANS:
         raise ImageError(f"{name} has {scans} JPEG scans, above {MAX_JPEG_SCANS} (a progressive JPEG has about "
@@ -429,6 +429,12 @@ def decode_image(data: bytes, name: str, max_pixels: int | None = MAX_PIXELS,
     if header is not None and header.orientation != 1 and header.format in TURNED_HERE:
         image = np.ascontiguousarray(ORIENTATIONS[header.orientation](image))
     return image
+
+
+def _shell_word(name: str) -> str:
+    """How a command line names the input ``name`` in a hint: its file name, quoted for a shell;
+    ``-`` for stdin."""
+    return "-" if name == "stdin" else shlex.quote(os.path.basename(name))
 
 
 def read_image(path: str, max_pixels: int | None = MAX_PIXELS, max_bytes: int | None = None,
