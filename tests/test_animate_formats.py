@@ -194,6 +194,10 @@ def test_only_the_options_that_override_the_varied_one_are_named(files):
         in out.stderr, out.stderr
     error = out.stderr.strip().splitlines()[-1]
     assert "--sy" not in error and "--sy does nothing with --size" in out.stderr      # the notice: it does not
+    both = run("animate", "stretch", str(files / "in.png"), str(files / "o.gif"), "-m", str(files / "mask.png"),
+               "--vary", "sx=1:2", "--width", "100", "--size", "100x100", "--frames", "3")
+    assert both.code == 2 and "--width and --size override it; drop --width and --size to vary sx" in both.stderr
+    assert "an option given" not in both.stderr       # neither alone frees sx: it named neither
 
 
 @pytest.mark.parametrize("name", ["odd.mp4", "odd.avi"])

@@ -77,13 +77,14 @@ def lab_tiff() -> bytes:
     return out.getvalue()
 
 
-def lab_tiff_16() -> bytes:
+def lab_tiff_16(kind=None) -> bytes:
     """A 16-bit CIELab TIFF, which Pillow cannot open (so its header says nothing) and OpenCV
-    decodes to 8-bit RGB of the wrong colours."""
+    decodes to 8-bit RGB of the wrong colours; ``kind``: the photometric tag's field type (libtiff
+    reads a LONG one too)."""
     from featurewarp_cli.io import tiff
 
     samples = textured().astype(np.uint16) * 257
-    return tiff.with_tags(encode.encode_image(samples, "tiff"), {tiff.PHOTOMETRIC: (tiff.SHORT, [8])})
+    return tiff.with_tags(encode.encode_image(samples, "tiff"), {tiff.PHOTOMETRIC: (kind or tiff.SHORT, [8])})
 
 
 #: Input files by name: their bytes.
@@ -107,6 +108,7 @@ FILES = {
     "zero.png": png_bytes(np.zeros((2, 2), np.uint8), 0, size=(0, 5)),
     "lab.tif": lab_tiff(),
     "lab16.tif": lab_tiff_16(),
+    "lab_long.tif": lab_tiff_16((4, "I")),
 }
 
 # (id, arguments, exit code, words the message must contain). {name} is a file of FILES,
@@ -162,6 +164,9 @@ CASES = [
     ("empty mask file", "swirl {ok.png} {out} -m {empty.png}", 1, ["--mask", "is empty"]),
     ("lab tiff", "swirl {lab.tif} {out}", 1, ["lab.tif", "CIELab", "convert it to RGB"]),   # was wrong colours, exit 0
     ("16-bit lab tiff", "swirl {lab16.tif} {out}", 1, ["lab16.tif", "CIELab", "convert it to RGB"]),
+    ("lab tiff, its tag a long", "swirl {lab_long.tif} {out}", 1, ["lab_long.tif", "CIELab"]),
+    # a mask's grey levels from L*a*b* are off too: greys 123-127 crossed 128, a 0/1 mask marked nothing
+    ("lab tiff mask", "swirl {ok.png} {out} -m {lab.tif}", 1, ["--mask", "lab.tif", "CIELab"]),
 ]
 
 
@@ -380,21 +385,20 @@ def test_palette_png(runner, tmp_path, transparent):
         assert (out[:, :, 3][~shown] == 0).all() and (out[:, :, 3][shown] == 255).all()
 
 
-def test_a_lab_tiff_mask_is_read_for_its_lightness(runner, tmp_path):
-    """A mask's colours do not matter: a CIELab TIFF mask (refused as INPUT) marks what its RGB twin marks."""
+def test_diff_refuses_a_lab_page_after_the_first(runner, tmp_path):
+    """diff compares every page: a Lab second page read as colours said 'differ' (exit 1)."""
     import io
 
     from PIL import Image
 
-    from featurewarp_cli.engine.arrays import mask_file
-
-    out = io.BytesIO()
-    Image.fromarray(square_mask()).convert("RGB").convert("LAB").save(out, "TIFF")
-    (tmp_path / "mask.tif").write_bytes(out.getvalue())
-    assert np.array_equal(mask_file(tmp_path / "mask.tif", square_mask().shape), square_mask() >= 128)
-    save(tmp_path / "in.png", textured())
-    assert runner("warp", "swirl", tmp_path / "in.png", tmp_path / "o.png", "-m", tmp_path / "mask.tif").code == 0
-    check_refused(runner("warp", "swirl", tmp_path / "mask.tif", tmp_path / "o.png"), 1, ["CIELab"])
+    rgb = Image.fromarray(cv2.cvtColor(textured(), cv2.COLOR_BGR2RGB))
+    for name, second in (("a.tif", rgb.convert("LAB")), ("b.tif", rgb)):
+        out = io.BytesIO()
+        rgb.save(out, "TIFF", save_all=True, append_images=[second])
+        (tmp_path / name).write_bytes(out.getvalue())
+    run = runner("diff", tmp_path / "a.tif", tmp_path / "b.tif")
+    assert run.code == 2 and "a.tif (page 2) holds CIELab colours" in run.stderr, run.stderr
+    assert runner("diff", tmp_path / "b.tif", tmp_path / "b.tif").code == 0
 
 
 def test_sixteen_bit_mask(runner, tmp_path):

@@ -300,16 +300,19 @@ def check_vary_moves(settings: Settings, ranges: dict, warps: list, width: int, 
                                          or not np.array_equal(w.forward(points), first) for w in warps[1:]):
         return
     varied = ", ".join(name.replace("_", "-") for name in ranges)
-    given = " or ".join(_overriding(settings, ranges, warps, points)) or "an option given"
-    raise WarpError(f"the varied {varied} changes no frame: {given} overrides it; drop {given} to vary {varied}",
+    given = _overriding(settings, ranges, warps, points)
+    verb = "override" if " and " in given else "overrides"
+    raise WarpError(f"the varied {varied} changes no frame: {given} {verb} it; drop {given} to vary {varied}",
                     "--vary", usage=True)
 
 
-def _overriding(settings: Settings, ranges: dict, warps: list, points: np.ndarray) -> list[str]:
+def _overriding(settings: Settings, ranges: dict, warps: list, points: np.ndarray) -> str:
     """The flags of the options given (not default, not varied) without which the first and last
-    frames differ: those that override the varied values (stretch's --size over sx, not --sy)."""
+    frames differ: those that override the varied values (stretch's --size over sx, not --sy);
+    where no one alone frees them (--width and --size over sx), those that declare overriding
+    them (:attr:`plugins.Param.overrides`), together; else 'an option given'."""
     if settings.warp_factory is not None:       # not the preset's warps: nothing to try without
-        return []
+        return "an option given"
     preset = plugins.load(settings.preset)
     first, last = dict(warps[0].values), dict(warps[-1].values)
     width, height = warps[0].width, warps[0].height
@@ -321,8 +324,10 @@ def _overriding(settings: Settings, ranges: dict, warps: list, points: np.ndarra
             return False
         return tuple(a.canvas) != tuple(b.canvas) or not np.array_equal(a.forward(points), b.forward(points))
 
-    return [plugins.option_flag(p.name) for p in preset.params
-            if p.name not in ranges and settings.params.get(p.name, p.default) != p.default and moves(p.name, p.default)]
+    given = [p for p in preset.params if p.name not in ranges and settings.params.get(p.name, p.default) != p.default]
+    alone = [plugins.option_flag(p.name) for p in given if moves(p.name, p.default)]
+    together = [plugins.option_flag(p.name) for p in given if set(p.overrides) & set(ranges)]
+    return " or ".join(alone) or " and ".join(together) or "an option given"
 
 
 def load_with_header(settings: Settings, input: str, mask: str | None):

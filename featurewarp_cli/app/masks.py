@@ -45,7 +45,7 @@ def load_mask(settings, mask: str | None, size: tuple[int, int], header=None, im
     width, height = size
     if mask != "-" and os.path.isfile(mask):
         check_file_size(mask, "--mask", settings.max_memory, settings.max_pixels)
-    pixels = read_input(mask, "--mask", settings.max_pixels, max_bytes=settings.max_memory, colours=False)
+    pixels = read_input(mask, "--mask", settings.max_pixels, max_bytes=settings.max_memory)
     feature_mask = decode.mask_from_image(pixels)
     if feature_mask.shape != (height, width):
         turned = (feature_mask.shape == (width, height) and getattr(header, "orientation", 1) >= 5) * \

@@ -121,16 +121,15 @@ def _check_paths(input: str, mask: str | None) -> None:
 
 
 def read_input(path: str, param: str, max_pixels: int | None, data: bytes | None = None,
-               max_bytes: int | None = None, colours: bool = True):
+               max_bytes: int | None = None):
     """Decode an image argument (``-``: stdin; ``data``: its bytes if already read); a missing file
-    is a usage error, a bad one a processing error (:class:`WarpError`); ``param`` names it;
-    ``colours``: :func:`featurewarp_cli.io.decode.decode_image`'s."""
+    is a usage error, a bad one a processing error (:class:`WarpError`); ``param`` names it."""
     if path != "-" and not os.path.isfile(path):
         raise WarpError(f"{path} {decode.path_problem(path)}", param, usage=True)
     try:
         if data is not None:
-            return decode.decode_image(data, "stdin" if path == "-" else path, max_pixels, max_bytes, colours)
-        return decode.read_image(path, max_pixels, max_bytes, colours)
+            return decode.decode_image(data, "stdin" if path == "-" else path, max_pixels, max_bytes)
+        return decode.read_image(path, max_pixels, max_bytes)
     except ImageError as err:
         raise WarpError(str(err), None if param == "INPUT" else param) from err
 

@@ -247,9 +247,12 @@ def _frames(source: Source):
 
     from ..app.pipeline import WarpError
     from ..io import tiff
-    from ..io.decode import gray_alpha_to_bgra
+    from ..io.decode import gray_alpha_to_bgra, lab_error
 
     if source.format == "TIFF":
+        lab = tiff.lab_pages(source.data, source.frames)
+        if lab:                                   # the first page's was refused as it was read
+            raise WarpError(str(lab_error(source.path, f" (page {lab[0] + 1})")), source.name)
         ok, pages = cv2.imdecodemulti(np.frombuffer(source.data, np.uint8), cv2.IMREAD_UNCHANGED)
         if not ok or len(pages) != source.frames:
             raise WarpError(f"{source.path}: its {source.frames} pages cannot be decoded", source.name)

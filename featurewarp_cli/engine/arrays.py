@@ -177,7 +177,7 @@ def mask_file(path, shape: tuple[int, int]) -> np.ndarray:
     from ..io.decode import mask_from_image, read_image
 
     try:
-        marked = mask_from_image(read_image(os.fspath(path), colours=False))
+        marked = mask_from_image(read_image(os.fspath(path)))
     except ImageError as err:
         raise ValueError(f"mask: {err}") from None
     if marked.shape != shape:

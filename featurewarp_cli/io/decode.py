@@ -368,7 +368,7 @@ def _full_range(image: np.ndarray, maxval: int | None, name: str) -> np.ndarray:
 
 
 def decode_image(data: bytes, name: str, max_pixels: int | None = MAX_PIXELS,
-                 max_memory: int | None = None, colours: bool = True) -> np.ndarray:
+                 max_memory: int | None = None) -> np.ndarray:
     """Decode image bytes (format sniffed from them) keeping depth and alpha, upright.
 
     The size in the header is checked against ``max_pixels`` before decoding;
@@ -388,9 +388,6 @@ def decode_image(data: bytes, name: str, max_pixels: int | None = MAX_PIXELS,
     max_memory : int or None
         Memory budget in bytes: an image whose header claims more than it can hold
         (:func:`featurewarp_cli.io.limits.check_memory`) is refused before decoding.
-    colours : bool
-        Whether the colours are used: a CIELab TIFF, whose colours OpenCV's decoding gets wrong,
-        is refused where they are, and read where only its lightness is (a mask).
 
     Returns
     -------
@@ -410,9 +407,8 @@ def decode_image(data: bytes, name: str, max_pixels: int | None = MAX_PIXELS,
     header = read_header(data)
     if header is not None:
         check_size(header.width, header.height, name, max_pixels, max_memory)
-    if colours and tiff.holds_lab(data):      # OpenCV's L*a*b* to RGB: wrong colours, no error
-        raise ImageError(f"{name} holds CIELab colours (a Lab TIFF), which featurewarp does not read; convert "
-                         f"it to RGB first (ImageMagick: convert {_shell_word(name)} -colorspace sRGB rgb.tif)")
+    if tiff.lab_pages(data):
+        raise lab_error(name)
     scans = data.count(b"\xff\xda") if data.startswith(b"\xff\xd8") else 0
     if scans > MAX_JPEG_SCANS:
         raise ImageError(f"{name} has {scans} JPEG scans, above {MAX_JPEG_SCANS} (a progressive JPEG has about "
@@ -431,18 +427,19 @@ def decode_image(data: bytes, name: str, max_pixels: int | None = MAX_PIXELS,
     return image
 
 
-def _shell_word(name: str) -> str:
-    """How a command line names the input ``name`` in a hint: its file name, quoted for a shell;
-    ``-`` for stdin."""
-    return "-" if name == "stdin" else shlex.quote(os.path.basename(name))
+def lab_error(name: str, page: str = "") -> ImageError:
+    """The refusal of a CIELab TIFF (``page``: which page of it, where not the first): OpenCV
+    decodes L*a*b* to wrong colours with no error, and a mask's grey levels from it are off
+    too (libtiff's conversion: greys 123-127 crossed the mask's 128, a 0/1 mask marked nothing)."""
+    hint = "-" if name == "stdin" else shlex.quote(name)       # as the command line named it
+    return ImageError(f"{name}{page} holds CIELab colours (a Lab TIFF), which featurewarp does not read; "
+                      f"convert it to RGB first (ImageMagick: convert {hint} -colorspace sRGB rgb.tif)")
 
 
-def read_image(path: str, max_pixels: int | None = MAX_PIXELS, max_bytes: int | None = None,
-               colours: bool = True) -> np.ndarray:
+def read_image(path: str, max_pixels: int | None = MAX_PIXELS, max_bytes: int | None = None) -> np.ndarray:
     """Read and decode an image file (``-``: stdin, at most ``max_bytes``, the memory budget,
     which its header's size must also fit); see :func:`decode_image`."""
-    return decode_image(read_bytes(path, max_bytes), "stdin" if path == "-" else path, max_pixels, max_bytes,
-                        colours)
+    return decode_image(read_bytes(path, max_bytes), "stdin" if path == "-" else path, max_pixels, max_bytes)
 
 
 def brightest_gray(image: np.ndarray) -> tuple[int, bool]:

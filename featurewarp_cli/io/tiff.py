@@ -27,41 +27,61 @@ def first_directory(data: bytes) -> tuple[str, int, list[bytes], bool] | None:
     if not (big or data[:4] in (b"II*\0", b"MM\0*")) or len(data) < 16:
         return None
     order = "<" if data[:2] == b"II" else ">"
+    (first,) = struct.unpack_from(order + ("Q" if big else "I"), data, 8 if big else 4)
+    entries = _entries(data, first, order, big)
+    return None if entries is None else (order, first, entries, big)
+
+
+def _entries(data: bytes, at: int, order: str, big: bool) -> list[bytes] | None:
+    """The entries of the directory at offset ``at``; None where it runs past the data."""
     offset, count, size = ("Q", "Q", 20) if big else ("I", "H", 12)
-    (first,) = struct.unpack_from(order + offset, data, 8 if big else 4)
-    start = first + struct.calcsize(count)
-    if start > len(data):
+    start = at + struct.calcsize(count)
+    if at <= 0 or start > len(data):
         return None
-    (entries,) = struct.unpack_from(order + count, data, first)
+    (entries,) = struct.unpack_from(order + count, data, at)
     if start + size * entries + struct.calcsize(offset) > len(data):
         return None
-    return order, first, [data[start + size * k:start + size * (k + 1)] for k in range(entries)], big
+    return [data[start + size * k:start + size * (k + 1)] for k in range(entries)]
 
 
-def first_short(data: bytes, wanted: int) -> int | None:
-    """The first value of the SHORT tag ``wanted`` on a TIFF's first page, or None (no such tag,
-    not a TIFF)."""
+def page_values(data: bytes, wanted: int, pages: int = 1) -> list[int | None]:
+    """The first value of the SHORT or LONG tag ``wanted`` on each of a TIFF's first ``pages``
+    pages, None on a page without it; [] for data that is no TIFF. The chain of directories
+    ends at a broken or repeated offset."""
     found = first_directory(data)
     if found is None:
-        return None
-    order, _, entries, big = found
+        return []
+    order, at, entries, big = found
+    word, values, seen = "Q" if big else "I", [], set()
+    while entries is not None and len(values) < pages and at not in seen:
+        seen.add(at)
+        values.append(_value(entries, order, big, wanted))
+        (at,) = struct.unpack_from(order + word, data, at + struct.calcsize("Q" if big else "H")
+                                   + (20 if big else 12) * len(entries))
+        entries = _entries(data, at, order, big)
+    return values
+
+
+def _value(entries: list[bytes], order: str, big: bool, wanted: int) -> int | None:
+    """The first value of the SHORT or LONG tag ``wanted`` among a directory's entries."""
     for entry in entries:
         tag, kind = struct.unpack_from(order + "HH", entry)
         (count,) = struct.unpack_from(order + ("Q" if big else "I"), entry, 4)
-        if tag == wanted and kind == 3 and count >= 1:
-            return struct.unpack_from(order + "H", entry, 12 if big else 8)[0]   # inline, left-justified
+        if tag == wanted and kind in (3, 4) and count >= 1:       # SHORT or LONG, as libtiff accepts
+            return struct.unpack_from(order + ("H" if kind == 3 else "I"), entry, 12 if big else 8)[0]   # inline
     return None
 
 
 def extra_samples(data: bytes) -> int | None:
     """The first ExtraSamples value of a TIFF's first page, or None (no such tag, not a TIFF)."""
-    return first_short(data, EXTRA_SAMPLES)
+    return (page_values(data, EXTRA_SAMPLES) or [None])[0]
 
 
-def holds_lab(data: bytes) -> bool:
-    """Whether a TIFF's first page holds L*a*b* samples (read from its tag, also where Pillow
-    cannot open the file, as a 16-bit CIELab TIFF)."""
-    return first_short(data, PHOTOMETRIC) in LAB_PHOTOMETRICS
+def lab_pages(data: bytes, pages: int = 1) -> list[int]:
+    """The pages (0-based) among a TIFF's first ``pages`` that hold L*a*b* samples (CIELab,
+    ICCLab, ITULab: their photometric tag, read also where Pillow cannot open the file, as a
+    16-bit CIELab TIFF); [] for other data."""
+    return [k for k, value in enumerate(page_values(data, PHOTOMETRIC, pages)) if value in LAB_PHOTOMETRICS]
 
 
 #: TIFF field types written here: (code, struct format of one value, or None for bytes).
