@@ -316,3 +316,55 @@ def test_a_resolution_no_output_can_store_is_not_kept(tmp_path):
     Image.fromarray(np.zeros((20, 30, 3), np.uint8)).save(tmp_path / "fine.tif", dpi=(300, 300))
     assert metadata.resolution(Image.open(tmp_path / "big.tif")) is None
     assert metadata.resolution(Image.open(tmp_path / "fine.tif")) == pytest.approx((300, 300))
+
+
+def _shot_exif(width: int, height: int) -> bytes:
+    """A camera's EXIF: its Exif directory (capture date, the pixel size) and GPS position."""
+    exif = Image.Exif()
+    exif[271] = "Camera"
+    exif.get_ifd(metadata.EXIF_IFD).update({0x9003: "2024:05:06 07:08:09", metadata.PIXEL_X_DIMENSION: width,
+                                            metadata.PIXEL_Y_DIMENSION: height})
+    exif.get_ifd(metadata.GPS_IFD).update({1: "N", 2: (48.0, 51.0, 29.0)})
+    return exif.tobytes()
+
+
+@pytest.mark.parametrize("fmt", ["jpg", "png", "webp"])
+def test_the_exif_states_the_outputs_pixel_size_and_keeps_the_camera_data(tmp_path, fmt):
+    """A stretched photo's EXIF still said the input's 64 px width (viewers and asset managers
+    read it); its capture date and GPS position stay."""
+    from click.testing import CliRunner
+
+    from featurewarp_cli.cli.main import cli
+
+    source = tmp_path / "in.jpg"
+    Image.fromarray(picture()).save(source, "JPEG", exif=_shot_exif(64, 48))
+    run = CliRunner().invoke(cli, ["warp", "stretch", str(source), str(tmp_path / f"out.{fmt}"), "--sx", "1.5"])
+    assert run.exit_code == 0 and run.output == "", run.output
+    with Image.open(tmp_path / f"out.{fmt}") as written:
+        exif = written.getexif()
+        camera = exif.get_ifd(metadata.EXIF_IFD)
+        assert written.size == (96, 48)
+        assert (camera[metadata.PIXEL_X_DIMENSION], camera[metadata.PIXEL_Y_DIMENSION]) == written.size
+        assert camera[0x9003] == "2024:05:06 07:08:09" and exif.get_ifd(metadata.GPS_IFD)[1] == "N"
+
+
+def test_what_a_tiff_leaves_out_of_the_exif_is_said_and_strict_refuses_it(tmp_path):
+    """TIFF output dropped the capture date and GPS position in silence, --strict passing."""
+    from click.testing import CliRunner
+
+    from featurewarp_cli.cli.main import cli
+
+    source = tmp_path / "in.jpg"
+    Image.fromarray(picture()).save(source, "JPEG", exif=_shot_exif(64, 48))
+    args = ["warp", "swirl", str(source), str(tmp_path / "out.tif"), "--angle", "30"]
+    run = CliRunner().invoke(cli, args)
+    assert run.exit_code == 0 and "not the input's camera data (capture date, exposure...) and GPS position" \
+        in run.output, run.output
+    with Image.open(tmp_path / "out.tif") as written:
+        assert written.getexif()[271] == "Camera"                 # its descriptive tags are kept
+    assert CliRunner().invoke(cli, args + ["--strict"]).exit_code == 1
+    assert CliRunner().invoke(cli, args + ["--strip"]).output == ""
+    descriptive = tmp_path / "plain.jpg"
+    Image.fromarray(picture()).save(descriptive, "JPEG", exif=camera_exif())
+    quiet = CliRunner().invoke(cli, ["warp", "swirl", str(descriptive), str(tmp_path / "o2.tif"), "--angle", "30"])
+    assert quiet.exit_code == 0 and quiet.output == "", quiet.output      # nothing of it is left out

@@ -121,6 +121,7 @@ def encode_image(image: np.ndarray, fmt: str, background=(255, 255, 255), qualit
         return _gif(image)
     lossless_alpha = fmt == "webp" and quality is None and image.ndim == 3 and image.shape[2] == 4
     exif, xmp, dpi = bytes(exif) if exif else None, bytes(xmp) if xmp else None, dpi or None
+    exif = exif and metadata.sized_exif(exif, image.shape[1], image.shape[0])
     given = icc or exif or xmp or dpi
     icc = profiles.for_pixels(icc, 1 if image.ndim == 2 else image.shape[2])
     if fmt == "jpg" and xmp and metadata.jpeg_xmp_unfit(xmp):

@@ -110,6 +110,53 @@ def _upright_exif(image, oriented) -> bytes | None:
         return None
 
 
+#: The Exif directory's pointer, and its tags of the picture's width and height in pixels.
+EXIF_IFD, PIXEL_X_DIMENSION, PIXEL_Y_DIMENSION = 0x8769, 0xA002, 0xA003
+
+
+def sized_exif(exif: bytes, width: int, height: int) -> bytes:
+    """``exif`` with the pixel size it states (PixelXDimension, PixelYDimension) set to the
+    output's: a warp changes the size, and the input's stayed (viewers and asset managers read
+    it). A block that states none, or cannot be read, as it is."""
+    from PIL import Image
+
+    try:
+        whole = Image.Exif()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            whole.load(exif)
+            camera = whole.get_ifd(EXIF_IFD)
+            if not {PIXEL_X_DIMENSION, PIXEL_Y_DIMENSION} & set(camera):
+                return exif
+            camera[PIXEL_X_DIMENSION], camera[PIXEL_Y_DIMENSION] = int(width), int(height)
+            return whole.tobytes()
+    except Exception:  # a broken block is kept as it came (as decoding kept it)
+        return exif
+
+
+#: The GPS directory's pointer.
+GPS_IFD = 0x8825
+
+
+def left_out_of_tiff(exif: bytes) -> list[str]:
+    """What of the EXIF block ``exif`` a TIFF output leaves out (it keeps the main directory's
+    :data:`TIFF_DESCRIPTIVE_TAGS`): the Exif directory (capture date, exposure...), the GPS
+    one, other tags; [] where nothing is, or the block cannot be read."""
+    from PIL import Image
+
+    try:
+        whole = Image.Exif()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            whole.load(exif)
+            parts = [name for pointer, name in ((EXIF_IFD, "camera data (capture date, exposure...)"),
+                                                (GPS_IFD, "GPS position")) if len(whole.get_ifd(pointer))]
+        others = [tag for tag in whole if tag not in TIFF_DESCRIPTIVE_TAGS + (EXIF_IFD, GPS_IFD)]
+    except Exception:  # a broken block: the encoder keeps none of it either way
+        return []
+    return parts + [f"{len(others)} other tag{'s' * (len(others) > 1)}"] * bool(others)
+
+
 def upright_xmp(xmp) -> bytes | None:
     """An XMP packet (bytes or str) with its tiff:Orientation set to 1; None for none."""
     if not xmp:
@@ -277,6 +324,9 @@ def unkept(header, fmt: str, strip: bool = False) -> list[str]:
     if fmt in BARE_FORMATS and held:
         return said + [f"{BARE_FORMATS[fmt]} output keeps none of the input's {', '.join(held)}: left out "
                        "(--strip leaves them out without this warning)"]
+    if fmt == "tiff" and header.exif and (dropped := left_out_of_tiff(header.exif)):
+        said.append(f"TIFF output keeps the EXIF's descriptive tags only (make, model, artist, copyright...), not "
+                    f"the input's {' and '.join(dropped)} (JPEG, PNG and WebP keep them)")
     if fmt == "jpg" and xmp and (reason := jpeg_xmp_unfit(xmp)):
         said.append(f"the input's XMP ({len(xmp)} bytes) {reason}: left out")
     if header.iptc:
