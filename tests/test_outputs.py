@@ -554,3 +554,18 @@ def test_a_named_staged_file_is_pending_while_it_is_written(tmp_path, monkeypatc
     assert seen and staged.temp in seen[0]
     write.remove_pending()
     assert not os.path.exists(staged.temp)
+
+
+def test_a_sixteen_bit_input_written_to_an_eight_bit_format_is_said(tmp_path):
+    """compare and animate said their 8-bit outputs lose the input's 16 bits; warp to JPEG did not."""
+    samples = (np.random.default_rng(3).random((40, 60, 3)) * 65535).astype(np.uint16)
+    cv2.imwrite(str(tmp_path / "in.png"), samples)
+    for name, said in (("o.jpg", "JPEG holds 8"), ("o.webp", "WebP holds 8"), ("o.png", None), ("o.tif", None)):
+        run = CliRunner().invoke(cli, ["warp", "swirl", str(tmp_path / "in.png"), str(tmp_path / name)])
+        assert run.exit_code == 0, run.output
+        assert (f"the input has 16 bits a sample; {said} (PNG and TIFF keep 16)" in run.output if said
+                else run.output == ""), (name, run.output)
+    cv2.imwrite(str(tmp_path / "in8.png"), (samples >> 8).astype(np.uint8))
+    assert CliRunner().invoke(cli, ["warp", "swirl", str(tmp_path / "in8.png"), str(tmp_path / "o8.jpg")]).output == ""
+    strict = CliRunner().invoke(cli, ["warp", "swirl", str(tmp_path / "in.png"), str(tmp_path / "s.jpg"), "--strict"])
+    assert strict.exit_code == 1 and not (tmp_path / "s.jpg").exists()

@@ -145,6 +145,15 @@ def kept_metadata(strip: bool, header, fmt: str, warnings: list) -> metadata.Met
     return kept
 
 
+def depth_lost(image, fmt: str) -> list[str]:
+    """A warning where ``fmt`` holds fewer bits a sample than the decoded ``image`` has (16-bit
+    to JPEG, WebP...), as compare and animate say of their 8-bit outputs; [] otherwise."""
+    if image.dtype.itemsize == 1 or not formats.FORMATS[fmt].eight_bit:
+        return []
+    name = {"jpg": "JPEG", "webp": "WebP"}.get(fmt, fmt.upper())
+    return [f"the input has 16 bits a sample; {name} holds 8 (PNG and TIFF keep 16)"]
+
+
 def encoded(out_path: str, fmt: str, image, background, quality: int | None = None,
             kept: metadata.Metadata | None = None) -> bytes:
     """``image`` encoded as ``fmt``, with a quality and the metadata to keep (:func:`kept_metadata`;

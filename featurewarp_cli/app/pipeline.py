@@ -17,8 +17,8 @@ from .. import plugins, stages
 from ..engine.defaults import DECAY, FEATURE_WEIGHT, FORMULATION, INTERPOLATION, MODE, SCALE_PRIOR
 from ..io import ImageError, decode, formats, limits
 from .masks import load_mask, mask_file, masked, uses_alpha
-from .outputs import (background_colour, check_distinct, check_encodable, check_grid_name, check_outputs, encoded,
-                      kept_metadata, rendered, write_all)
+from .outputs import (background_colour, check_distinct, check_encodable, check_grid_name, check_outputs, depth_lost,
+                      encoded, kept_metadata, rendered, write_all)
 from .report import refused_report, report_bytes, summary
 
 #: What :func:`prefetch_engine` imports: the engine (grid, features, fold-over guard,
@@ -465,6 +465,7 @@ def warp_file(settings: Settings, input: str, output: str, mask: str | None = No
         timings["load"] += time.perf_counter() - t1
     if image.shape[:2] != (height, width):
         raise WarpError(f"{input} decodes to {image.shape[1]}x{image.shape[0]}, its header says {width}x{height}")
+    warnings += depth_lost(image, fmt)
     mesh.record.warnings[:0] = warnings       # the loading's (an empty mask): said, reported, refused
     check_solution(settings, mesh, partial(refused_report, report, input, out_path, image, warp, mesh, timings, t0,
                                            fmt) if report else None)   # a CI gate reads why: the report, no image
