@@ -127,7 +127,8 @@ def encode_image(image: np.ndarray, fmt: str, background=(255, 255, 255), qualit
     if fmt == "jpg" and xmp and metadata.jpeg_xmp_unfit(xmp):
         xmp = None                                # said before the work (metadata.unkept)
     if (given or lossless_alpha) and fmt in METADATA_FORMATS and image.dtype == np.uint8:
-        return _pillow_encode(image, fmt, quality, icc, exif, xmp, dpi)
+        data = _pillow_encode(image, fmt, quality, icc, exif, xmp, dpi)
+        return metadata.tiff_with_exif_directories(data, exif) if fmt == "tiff" else data
     settings = list(SETTINGS[fmt])
     if quality is not None and fmt in ("jpg", "webp"):
         settings[1] = int(quality)
@@ -166,7 +167,7 @@ def _tagged_tiff(data: bytes, alpha: bool, icc: bytes | None, exif: bytes | None
     tagged = tiff.with_tags(data, tags)
     if tagged is None:
         raise ImageError("cannot store the input's metadata in the TIFF (over 4 GiB); use --strip")
-    return tagged
+    return metadata.tiff_with_exif_directories(tagged, exif)
 
 
 def _exif_tags(exif: bytes | None) -> dict:

@@ -134,14 +134,15 @@ def sized_exif(exif: bytes, width: int, height: int) -> bytes:
         return exif
 
 
-#: The GPS directory's pointer.
-GPS_IFD = 0x8825
+#: The GPS directory's pointer, and the Exif directory's pointer to its interoperability one.
+GPS_IFD, INTEROP_IFD, Y_CB_CR_POSITIONING = 0x8825, 0xA005, 0x0213
 
 
-def left_out_of_tiff(exif: bytes) -> list[str]:
-    """What of the EXIF block ``exif`` a TIFF output leaves out (it keeps the main directory's
-    :data:`TIFF_DESCRIPTIVE_TAGS`): the Exif directory (capture date, exposure...), the GPS
-    one, other tags; [] where nothing is, or the block cannot be read."""
+def left_out_of_tiff(exif: bytes) -> int:
+    """How many tags of the EXIF block ``exif``'s main directory a TIFF output leaves out: it
+    keeps :data:`TIFF_DESCRIPTIVE_TAGS` and the Exif and GPS directories
+    (:func:`tiff_with_exif_directories`); YCbCrPositioning, of JPEG's layout, is no loss. 0 where
+    the block cannot be read (the encoder keeps none of it either)."""
     from PIL import Image
 
     try:
@@ -149,12 +150,47 @@ def left_out_of_tiff(exif: bytes) -> list[str]:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             whole.load(exif)
-            parts = [name for pointer, name in ((EXIF_IFD, "camera data (capture date, exposure...)"),
-                                                (GPS_IFD, "GPS position")) if len(whole.get_ifd(pointer))]
-        others = [tag for tag in whole if tag not in TIFF_DESCRIPTIVE_TAGS + (EXIF_IFD, GPS_IFD)]
-    except Exception:  # a broken block: the encoder keeps none of it either way
-        return []
-    return parts + [f"{len(others)} other tag{'s' * (len(others) > 1)}"] * bool(others)
+        return sum(tag not in TIFF_DESCRIPTIVE_TAGS + (EXIF_IFD, GPS_IFD, Y_CB_CR_POSITIONING) for tag in whole)
+    except Exception:  # a broken block
+        return 0
+
+
+def tiff_with_exif_directories(data: bytes, exif: bytes | None) -> bytes:
+    """A one-page TIFF ``data`` with the Exif and GPS directories of the EXIF block ``exif``
+    (capture date, exposure... and GPS position; the descriptive tags are the first directory's
+    own) written after it and pointed to from its first directory (tags 34665 and 34853), as a
+    camera's TIFF holds them. ``data`` as it is where ``exif`` has neither, where it cannot be
+    read, and for a BigTIFF (whose pointers are 8 bytes), which :func:`left_out_of_tiff` names."""
+    from PIL import Image
+
+    from . import tiff
+
+    found = tiff.first_directory(data)
+    if not exif or found is None or found[3]:
+        return data
+    try:
+        whole, subs = Image.Exif(), Image.Exif()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            whole.load(exif)
+            for pointer in (EXIF_IFD, GPS_IFD):
+                directory = dict(whole.get_ifd(pointer))
+                if pointer == EXIF_IFD:            # a TIFF's size is its own tags' (libtiff: LONG only)
+                    directory.pop(PIXEL_X_DIMENSION, None), directory.pop(PIXEL_Y_DIMENSION, None)
+                    if INTEROP_IFD in directory:
+                        directory[INTEROP_IFD] = dict(whole.get_ifd(INTEROP_IFD))
+                if directory:
+                    subs[pointer] = directory
+        if not len(subs):
+            return data
+        subs.endian = found[0]                            # the file's byte order, not the camera's
+        at = len(data) + len(data) % 2                    # the block's header starts on a word
+        block = subs.tobytes(offset=at + 8)[6:]           # "Exif\0\0" off; offsets as placed at ``at``
+        pointers = {pointer: (tiff.LONG, [value]) for pointer in (EXIF_IFD, GPS_IFD)
+                    if (value := tiff.page_values(block, pointer)[0]) is not None}
+    except Exception:  # a broken block: the descriptive tags only, as before
+        return data
+    return tiff.with_tags(data + b"\0" * (at - len(data)) + block, pointers) or data
 
 
 def upright_xmp(xmp) -> bytes | None:
@@ -325,8 +361,9 @@ def unkept(header, fmt: str, strip: bool = False) -> list[str]:
         return said + [f"{BARE_FORMATS[fmt]} output keeps none of the input's {', '.join(held)}: left out "
                        "(--strip leaves them out without this warning)"]
     if fmt == "tiff" and header.exif and (dropped := left_out_of_tiff(header.exif)):
-        said.append(f"TIFF output keeps the EXIF's descriptive tags only (make, model, artist, copyright...), not "
-                    f"the input's {' and '.join(dropped)} (JPEG, PNG and WebP keep them)")
+        said.append(f"TIFF output keeps the EXIF's descriptive tags (make, model, artist, copyright...) and its "
+                    f"camera and GPS data, not the input's {dropped} other main tag{'s' * (dropped > 1)} "
+                    f"(JPEG, PNG and WebP keep them)")
     if fmt == "jpg" and xmp and (reason := jpeg_xmp_unfit(xmp)):
         said.append(f"the input's XMP ({len(xmp)} bytes) {reason}: left out")
     if header.iptc:
