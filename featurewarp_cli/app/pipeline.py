@@ -465,8 +465,7 @@ def warp_file(settings: Settings, input: str, output: str, mask: str | None = No
         timings["load"] += time.perf_counter() - t1
     if image.shape[:2] != (height, width):
         raise WarpError(f"{input} decodes to {image.shape[1]}x{image.shape[0]}, its header says {width}x{height}")
-    warnings += depth_lost(image, fmt)
-    mesh.record.warnings[:0] = warnings       # the loading's (an empty mask): said, reported, refused
+    mesh.record.warnings[:0] = warnings + depth_lost(image, fmt)    # the loading's and the depth: said, refused
     check_solution(settings, mesh, partial(refused_report, report, input, out_path, image, warp, mesh, timings, t0,
                                            fmt) if report else None)   # a CI gate reads why: the report, no image
     result = rendered(warper, image, mesh, settings.interp, background)
