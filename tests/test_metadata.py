@@ -381,3 +381,20 @@ def test_what_a_tiff_leaves_out_of_the_exif_is_said_and_strict_refuses_it(tmp_pa
         assert CliRunner().invoke(cli, args + ["--strict"]).exit_code == (1 if said else 0)
     with Image.open(tmp_path / "out.tif") as written:
         assert written.getexif().get_ifd(metadata.GPS_IFD)[1] == "N"
+
+
+def test_a_tiff_inputs_camera_and_gps_directories_are_kept(tmp_path):
+    """A TIFF input's EXIF was read as its descriptive tags only: its capture date and GPS
+    position never reached any output."""
+    from click.testing import CliRunner
+
+    from featurewarp_cli.cli.main import cli
+
+    (tmp_path / "in.tif").write_bytes(encode.encode_image(picture(), "tiff", exif=_shot_exif(64, 48)))
+    for name in ("out.jpg", "out.tif"):
+        run = CliRunner().invoke(cli, ["warp", "swirl", str(tmp_path / "in.tif"), str(tmp_path / name)])
+        assert run.exit_code == 0 and run.output == "", run.output
+        with Image.open(tmp_path / name) as written:
+            exif = written.getexif()
+            assert exif.get_ifd(metadata.EXIF_IFD)[0x9003] == "2024:05:06 07:08:09", name
+            assert exif.get_ifd(metadata.GPS_IFD)[1] == "N" and exif[271] == "Camera", name

@@ -34,6 +34,11 @@ from .png import make_chunk
 #: compression...) written into another file made it unreadable (float samples declared).
 TIFF_DESCRIPTIVE_TAGS = (270, 271, 272, 274, 282, 283, 296, 305, 306, 315, 33432)
 ORIENTATION, X_RESOLUTION, Y_RESOLUTION, RESOLUTION_UNIT = 0x0112, 282, 283, 296
+#: The Exif directory's pointer, and its tags of the picture's width and height in pixels.
+EXIF_IFD, PIXEL_X_DIMENSION, PIXEL_Y_DIMENSION = 0x8769, 0xA002, 0xA003
+#: The GPS directory's pointer, the Exif directory's pointer to its interoperability one, and
+#: YCbCrPositioning (of JPEG's layout: no loss where a TIFF leaves it out).
+GPS_IFD, INTEROP_IFD, Y_CB_CR_POSITIONING = 0x8825, 0xA005, 0x0213
 #: The most XMP bytes a JPEG holds: one APP1 segment less its name (Pillow refuses more).
 JPEG_XMP_BYTES = 65504
 #: Formats that keep no metadata at all.
@@ -90,6 +95,14 @@ def descriptive_exif(exif):
     return kept
 
 
+def _with_directories(kept, whole):
+    """``kept`` (a :class:`PIL.Image.Exif`) with the Exif and GPS directories of ``whole``."""
+    for pointer in (EXIF_IFD, GPS_IFD):
+        if directory := whole.get_ifd(pointer):
+            kept.get_ifd(pointer).update(directory)
+    return kept
+
+
 def _upright_exif(image, oriented) -> bytes | None:
     """The image's EXIF block with its orientation set to 1, or None (none, or broken); of a
     TIFF, only its descriptive tags (:data:`TIFF_DESCRIPTIVE_TAGS`)."""
@@ -99,8 +112,8 @@ def _upright_exif(image, oriented) -> bytes | None:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")            # a broken block is dropped, not reported
             exif = image.getexif()
-        if image.format == "TIFF":
-            exif = descriptive_exif(exif)
+        if image.format == "TIFF":                     # its camera and GPS directories too
+            exif = _with_directories(descriptive_exif(exif), exif)
         if not len(exif):
             return None
         if ORIENTATION in exif:
@@ -108,10 +121,6 @@ def _upright_exif(image, oriented) -> bytes | None:
         return exif.tobytes()
     except Exception:  # a broken EXIF block is not kept
         return None
-
-
-#: The Exif directory's pointer, and its tags of the picture's width and height in pixels.
-EXIF_IFD, PIXEL_X_DIMENSION, PIXEL_Y_DIMENSION = 0x8769, 0xA002, 0xA003
 
 
 def sized_exif(exif: bytes, width: int, height: int) -> bytes:
@@ -132,10 +141,6 @@ def sized_exif(exif: bytes, width: int, height: int) -> bytes:
             return whole.tobytes()
     except Exception:  # a broken block is kept as it came (as decoding kept it)
         return exif
-
-
-#: The GPS directory's pointer, and the Exif directory's pointer to its interoperability one.
-GPS_IFD, INTEROP_IFD, Y_CB_CR_POSITIONING = 0x8825, 0xA005, 0x0213
 
 
 def left_out_of_tiff(exif: bytes) -> int:
