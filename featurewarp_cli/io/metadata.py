@@ -165,7 +165,7 @@ def tiff_with_exif_directories(data: bytes, exif: bytes | None) -> bytes:
     (capture date, exposure... and GPS position; the descriptive tags are the first directory's
     own) written after it and pointed to from its first directory (tags 34665 and 34853), as a
     camera's TIFF holds them. ``data`` as it is where ``exif`` has neither, where it cannot be
-    read, and for a BigTIFF (whose pointers are 8 bytes), which :func:`left_out_of_tiff` names."""
+    read, and for a BigTIFF (whose pointers are 8 bytes; one is written only past 4 GiB)."""
     from PIL import Image
 
     from . import tiff
