@@ -109,6 +109,7 @@ FILES = {
     "lab.tif": lab_tiff(),
     "lab16.tif": lab_tiff_16(),
     "lab_long.tif": lab_tiff_16((4, "I")),
+    "lab_byte.tif": lab_tiff_16((1, None)),
 }
 
 # (id, arguments, exit code, words the message must contain). {name} is a file of FILES,
@@ -165,6 +166,7 @@ CASES = [
     ("lab tiff", "swirl {lab.tif} {out}", 1, ["lab.tif", "CIELab", "convert it to RGB"]),   # was wrong colours, exit 0
     ("16-bit lab tiff", "swirl {lab16.tif} {out}", 1, ["lab16.tif", "CIELab", "convert it to RGB"]),
     ("lab tiff, its tag a long", "swirl {lab_long.tif} {out}", 1, ["lab_long.tif", "CIELab"]),
+    ("lab tiff, its tag a byte", "swirl {lab_byte.tif} {out}", 1, ["lab_byte.tif", "CIELab"]),
     # a mask's grey levels from L*a*b* are off too: greys 123-127 crossed 128, a 0/1 mask marked nothing
     ("lab tiff mask", "swirl {ok.png} {out} -m {lab.tif}", 1, ["--mask", "lab.tif", "CIELab"]),
 ]

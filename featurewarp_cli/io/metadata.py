@@ -137,7 +137,9 @@ def sized_exif(exif: bytes, width: int, height: int) -> bytes:
             camera = whole.get_ifd(EXIF_IFD)
             if not {PIXEL_X_DIMENSION, PIXEL_Y_DIMENSION} & set(camera):
                 return exif
-            camera[PIXEL_X_DIMENSION], camera[PIXEL_Y_DIMENSION] = int(width), int(height)
+            for tag, size in ((PIXEL_X_DIMENSION, width), (PIXEL_Y_DIMENSION, height)):
+                if tag in camera:                 # only those stated: the block keeps its length
+                    camera[tag] = int(size)
             return whole.tobytes()
     except Exception:  # a broken block is kept as it came (as decoding kept it)
         return exif

@@ -67,8 +67,9 @@ def _value(entries: list[bytes], order: str, big: bool, wanted: int) -> int | No
     for entry in entries:
         tag, kind = struct.unpack_from(order + "HH", entry)
         (count,) = struct.unpack_from(order + ("Q" if big else "I"), entry, 4)
-        if tag == wanted and kind in (3, 4) and count >= 1:       # SHORT or LONG, as libtiff accepts
-            return struct.unpack_from(order + ("H" if kind == 3 else "I"), entry, 12 if big else 8)[0]   # inline
+        form = {1: "B", 3: "H", 4: "I", 6: "b", 8: "h", 9: "i"}.get(kind)    # any integer type: libtiff reads each
+        if tag == wanted and form and count >= 1:
+            return struct.unpack_from(order + form, entry, 12 if big else 8)[0]   # inline, left-justified
     return None
 
 
