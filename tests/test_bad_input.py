@@ -120,6 +120,8 @@ CASES = [
     ("input is a folder", "swirl {dir} {out}", 2, ["is a directory"]),
     ("missing mask", "swirl {ok.png} {out} -m {dir}/nomask.png", 2, ["--mask", "does not exist"]),
     ("mask of another size", "swirl {ok.png} {out} -m {small_mask.png}", 2, ["--mask", "10x10", "48x36"]),
+    # stdin is read once: the mask's error, not "stdin is empty" from reading it again
+    ("stdin with a mask of another size", "swirl - {out} -m {small_mask.png}", 2, ["--mask", "10x10", "48x36"]),
     ("nan option", "swirl {ok.png} {out} --angle nan", 2, ["--angle", "not a finite number"]),
     ("inf option", "swirl {ok.png} {out} --feature-weight inf", 2, ["--feature-weight", "finite"]),
     ("-inf option", "swirl {ok.png} {out} --decay -inf", 2, ["--decay", "finite"]),

@@ -398,3 +398,31 @@ def test_a_tiff_inputs_camera_and_gps_directories_are_kept(tmp_path):
             exif = written.getexif()
             assert exif.get_ifd(metadata.EXIF_IFD)[0x9003] == "2024:05:06 07:08:09", name
             assert exif.get_ifd(metadata.GPS_IFD)[1] == "N" and exif[271] == "Camera", name
+
+
+@pytest.mark.parametrize("command", [["warp", "stretch", "-", "out.png", "--sx", "1.5", "-m", "mask.png"],
+                                     ["warp", "swirl", "-", "out.png"],
+                                     ["compare", "stretch", "-", "out.png", "--sx", "1.5", "-m", "mask.png"],
+                                     ["deform", "-", "out.png", "--move", "10,10:14,12", "--pin", "50,40"]])
+def test_an_input_from_stdin_keeps_its_metadata_as_a_file_does(tmp_path, monkeypatch, command):
+    """An image piped in lost its profile, EXIF, XMP and resolution in silence (even with
+    --strict); the same file named on the command line kept them."""
+    from click.testing import CliRunner
+
+    from featurewarp_cli.cli.main import cli
+
+    monkeypatch.chdir(tmp_path)
+    profile = srgb()                                         # it holds the time it was made
+    data = encode.encode_image(picture(), "jpg", icc=profile, **carried())
+    (tmp_path / "in.jpg").write_bytes(data)
+    mask = np.zeros((48, 64), np.uint8)
+    mask[10:30, 20:40] = 255
+    cv2.imwrite(str(tmp_path / "mask.png"), mask)
+    piped = CliRunner().invoke(cli, command + ["--strict"], input=data)
+    assert piped.exit_code == 0 and piped.output == "", piped.output
+    with Image.open(tmp_path / "out.png") as written:
+        assert written.info["icc_profile"] == profile and written.info["dpi"] == pytest.approx((300, 300), abs=0.01)
+        assert written.getexif()[33432] == "(c) Retoucher" and b"xmpmeta" in written.info["XML:com.adobe.xmp"].encode()
+    from_pipe = (tmp_path / "out.png").read_bytes()
+    named = CliRunner().invoke(cli, [("in.jpg" if arg == "-" else arg) for arg in command])
+    assert named.exit_code == 0 and (tmp_path / "out.png").read_bytes() == from_pipe

@@ -285,7 +285,9 @@ def start_loading(settings: Settings, input: str, mask: str | None, data: bytes 
     """
     use_mask = masked(settings, mask)
     _check_paths(input, mask_file(settings, mask) if use_mask else None)
-    header = decode.read_header(data) if data else None             # stdin, already read
+    if input == "-" and data is None:
+        data = input_bytes(settings, input)                  # read now: its header keeps its metadata
+    header = decode.read_header(data) if data else None
     if input != "-" and os.path.isfile(input):
         check_file_size(input, "INPUT", settings.max_memory, settings.max_pixels)
         try:
@@ -305,7 +307,7 @@ def start_loading(settings: Settings, input: str, mask: str | None, data: bytes 
             feature_mask, mask_warnings = load_mask(settings, mask, size, header)
             warnings += mask_warnings
         except WarpError:
-            load_image_and_mask(settings, input, mask)       # the image's own error comes first
+            load_image_and_mask(settings, input, mask, data)   # the image's own error comes first
             raise
     return (_Decoding(data, "stdin" if input == "-" else input, settings.max_pixels, header), feature_mask,
             warnings, size)
