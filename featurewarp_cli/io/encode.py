@@ -252,6 +252,8 @@ def _pillow_encode(image: np.ndarray, fmt: str, quality: int | None, icc: bytes 
                     "png": {"compress_level": 1},
                     "webp": webp_options(quality),
                     "tiff": {"compression": "tiff_lzw"}}[fmt])
+    if fmt == "tiff":                            # LZW with the horizontal predictor, as OpenCV writes
+        options.setdefault("tiffinfo", {})[317] = 2     # 317: Predictor, 2: horizontal
     buffer = io.BytesIO()
     with captured_stderr() as printed:
         try:
