@@ -438,3 +438,22 @@ def test_a_tiff_with_metadata_is_compressed_as_one_without(channels):
     with opened(with_xmp) as written:
         assert written.tag_v2[317] == 2 and np.array_equal(np.asarray(written), np.asarray(opened(plain)))
     assert len(with_xmp) < len(plain) * 1.05 + 2000        # the metadata's own bytes aside
+
+
+@pytest.mark.parametrize("name", ["out.webp", "out.png"])
+def test_an_animations_exif_states_its_frames_size(tmp_path, name):
+    """An animated WebP's EXIF still stated the input's 64 px width (its encoder is not
+    encode_image's)."""
+    from click.testing import CliRunner
+
+    from featurewarp_cli.cli.main import cli
+
+    source = tmp_path / "in.jpg"
+    Image.fromarray(picture()).save(source, "JPEG", exif=_shot_exif(64, 48))
+    run = CliRunner().invoke(cli, ["animate", "stretch", str(source), str(tmp_path / name), "--vary", "sx=1.5:2",
+                                   "--frames", "2"])
+    assert run.exit_code == 0, run.output
+    with Image.open(tmp_path / name) as written:
+        camera = written.getexif().get_ifd(metadata.EXIF_IFD)
+        assert written.size[0] > 64 and (camera[metadata.PIXEL_X_DIMENSION], camera[metadata.PIXEL_Y_DIMENSION]) \
+            == written.size and camera[0x9003] == "2024:05:06 07:08:09"

@@ -18,7 +18,7 @@ from fractions import Fraction
 
 import numpy as np
 
-from . import ImageError, png
+from . import ImageError, metadata, png
 from .encode import encode_image, rgb_order, webp_options
 
 #: The fastest frame rate a GIF plays as written: its delays are in 1/100 s, and browsers play
@@ -101,6 +101,7 @@ def webp_bytes(frames: list[np.ndarray], fps: float, quality: int | None, icc: b
     from PIL import Image
 
     images = [Image.fromarray(rgb_order(frame)) for frame in frames]
+    exif = exif and metadata.sized_exif(exif, *images[0].size)        # the frames' size, as encode_image
     kept = {key: value for key, value in (("icc_profile", icc), ("exif", exif), ("xmp", xmp)) if value}
     buffer = io.BytesIO()
     images[0].save(buffer, "WEBP", save_all=True, append_images=images[1:], loop=0,
