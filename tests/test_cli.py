@@ -354,6 +354,12 @@ def test_a_stdout_that_cannot_be_written_is_named(tmp_path):
                                  stderr=subprocess.PIPE, text=True, timeout=60,
                                  env={**os.environ, "PYTHONIOENCODING": encoding})
         assert run.returncode == 1 and run.stderr == "featurewarp: error: cannot write stdout: No space left on device\n"
+    image, _ = scene(tmp_path)              # the report on stdout failed named as the image beside it
+    with open("/dev/full", "w") as full:
+        run = subprocess.run([sys.executable, "-m", "featurewarp_cli", "warp", "swirl", image, str(tmp_path / "o.png"),
+                              "--report", "-"], stdout=full, stderr=subprocess.PIPE, text=True, timeout=60)
+    assert run.returncode == 1 and run.stderr == "featurewarp: error: cannot write stdout: No space left on device\n"
+    assert not (tmp_path / "o.png").exists()
 
 
 def test_only_a_stream_on_stdout_is_stdout(tmp_path):
@@ -432,7 +438,7 @@ def test_broken_pipe_is_one_line(tmp_path):
     run = subprocess.run(f"{sys.executable} -m featurewarp_cli warp stretch {image} bmp:- --sx 40 --sy 20 | true",
                          shell=True, capture_output=True, timeout=120)
     lines = run.stderr.decode().splitlines()
-    assert lines == ["featurewarp: error: cannot write -: Broken pipe"]
+    assert lines == ["featurewarp: error: cannot write stdout: Broken pipe"]
 
 
 def test_the_command_runs_openblas_with_one_thread_unless_told_otherwise():

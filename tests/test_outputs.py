@@ -229,7 +229,7 @@ def test_a_short_write_to_an_unbuffered_stdout_is_finished_or_is_an_error(pictur
         time.sleep(0.01)
     process.stdout.close()
     assert process.wait(timeout=60) == 1
-    assert process.stderr.read().decode().strip().endswith("cannot write -: Broken pipe")
+    assert process.stderr.read().decode().strip().endswith("cannot write stdout: Broken pipe")
 
     class Partial:                                   # a raw stream that takes 5 bytes a call
         def __init__(self):

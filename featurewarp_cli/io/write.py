@@ -7,14 +7,13 @@ so every file that existed stays as it was (all or nothing).
 
 Where an output goes, by what its path is now:
 
-- a regular file, or nothing yet: replaced atomically. The bytes wait in an unnamed
-  file (``O_TMPFILE``) in the target's folder, so an interrupted run leaves nothing
-  behind, even under SIGKILL; at commit it gets a hidden name and is renamed over
-  the target. Where the file system has no ``O_TMPFILE``, or a command has more than
-  :data:`OPEN_STAGED` outputs, a hidden temporary file is used instead and removed on
-  failure and on SIGTERM or SIGINT. A file that already holds exactly these bytes is
-  left as it is (same inode, owner and mtime: make and rsync see no change); one with
-  no write permission for anyone (``chmod a-w``) is refused, even for root.
+- a regular file, or nothing yet: replaced atomically. The bytes wait in an unnamed file
+  (``O_TMPFILE``) in the target's folder, so an interrupted run leaves nothing behind, even
+  under SIGKILL; at commit it gets a hidden name and is renamed over the target. Without
+  ``O_TMPFILE``, or with more than :data:`OPEN_STAGED` outputs, a hidden temporary file is
+  used, removed on failure, SIGTERM and SIGINT. A file that already holds these bytes is left
+  as it is (inode, owner, mtime: make and rsync see no change); one with no write permission
+  for anyone (``chmod a-w``) is refused, even for root.
 - a symbolic link: followed, so its target is replaced as above and the link stays.
 - ``/dev/stdout``, ``/dev/stderr``, ``/dev/fd/N``, ``/proc/self/fd/N``: this process's own
   descriptor, written where it stands (a shell's ``>> log`` appends, ``> file`` is not
@@ -155,11 +154,8 @@ def stage(path: str, data: bytes, named: bool = False) -> Staged:
     """Get ``data`` ready to go to ``path`` (see the module's docstring; ``named``: a regular
     file waits in a hidden named file, closed, not in an open unnamed one); OSError on failure."""
     staged = _stage(path, data, named)
-    delay = stage_delay()
-    if delay:
-        import time
-
-        time.sleep(delay)
+    if stage_delay():
+        __import__("time").sleep(stage_delay())
     return staged
 
 
@@ -216,10 +212,9 @@ def read_only(mode: int) -> bool:
 
 def _mode_of(path: str) -> int | None:
     """``st_mode`` of what ``path`` names, links followed (None: nothing there yet)."""
-    try:
+    with contextlib.suppress(FileNotFoundError, NotADirectoryError):
         return os.stat(path).st_mode
-    except (FileNotFoundError, NotADirectoryError):
-        return None
+    return None
 
 
 def _replaced(path: str) -> str:
@@ -236,6 +231,22 @@ def commit(outputs: list[Staged]) -> None:
             _commit_one(output)
     finally:
         discard(outputs)
+
+
+def _write_stdout(data: bytes) -> None:
+    """``data`` to standard output; an OSError names ``stdout`` (not another output of the command)."""
+    try:
+        stream, fd = sys.stdout.buffer, None
+        sys.stdout.flush()
+        fd = stream.fileno()                  # a descriptor: written whole, waiting if non-blocking
+    except io.UnsupportedOperation:           # no descriptor (a test's BytesIO): the stream itself
+        pass
+    except (AttributeError, ValueError):
+        raise OSError(9, "standard output is closed", "stdout") from None
+    try:
+        _write_stream(stream, data) if fd is None else _write_all(fd, data)
+    except OSError as err:
+        raise OSError(err.errno, err.strerror, "stdout") from None
 
 
 #: Seconds to wait for a process to open a FIFO output for reading before giving up.
@@ -277,16 +288,7 @@ def _open_fifo(path: str) -> int:
 
 def _commit_one(output: Staged) -> None:
     if output.kind == "stdout":
-        try:
-            stream = sys.stdout.buffer
-            sys.stdout.flush()
-            fd = stream.fileno()              # a descriptor: written whole, waiting if non-blocking
-        except io.UnsupportedOperation:       # no descriptor (a test's BytesIO): the stream itself
-            _write_stream(stream, output.data)
-            return
-        except (AttributeError, ValueError):
-            raise OSError(9, "standard output is closed") from None
-        _write_all(fd, output.data)
+        _write_stdout(output.data)
     elif output.kind == "direct":
         _write_direct(output.target, output.data)
     elif output.kind == "descriptor":
@@ -408,10 +410,8 @@ def write_atomic(path: str, data: bytes) -> None:
 
 def remove_quietly(path: str) -> None:
     """Remove ``path`` if it is there."""
-    try:
+    with contextlib.suppress(OSError):
         os.unlink(path)
-    except OSError:
-        pass
 
 
 #: Hidden temporary files that exist right now (removed by :func:`remove_pending` on a signal).
