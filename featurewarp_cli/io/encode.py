@@ -253,7 +253,10 @@ def _pillow_encode(image: np.ndarray, fmt: str, quality: int | None, icc: bytes 
                     "webp": webp_options(quality),
                     "tiff": {"compression": "tiff_lzw"}}[fmt])
     if fmt == "tiff":                            # LZW with the horizontal predictor, as OpenCV writes
-        options.setdefault("tiffinfo", {})[317] = 2     # 317: Predictor, 2: horizontal
+        if "tiffinfo" not in options:            # which, given, Pillow writes instead of ``exif``
+            options["tiffinfo"] = Image.Exif()
+            options["tiffinfo"].load(exif)       # (nothing where exif is None)
+        options["tiffinfo"][317] = 2             # 317: Predictor, 2: horizontal
     buffer = io.BytesIO()
     with captured_stderr() as printed:
         try:
