@@ -238,14 +238,12 @@ def _write_stdout(data: bytes) -> None:
     try:
         stream, fd = sys.stdout.buffer, None
         sys.stdout.flush()
-        fd = stream.fileno()                  # a descriptor: written whole, waiting if non-blocking
-    except io.UnsupportedOperation:           # no descriptor (a test's BytesIO): the stream itself
-        pass
+        with contextlib.suppress(io.UnsupportedOperation):   # no descriptor (a test's BytesIO): the stream
+            fd = stream.fileno()              # a descriptor: written whole, waiting if non-blocking
+        _write_stream(stream, data) if fd is None else _write_all(fd, data)
     except (AttributeError, ValueError):
         raise OSError(9, "standard output is closed", "stdout") from None
-    try:
-        _write_stream(stream, data) if fd is None else _write_all(fd, data)
-    except OSError as err:
+    except OSError as err:                    # flushing what was printed before, too
         raise OSError(err.errno, err.strerror, "stdout") from None
 
 
