@@ -121,6 +121,12 @@ def test_a_batch_never_replaces_a_file_it_reads_nor_its_summary(runner, photos, 
     for summary in (photos / "a.png", photos / "a_mask.png", tmp_path / "out" / "a.png"):
         run = runner("batch", "swirl", photos / "a.png", "-o", tmp_path / "out", "--summary", summary)
         assert run.code == 2 and "--summary" in run.stderr and "overwritten" in run.stderr, run.stderr
+    (tmp_path / "links").mkdir()
+    for name in ("a.png", "a_mask.png"):          # a hard link of one is that file: it was truncated
+        summary = tmp_path / "links" / f"{name}.jsonl"
+        os.link(photos / name, summary)
+        run = runner("batch", "swirl", photos / "a.png", "-o", tmp_path / "out", "--summary", summary)
+        assert run.code == 2 and "is also read by this batch" in run.stderr, run.stderr
     run = runner("batch", "swirl", photos / "a.png", "-o", photos)
     assert run.code == 2 and "replacing its own input" in run.stderr, run.stderr
     assert {name: (photos / name).read_bytes() for name in names(photos)} == before

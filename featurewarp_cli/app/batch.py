@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import os
 import re
+import stat
 import time
 from dataclasses import dataclass, replace
 
@@ -113,9 +114,11 @@ def _check_overwrites(jobs: list[Job], summary: str | None, also_read: set) -> N
             raise WarpError(f"{job.input} would be written to {job.output}, replacing {what}; use another "
                             "--out-dir or a --suffix", usage=True)
     if summary is not None and summary != "-":
-        key = _identity(summary)
+        key, linked = _identity(summary), _inode(summary)
         written = {_identity(job.output) for job in jobs}
-        role = "read by" if key in read or key in also_read else "an output of" if key in written else None
+        read_files = {_inode(p) for p in (*read.values(), *also_read)} - {None}    # a hard link is the file
+        role = "read by" if key in read or key in also_read or linked in read_files else \
+            "an output of" if key in written else None
         if role is not None:
             raise WarpError(f"{summary} is also {role} this batch; it would be overwritten", "--summary",
                             usage=True)
@@ -173,6 +176,15 @@ def _expanded(path: str) -> list[str]:
 def _identity(path: str) -> str:
     """What ``path`` names, for comparing: its real path, or a URL's protocol and path."""
     return urls.key(path) if urls.is_url(path) else os.path.realpath(path)
+
+
+def _inode(path: str):
+    """(device, inode) of an existing local file (a hard link's are its file's), else None."""
+    try:
+        info = os.stat(path) if not urls.is_url(path) else None
+    except (OSError, ValueError):
+        return None
+    return (info.st_dev, info.st_ino) if info is not None and stat.S_ISREG(info.st_mode) else None
 
 
 def _create(out_dir: str) -> None:
