@@ -107,6 +107,25 @@ def test_diff_image(runner, pair, tmp_path):
     assert (gray[:, 0] == gray[:, 1]).all() and (gray[:, 1] == gray[:, 2]).all() and gray.min() >= 128
 
 
+def test_quiet_prints_nothing_but_trouble(runner, tmp_path):
+    """``-q`` printed a note (A without alpha against B with it) and the "differ" line; as
+    ``cmp -s``, it says nothing but trouble (exit 2), and the exit status is the same."""
+    image = textured()
+    opaque = save(tmp_path / "a.png", image)
+    cut = np.dstack([image, np.full(image.shape[:2], 255, np.uint8)])
+    cut[:10, :, 3] = 0
+    pairs = {1: (opaque, save(tmp_path / "b.png", cut)), 0: (opaque, opaque)}
+    pairs[-1] = (opaque, save(tmp_path / "c.png", image[:20]))       # sizes differ: cannot be compared
+    for code, pair in pairs.items():
+        loud = runner("diff", *pair)
+        for flags in (["-q"], ["--quiet", "--json"]):
+            run = runner("diff", *pair, *flags)
+            assert run.code == loud.code == abs(code) and run.stderr == "" and run.stdout == b"", run.stderr
+    assert "note: A is colour without alpha" in runner("diff", *pairs[1]).stderr
+    missing = runner("diff", opaque, tmp_path / "none.png", "-q")
+    assert missing.code == 2 and "does not exist" in missing.stderr
+
+
 def test_stdin_and_errors(runner, pair, tmp_path):
     run = runner("diff", "-", pair[0], input=Path(pair[0]).read_bytes())
     assert run.code == 0

@@ -67,8 +67,8 @@ def diff_command(a, b, max_rmse, min_psnr, max_pixels_off, tolerance, diff_image
         if as_json and not quiet:         # a CI job parses the failure as it parses any other
             _echo(_as_json(a, b, None, [f"cannot be compared: {reason}"], tolerance))
         unwritten = f"; {diff_image} not written" if diff_image else ""
-        raise click.ClickException(f"{a} and {b} cannot be compared: {reason}{unwritten}")
-    for note in result.notes:
+        _differ(quiet, f"{a} and {b} cannot be compared: {reason}{unwritten}")
+    for note in result.notes if not quiet else ():
         click.echo(f"featurewarp: note: {note}", err=True)
     broken = diff.failures(result, max_rmse, min_psnr, max_pixels_off, tolerance_given)
     broken += _durations_differ(first.durations, second.durations)
@@ -79,7 +79,14 @@ def diff_command(a, b, max_rmse, min_psnr, max_pixels_off, tolerance, diff_image
     if target:
         _write_highlight(target, diff.highlight(first.image, result.off))
     if broken:
-        raise click.ClickException(f"{a} and {b} differ beyond tolerance: {'; '.join(broken)}")
+        _differ(quiet, f"{a} and {b} differ beyond tolerance: {'; '.join(broken)}")
+
+
+def _differ(quiet: bool, message: str):
+    """Exit 1, "differ", saying why unless ``quiet`` (as ``cmp -s``: trouble, 2, is still said)."""
+    if quiet:
+        raise click.exceptions.Exit(1)
+    raise click.ClickException(message)
 
 
 def _diff_target(diff_image: str, a: str, b: str, quiet: bool) -> tuple[str, str]:
