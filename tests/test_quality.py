@@ -117,6 +117,30 @@ def files(tmp_path_factory):
     return folder
 
 
+@pytest.mark.parametrize("kind", ["transparent", "translucent", "16-bit", "gray"])
+def test_a_drawn_grid_keeps_the_background_alpha_and_depth(files, kind):
+    """--grid drew on an 8-bit BGR copy: a transparent or translucent --background came out
+    grey (the panels' checkerboard), a 16-bit result 8-bit, with exit 0 and no word."""
+    image = cv2.imread(str(files / "in.png"))
+    source = {"16-bit": image.astype(np.uint16) * 257, "gray": image[:, :, 1]}.get(kind, image)
+    cv2.imwrite(str(files / f"{kind}.png"), source)
+    background = {"transparent": ["--background", "transparent"],
+                  "translucent": ["--background", "rgba(0,0,255,0.5)"]}.get(kind, [])
+    pictures = {}
+    for extra in ([], ["--grid"]):
+        name = files / f"{kind}{len(extra)}.png"
+        out = run("warp", "arc", str(files / f"{kind}.png"), str(name), "--angle", "90", *background, *extra)
+        assert out.code == 0 and out.stderr == "", out.stderr
+        pictures[bool(extra)] = cv2.imread(str(name), cv2.IMREAD_UNCHANGED)
+    plain, grid = pictures[False], pictures[True]       # PNG: transparent beyond the image by default
+    assert grid.dtype == plain.dtype == source.dtype and grid.shape == plain.shape and grid.shape[2] == 4
+    lines = np.any(grid != plain, axis=2)
+    assert 0.01 < lines.mean() < 0.5
+    assert np.array_equal(grid[~lines], plain[~lines]) and np.all(grid[lines, 3] >= plain[lines, 3])
+    corner = plain[0, 0, 3] if not lines[0, 0] else plain[-1, 0, 3]      # where the arc leaves the canvas
+    assert corner == (128 if kind == "translucent" else 0)
+
+
 def test_save_grid_writes_the_mapping(files):
     """--save-grid: source (N, 2), target (N, 2), triangles (M, 3) counter-clockwise in source
     coordinates; target is where the warp put the nodes on the canvas."""

@@ -26,24 +26,26 @@ def as_bgr8(image: np.ndarray) -> np.ndarray:
 
 
 def draw_grid(image: np.ndarray, mesh, spacing_px: float | None = None) -> np.ndarray:
-    """Draw the deformed grid lines over ``image`` (a copy, 8-bit BGR).
+    """Draw the deformed grid lines over ``image`` (a copy), its depth, background and alpha kept.
 
     Every k-th grid line is drawn so that lines are about ``spacing_px`` apart
     in the source (the paper's Fig. 3); default: 1/20 of the source's shorter
-    side, at least 12 px.
+    side, at least 12 px. The lines are antialiased and laid over the image (a line is
+    opaque where it covers a pixel whole); a gray image becomes BGR for their colour.
+    (The lines were drawn on an 8-bit BGR copy: ``--grid`` dropped a transparent or
+    translucent ``--background``, a cut-out's alpha and 16 bits, in silence.)
 
     Parameters
     ----------
-    image : ndarray
-        The warped image (on the mesh's canvas).
+    image : (H, W[, C]) ndarray, uint8 or uint16, C in 1..4
+        The warped image (on the mesh's canvas), BGR(A); C = 2: gray + alpha.
     mesh : api.Mesh
     spacing_px : float
 
     Returns
     -------
-    (H, W, 3) uint8 ndarray
+    (H, W, 3 or 4) ndarray of ``image``'s dtype
     """
-    out = as_bgr8(image).copy()
     grid_x = np.unique(mesh.source[:, 0])
     grid_y = np.unique(mesh.source[:, 1])
     if spacing_px is None:
@@ -57,7 +59,33 @@ def draw_grid(image: np.ndarray, mesh, spacing_px: float | None = None) -> np.nd
     lines = [nodes[j, :, :] for j in rows] + [nodes[:, i, :] for i in cols]
     shift = 4                                       # sub-pixel precision for polylines
     polylines = [np.round(line * (1 << shift)).astype(np.int32) for line in lines]
-    cv2.polylines(out, polylines, False, GRID_COLOUR, 1, cv2.LINE_AA, shift)
+    cover = np.zeros(image.shape[:2], np.uint8)
+    cv2.polylines(cover, polylines, False, 255, 1, cv2.LINE_AA, shift)
+    return _lines_over(image, cover)
+
+
+def _lines_over(image: np.ndarray, cover: np.ndarray) -> np.ndarray:
+    """``image`` (BGR(A), gray or gray + alpha; as BGR(A)) with :data:`GRID_COLOUR` laid over it
+    where ``cover`` (uint8, 255: whole) says, by the over operator on straight alpha."""
+    planes = image.shape[2] if image.ndim == 3 else 1
+    if planes <= 2:
+        gray = image if image.ndim == 2 else image[:, :, 0]
+        out = np.dstack([gray] * 3 + ([image[:, :, 1]] if planes == 2 else []))
+    else:
+        out = image.copy()
+    top = float(np.iinfo(out.dtype).max)
+    at = np.flatnonzero(cover)
+    flat = out.reshape(-1, out.shape[2])
+    a = cover.ravel()[at, None] / 255.0
+    values, colour = flat[at].astype(np.float64), np.array(GRID_COLOUR, np.float64) * (top / 255.0)
+    if out.shape[2] == 4:
+        alpha = values[:, 3:] / top
+        covered = a + alpha * (1.0 - a)
+        values[:, :3] = (colour * a + values[:, :3] * alpha * (1.0 - a)) / np.maximum(covered, 1e-12)
+        values[:, 3:] = covered * top
+    else:
+        values = colour * a + values * (1.0 - a)
+    flat[at] = np.rint(values).astype(out.dtype)
     return out
 
 
