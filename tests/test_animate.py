@@ -61,6 +61,18 @@ def test_numbered_sequence_and_varying_canvas(files):
     assert frames[0][:, 0, 3].max() == 0 and frames[-1][:, 0, 3].min() == 255   # padding is transparent
 
 
+def test_frames_left_after_a_sequence_by_a_longer_run_are_said(files, tmp_path):
+    """A shorter run over an earlier sequence left its later frames, exit 0 and no word: a
+    reader of the pattern (ffmpeg -i f-%04d.png) played a mixed clip."""
+    args = [str(files / "in.png"), str(tmp_path / "f-%04d.png"), "--vary", "angle=0:90"]
+    assert run("swirl", *args, "--frames", "5").code == 0
+    out = run("swirl", *args, "--frames", "2")
+    assert out.code == 0 and "f-0002.png to " in out.stderr and "f-0004.png (3 files) follow this" in out.stderr
+    out = run("swirl", *args, "--frames", "4", "--strict")
+    assert out.code == 1 and "f-0004.png (1 file) follows this sequence's last frame" in out.stderr
+    assert run("swirl", *args, "--frames", "5", "--strict").code == 0
+
+
 def test_video(files):
     """An .mp4 is written through OpenCV's video writer."""
     out = run("bulge", str(files / "in.png"), str(files / "out.mp4"), "-m", str(files / "mask.png"),

@@ -194,6 +194,7 @@ def animate_file(settings: Settings, input: str, output: str, mask: str | None, 
     background = frame_background(settings.background, kind, ext)
     prefetch_engine()
     image, feature_mask, warnings, header = load_with_header(settings, formats.split_prefix(input)[1], mask)
+    warnings += left_after(output, kind, frames)
     kept = output_metadata(settings.strip, header, kind, ext, warnings)
     if ext == ".gif" and kind == "animation" and fps > GIF_MAX_FPS:
         warnings.append(f"--fps {fps:g}: a GIF plays at most {GIF_MAX_FPS:g} frames a second (its delays are in "
@@ -377,6 +378,19 @@ def output_paths(output: str, kind: str, frames: int) -> list[str]:
         raise WarpError(f"{output[:80]}{'...' if len(output) > 80 else ''}: its frames' names would be longer "
                         "than a file system allows (255 bytes a name)", "OUTPUT", usage=True)
     return [output % index for index in range(frames)]
+
+
+def left_after(output: str, kind: str, frames: int) -> list[str]:
+    """The warning for numbered files that follow a sequence's last frame (left by a longer run:
+    a reader of the sequence takes them as its frames too); [] for none and for one file."""
+    if kind != "sequence":
+        return []
+    left = 0
+    while left < 1_000_000 and os.path.lexists(output % (frames + left)):
+        left += 1
+    return [f"{output % frames}{' to ' + output % (frames + left - 1) if left > 1 else ''} ({left} file"
+            f"{'s' if left > 1 else ''}) follow{'s' if left == 1 else ''} this sequence's last frame, left "
+            f"from another run: whatever reads {output} takes {'them as frames' if left > 1 else 'it as a frame'} too"] * (left > 0)
 
 
 def check_output_paths(paths: list[str], input: str, mask: str | None) -> None:
