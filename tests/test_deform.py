@@ -374,9 +374,12 @@ def test_a_misspelt_key_inside_a_handle_is_noted_and_errors_say_what_is_missing(
     "version: None"; no handles at all said "one handle alone"."""
     pins = [{"from": [40, 40], "to": [40, 40]}, {"from": [460, 320], "to": [460, 320]}]
     typo = Handles.from_dict({"version": 2, "points": pins + [{"from": [250, 180], "to": [250, 180], "angel": 30}],
-                              "curves": [{"from": [[1, 2], [30, 4]], "to": [[1, 2], [30, 4]], "weight": 2}]}, W, H)
+                              "curves": [{"from": [[1, 2], [30, 4]], "to": [[1, 2], [30, 4]], "weight": 2}],
+                              "border": {"top": {"bezier": [[-0.5, -0.5], [W / 3, -20], [2 * W / 3, 20],
+                                                            [W - 0.5, -0.5]], "angle": 30}}}, W, H)
     assert typo.notes == ["handles: ignoring points[2].angel (unknown to version 2)",
-                          "handles: ignoring curves[0].weight (unknown to version 2)"]
+                          "handles: ignoring curves[0].weight (unknown to version 2)",
+                          "handles: ignoring border.top.angle (unknown to version 2)"]     # was silent
     assert Handles.from_dict({"version": 2, "points": pins}, W, H).notes == []
     with pytest.raises(ValueError, match=r'^version: missing; this featurewarp reads versions 1, 2 \("version": 2\)$'):
         Handles.from_dict({}, W, H)

@@ -302,11 +302,14 @@ ITEM_KEYS = {"points": ("from", "to", "angle"), "curves": ("from", "to")}
 
 
 def _unknown_keys(data: dict, version: int) -> list[str]:
-    """Notes for the keys of point handles and curves no version reads (a misspelt ``"angel"``
-    would otherwise drop a rotation silently); a version-1 ``angle`` has its own."""
+    """Notes for the keys of point handles, curves and a border side's Bezier no version reads (a
+    misspelt ``"angel"`` would otherwise drop a rotation silently); a version-1 ``angle`` has its own."""
+    border = data.get("border") if isinstance(data.get("border"), dict) else {}
     return [f"handles: ignoring {group}[{k}].{key} (unknown to version {version})"
             for group, keys in ITEM_KEYS.items() for k, item in enumerate(data.get(group, []))
-            for key in item if key not in keys]
+            for key in item if key not in keys] + [
+        f"handles: ignoring border.{side}.{key} (unknown to version {version})"
+        for side, line in border.items() if isinstance(line, dict) for key in line if key != "bezier"]
 
 
 #: Largest turn of a point handle's disc, in degrees (ten turns): beyond, a turn is rounding noise
