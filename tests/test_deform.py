@@ -388,6 +388,11 @@ def test_a_misspelt_key_inside_a_handle_is_noted_and_errors_say_what_is_missing(
     assert Handles.from_dict({"version": 2.0, "points": pins}, W, H).notes == []      # as the schema reads it
     with pytest.raises(ValueError, match="^points: none are given; at least two handles are needed"):
         Handles.from_dict({"version": 1, "points": []}, W, H)
+    # a curve of one point was taken (stretched to 400 px: "asks for a fold"), or named no place
+    with pytest.raises(ValueError, match=r"^curves\[1\]\.from: every point is \(50, 30\); a curve runs"):
+        Handles.from_dict({"version": 2, "points": pins, "curves": [
+            {"from": [[1, 2], [30, 4]], "to": [[1, 2], [30, 4]]},
+            {"from": [[50, 30], [50, 30], [50, 30]], "to": [[50, 32], [250, 32], [450, 32]]}]}, W, H)
 
 
 def test_a_curve_that_a_feature_holds_off_target_warns():

@@ -126,6 +126,9 @@ class Handles:
         curves = []
         for i, curve in enumerate(data.get("curves", [])):
             start = _points(curve["from"], f"curves[{i}].from[{{}}]")
+            if not np.ptp(start, axis=0).any():       # no direction to follow: not a curve
+                raise ValueError(f"curves[{i}].from: every point is ({start[0, 0]:g}, {start[0, 1]:g}); a curve "
+                                 "runs somewhere (a point handle moves one point)")
             end = _points(curve["to"], f"curves[{i}].to[{{}}]")
             _inside(start, width, height, f"curves[{i}].from[{{}}]")
             _near(end, width, height, f"curves[{i}].to[{{}}]")
