@@ -96,7 +96,7 @@ def test_each_frames_compromises_are_said_with_its_number_and_the_rest_counted(f
     assert [line.split(": ")[3] for line in strays] == ["frame 1", "frame 2", "frame 3"], out.stderr
     monkeypatch.setattr(animate, "FRAME_WARNINGS", 1)
     counted = run(*args).stderr.splitlines()
-    assert "frame 1: " in counted[0] and "more compromises in frames 1 to 3" in counted[-1]
+    assert "frame 1: " in counted[0] and "more warning lines in frames 1 to 3 (one may count several features" in counted[-1]
     args[2] = str(files / "strict.gif")
     strict = run(*args, "--strict")                     # the first frame's compromise refuses the whole
     assert strict.code == 1 and "--strict: frame 1: " in strict.stderr and not (files / "strict.gif").exists()

@@ -251,8 +251,8 @@ def frame_lines(said: list[tuple[int, str]]) -> list[str]:
     if len(said) > FRAME_WARNINGS:
         first, last = said[FRAME_WARNINGS][0], said[-1][0]
         where = f"frame {first}" if first == last else f"frames {first} to {last}"
-        lines.append(f"{len(said) - FRAME_WARNINGS} more compromises in {where} "
-                     f"(featurewarp warp with a frame's values says each)")
+        lines.append(f"{len(said) - FRAME_WARNINGS} more warning lines in {where} (one may count several "
+                     f"features; featurewarp warp with a frame's values says each)")
     return lines
 
 
