@@ -200,6 +200,13 @@ def test_run_job_never_raises(tmp_path):
     assert "does not exist" in error and summary is None
 
 
+def test_a_summary_that_cannot_be_written_is_refused_before_the_out_dir_is_made(runner, photos, tmp_path):
+    """The usage error came after --out-dir had been created (an empty folder left behind)."""
+    run = runner("batch", "swirl", photos / "a.png", "-o", tmp_path / "new", "--summary", tmp_path / "no" / "s.jsonl")
+    assert run.code == 2 and "--summary" in run.stderr and "does not exist" in run.stderr, run.stderr
+    assert not (tmp_path / "new").exists()
+
+
 def test_a_missing_out_dir_is_created(runner, photos, tmp_path):
     run = runner("batch", "swirl", photos / "a.png", "-o", tmp_path / "new" / "deeper", "--mode", "plain")
     assert run.code == 0 and names(tmp_path / "new" / "deeper") == ["a.png"]

@@ -210,8 +210,6 @@ def run_planned(settings, todo, jobs: int, scheduler, summary_path, resume: bool
         say(note)
     numbers = [i for i in range(len(todo)) if i not in skipped]
     remaining = [todo[i] for i in numbers]
-    if summary_path and summary_path != "-":
-        _summary_writable(summary_path)
     failed = 0
     with contextlib.closing(run_jobs(settings, remaining, jobs, scheduler, verbose)) as results, \
             _summary_sink(summary_path) as record:
@@ -340,6 +338,8 @@ def batch_command(preset) -> click.Command:
         settings, quiet, verbose = settings_from(preset, kwargs)
         try:
             check_scheduler(scheduler)
+            if summary and summary != "-":             # before plan() creates --out-dir
+                _summary_writable(summary)
             from ..io.formats import format_name
 
             fmt = format_name(settings.fmt) if settings.fmt else None
