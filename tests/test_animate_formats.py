@@ -88,6 +88,12 @@ def test_a_gifs_background_is_white_and_transparent_cuts_alpha_at_half(files):
             "transparent")
     first = gif_frames(files / "t.gif", "RGBA")[0]
     assert np.array_equal(first[:, :, 3] == 0, ramp[:, :, 3] < 128)
+    # warp refused --background transparent for a GIF ("no alpha channel"): the still GIF of the
+    # same swirl is the animation's first frame now, its transparency too
+    still = run("warp", "swirl", str(files / "ramp.png"), str(files / "t0.gif"), "--angle", "0", "--background",
+                "transparent")
+    assert still.code == 0, still.stderr
+    assert np.array_equal(gif_frames(files / "t0.gif", "RGBA")[0], first)
 
 
 @pytest.mark.parametrize("fps", [7, 12, 30, 50])

@@ -161,7 +161,7 @@ def encoded(out_path: str, fmt: str, image, background, quality: int | None = No
     from .pipeline import WarpError
 
     try:
-        return encode.encode_image(image, fmt, background or (255, 255, 255), quality,
+        return encode.encode_image(image, fmt, background or (None if fmt == "gif" else (255, 255, 255)), quality,
                                    **(kept or metadata.Metadata()).keywords())
     except ImageError as err:
         raise WarpError(f"cannot write {out_path}: {err}") from err
@@ -198,8 +198,8 @@ def background_colour(text: str | None, fmt: str):
         raise WarpError(str(err), "--background", usage=True) from None
     if rgb is not None and len(rgb) == 4 and not has_alpha:
         return tuple(round(c * rgb[3] / 255 + 255 * (1 - rgb[3] / 255)) for c in rgb[:3])
-    if rgb is None and not has_alpha:
-        raise WarpError(f"{fmt} has no alpha channel; use a colour or a png, webp or tiff output",
+    if rgb is None and not has_alpha and fmt != "gif":       # a GIF: transparent below half alpha
+        raise WarpError(f"{fmt} has no alpha channel; use a colour or a png, webp, tiff or gif output",
                         "--background", usage=True)
     return rgb
 

@@ -19,15 +19,11 @@ from fractions import Fraction
 import numpy as np
 
 from . import ImageError, metadata, png
-from .encode import encode_image, rgb_order, webp_options
+from .encode import GIF_TRANSPARENT, encode_image, gif_picture, rgb_order, webp_options
 
 #: The fastest frame rate a GIF plays as written: its delays are in 1/100 s, and browsers play
 #: a delay under 2/100 s as 1/10 s (a 60 fps GIF ran six times too slowly).
 GIF_MAX_FPS = 50.0
-#: A GIF pixel under this alpha is transparent, one at or above it opaque (as ImageMagick cuts).
-GIF_ALPHA_CUT = 128
-#: The GIF palette index of transparent pixels (the other 255 are the frame's colours).
-GIF_TRANSPARENT = 255
 
 
 def frame_delays(fps: float, count: int, ticks: int) -> list[int]:
@@ -62,30 +58,13 @@ def gif_bytes(frames: list[np.ndarray], fps: float, transparent: bool) -> bytes:
 
     Each frame has its own palette, as a still GIF: grey frames a grey one, others an adaptive
     one of 256 colours (median cut, Floyd-Steinberg dither). With ``transparent``, a pixel whose
-    alpha is under :data:`GIF_ALPHA_CUT` is transparent (the others opaque, their colour kept),
-    and the colours come from 255 entries. Identical consecutive frames are one frame shown
-    as long as both (Pillow's writer).
+    alpha is under half is transparent (the others opaque, their colour kept), and the colours
+    come from 255 entries (:func:`featurewarp_cli.io.encode.gif_picture`). Identical consecutive
+    frames are one frame shown as long as both (Pillow's writer).
     """
-    from PIL import Image
-
     grey = not transparent and all(np.array_equal(f[:, :, 0], f[:, :, 1]) and np.array_equal(f[:, :, 0], f[:, :, 2])
                                    for f in frames)
-    images = []
-    for frame in frames:
-        if grey:
-            images.append(Image.fromarray(np.ascontiguousarray(frame[:, :, 0])))
-            continue
-        colour = Image.fromarray(rgb_order(np.ascontiguousarray(frame[:, :, :3])))
-        if not transparent:
-            images.append(colour.quantize(256))
-            continue
-        paletted = colour.quantize(GIF_TRANSPARENT)
-        indices = np.asarray(paletted).copy()
-        indices[frame[:, :, 3] < GIF_ALPHA_CUT] = GIF_TRANSPARENT
-        image = Image.fromarray(indices, "P")
-        palette = paletted.getpalette()[: 3 * GIF_TRANSPARENT]
-        image.putpalette(palette + [0] * (768 - len(palette)))
-        images.append(image)
+    images = [gif_picture(np.ascontiguousarray(frame[:, :, 0]) if grey else frame, transparent) for frame in frames]
     options = {"transparency": GIF_TRANSPARENT, "disposal": 2} if transparent else {}
     buffer = io.BytesIO()
     images[0].save(buffer, "GIF", save_all=True, append_images=images[1:], loop=0, optimize=False,

@@ -113,7 +113,7 @@ def encode_image(image: np.ndarray, fmt: str, background=(255, 255, 255), qualit
     if image.ndim == 3 and not 1 <= image.shape[2] <= 4:
         raise ImageError(f"cannot encode {image.shape[2]} channels as {fmt}")
     image = gray_alpha_to_bgra(image)
-    if not FORMATS[fmt].alpha:
+    if not FORMATS[fmt].alpha and not (fmt == "gif" and background is None):     # GIF: 1-bit alpha
         image = flatten(image, background)
     if FORMATS[fmt].eight_bit:
         image = to_eight_bit(image)
@@ -198,21 +198,44 @@ def _exif_tags(exif: bytes | None) -> dict:
     return tags
 
 
+#: A GIF pixel under this alpha is transparent, one at or above it opaque (as ImageMagick cuts).
+GIF_ALPHA_CUT = 128
+#: The GIF palette index of transparent pixels (the other 255 are the picture's colours).
+GIF_TRANSPARENT = 255
+
+
 def _gif(image: np.ndarray) -> bytes:
-    """8-bit gray or BGR pixels as a GIF by Pillow: gray as a gray palette, colour quantised to
-    an adaptive palette of 256 (median cut, Floyd-Steinberg dither). OpenCV's GIF encoder
-    takes a fixed palette: on the astronaut under ``arc --angle 200`` a mean error of 20.7
-    levels, and a band of bright yellow along the outline (the adaptive palette: 3.0)."""
+    """8-bit gray, BGR or BGRA pixels as a GIF by Pillow (:func:`gif_picture`; BGRA: transparent
+    where alpha is under :data:`GIF_ALPHA_CUT`)."""
     import io
 
+    transparent = image.ndim == 3 and image.shape[2] == 4
+    buffer = io.BytesIO()
+    gif_picture(image, transparent).save(buffer, "GIF", **({"transparency": GIF_TRANSPARENT} if transparent else {}))
+    return buffer.getvalue()
+
+
+def gif_picture(image: np.ndarray, transparent: bool = False):
+    """8-bit gray, BGR or BGRA pixels as one GIF picture (a Pillow image): gray as a gray palette,
+    colour quantised to an adaptive palette of 256 (median cut, Floyd-Steinberg dither); with
+    ``transparent``, a pixel whose alpha is under :data:`GIF_ALPHA_CUT` takes the index
+    :data:`GIF_TRANSPARENT` and the colours 255 entries. OpenCV's GIF encoder takes a fixed
+    palette: on the astronaut under ``arc --angle 200`` a mean error of 20.7 levels, and a band
+    of bright yellow along the outline (the adaptive palette: 3.0)."""
     from PIL import Image
 
-    buffer = io.BytesIO()
     if image.ndim == 2:
-        Image.fromarray(image).save(buffer, "GIF")
-    else:
-        Image.fromarray(cv2.cvtColor(image, cv2.COLOR_BGR2RGB)).quantize(256).save(buffer, "GIF")
-    return buffer.getvalue()
+        return Image.fromarray(image)
+    colour = Image.fromarray(rgb_order(np.ascontiguousarray(image[:, :, :3])))
+    if not transparent:
+        return colour.quantize(256)
+    paletted = colour.quantize(GIF_TRANSPARENT)
+    indices = np.asarray(paletted).copy()
+    indices[image[:, :, 3] < GIF_ALPHA_CUT] = GIF_TRANSPARENT
+    picture = Image.fromarray(indices, "P")
+    palette = paletted.getpalette()[: 3 * GIF_TRANSPARENT]
+    picture.putpalette(palette + [0] * (768 - len(palette)))
+    return picture
 
 
 def rgb_order(image: np.ndarray) -> np.ndarray:
