@@ -427,3 +427,17 @@ def test_a_newline_in_a_file_name_keeps_warnings_and_summaries_on_one_line(tmp_p
     assert run.returncode == 0, run.stderr
     lines = run.stderr.splitlines()
     assert len(lines) == 2 and all(line.startswith("featurewarp: ") and "two\\nlines.png" in line for line in lines)
+
+
+def test_an_input_that_decodes_to_another_size_than_its_header_is_named(monkeypatch):
+    """The check named stdin '-' (reachable from stdin since it decodes beside the solve)."""
+    from featurewarp_cli.io import decode as decoding
+
+    whole = decoding.decode_image
+    monkeypatch.setattr(decoding, "decode_image", lambda *args, **kw: whole(*args, **kw)[:-1])
+    from click.testing import CliRunner
+
+    from featurewarp_cli.cli.main import cli
+
+    run = CliRunner().invoke(cli, ["warp", "swirl", "-", "-", "--format", "png"], input=FILES["ok.png"])
+    assert run.exit_code == 1 and "stdin decodes to 48x35, its header says 48x36" in run.output, run.output

@@ -313,6 +313,13 @@ def start_loading(settings: Settings, input: str, mask: str | None, data: bytes 
             warnings, size)
 
 
+def _check_decoded_size(image, input: str, width: int, height: int) -> None:
+    """A WarpError where INPUT decoded to another size than its header gave (the solve's)."""
+    if image.shape[:2] != (height, width):
+        raise WarpError(f"{'stdin' if input == '-' else input} decodes to {image.shape[1]}x{image.shape[0]}, "
+                        f"its header says {width}x{height}")
+
+
 class _Ready:
     def __init__(self, image, header=None):
         self._image = image
@@ -465,8 +472,7 @@ def warp_file(settings: Settings, input: str, output: str, mask: str | None = No
         t1 = time.perf_counter()
         image = pending.result()               # a decoding error outranks any from the solve
         timings["load"] += time.perf_counter() - t1
-    if image.shape[:2] != (height, width):
-        raise WarpError(f"{input} decodes to {image.shape[1]}x{image.shape[0]}, its header says {width}x{height}")
+    _check_decoded_size(image, input, width, height)
     mesh.record.warnings[:0] = warnings + depth_lost(image, fmt)    # the loading's and the depth: said, refused
     check_solution(settings, mesh, partial(refused_report, report, input, out_path, image, warp, mesh, timings, t0,
                                            fmt) if report else None)   # a CI gate reads why: the report, no image
