@@ -253,7 +253,7 @@ def test_tolerance_with_a_limit_is_kept(runner, pair):
 
 def test_diff_image_cannot_be_stdout(runner, pair, tmp_path):
     """Finding 7: the picture would land in the metrics."""
-    for alias in ("png:/dev/stdout", "png:/dev/fd/1"):
+    for alias in ("png:/dev/stdout", "png:/dev/fd/1", "png:-"):       # png:- put the PNG after the metrics
         run = runner("diff", *pair, "--diff-image", alias)
         assert run.code == 2 and "is stdout, which holds the metrics" in run.stderr and b"PNG" not in run.stdout
     out = tmp_path / "out.txt"

@@ -117,9 +117,11 @@ STDOUT_NAMES = ("/dev/stdout", "/dev/fd/1", "/proc/self/fd/1")
 
 
 def _is_stdout(path: str) -> bool:
-    """Whether ``path`` names the file stdout writes to."""
+    """Whether ``path`` names the file stdout writes to (``-`` too: ``png:-``)."""
     import sys
 
+    if path == "-":
+        return True
     try:
         shown, there = os.fstat(sys.stdout.fileno()), os.stat(path)
     except (OSError, ValueError, AttributeError, io.UnsupportedOperation):
