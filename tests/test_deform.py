@@ -388,6 +388,11 @@ def test_a_misspelt_key_inside_a_handle_is_noted_and_errors_say_what_is_missing(
     assert Handles.from_dict({"version": 2.0, "points": pins}, W, H).notes == []      # as the schema reads it
     with pytest.raises(ValueError, match="^points: none are given; at least two handles are needed"):
         Handles.from_dict({"version": 1, "points": []}, W, H)
+    # a side given backwards turned the image round (or emptied an input canvas), exit 0
+    for side, line in (("top", [[W - 0.5, -0.5], [-0.5, -0.5]]), ("left", {"bezier": [[-0.5, H - 0.5], [-9, 200],
+                                                                                       [-9, 100], [-0.5, -0.5]]})):
+        with pytest.raises(ValueError, match=rf"^border\.{side} runs from .* a {side} side runs (left to right|top to bottom)$"):
+            Handles.from_dict({"version": 2, "points": pins, "border": {side: line}}, W, H)
     # a curve of one point was taken (stretched to 400 px: "asks for a fold"), or named no place
     with pytest.raises(ValueError, match=r"^curves\[1\]\.from: every point is \(50, 30\); a curve runs"):
         Handles.from_dict({"version": 2, "points": pins, "curves": [

@@ -454,6 +454,10 @@ def _border(value, width: int, height: int):
         else:
             line = _points(line, f"border.{side}[{{}}]")
             _near(line, width, height, f"border.{side}[{{}}]")
+        axis = 0 if side in ("top", "bottom") else 1        # sides run left to right, top to bottom
+        if not line[-1, axis] > line[0, axis]:
+            raise ValueError(f"border.{side} runs from ({line[0, 0]:g}, {line[0, 1]:g}) to ({line[-1, 0]:g}, "
+                             f"{line[-1, 1]:g}); a {side} side runs {('left to right', 'top to bottom')[axis]}")
         sides[side] = line
     corners = {("top", 0): "left", ("top", -1): "right", ("bottom", 0): "left", ("bottom", -1): "right"}
     for (row, end), column in corners.items():
