@@ -73,6 +73,15 @@ def test_frames_left_after_a_sequence_by_a_longer_run_are_said(files, tmp_path):
     assert run("swirl", *args, "--frames", "5", "--strict").code == 0
 
 
+@pytest.mark.parametrize("output", ["gif:-", "/dev/stdout", "gif:{dir}/o.gif"])
+def test_stdout_and_format_prefixes_are_named_as_what_animate_does_not_write(files, output):
+    """``gif:-`` was "cannot tell the animation format" (the format was given), and ``gif:o.gif``
+    wrote a file named ``gif:o.gif``."""
+    out = run("swirl", str(files / "in.png"), output.format(dir=files), "--vary", "angle=0:90", "--frames", "2")
+    assert out.code == 2 and "an animation is written to a file, its format from its extension" in out.stderr
+    assert not list(files.glob("gif:*"))
+
+
 def test_video(files):
     """An .mp4 is written through OpenCV's video writer."""
     out = run("bulge", str(files / "in.png"), str(files / "out.mp4"), "-m", str(files / "mask.png"),

@@ -253,6 +253,8 @@ def test_tolerance_with_a_limit_is_kept(runner, pair):
 
 def test_diff_image_cannot_be_stdout(runner, pair, tmp_path):
     """Finding 7: the picture would land in the metrics."""
+    unknown = runner("diff", *pair, "--diff-image", tmp_path / "d.txt")      # diff has no --format to suggest
+    assert unknown.code == 2 and unknown.stderr.rstrip().endswith(f"or a prefix: png:{tmp_path / 'd.txt'}")
     for alias in ("png:/dev/stdout", "png:/dev/fd/1", "png:-"):       # png:- put the PNG after the metrics
         run = runner("diff", *pair, "--diff-image", alias)
         assert run.code == 2 and "is stdout, which holds the metrics" in run.stderr and b"PNG" not in run.stdout

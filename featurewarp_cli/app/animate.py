@@ -100,7 +100,11 @@ def check_frames_fit(settings: Settings, frames: int, canvas: tuple[int, int]) -
 
 
 def output_kind(path: str) -> str:
-    """'sequence' (a %d field in the name), 'animation' or 'video'."""
+    """'sequence' (a %d field in the name), 'animation' or 'video'; a usage error for stdout or a
+    ``gif:``-style prefix (one was taken into the file's name)."""
+    if path == "-" or formats.split_prefix(path)[0] or write.descriptor_of(path) is not None:
+        raise WarpError(f"{path}: an animation is written to a file, its format from its extension (not to "
+                        "stdout, nor with a format prefix)", "OUTPUT", usage=True)
     if re.search(r"%0?\d*d", os.path.basename(path)):
         try:
             path % 0

@@ -103,7 +103,7 @@ def _diff_target(diff_image: str, a: str, b: str, quiet: bool) -> tuple[str, str
             raise ValueError("cannot be '-' (stdout holds the metrics)")
         if diff_image == os.devnull:
             return os.devnull, "png"
-        path, fmt = formats.output_target(diff_image)
+        path, fmt = formats.output_target(diff_image, other=f"a prefix: png:{diff_image}")
         if not quiet and _is_stdout(path):
             raise ValueError(f"{path} is stdout, which holds the metrics (with -q it does not)")
         write.check_writable(path)

@@ -53,11 +53,12 @@ def split_prefix(spec: str) -> tuple[str | None, str]:
     return None, spec
 
 
-def output_target(spec: str, fmt: str | None = None) -> tuple[str, str]:
+def output_target(spec: str, fmt: str | None = None, other: str = "--format") -> tuple[str, str]:
     """Path and format name of an OUTPUT argument.
 
     The format comes from a ``png:``-style prefix, else ``fmt`` (``--format``),
-    else the path's extension. ``-`` (stdout) needs a prefix or ``fmt``.
+    else the path's extension. ``-`` (stdout) needs a prefix or ``fmt``. ``other``: the way to
+    name a format besides an extension that an error suggests (``diff`` has no ``--format``).
 
     Raises
     ------
@@ -79,5 +80,5 @@ def output_target(spec: str, fmt: str | None = None) -> tuple[str, str]:
         if name is None:
             known = ", ".join(sorted(set(FORMATS) | set(ALIASES)))
             raise ValueError(f"unknown output format {ext or '(no extension)'!r} for {path}; "
-                             f"use one of {known}, or --format")
+                             f"use one of {known}, or {other}")
     return path, name
