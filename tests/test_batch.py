@@ -90,8 +90,9 @@ def test_plain_mode_needs_no_masks(runner, tmp_path):
     (["--out-dir", "{tmp}/out", "--jobs", "0"], ["--jobs", "out of range (1 <= N <= 1024)"]),
     (["--out-dir", "{tmp}/out", "--angle", "inf"], ["--angle", "finite"]),
     (["--out-dir", "{tmp}/out", "--background", "transparent", "--format", "bmp"], []),
+    (["--out-dir", "{tmp}/out", "--suffix", "/x"], ["--suffix", "holds no '/'"]),     # each file failed
 ], ids=["out-dir under a file", "bad pattern", "attribute in pattern", "format spec in pattern", "no jobs",
-        "inf angle", "transparent bmp"])
+        "inf angle", "transparent bmp", "suffix with a slash"])
 def test_usage_errors(runner, photos, tmp_path, args, words):
     (tmp_path / "a-file").write_text("")
     run = runner("batch", "swirl", photos / "a.png", *[a.replace("{tmp}", str(tmp_path)) for a in args])

@@ -63,6 +63,8 @@ def plan(inputs, out_dir: str, suffix: str = "", fmt: str | None = None,
         format, two inputs that would write the same output, an output that would replace
         a file the batch reads (its own input too), or a summary that would.
     """
+    if "/" in suffix or "\0" in suffix:          # a suffix is part of a name: each file failed, an out-dir made
+        raise WarpError(f"{suffix!r} is part of a file name: it holds no '/'", "--suffix", usage=True)
     named_as_mask = _mask_names(mask_pattern)
 
     def mask_of(path):
@@ -90,8 +92,8 @@ def plan(inputs, out_dir: str, suffix: str = "", fmt: str | None = None,
         output = urls.join(out_dir, name) if urls.is_url(out_dir) else os.path.join(out_dir, name)
         key = _identity(output)
         if key in seen:
-            raise WarpError(f"{seen[key]} and {path} would both write {output} (a --suffix is added to "
-                            "both); rename one, or run them in separate batches", usage=True)
+            raise WarpError(f"{seen[key]} and {path} would both write {output} (a --suffix would not help: "
+                            "it is added to both); rename one, or run them in separate batches", usage=True)
         seen[key] = path
         jobs.append(Job(path, output, mask_of(path)))
     _check_overwrites(jobs, summary, given | masks)
