@@ -208,6 +208,15 @@ def test_a_summary_that_cannot_be_written_is_refused_before_the_out_dir_is_made(
     assert not (tmp_path / "new").exists()
 
 
+def test_a_quoted_pattern_is_expanded_as_the_shell_would(runner, photos, tmp_path):
+    """``batch swirl 'photos/*.png'`` (quoted past the shell, or past its limit on arguments)
+    said the pattern did not exist; URLs were expanded, local paths not."""
+    run = runner("batch", "swirl", photos / "*.png", "-o", tmp_path / "out")
+    assert run.code == 0 and names(tmp_path / "out") == ["a.png", "b.png"], run.stderr     # masks skipped
+    run = runner("batch", "swirl", photos / "*.tif", "-o", tmp_path / "out")
+    assert run.code == 2 and "matches no file" in run.stderr
+
+
 def test_a_missing_out_dir_is_created(runner, photos, tmp_path):
     run = runner("batch", "swirl", photos / "a.png", "-o", tmp_path / "new" / "deeper", "--mode", "plain")
     assert run.code == 0 and names(tmp_path / "new" / "deeper") == ["a.png"]

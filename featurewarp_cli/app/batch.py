@@ -9,6 +9,7 @@ be fsspec URLs (:mod:`featurewarp_cli.io.urls`; jobs with one run through
 
 from __future__ import annotations
 
+import glob
 import os
 import re
 import stat
@@ -163,12 +164,18 @@ def _located(path: str, param: str | None = "INPUT") -> str:
 
 
 def _expanded(path: str) -> list[str]:
-    """An INPUT: a path as it is, a URL located, a URL with glob characters as every object
-    it matches; '-' a usage error (a batch reads no stdin)."""
+    """An INPUT: a path as it is, a URL located; a pattern (glob characters, quoted past the
+    shell or past its limit on arguments; a URL's too) as every file it matches, sorted; '-' a
+    usage error (a batch reads no stdin)."""
     if path == "-":
         raise WarpError("'-': a batch reads no stdin; name the files (photos/*.jpg)", "INPUT", usage=True)
     if not urls.is_url(path):
-        return [path]
+        if os.path.lexists(path) or not re.search(r"[*?[]", path):
+            return [path]
+        found = sorted(glob.glob(path, recursive=True))
+        if not found:
+            raise WarpError(f"{path} matches no file", "INPUT", usage=True)
+        return found
     try:
         return [_located(found) for found in urls.expand(path)]
     except (OSError, ValueError) as err:
