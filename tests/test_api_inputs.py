@@ -85,6 +85,60 @@ def test_lists_and_pil_images_are_arrays():
     np.testing.assert_array_equal(quiet(Image.fromarray(image), box(), "swirl", angle=60), expected)
 
 
+def test_a_pil_image_is_taken_as_its_pixels_whatever_its_mode():
+    """np.asarray of a palette image is its colour indices (warped as grey, silently), of a CMYK
+    one four channels taken as RGBA (K as alpha): they are converted first; L*a*b* is refused."""
+    from PIL import Image
+
+    image = picture()
+    rgb = Image.fromarray(image)
+    palette = rgb.quantize(64)
+    np.testing.assert_array_equal(quiet(palette, box(), "swirl", angle=60),
+                                  quiet(np.asarray(palette.convert("RGB")), box(), "swirl", angle=60))
+    palette.info["transparency"] = 0
+    assert quiet(palette, box(), "swirl", angle=60).shape[2] == 4
+    cmyk = rgb.convert("CMYK")
+    np.testing.assert_array_equal(quiet(cmyk, box(), "swirl", angle=60),
+                                  quiet(np.asarray(cmyk.convert("RGB")), box(), "swirl", angle=60))
+    with pytest.raises(ValueError, match="mode LAB"):
+        warp(rgb.convert("LAB"), box(), "swirl", angle=60)
+
+
+def test_a_mesh_is_its_own_and_renders_only_its_image_size():
+    """Every mesh of a warper shared its source array with the warper's cache (an edit of one
+    changed every later solve), and a mesh of another size rendered a crop."""
+    from featurewarp_cli import FeatureWarper, load_warp
+
+    image = picture()
+    height, width = image.shape[:2]
+    warper = FeatureWarper(width, height, box())
+    first = warper.solve(load_warp("swirl")(width, height, angle=45))
+    first.source[:, 0] += 5.0
+    second = warper.solve(load_warp("swirl")(width, height, angle=90))
+    fresh = FeatureWarper(width, height, box())
+    np.testing.assert_array_equal(warper.render(image, second),
+                                  fresh.render(image, fresh.solve(load_warp("swirl")(width, height, angle=90))))
+    small = FeatureWarper(width // 2, height // 2)
+    with pytest.raises(ValueError, match=f"mesh is for a {width // 2}x{height // 2} image, not {width}x{height}"):
+        warper.render(image, small.solve(load_warp("swirl")(width // 2, height // 2, angle=60)))
+
+
+def test_handles_made_directly_are_checked_as_a_files_are():
+    """Handles(...) made directly skipped every check: NaN gave numpy's and scipy's errors, a
+    source outside the image was taken, lists failed with a TypeError."""
+    from featurewarp_cli import Deformer, Handles
+
+    deformer = Deformer(160, 120, box(120, 160))
+    with pytest.raises(ValueError, match=r"^points\[1\]\.to: expected a point \[x, y\] of two finite numbers"):
+        Handles(np.array([[10.0, 10], [150, 110]]), np.array([[10.0, 10], [np.nan, 100]]))
+    with pytest.raises(ValueError, match=r"^points\[1\]\.from \(2000, 110\) lies outside the 160x120 image"):
+        deformer.solve(Handles(np.array([[10.0, 10], [2000, 110]]), np.array([[10.0, 10], [140, 100]])))
+    with pytest.raises(ValueError, match="2 sources but 1 targets"):
+        Handles([[10.0, 10], [150, 110]], [[10.0, 10]])
+    mesh = deformer.solve(Handles([[10.0, 10], [150, 110]], [[10.0, 10], [140, 100]]))      # lists: taken
+    assert mesh.flips() == 0
+
+
 def test_integer_images_of_eight_bit_data_keep_the_eight_bit_scale():
     """An int32 image of 0..255 data came back with alpha and white at 65535 and cubic overshoot past 255."""
     image, mask = picture(), box()

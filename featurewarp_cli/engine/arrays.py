@@ -59,11 +59,33 @@ def check_size(width, height, who: str = "FeatureWarper") -> None:
             raise ValueError(f"{who}: {name}={value!r}; use a whole number of pixels, at least 1")
 
 
+#: PIL modes whose arrays are not the pixels (a palette's indices, CMYK, other colour spaces),
+#: and the mode each is converted to first; "P" becomes RGBA where it has a transparent entry.
+PIL_CONVERSIONS = {"P": "RGB", "PA": "RGBA", "CMYK": "RGB", "YCbCr": "RGB", "HSV": "RGB", "RGBX": "RGB",
+                   "RGBa": "RGBA", "La": "LA"}
+
+
+def _pil_pixels(image):
+    """A PIL image in a mode whose array is its pixels (:data:`PIL_CONVERSIONS`; CMYK by PIL's
+    own formula, not a profile); anything else as it is. ValueError for L*a*b*."""
+    mode = getattr(image, "mode", None)
+    if not (type(image).__module__.startswith("PIL.") and hasattr(image, "convert")):
+        return image
+    if mode == "LAB":
+        raise ValueError("image is a PIL image in mode LAB: convert it to RGB first (PIL.ImageCms)")
+    if mode == "P" and "transparency" in image.info:
+        return image.convert("RGBA")
+    return image.convert(PIL_CONVERSIONS[mode]) if mode in PIL_CONVERSIONS else image
+
+
 def as_array(value, what: str) -> np.ndarray:
-    """``np.asarray(value)``, or a one-line error naming ``what`` and the type it could not take."""
+    """``np.asarray(value)`` (a PIL image in its pixels: :func:`_pil_pixels`), or a one-line error
+    naming ``what`` and the type it could not take."""
     if isinstance(value, (str, bytes, os.PathLike)) and what == "image":
         raise TypeError(f"image must be an array (h, w) or (h, w, C), not a path or text ({value!r}): read it "
                         f"first (PIL.Image.open, cv2.imread, imageio)")
+    if what == "image":
+        value = _pil_pixels(value)
     try:
         return np.asarray(value)
     except (ValueError, TypeError) as err:          # ragged lists, objects numpy cannot read

@@ -390,6 +390,7 @@ class Deformer:
         if not isinstance(handles, Handles):
             raise TypeError(f"handles must be Handles, a handles dict or a handles file's path, not "
                             f"{type(handles).__name__}")
+        handles.check_image(self.warper.width, self.warper.height)
         self.handles = handles
         factored = self.rigid.rigid
         self.warp = self.rigid.deformation(handles, warm=drag or self.quick)     # a full solve: no history

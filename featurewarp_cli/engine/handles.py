@@ -88,8 +88,28 @@ class Handles:
     names: list | None = None
 
     def __post_init__(self):
+        """Point handles as (K, 2) arrays of finite numbers (a Handles made directly, not from a
+        dict, gave numpy's and scipy's errors on NaN or on lists)."""
+        ends = []
+        for points, end in ((self.points_from, "from"), (self.points_to, "to")):
+            try:
+                points = np.asarray(points, float)
+            except (TypeError, ValueError):
+                raise ValueError(f"points[].{end}: expected (K, 2) numbers") from None
+            if points.ndim != 2 or points.shape[1] != 2:
+                raise ValueError(f"points[].{end}: expected (K, 2) numbers, not shape {points.shape}")
+            ends.append(_points(points.tolist(), f"points[{{}}].{end}"))
+        if len(ends[0]) != len(ends[1]):
+            raise ValueError(f"points: {len(ends[0])} sources but {len(ends[1])} targets")
+        self.points_from, self.points_to = ends
         if self.angles is None:
             self.angles = np.full(len(self.points_from), np.nan)
+
+    def check_image(self, width: int, height: int) -> None:
+        """ValueError unless the point handles start inside a ``width`` x ``height`` image and end
+        near it (:meth:`from_dict` checks this; a Handles made directly, here)."""
+        _inside(self.points_from, width, height, "points[{}].from")
+        _near(self.points_to, width, height, "points[{}].to")
 
     @classmethod
     def from_dict(cls, data, width: int, height: int, source: str = "handles") -> "Handles":

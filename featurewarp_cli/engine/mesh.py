@@ -45,6 +45,13 @@ class Mesh:
         """The record as JSON-ready data (:meth:`SolveRecord.to_dict`)."""
         return self.record.to_dict() if self.record is not None else {}
 
+    def check_image(self, width: int, height: int) -> None:
+        """ValueError unless the mesh's grid spans a ``width`` x ``height`` image (a mesh of another
+        warper rendered a crop of the image)."""
+        spans = np.ptp(self.source, axis=0) if len(self.source) else np.zeros(2)
+        if not np.allclose(spans, (width, height), atol=1e-6):
+            raise ValueError(f"mesh is for a {spans[0]:g}x{spans[1]:g} image, not {width}x{height}")
+
     def flips(self) -> int:
         """Number of triangles whose signed area on the canvas is <= 0."""
         return int(np.count_nonzero(signed_areas(self.target, self.triangles) <= 0))

@@ -240,9 +240,8 @@ class FeatureWarper:
         return state.systems[key]
 
     def _releases(self, warp) -> bool:
-        """Whether a feature cut by a border no similarity of it can follow lets go of it:
-        ``boundary='release'``, or by default where the warp asks (``cut_features='keep'``:
-        the handles' map); else it gives way and the outline stays W's."""
+        """Whether a feature cut by a border no similarity of it can follow lets go of it: ``boundary=
+        'release'``, or by default where the warp asks (``cut_features='keep'``: the handles' map)."""
         if self.boundary is not None:
             return self.boundary == "release"
         return getattr(warp, "cut_features", "give") == "keep"
@@ -340,7 +339,7 @@ class FeatureWarper:
                self.cell is not None and not self.cell_chosen_automatically)
         self.timings["quality"] = time.perf_counter() - t1
         record.timings = dict(self.timings)
-        return Mesh(state.nodes, target, state.triangles, tuple(warp.canvas), record, state.node_component)
+        return Mesh(state.nodes.copy(), target, state.triangles.copy(), tuple(warp.canvas), record, state.node_component)
 
     def _feature_aware(self, state: _GridState, warped: np.ndarray, mode: str, record: SolveRecord,
                        quick: bool = False, unpin: bool = False, drag: bool = False, keep_ties: bool = False):
@@ -467,6 +466,7 @@ class FeatureWarper:
         image = arrays.as_array(image, "image") if order == "rgb" else image       # a list, a PIL image
         if image.shape[:2] != (self.height, self.width):
             raise ValueError(f"image is {image.shape[1]}x{image.shape[0]}, warper is for {self.width}x{self.height}")
+        mesh.check_image(self.width, self.height)
         stages.enter("render")
         t0 = time.perf_counter()
         if order not in ("rgb", "bgr"):
@@ -482,9 +482,8 @@ class FeatureWarper:
 
 
 def _border_used(asked: str | None, boundary: str, state: _GridState) -> str:
-    """The border conditions a solve used (the report's ``boundary``): ``release`` when ``asked``;
-    ``slide`` where a side W keeps straight let its nodes slide, else ``fixed`` (a swirl asks
-    for slide and holds every border node)."""
+    """The border conditions a solve used (the report's ``boundary``): ``release`` when ``asked``; ``slide``
+    where a side W keeps straight let its nodes slide, else ``fixed`` (a swirl holds every border node)."""
     if asked == "release":
         return "release"
     held = state.fixed_x & state.fixed_y
