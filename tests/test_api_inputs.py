@@ -139,6 +139,22 @@ def test_handles_made_directly_are_checked_as_a_files_are():
     assert mesh.flips() == 0
 
 
+def test_a_warpers_cell_and_flags_are_checked_as_warps_are():
+    """FeatureWarper took ``cell=True`` as a 1 px grid and ``injective="no"`` (and render's
+    ``antialias="no"``) as true, where warp() refuses them."""
+    from featurewarp_cli import FeatureWarper, load_warp
+
+    for options, message in (({"cell": True}, "cell must be a number of pixels"),
+                             ({"injective": "no"}, "injective must be True or False, not 'no'"),
+                             ({"grow_past_edge": "no"}, "grow_past_edge must be True or False")):
+        with pytest.raises(ValueError, match=message):
+            FeatureWarper(32, 24, box(), **options)
+    warper = FeatureWarper(32, 24, box(), injective=np.bool_(True))
+    mesh = warper.solve(load_warp("swirl")(32, 24, angle=60))
+    with pytest.raises(ValueError, match="antialias must be True or False"):
+        warper.render(picture(), mesh, antialias="no")
+
+
 def test_integer_images_of_eight_bit_data_keep_the_eight_bit_scale():
     """An int32 image of 0..255 data came back with alpha and white at 65535 and cubic overshoot past 255."""
     image, mask = picture(), box()

@@ -78,6 +78,17 @@ def _pil_pixels(image):
     return image.convert(PIL_CONVERSIONS[mode]) if mode in PIL_CONVERSIONS else image
 
 
+def check_cell_and_flags(cell, **flags) -> None:
+    """ValueError for a ``cell`` that is not a number of pixels of at least 1 (``True`` was a
+    1 px grid), or a flag that is not a bool (``injective="no"`` was taken as true)."""
+    if cell is not None and (isinstance(cell, bool) or not (isinstance(cell, (int, float, np.number))
+                                                             and cell >= 1 and np.isfinite(cell))):
+        raise ValueError(f"cell must be a number of pixels, at least 1, not {cell!r}")
+    for name, value in flags.items():
+        if not isinstance(value, (bool, np.bool_)):
+            raise ValueError(f"{name} must be True or False, not {value!r}")
+
+
 def as_array(value, what: str) -> np.ndarray:
     """``np.asarray(value)`` (a PIL image in its pixels: :func:`_pil_pixels`), or a one-line error
     naming ``what`` and the type it could not take."""

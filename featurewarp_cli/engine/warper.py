@@ -34,7 +34,6 @@ factored in turn. A sliding border (stretch's): one factorization per coordinate
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass, field
 
@@ -166,8 +165,7 @@ class FeatureWarper:
                 raise ValueError(f"{param.name}: {str(err).split(': ', 1)[-1]}") from None
         if formulation not in FORMULATIONS:
             raise ValueError(f"formulation must be one of {', '.join(FORMULATIONS)}, not {formulation!r}")
-        if cell is not None and not (isinstance(cell, (int, float, np.number)) and cell >= 1 and math.isfinite(cell)):
-            raise ValueError(f"cell must be a number of pixels, at least 1, not {cell!r}")
+        arrays.check_cell_and_flags(cell, injective=injective, grow_past_edge=grow_past_edge)
         if cell is not None and max_nodes is not None:
             nodes = Grid.for_image(width, height, cell).n_nodes
             if nodes > max_nodes:
@@ -463,6 +461,7 @@ class FeatureWarper:
         """
         from ..render import raster
 
+        arrays.check_cell_and_flags(None, antialias=antialias)
         image = arrays.as_array(image, "image") if order == "rgb" else image       # a list, a PIL image
         if image.shape[:2] != (self.height, self.width):
             raise ValueError(f"image is {image.shape[1]}x{image.shape[0]}, warper is for {self.width}x{self.height}")
