@@ -143,6 +143,11 @@ def test_a_parameter_varied_twice_and_a_sequence_name_python_cannot_fill_are_usa
     out = run("swirl", str(files / "in.png"), str(files / "f-%d%n.png"), "--vary", "angle=0:90", "--frames", "2")
     assert out.code == 2 and "one %d field" in out.stderr and len(out.stderr.strip().splitlines()) == 1
     assert not list(files.glob("f-*")) and not (files / "v.gif").exists()
+    for name in ("s-%s.png", "s-%05i.png"):        # one APNG was written under that very name
+        out = run("swirl", str(files / "in.png"), str(files / name), "--vary", "angle=0:90", "--frames", "2")
+        assert out.code == 2 and "one %d field" in out.stderr and not list(files.glob("s-*"))
+    out = run("swirl", str(files / "in.png"), str(files / "50%sale.gif"), "--vary", "angle=0:90", "--frames", "2")
+    assert out.code == 0 and (files / "50%sale.gif").exists()          # a percent sign in a name stays one
 
 
 def test_frames_that_would_not_fit_the_memory_limit_are_refused_before_any_is_made(files):

@@ -105,6 +105,10 @@ def output_kind(path: str) -> str:
     if path == "-" or formats.split_prefix(path)[0] or write.descriptor_of(path) is not None:
         raise WarpError(f"{path}: an animation is written to a file, its format from its extension (not to "
                         "stdout, nor with a format prefix)", "OUTPUT", usage=True)
+    name = os.path.basename(path).replace("%%", "")
+    if re.search(r"%[-#0 +]*\d*[siuxX](?![A-Za-z])", name):     # %s, %05i: meant as a frame number
+        raise WarpError(f"{path}: a numbered sequence's name holds one %d field (such as %04d), and %% for a "
+                        "percent sign", "OUTPUT", usage=True)
     if re.search(r"%0?\d*d", os.path.basename(path)):
         try:
             path % 0
