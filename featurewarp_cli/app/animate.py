@@ -396,9 +396,13 @@ def left_after(output: str, kind: str, frames: int) -> list[str]:
     left = 0
     while left < 1_000_000 and os.path.lexists(output % (frames + left)):
         left += 1
-    return [f"{output % frames}{' to ' + output % (frames + left - 1) if left > 1 else ''} ({left} file"
-            f"{'s' if left > 1 else ''}) follow{'s' if left == 1 else ''} this sequence's last frame, left "
-            f"from another run: whatever reads {output} takes {'them as frames' if left > 1 else 'it as a frame'} too"] * (left > 0)
+    if left == 0:
+        return []
+    if left == 1:
+        return [f"{output % frames} (1 file) follows this sequence's last frame, left from another run: "
+                f"whatever reads {output} takes it as a frame too"]
+    return [f"{output % frames} to {output % (frames + left - 1)} ({left} files) follow this sequence's last "
+            f"frame, left from another run: whatever reads {output} takes them as frames too"]
 
 
 def check_output_paths(paths: list[str], input: str, mask: str | None) -> None:

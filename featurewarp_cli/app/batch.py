@@ -12,13 +12,12 @@ from __future__ import annotations
 import glob
 import os
 import re
-import stat
 import time
 from dataclasses import dataclass, replace
 
 from ..io import urls
 from ..io.decode import path_problem
-from .outputs import writable
+from .outputs import file_identity, writable
 from .pipeline import Settings, WarpError, warp_file
 from .remote import has_url, run_url_job, url_up_to_date
 
@@ -117,9 +116,9 @@ def _check_overwrites(jobs: list[Job], summary: str | None, also_read: set) -> N
             raise WarpError(f"{job.input} would be written to {job.output}, replacing {what}; use another "
                             "--out-dir or a --suffix", usage=True)
     if summary is not None and summary != "-":
-        key, linked = _identity(summary), _inode(summary)
+        key, linked = _identity(summary), file_identity(summary)
         written = {_identity(job.output) for job in jobs}
-        read_files = {_inode(p) for p in (*read.values(), *also_read)} - {None}    # a hard link is the file
+        read_files = {file_identity(p) for p in (*read.values(), *also_read)} - {None}    # a hard link: the file
         role = "read by" if key in read or key in also_read or linked in read_files else \
             "an output of" if key in written else None
         if role is not None:
@@ -185,15 +184,6 @@ def _expanded(path: str) -> list[str]:
 def _identity(path: str) -> str:
     """What ``path`` names, for comparing: its real path, or a URL's protocol and path."""
     return urls.key(path) if urls.is_url(path) else os.path.realpath(path)
-
-
-def _inode(path: str):
-    """(device, inode) of an existing local file (a hard link's are its file's), else None."""
-    try:
-        info = os.stat(path) if not urls.is_url(path) else None
-    except (OSError, ValueError):
-        return None
-    return (info.st_dev, info.st_ino) if info is not None and stat.S_ISREG(info.st_mode) else None
 
 
 def _create(out_dir: str) -> None:

@@ -20,7 +20,7 @@ def format_of(path: str) -> str | None:
     return formats.format_name(header.format) if header is not None else None
 
 
-def _identity(path: str):
+def file_identity(path: str):
     """What a path names, for comparing two: (device, inode) of an existing file, else the
     absolute path with links resolved."""
     try:
@@ -98,8 +98,8 @@ def check_distinct(outputs: list[tuple[str | None, str]], inputs: list[tuple[str
         if descriptor is not None and len(options) > 1:
             where = "stdout ('-')" if descriptor == 1 else f"descriptor {descriptor}"
             raise WarpError(f"only one output can go to {where}: {', '.join(options)}", usage=True)
-    files = [(p, o, _identity(p)) for p, o in named if p != "-"]
-    sources = [(p, o, _identity(p)) for p, o in inputs if p and p != "-"]
+    files = [(p, o, file_identity(p)) for p, o in named if p != "-"]
+    sources = [(p, o, file_identity(p)) for p, o in inputs if p and p != "-"]
     for k, (path, option, ident) in enumerate(files):
         if ident is None:
             continue
@@ -161,8 +161,7 @@ def encoded(out_path: str, fmt: str, image, background, quality: int | None = No
     from .pipeline import WarpError
 
     try:
-        return encode.encode_image(image, fmt, background or (None if fmt == "gif" else (255, 255, 255)), quality,
-                                   **(kept or metadata.Metadata()).keywords())
+        return encode.encode_image(image, fmt, background, quality, **(kept or metadata.Metadata()).keywords())
     except ImageError as err:
         raise WarpError(f"cannot write {out_path}: {err}") from err
 

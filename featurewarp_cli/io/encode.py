@@ -81,8 +81,9 @@ def encode_image(image: np.ndarray, fmt: str, background=(255, 255, 255), qualit
     image : (h, w) or (h, w, C) ndarray, uint8 or uint16, C in 1..4, BGR(A) channel order
         Gray + alpha (C = 2) is stored as BGRA.
     fmt : str
-    background : (r, g, b)
-        Colour that alpha is composited over for formats without alpha.
+    background : (r, g, b) or None
+        Colour that alpha is composited over for formats without alpha; None: white, but a GIF's
+        pixels are transparent where alpha is under half.
     quality : int, optional
         1..100 for JPEG (default 95) and WebP (lossy when given; default lossless); other
         formats ignore it.
@@ -114,7 +115,7 @@ def encode_image(image: np.ndarray, fmt: str, background=(255, 255, 255), qualit
         raise ImageError(f"cannot encode {image.shape[2]} channels as {fmt}")
     image = gray_alpha_to_bgra(image)
     if not FORMATS[fmt].alpha and not (fmt == "gif" and background is None):     # GIF: 1-bit alpha
-        image = flatten(image, background)
+        image = flatten(image, background or (255, 255, 255))
     if FORMATS[fmt].eight_bit:
         image = to_eight_bit(image)
     if fmt == "gif":
