@@ -242,6 +242,21 @@ def test_colour_under_transparent_pixels_not_compared(runner, tmp_path):
     assert runner("diff", tmp_path / "a.png", save(tmp_path / "b.png", b)).code == 1
 
 
+def test_colour_under_faint_alpha_counts_as_it_shows(runner, tmp_path):
+    """Colour is compared premultiplied: under alpha 2 of 255 a colour 255 apart shows 2 apart
+    over any background. Compared straight it counted 255, and a 16-bit output's 8-bit twin
+    (whose colour under faint alpha is its rounding) failed --max-rmse 0.5 on four edge pixels."""
+    a = np.dstack([textured(), np.full((36, 48), 255, np.uint8)])
+    a[:, :3, 3] = 2
+    b = a.copy()
+    b[:, :3, :3] = 255 - a[:, :3, :3]
+    run = runner("diff", save(tmp_path / "a.png", a), save(tmp_path / "b.png", b), "--max-rmse", "0.5")
+    assert run.code == 0 and 1.0 < float(metrics(run)["max_abs_diff"]) <= 2.0, run.stdout
+    b[:, :3, 3] = 200                       # the alpha itself counts in full, and the colour shows
+    run = runner("diff", tmp_path / "a.png", save(tmp_path / "b.png", b), "--max-rmse", "0.5")
+    assert run.code == 1 and float(metrics(run)["max_abs_diff"]) >= 198
+
+
 def test_tolerance_with_a_limit_is_kept(runner, pair):
     """Finding 4: --tolerance with --max-rmse means no sample off by more than it."""
     run = runner("diff", *pair, "--max-rmse", "5", "--tolerance", "1")

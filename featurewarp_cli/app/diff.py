@@ -3,7 +3,8 @@
 All metrics are on the 0..255 scale: 8-bit samples as they are, 16-bit samples
 divided by 257. Every channel counts, alpha included, but an alpha that is opaque
 everywhere in both images (or frames) is left out, so an opaque RGBA file reads as
-its RGB twin; the colour under a fully transparent pixel is not seen, so it counts
+its RGB twin; colour is compared premultiplied by alpha (what it adds over any
+background), so the colour under a fully transparent pixel, which no one sees, counts
 as 0. Images whose channel layouts
 differ are compared as what their pixels mean: gray as R = G = B, no alpha as opaque.
 Animations and multi-page files are compared frame by frame (:func:`compare_frames`).
@@ -75,12 +76,14 @@ def channels(image: np.ndarray) -> int:
 
 
 def normalised(image: np.ndarray) -> np.ndarray:
-    """(h, w, C) float64 samples on the 0..255 scale; colour 0 under alpha 0 (where no one sees
-    it: encoders differ there, libwebp fills it with nearby colour)."""
+    """(h, w, C) float64 samples on the 0..255 scale, colour premultiplied by alpha: what a pixel
+    adds over any background, so colour under alpha 0 is 0 (encoders differ there, libwebp fills
+    it with nearby colour) and colour under alpha 1 counts 1/255 (a 16-bit twin's rounding there
+    failed ``--max-rmse 0.5``)."""
     data = on_eight_bit_scale(image)
     data = data[:, :, None] if data.ndim == 2 else data
     if data.shape[2] == 4:
-        data[data[:, :, 3] == 0, :3] = 0
+        data[:, :, :3] *= data[:, :, 3:] / 255.0
     return data
 
 

@@ -33,7 +33,8 @@ def diff_command(a, b, max_rmse, min_psnr, max_pixels_off, tolerance, diff_image
 
     Prints RMSE, PSNR, the largest absolute difference and the pixels off, on
     the 0..255 scale (16-bit samples divided by 257), every channel and alpha
-    included (the colour under fully transparent pixels counts as 0). Gray is
+    included (colour premultiplied by alpha: what it adds over any background,
+    so the colour under fully transparent pixels counts as 0). Gray is
     compared as R = G = B and no alpha as opaque. Animations and multi-page files
     are compared frame by frame; differing frame counts or frame durations fail.
     Exit 0 within tolerance, 1 beyond it or when the sizes or frame counts differ,
