@@ -155,6 +155,21 @@ def test_a_warpers_cell_and_flags_are_checked_as_warps_are():
         warper.render(picture(), mesh, antialias="no")
 
 
+def test_solve_names_a_preset_class_or_name_given_for_its_instance():
+    """``FeatureWarper.solve(Swirl)`` (the class, as warp() takes it) and ``solve("swirl")`` failed
+    with AttributeError: 'type' object has no attribute 'width'."""
+    from featurewarp_cli import FeatureWarper, load_warp
+
+    warper, swirl = FeatureWarper(32, 24, box()), load_warp("swirl")
+    for given, message in ((swirl, r"not the class Swirl: make it for the image, Swirl\(32, 24\)"),
+                           ("swirl", r"load_warp\('swirl'\)\(32, 24\) makes a preset"), (None, "not NoneType")):
+        with pytest.raises(TypeError, match=message):
+            warper.solve(given)
+    with pytest.raises(ValueError, match="warp is for 24x32, warper for 32x24"):
+        warper.solve(swirl(24, 32))
+    assert warper.solve(swirl(32, 24)).target.shape[1] == 2
+
+
 def test_integer_images_of_eight_bit_data_keep_the_eight_bit_scale():
     """An int32 image of 0..255 data came back with alpha and white at 65535 and cubic overshoot past 255."""
     image, mask = picture(), box()

@@ -65,6 +65,20 @@ PIL_CONVERSIONS = {"P": "RGB", "PA": "RGBA", "CMYK": "RGB", "YCbCr": "RGB", "HSV
                    "RGBa": "RGBA", "La": "LA"}
 
 
+def check_warp(warp, width: int, height: int, who: str = "FeatureWarper.solve") -> None:
+    """TypeError unless ``warp`` is a warp made for a size (a callable with ``width``, ``height``
+    and ``canvas``: a preset's instance, a HandleWarp), naming what to pass instead (a class or
+    a name failed with AttributeError: no attribute 'width'); ValueError if it is for another
+    size than ``width`` x ``height``."""
+    if isinstance(warp, type) or not (callable(warp) and all(hasattr(warp, a) for a in ("width", "height", "canvas"))):
+        what = (f"the class {warp.__name__}: make it for the image, {warp.__name__}({width}, {height})"
+                if isinstance(warp, type) else f"{warp!r}: featurewarp_cli.load_warp({warp!r})({width}, {height}) "
+                "makes a preset from its name" if isinstance(warp, str) else f"{type(warp).__name__} {warp!r}")
+        raise TypeError(f"{who}: warp must be a warp made for the image (a preset's instance), not {what}")
+    if (warp.width, warp.height) != (width, height):
+        raise ValueError(f"warp is for {warp.width}x{warp.height}, warper for {width}x{height}")
+
+
 def _pil_pixels(image):
     """A PIL image in a mode whose array is its pixels (:data:`PIL_CONVERSIONS`; CMYK by PIL's
     own formula, not a profile); anything else as it is. ValueError for L*a*b*."""

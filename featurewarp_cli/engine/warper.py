@@ -300,8 +300,7 @@ class FeatureWarper:
         """
         if mode not in MODES:
             raise ValueError(f"mode must be one of {', '.join(MODES)}, not {mode!r}")
-        if (warp.width, warp.height) != (self.width, self.height):
-            raise ValueError(f"warp is for {warp.width}x{warp.height}, warper for {self.width}x{self.height}")
+        arrays.check_warp(warp, self.width, self.height)
         self.timings = {}
         stages.enter("grid")
         t0 = time.perf_counter()
