@@ -742,6 +742,36 @@ def test_a_feature_carried_against_a_pin_warns_of_the_crease_and_names_it():
     assert mesh.fold_cause.endswith('give it "angle": 0 in a version-2 handles file to hold it unturned')  # finding 3
 
 
+@pytest.mark.parametrize("mode", ["plain", "similarity"])
+def test_a_handle_dragged_past_the_pinned_border_warns_of_the_crease_in_every_mode(tmp_path, mode):
+    """A handle dragged past the pinned border crushed the band between them to 2e-6 of its area
+    under the handles' map itself: the plain mode said nothing of it (its quality.area_ratio,
+    against that map, read 1.0), nor the feature-aware one (its crease warning compares with the
+    map). params.area_kept gives the figure in every mode."""
+    from click.testing import CliRunner
+
+    from featurewarp_cli.cli.main import cli
+
+    image = tmp_path / "in.png"
+    cv2.imwrite(str(image), make_scene()[0][:120, :160])
+    handles = tmp_path / "h.json"
+    handles.write_text(json.dumps({"version": 2, "border": "pinned", "points": [{"from": [80, 90], "to": [80, 150]}]}))
+    report = tmp_path / "r.json"
+    args = ["deform", str(image), str(tmp_path / "o.png"), "--handles", str(handles), "--mode", mode]
+    run = CliRunner().invoke(cli, args + ["--report", str(report)])
+    assert run.exit_code == 0, run.output
+    data = json.loads(report.read_text())
+    crease = [w for w in data["warnings"] if w.startswith("the handles crush the image into a crease near (")]
+    assert len(crease) == 1 and "of their area in the input (params.area_kept)" in crease[0], data["warnings"]
+    kept = data["params"]["area_kept"]
+    assert kept["min"] < 0.001 and 60 <= kept["at"][0] <= 100 and kept["at"][1] >= 85
+    handles.write_text(json.dumps({"version": 2, "border": "pinned", "points": [{"from": [80, 60], "to": [80, 75]}]}))
+    run = CliRunner().invoke(cli, args + ["--report", str(report)])
+    data = json.loads(report.read_text())
+    assert run.exit_code == 0 and not any("crease" in w for w in data["warnings"]), data["warnings"]
+    assert 0.2 < data["params"]["area_kept"]["min"] < 1.0
+
+
 def test_the_fold_note_measures_the_user_s_handles_not_the_carried_feature():
     """Carried 154 px, the note said the handles were held up to 69 px from their targets while
     they landed within 0.07 px: it measured the carried face's nodes (deform trial, finding 5)."""

@@ -3,7 +3,7 @@ as they were given, with a cause), a crushed crease, a fold the handles ask for.
 
 The functions take the :class:`deform.HandleWarp` of the handles (``warp``) and keep what the
 report shows in its ``values`` (``handle_error_px``, ``handle_ends``, ``curve_error_px``,
-``curve_ends``).
+``curve_ends``, ``area_kept``).
 """
 
 from __future__ import annotations
@@ -87,15 +87,29 @@ def _within_band(warp, k: int, at) -> bool:
 
 def crushed(warp, mesh) -> list[str]:
     """A warning when a triangle of ``mesh`` keeps under :data:`CRUSHED` of its area under W
-    (a crease: W's barrier keeps half the rest area, the feature-aware solve does not)."""
-    under_w = signed_areas(warp(mesh.source), mesh.triangles)
-    ratio = signed_areas(mesh.target, mesh.triangles)[under_w > 1e-12] / under_w[under_w > 1e-12]
-    if not ratio.size or ratio.min() >= CRUSHED:
+    (a crease the feature-aware solve makes: W's barrier keeps half the rest area, the solve
+    does not), else of its area in the input (a crease of the handles' map itself, where handles
+    press the image against a pin or the held border: the plain mode said nothing of it, its
+    quality.area_ratio, against W, reading 1); ``values["area_kept"]``: the smallest share of its
+    input area a triangle keeps and where (input px)."""
+    tris, result = mesh.triangles, signed_areas(mesh.target, mesh.triangles)
+    source = signed_areas(mesh.source, tris)
+    kept = result / np.maximum(source, 1e-12)
+    weakest = mesh.source[tris[np.argmin(kept)]].mean(axis=0)
+    warp.values["area_kept"] = {"min": round(float(kept.min()), 6), "at": _plain(weakest, 1)}
+    under_w = signed_areas(warp(mesh.source), tris)
+    ratio = result[under_w > 1e-12] / under_w[under_w > 1e-12]
+    if ratio.size and ratio.min() < CRUSHED:
+        worst = mesh.source[tris[under_w > 1e-12][np.argmin(ratio)]].mean(axis=0)
+        return [f"the result crushes the image into a crease near ({worst[0]:.0f}, {worst[1]:.0f}): triangles keep "
+                f"{100 * ratio.min():.1f} % of their area under the handles' map (quality.area_ratio.min): "
+                f"{fold_cause(warp, worst)}"]
+    if kept.min() >= CRUSHED:
         return []
-    worst = mesh.source[mesh.triangles[under_w > 1e-12][np.argmin(ratio)]].mean(axis=0)
-    return [f"the result crushes the image into a crease near ({worst[0]:.0f}, {worst[1]:.0f}): triangles keep "
-            f"{100 * ratio.min():.1f} % of their area under the handles' map (quality.area_ratio.min): "
-            f"{fold_cause(warp, worst)}"]
+    share = f"{100 * kept.min():.1f} %" if kept.min() >= 0.001 else "under 0.1 %"
+    return [f"the handles crush the image into a crease near ({weakest[0]:.0f}, {weakest[1]:.0f}): triangles keep "
+            f"{share} of their area in the input (params.area_kept): handles pull it towards or past "
+            "a pin, the held border or each other there; drag them less far or move the pin"]
 
 
 def review_points(warp, mesh) -> list[str]:
