@@ -469,6 +469,21 @@ def test_the_report_describes_the_output_as_its_format_stores_it(tmp_path, name,
     assert (output["channels"], output["bits"]) == (channels, bits) == (written.shape[2], 8 * written.itemsize)
 
 
+def test_the_report_gives_a_transparent_gif_its_alpha(tmp_path):
+    """A GIF written with --background transparent keeps its alpha (cut at half) but the report
+    said 3 channels, as for a GIF laid over white."""
+    from PIL import Image
+
+    cv2.imwrite(str(tmp_path / "in.png"), np.random.default_rng(5).integers(0, 255, (60, 80, 3)).astype(np.uint8))
+    for background, channels in (("transparent", 4), ("white", 3)):
+        run = invoke("warp", "arc", tmp_path / "in.png", tmp_path / "o.gif", "--report", tmp_path / "r.json",
+                     "--background", background)
+        assert run.exit_code == 0, run.output
+        assert json.loads((tmp_path / "r.json").read_text())["output"]["channels"] == channels
+        with Image.open(tmp_path / "o.gif") as gif:
+            assert ("transparency" in gif.info) == (channels == 4)
+
+
 def test_a_transparent_input_laid_over_the_background_leaves_no_seam_at_the_warps_edge(tmp_path):
     """The silhouette's partly covered pixels were blended with the fill by coverage alone, not by
     their own alpha: the hidden colour under alpha 0 showed as a gray line along the edge (BMP, JPEG)."""

@@ -488,7 +488,8 @@ def warp_file(settings: Settings, input: str, output: str, mask: str | None = No
     if save_grid:
         outputs.append((save_grid, mesh.to_obj() if save_grid.lower().endswith(".obj") else mesh.to_npz()))
     if report:
-        outputs.append((report, report_bytes(input, out_path, image, result, warp, mesh, timings, t0, fmt)))
+        outputs.append((report, report_bytes(input, out_path, image, result, warp, mesh, timings, t0, fmt,
+                                             transparent=background is None)))
     write_all(outputs)
     return summary(settings.preset, mesh.record.mode, input, out_path, (width, height), mesh, t0,
                    list(mesh.record.warnings))

@@ -18,13 +18,14 @@ from ..engine import path as fold_path
 REPORT_SCHEMA = "featurewarp-report/3"
 
 
-def image_summary(path: str, image: np.ndarray, fmt: str | None = None) -> dict:
+def image_summary(path: str, image: np.ndarray, fmt: str | None = None, transparent: bool = False) -> dict:
     """Path, size, channels and depth of an image (as ``fmt`` stores it, where given: a 16-bit
-    result written as JPEG is an 8-bit file, an RGBA one as BMP has 3 channels)."""
+    result written as JPEG is an 8-bit file, an RGBA one as BMP has 3 channels, and as a GIF 4
+    where ``transparent``)."""
     from ..io.encode import stored_form
 
     channels, bits = ((1 if image.ndim == 2 else int(image.shape[2]), 8 * image.dtype.itemsize) if fmt is None
-                      else stored_form(image, fmt))
+                      else stored_form(image, fmt, transparent))
     return {
         "path": os.path.abspath(path) if path != "-" else "-",
         "width": int(image.shape[1]),
@@ -35,7 +36,7 @@ def image_summary(path: str, image: np.ndarray, fmt: str | None = None) -> dict:
 
 
 def build_report(input_path, output_path, image, result, warp, mesh, timings, fmt: str | None = None,
-                 refused: dict | None = None) -> dict:
+                 refused: dict | None = None, transparent: bool = False) -> dict:
     """Assemble the report dictionary (JSON-ready).
 
     Parameters
@@ -52,6 +53,8 @@ def build_report(input_path, output_path, image, result, warp, mesh, timings, fm
     refused : dict, optional
         A run refused after its solve (``--strict``, folds): ``error`` (its one line) and
         ``warnings`` (those that caused it); ``output`` is null then.
+    transparent : bool
+        The output's background is transparent (a GIF keeps its alpha then).
 
     Returns
     -------
@@ -72,7 +75,7 @@ def build_report(input_path, output_path, image, result, warp, mesh, timings, fm
         "formulation": info["formulation"],
         "boundary": info["boundary"],
         "input": image_summary(input_path, image),
-        "output": None if result is None else image_summary(output_path, result, fmt),
+        "output": None if result is None else image_summary(output_path, result, fmt, transparent),
         "refused": refused,
         "canvas": {"width": mesh.canvas[0], "height": mesh.canvas[1], "offset": list(warp.offset)},
         "grid": info["grid"],
@@ -142,11 +145,11 @@ def summary(preset: str, mode: str, input: str, out_path: str, size, mesh, t0: f
 
 
 def report_bytes(input, out_path, image, result, warp, mesh, timings, t0, fmt: str | None = None,
-                 refused: dict | None = None) -> bytes:
+                 refused: dict | None = None, transparent: bool = False) -> bytes:
     """The JSON report's bytes (its ``seconds.total`` is the run so far; ``refused``: see
     :func:`build_report`)."""
     timings["total"] = time.perf_counter() - t0
-    report = build_report(input, out_path, image, result, warp, mesh, timings, fmt, refused)
+    report = build_report(input, out_path, image, result, warp, mesh, timings, fmt, refused, transparent)
     return (json.dumps(report, indent=2) + "\n").encode()
 
 

@@ -44,13 +44,13 @@ def flatten(image: np.ndarray, rgb=(255, 255, 255)) -> np.ndarray:
     return np.round(out).astype(image.dtype)
 
 
-def stored_form(image: np.ndarray, fmt: str) -> tuple[int, int]:
+def stored_form(image: np.ndarray, fmt: str, transparent: bool = False) -> tuple[int, int]:
     """(channels, bits per sample) of ``image`` as :func:`encode_image` stores it as ``fmt``:
-    gray + alpha as BGRA, alpha laid over the background where ``fmt`` has none, 8 bits where
-    it holds no more."""
+    gray + alpha as BGRA, alpha laid over the background where ``fmt`` has none (a GIF keeps
+    it, cut at half, where ``transparent``: its background None), 8 bits where it holds no more."""
     channels = 1 if image.ndim == 2 else int(image.shape[2])
     channels = 4 if channels == 2 else channels
-    if channels == 4 and not FORMATS[fmt].alpha:
+    if channels == 4 and not FORMATS[fmt].alpha and not (fmt == "gif" and transparent):
         channels = 3
     if channels == 1 and fmt in ("webp", "gif"):       # no gray form: colour (WebP), a palette (GIF)
         channels = 3
