@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import canvas, fidelity, grow, quality
-from .record import KEPT, ComponentRecord, SolveRecord, warnings_for
+from .record import ComponentRecord, SolveRecord, is_kept, warnings_for
 
 #: Features (quads holding a mask pixel) covering more than this share of the grid get a warning.
 MASK_COVERAGE = 0.9
@@ -37,7 +37,7 @@ def assess(state, target, warped, tied, unpinned, warp, record: SolveRecord, not
         ComponentRecord(int(counts[c]), bool(tied[c]), bool(unpinned[c]), *(float(figures[k][c]) for k in (
             "scale", "rotation_deg", "distortion", "anisotropy_worst", "anisotropy_mean",
             "plain_distortion", "plain_anisotropy_worst", "area_ratio")),
-            kept=bool(figures["anisotropy_worst"][c] <= KEPT), at=at[c])
+            kept=is_kept(figures["anisotropy_worst"][c], figures["scale"][c], record.mode), at=at[c])
         for c in range(features.n_components)]
     if not quick:
         stretch, where = canvas.largest_stretch(target, warped, state.triangles[state.tri_component < 0])

@@ -37,7 +37,9 @@ class ComponentRecord:
     area_ratio : float
         Its area on the canvas over its area in the source.
     kept : bool
-        anisotropy_worst <= :data:`KEPT`.
+        anisotropy_worst <= :data:`KEPT`, and in the rigid mode its scale within KEPT of 1 (its
+        size is what rigid asks for: a rigid shrink to half, which no feature can follow at
+        full size, gave them all W's 0.5 and read kept, with no warning).
     at : list of float or None
         Where it is in the input: the mean of its nodes' source positions, [x, y] in pixels
         (what a warning names it by, beside its number).
@@ -58,8 +60,14 @@ class ComponentRecord:
     at: list | None = None
 
 
-#: Largest anisotropy - 1 of a component's triangles for it to count as kept.
+#: Largest anisotropy - 1 of a component's triangles for it to count as kept (and, in the
+#: rigid mode, the largest departure of its scale from 1).
 KEPT = 0.02
+
+
+def is_kept(anisotropy_worst: float, scale: float, mode: str) -> bool:
+    """Whether a component with these figures kept what ``mode`` asks of it (:data:`KEPT`)."""
+    return bool(anisotropy_worst <= KEPT and (mode != "rigid" or abs(scale - 1.0) <= KEPT))
 #: Background stretched beyond W by more than this (largest singular value) is said: from
 #: about 8x, stars become needles and fine texture streaks (README: Limits, with pictures).
 STREAKS = 8.0
@@ -290,8 +298,9 @@ def warnings_for(record: "SolveRecord", source, target, warped, warp) -> list[st
                   key=lambda k: -record.components[k].quads)
     for k in sorted(lost[:MOST_LISTED]):
         c = record.components[k]
-        lines.append(f"feature {k} ({c.quads} quads{_around(c)}) not kept: worst-triangle anisotropy "
-                     f"{c.anisotropy_worst:.3f} (plain warp: {c.plain_anisotropy_worst:.3f})" + _why(record, k))
+        figure = (f"worst-triangle anisotropy {c.anisotropy_worst:.3f} (plain warp: {c.plain_anisotropy_worst:.3f})"
+                  if c.anisotropy_worst > KEPT else f"scale {c.scale:.3f} where the rigid mode keeps 1")
+        lines.append(f"feature {k} ({c.quads} quads{_around(c)}) not kept: {figure}" + _why(record, k))
     if len(lost) > MOST_LISTED:
         rest = [record.components[k] for k in lost[MOST_LISTED:]]
         lines.append(f"{len(rest)} smaller features not kept either ({min(c.quads for c in rest)} to "
