@@ -489,6 +489,18 @@ def test_an_option_the_mode_leaves_unused_is_noted(runner, tmp_path):
     assert "--decay does nothing without --mask" in run.stderr
 
 
+def test_quality_for_a_format_it_does_not_set_is_noted(runner, tmp_path):
+    """--quality 50 with a TIFF output was taken in silence (a retoucher expected compression)."""
+    image = save(tmp_path / "in.png", textured(SIZE))
+    for name, kind in (("o.tif", "TIFF is lossless"), ("o.png", "PNG is lossless"), ("o.gif", "GIF is a 256-colour")):
+        run = runner("warp", "stretch", image, tmp_path / name, "--sx", "1.2", "--quality", "50")
+        assert run.code == 0 and f"--quality does nothing for a {name[2:].upper().replace('TIF', 'TIFF')} output" \
+            in run.stderr and kind in run.stderr, run.stderr
+    for name in ("o.jpg", "o.webp"):
+        assert "--quality" not in runner("warp", "stretch", image, tmp_path / name, "--sx", "1.2", "--quality",
+                                         "50").stderr
+
+
 def test_an_option_another_overrides_is_noted(runner, tmp_path):
     """--sx 2 --width 100 wrote 100 px wide and said nothing of the 2."""
     image = save(tmp_path / "in.png", textured(SIZE))

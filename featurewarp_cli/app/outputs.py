@@ -70,7 +70,17 @@ def check_outputs(settings, output: str, *extra: tuple[str | None, str], like: s
     for path, param in extra:
         if path and path != "-":
             writable(path, param)
+    if getattr(settings, "quality", None) is not None and fmt not in QUALITY_FORMATS:
+        from .. import stages
+
+        name = fmt.upper()
+        stages.notice(f"--quality does nothing for a {name} output (it sets the quality of JPEG and WebP; "
+                      f"{name} is {'lossless' if fmt != 'gif' else 'a 256-colour palette'})")
     return out_path, fmt
+
+
+#: The output formats that take ``--quality``; a notice says it does nothing for the others.
+QUALITY_FORMATS = ("jpg", "webp")
 
 
 def check_grid_name(save_grid: str | None) -> None:
