@@ -455,3 +455,25 @@ def test_a_refusal_for_folds_reports_no_warning_as_its_cause_and_survives_a_fail
         raise WarpError("cannot write r.json: No space left on device")
     with pytest.raises(WarpError, match=r"; nothing written \(--allow-folds .*\) \(cannot write r.json: No space"):
         check_solution(Settings("swirl", strict=True), mesh, fails)
+
+
+def test_a_rigid_feature_given_its_plain_scale_is_not_kept_and_says_its_scale():
+    """A retoucher's trial: ``--size 50%x50% --mode rigid`` gave every feature W's scale 0.5
+    (they cannot fit at full size: the guard released them) and read kept, with no warning and
+    --strict passing; kept was judged on shape alone. In the rigid mode the size counts too;
+    the similarity mode's scale is free."""
+    import cv2
+
+    mask = np.zeros((120, 160), np.uint8)
+    cv2.circle(mask, (50, 60), 30, 255, -1)
+    cv2.circle(mask, (115, 60), 30, 255, -1)             # two discs, one feature: 5 600 px of 4 800
+    warper = FeatureWarper(160, 120, mask > 0)
+    half, gentle = load_warp("stretch")(160, 120, sx=0.5, sy=0.5), load_warp("stretch")(160, 120, sx=0.9, sy=0.9)
+    record = warper.solve(half, mode="rigid").record
+    assert [round(c.scale, 2) for c in record.components] == [0.5] and not record.features_kept
+    assert record.warnings[0].startswith("feature 0 (") and "not kept: scale 0.500 where the rigid mode keeps 1" \
+        in record.warnings[0]
+    record = warper.solve(gentle, mode="rigid").record
+    assert [round(c.scale, 3) for c in record.components] == [1.0] and record.features_kept and not record.warnings
+    record = warper.solve(half, mode="similarity").record
+    assert [round(c.scale, 2) for c in record.components] == [0.5] and record.features_kept and not record.warnings
