@@ -185,6 +185,25 @@ def test_minified_render_does_not_depend_on_bands_or_threads(interp, kind):
         np.testing.assert_array_equal(banded, whole)
 
 
+def test_octaves_prepared_ahead_render_the_same_and_are_taken_once():
+    """The command line builds the first octaves while the mesh is solved (pyramid.prepare from
+    the decoding thread): the render is the same whether they were ready or not, they are taken
+    by the image they were made of only, once, and another image's render drops them."""
+    image = (np.random.default_rng(3).integers(0, 255, (90, 120, 3))).astype(np.uint8)
+    mesh = warp_mesh(120, 90, sx=0.2, sy=0.7, cell=6)
+    plain = render.render(image, *mesh, "cubic", None, threads=1)
+    pyramid.prepare(image)
+    assert len(pyramid._prepared) == 1 and len(pyramid._prepared[0][1]) == pyramid.AHEAD_OCTAVES + 1
+    np.testing.assert_array_equal(render.render(image, *mesh, "cubic", None, threads=1), plain)
+    assert pyramid._prepared == []                      # taken
+    pyramid.prepare(image)
+    other = image.copy()
+    np.testing.assert_array_equal(render.render(other, *mesh, "cubic", None, threads=1), plain)
+    assert pyramid._prepared == []                      # dropped: not its image
+    pyramid.prepare(np.dstack([image, image[:, :, :1]]))      # alpha: resampled premultiplied, not ahead
+    assert pyramid._prepared == []
+
+
 def test_pyramid_levels_sit_where_the_filter_expects():
     """A level's pixel i lies on source (i + 0.5) 2^o - 0.5: a linear ramp sampled through
     any level (octaves 0 to 3) gives back the ramp's value at the source position."""

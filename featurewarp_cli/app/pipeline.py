@@ -217,9 +217,8 @@ class _Decoding:
     """INPUT decoding in a thread (OpenCV releases the GIL), from ``start()``, once every check
     that needs no pixels has passed: ``result()`` waits for the image."""
 
-    def __init__(self, data: bytes, name: str, max_pixels: int | None, header=None):
-        self._image = self._error = None
-        self.header = header
+    def __init__(self, data: bytes, name: str, max_pixels: int | None, header=None, ahead: bool = False):
+        self._image, self._error, self.header, self._done = None, None, header, threading.Event()
 
         def work():
             try:
@@ -228,6 +227,10 @@ class _Decoding:
                 self._error = WarpError(str(err))
             except BaseException as err:  # re-raised in the main thread
                 self._error = err
+            finally:
+                self._done.set()
+            if ahead and self._error is None:     # the render's first octaves while the main thread solves
+                importlib.import_module("featurewarp_cli.render.pyramid").prepare(self._image)
 
         self._thread = threading.Thread(target=work, name="featurewarp-decode")
 
@@ -237,7 +240,7 @@ class _Decoding:
     def result(self):
         if self._thread.ident is None:
             self.start()
-        self._thread.join()
+        self._done.wait()
         if self._error is not None:
             raise self._error
         return self._image
@@ -309,8 +312,8 @@ def start_loading(settings: Settings, input: str, mask: str | None, data: bytes 
         except WarpError:
             load_image_and_mask(settings, input, mask, data)   # the image's own error comes first
             raise
-    return (_Decoding(data, "stdin" if input == "-" else input, settings.max_pixels, header), feature_mask,
-            warnings, size)
+    return (_Decoding(data, "stdin" if input == "-" else input, settings.max_pixels, header,
+                      ahead=use_mask and settings.interp != "nearest"), feature_mask, warnings, size)
 
 
 def _check_decoded_size(image, input: str, width: int, height: int) -> None:

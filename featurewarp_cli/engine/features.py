@@ -197,8 +197,11 @@ def short_of_frame(mask: np.ndarray, grid: Grid, pooled: np.ndarray) -> tuple[np
     drop &= left[quads]                                     # a component would vanish: it keeps them
     kept = (quads >= 0) & ~drop
     _, parts = cv2.connectedComponents(kept.view(np.uint8), connectivity=8)
-    pairs = np.unique(np.stack([quads[kept], parts[kept]]), axis=1)
-    drop &= ~(np.bincount(pairs[0], minlength=n + 1) > 1)[quads]   # one that would split keeps them
+    # The distinct (component, part) pairs, as one integer each (np.unique(axis=1) on the
+    # stacked pairs sorts them as raw bytes: 0.12 s at 12 MP, this 3 ms).
+    span = np.int64(parts.max()) + 1
+    pairs = np.unique(quads[kept].astype(np.int64) * span + parts[kept]) // span
+    drop &= ~(np.bincount(pairs, minlength=n + 1) > 1)[quads]   # one that would split keeps them
     if not drop.any():
         return mask, pooled
     # Every pixel of a dropped quad goes, and no other: pooling again would give pooled & ~drop.
