@@ -477,3 +477,42 @@ def test_a_rigid_feature_given_its_plain_scale_is_not_kept_and_says_its_scale():
     assert [round(c.scale, 3) for c in record.components] == [1.0] and record.features_kept and not record.warnings
     record = warper.solve(half, mode="similarity").record
     assert [round(c.scale, 2) for c in record.components] == [0.5] and record.features_kept and not record.warnings
+
+
+def test_a_feature_short_of_the_frame_says_how_far_its_edge_strip_follows_the_background():
+    """A QA audit: a striped rectangle whose mask stops 1 px short of the right edge, under
+    ``flag``, turned 6 degrees but kept its right side straight down the frame, and read kept
+    with no warning: its pixels in the outer cells, which the frame holds, follow the
+    background. Now a warning gives their count and how far they end from the feature's shape,
+    and the --cell that keeps them in it; with that cell, nothing is said."""
+    import json
+
+    image = np.full((200, 400, 3), 200, np.uint8)
+    image[40:160, 330:400] = 40
+    image[40:160:8, 330:400] = 250                      # stripes
+    mask = np.zeros((200, 400), np.uint8)
+    mask[40:160, 330:399] = 255                         # 1 px short of the right edge
+    runner = CliRunner()
+    with runner.isolated_filesystem():
+        import cv2
+
+        cv2.imwrite("in.png", image)
+        cv2.imwrite("m.png", mask)
+        run = runner.invoke(cli, ["warp", "flag", "in.png", "o.png", "-m", "m.png", "--report", "r.json"])
+        assert run.exit_code == 0, run.output
+        report = json.loads(Path("r.json").read_text())
+        strip = report["components"]["items"][0]["frame_strip"]
+        assert strip["sides"] == ["right"] and strip["off_px"] > 1.0 and strip["cell_px"] == 1.5
+        line, = [w for w in report["warnings"] if "its mask stops just short of the right edge" in w]
+        assert f"its {strip['pixels']} pixels in the frame's outer cells" in line and "--cell 1.5 or finer" in line
+        refused = runner.invoke(cli, ["warp", "flag", "in.png", "o2.png", "-m", "m.png", "--strict"])
+        assert refused.exit_code == 1 and not Path("o2.png").exists()
+        run = runner.invoke(cli, ["warp", "flag", "in.png", "o.png", "-m", "m.png", "--cell", "1.5", "--report", "r.json"])
+        assert json.loads(Path("r.json").read_text())["components"]["items"][0]["frame_strip"] is None
+        assert "short of the right edge" not in run.output
+        mask[:, 330:] = 0
+        mask[40:160, 330:380] = 255                      # 19 px short: a cell or more
+        cv2.imwrite("m.png", mask)
+        run = runner.invoke(cli, ["warp", "flag", "in.png", "o.png", "-m", "m.png", "--report", "r.json"])
+        report = json.loads(Path("r.json").read_text())
+        assert report["components"]["items"][0]["frame_strip"] is None and report["warnings"] == []

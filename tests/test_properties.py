@@ -225,7 +225,7 @@ def test_a_mask_short_of_the_frame_loses_no_edge_pixel_and_no_component():
             mask[y0:y0 + rng.integers(1, 25), x0:x0 + rng.integers(1, 25)] = True
         grid = Grid.for_image(w, h, float(rng.choice([1.0, 1.7, 3.0, 4.0, 7.3])))
         pooled = features._pooled(mask, grid)
-        out, again = features.short_of_frame(mask, grid, pooled)
+        out, again, _ = features.short_of_frame(mask, grid, pooled)
         assert not (out & ~mask).any()
         for edge in (np.s_[0], np.s_[-1], np.s_[:, 0], np.s_[:, -1]):
             assert np.array_equal(out[edge], mask[edge])

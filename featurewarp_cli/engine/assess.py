@@ -31,13 +31,17 @@ def assess(state, target, warped, tied, unpinned, warp, record: SolveRecord, not
             features.n_components, ~features.is_constrained, transition)
     figures = quality.component_figures(state.nodes, target, warped, state.triangles, state.tri_component,
                                         state.node_component, features.n_components, plain=not quick)
+    strips = ([None] * features.n_components if quick or features.frame_strip is None else
+              quality.frame_strip_figures(state.grid, state.nodes, target, state.node_component,
+                                          features.n_components, *features.frame_strip))
     counts = np.bincount(features.component[features.is_feature], minlength=features.n_components)
     at = _centres(state.nodes, state.node_component, features.n_components)
     record.components = [
         ComponentRecord(int(counts[c]), bool(tied[c]), bool(unpinned[c]), *(float(figures[k][c]) for k in (
             "scale", "rotation_deg", "distortion", "anisotropy_worst", "anisotropy_mean",
             "plain_distortion", "plain_anisotropy_worst", "area_ratio")),
-            kept=is_kept(figures["anisotropy_worst"][c], figures["scale"][c], record.mode), at=at[c])
+            kept=is_kept(figures["anisotropy_worst"][c], figures["scale"][c], record.mode), at=at[c],
+            frame_strip=strips[c])
         for c in range(features.n_components)]
     if not quick:
         stretch, where = canvas.largest_stretch(target, warped, state.triangles[state.tri_component < 0])

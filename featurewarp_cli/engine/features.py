@@ -25,12 +25,18 @@ class Features:
     weight : (K,) float ndarray
         Equation weight: w_F on features, decaying to 1 within ``decay`` cells (Eq. 7).
     n_components : int
+    frame_strip : ((P, 2) float ndarray, (P,) int ndarray) or None
+        The mask pixels (x, y) that :func:`short_of_frame` left to the background, in the
+        frame's outer cells along a side their component's mask stops short of, and each one's
+        component: they follow the background, and the report says how far
+        (:func:`featurewarp_cli.engine.quality.frame_strip_figures`). None: no such pixel.
     """
 
     is_feature: np.ndarray
     component: np.ndarray
     weight: np.ndarray
     n_components: int
+    frame_strip: tuple | None = None
 
     @property
     def is_constrained(self) -> np.ndarray:
@@ -69,14 +75,22 @@ def analyse(mask: np.ndarray, grid: Grid, feature_weight: float = FEATURE_WEIGHT
     sx, sy = grid.spacing
     cx = np.clip(np.round((np.arange(qx) + 0.5) * sx - 0.5).astype(int), 0, grid.width - 1)
     cy = np.clip(np.round((np.arange(qy) + 0.5) * sy - 0.5).astype(int), 0, grid.height - 1)
+    origin, given = None, mask
     if min(sx, sy) >= 1.0:
         pooled = _pooled(mask, grid)
-        mask, pooled = short_of_frame(mask, grid, pooled)
+        mask, pooled, origin = short_of_frame(mask, grid, pooled)
     else:  # sub-pixel cells: the pixel under the quad's centre decides
         pooled = np.ascontiguousarray(mask[np.ix_(cy, cx)]).view(np.uint8)
     is_feature = pooled.astype(bool)
 
     n_labels, labels = cv2.connectedComponents(pooled, connectivity=8)
+    strip = None
+    if origin is not None:            # the pixels dropped, and their components as labelled after the drop
+        final = np.full(origin.max() + 1, -1, np.int64)
+        final[origin[is_feature]] = labels[is_feature] - 1     # a component keeps one piece
+        ys, xs = np.nonzero(given & ~mask)
+        rows, cols = grid.quad_of_pixel()
+        strip = (np.stack([xs, ys], axis=1).astype(np.float64), final[origin[rows[ys], cols[xs]]])
     # Nearest feature quad of every quad, then its component.
     _, nearest = cv2.distanceTransformWithLabels(
         (~is_feature).view(np.uint8), cv2.DIST_L2, 5, labelType=cv2.DIST_LABEL_PIXEL)
@@ -92,7 +106,7 @@ def analyse(mask: np.ndarray, grid: Grid, feature_weight: float = FEATURE_WEIGHT
     f = np.where(is_feature, 1.0, decay(distance, rho))
     weight = feature_weight * f + (1.0 - f)
     component = np.where(f > 0, nearest_component, -1)
-    return Features(is_feature.ravel(), component.ravel(), weight.ravel(), n_labels - 1)
+    return Features(is_feature.ravel(), component.ravel(), weight.ravel(), n_labels - 1, strip)
 
 
 def feature_distance(mask: np.ndarray, rows: np.ndarray, cols: np.ndarray, reach: int) -> np.ndarray:
@@ -154,9 +168,10 @@ def _pooled(mask: np.ndarray, grid: Grid) -> np.ndarray:
     return np.maximum.reduceat(by_row, col_starts, axis=1)
 
 
-def short_of_frame(mask: np.ndarray, grid: Grid, pooled: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def short_of_frame(mask: np.ndarray, grid: Grid, pooled: np.ndarray) -> tuple[np.ndarray, np.ndarray, object]:
     """The mask, less the pixels a component holds in the frame's outer cells along a side that
-    its mask does not reach; and the quads pooled again (``pooled`` when nothing changed).
+    its mask does not reach; the quads pooled again (``pooled`` when nothing changed); and the
+    quads' components before (None when nothing changed).
 
     A lasso that stops a few pixels short of an edge puts the component in the outer cells,
     whose nodes the border holds: the component would count as cut by the frame, and under a
@@ -179,6 +194,9 @@ def short_of_frame(mask: np.ndarray, grid: Grid, pooled: np.ndarray) -> tuple[np
         ``mask`` itself when nothing is dropped, else a copy without those pixels.
     pooled : (qy, qx) uint8 ndarray
         Its feature quads.
+    origin : (qy, qx) int ndarray or None
+        The component of every feature quad of the ``pooled`` given (-1: none), numbered by
+        its own labelling; None when nothing is dropped.
     """
     n_labels, labels = cv2.connectedComponents(pooled, connectivity=8)
     quads, n = labels - 1, n_labels - 1                     # component per quad, -1 for none
@@ -203,6 +221,6 @@ def short_of_frame(mask: np.ndarray, grid: Grid, pooled: np.ndarray) -> tuple[np
     pairs = np.unique(quads[kept].astype(np.int64) * span + parts[kept]) // span
     drop &= ~(np.bincount(pairs, minlength=n + 1) > 1)[quads]   # one that would split keeps them
     if not drop.any():
-        return mask, pooled
+        return mask, pooled, None
     # Every pixel of a dropped quad goes, and no other: pooling again would give pooled & ~drop.
-    return mask & ~drop[rows][:, cols], pooled & ~drop.view(np.uint8)
+    return mask & ~drop[rows][:, cols], pooled & ~drop.view(np.uint8), quads

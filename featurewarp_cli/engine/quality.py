@@ -229,3 +229,43 @@ def component_figures(source, target, warped, triangles, tri_component, node_com
     out["area_ratio"] = area_t / np.maximum(area_s, 1e-12)
     return out
 
+
+
+def frame_strip_figures(grid, nodes, target, node_component, n_components: int, points, labels) -> list:
+    """Per component, where its mask stops short of the frame, how its pixels in the frame's
+    outer cells ended (:attr:`featurewarp_cli.engine.features.Features.frame_strip`: ``points``
+    (P, 2) and their components ``labels``): they follow the background, which the frame holds
+    there, not the component's shape.
+
+    Returns
+    -------
+    list of dict or None
+        Per component, None without such pixels, else ``sides`` (the frame's sides they lie
+        along), ``pixels``, ``off_px`` (the farthest any ends from where the component's
+        affine fit over its nodes puts it: the piecewise-linear map of the mesh at the pixel
+        against the fit) and ``cell_px`` (a cell at most this wide puts none of them in the
+        outer cells: the nearest one's distance to its edge, + 0.5).
+    """
+    (sx, sy), (qy, qx) = grid.spacing, grid.quad_shape
+    col = np.minimum(((points[:, 0] + 0.5) / sx).astype(int), qx - 1)
+    row = np.minimum(((points[:, 1] + 0.5) / sy).astype(int), qy - 1)
+    u, v = ((points[:, 0] + 0.5) / sx - col)[:, None], ((points[:, 1] + 0.5) / sy - row)[:, None]
+    tl = row * grid.nx + col
+    a, b, c, d = target[tl], target[tl + 1], target[tl + 1 + grid.nx], target[tl + grid.nx]   # TL TR BR BL
+    mapped = a + np.where(u >= v, u * (b - a) + v * (c - b), v * (d - a) + u * (c - d))   # the quad's two triangles
+    on = np.flatnonzero(node_component >= 0)
+    linear = affine_fits(nodes[on], target[on], node_component[on], n_components)
+    count = np.maximum(np.bincount(node_component[on], minlength=n_components), 1)
+    centre_s, centre_t = (np.stack([np.bincount(node_component[on], p[on, k], minlength=n_components) / count
+                                    for k in range(2)], axis=1) for p in (nodes, target))
+    fitted = centre_t[labels] + np.einsum("kij,kj->ki", linear[labels], points - centre_s[labels])
+    off = np.nan_to_num(np.hypot(*(mapped - fitted).T), nan=0.0)
+    gap = np.minimum.reduce([points[:, 1], grid.height - 1 - points[:, 1], points[:, 0], grid.width - 1 - points[:, 0]])
+    sides = {"top": row == 0, "bottom": row == qy - 1, "left": col == 0, "right": col == qx - 1}
+    out = []
+    for k in range(n_components):
+        mine = labels == k
+        out.append(None if not mine.any() else {
+            "sides": [side for side, along in sides.items() if (along & mine).any()], "pixels": int(mine.sum()),
+            "off_px": round(float(off[mine].max()), 3), "cell_px": float(gap[mine].min()) + 0.5})
+    return out

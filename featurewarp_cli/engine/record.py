@@ -43,6 +43,12 @@ class ComponentRecord:
     at : list of float or None
         Where it is in the input: the mean of its nodes' source positions, [x, y] in pixels
         (what a warning names it by, beside its number).
+    frame_strip : dict or None
+        Where its mask stops within a cell of the frame: its pixels in those outer cells, which
+        the frame holds, follow the background
+        (:func:`featurewarp_cli.engine.quality.frame_strip_figures`: ``sides``, ``pixels``,
+        ``off_px``, ``cell_px``); beyond :data:`STRIP_PX` a warning says so (a rectangle 1 px
+        short of the right edge, turned 6 degrees, kept that side straight down the frame).
     """
 
     quads: int
@@ -58,6 +64,7 @@ class ComponentRecord:
     area_ratio: float
     kept: bool
     at: list | None = None
+    frame_strip: dict | None = None
 
 
 #: Largest anisotropy - 1 of a component's triangles for it to count as kept (and, in the
@@ -68,6 +75,9 @@ KEPT = 0.02
 def is_kept(anisotropy_worst: float, scale: float, mode: str) -> bool:
     """Whether a component with these figures kept what ``mode`` asks of it (:data:`KEPT`)."""
     return bool(anisotropy_worst <= KEPT and (mode != "rigid" or abs(scale - 1.0) <= KEPT))
+#: A feature's pixels in the frame's outer cells (its mask stops short of the frame) ending
+#: farther than this (px) from where its shape would put them get a warning.
+STRIP_PX = 1.0
 #: Background stretched beyond W by more than this (largest singular value) is said: from
 #: about 8x, stars become needles and fine texture streaks (README: Limits, with pictures).
 STREAKS = 8.0
@@ -305,6 +315,13 @@ def warnings_for(record: "SolveRecord", source, target, warped, warp) -> list[st
         rest = [record.components[k] for k in lost[MOST_LISTED:]]
         lines.append(f"{len(rest)} smaller features not kept either ({min(c.quads for c in rest)} to "
                      f"{max(c.quads for c in rest)} quads{LISTED_IN_REPORT})")
+    for k, c in enumerate(record.components):
+        strip = c.frame_strip
+        if strip and strip["off_px"] > STRIP_PX:
+            lines.append(f"feature {k} ({c.quads} quads{_around(c)}): its mask stops just short of the "
+                         f"{' and '.join(strip['sides'])} edge{'s' if len(strip['sides']) > 1 else ''}; its {strip['pixels']} pixels in the frame's outer "
+                         f"cells there follow the background, up to {strip['off_px']:.1f} px from its shape "
+                         f"(--cell {strip['cell_px']:g} or finer keeps them in it)")
     lines.extend(canvas_warnings(record))
     if tuple(warp.canvas) == (warp.width, warp.height):
         wanted = np.hypot(*(warped - source).T)
