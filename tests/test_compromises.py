@@ -479,7 +479,7 @@ def test_a_rigid_feature_given_its_plain_scale_is_not_kept_and_says_its_scale():
     assert [round(c.scale, 2) for c in record.components] == [0.5] and record.features_kept and not record.warnings
 
 
-def test_a_feature_short_of_the_frame_says_how_far_its_edge_strip_follows_the_background():
+def test_a_feature_short_of_the_frame_says_how_far_its_edge_strip_follows_the_background(tmp_path):
     """A QA audit: a striped rectangle whose mask stops 1 px short of the right edge, under
     ``flag``, turned 6 degrees but kept its right side straight down the frame, and read kept
     with no warning: its pixels in the outer cells, which the frame holds, follow the
@@ -487,32 +487,54 @@ def test_a_feature_short_of_the_frame_says_how_far_its_edge_strip_follows_the_ba
     and the --cell that keeps them in it; with that cell, nothing is said."""
     import json
 
+    import cv2
+
     image = np.full((200, 400, 3), 200, np.uint8)
     image[40:160, 330:400] = 40
     image[40:160:8, 330:400] = 250                      # stripes
     mask = np.zeros((200, 400), np.uint8)
     mask[40:160, 330:399] = 255                         # 1 px short of the right edge
+    picture, mask_file, report_file = str(tmp_path / "in.png"), str(tmp_path / "m.png"), tmp_path / "r.json"
+    cv2.imwrite(picture, image)
+    cv2.imwrite(mask_file, mask)
     runner = CliRunner()
-    with runner.isolated_filesystem():
-        import cv2
 
-        cv2.imwrite("in.png", image)
-        cv2.imwrite("m.png", mask)
-        run = runner.invoke(cli, ["warp", "flag", "in.png", "o.png", "-m", "m.png", "--report", "r.json"])
+    def warp(*extra):
+        run = runner.invoke(cli, ["warp", "flag", picture, str(tmp_path / "o.png"), "-m", mask_file, "--report",
+                                  str(report_file), *extra])
         assert run.exit_code == 0, run.output
-        report = json.loads(Path("r.json").read_text())
-        strip = report["components"]["items"][0]["frame_strip"]
-        assert strip["sides"] == ["right"] and strip["off_px"] > 1.0 and strip["cell_px"] == 1.5
-        line, = [w for w in report["warnings"] if "its mask stops just short of the right edge" in w]
-        assert f"its {strip['pixels']} pixels in the frame's outer cells" in line and "--cell 1.5 or finer" in line
-        refused = runner.invoke(cli, ["warp", "flag", "in.png", "o2.png", "-m", "m.png", "--strict"])
-        assert refused.exit_code == 1 and not Path("o2.png").exists()
-        run = runner.invoke(cli, ["warp", "flag", "in.png", "o.png", "-m", "m.png", "--cell", "1.5", "--report", "r.json"])
-        assert json.loads(Path("r.json").read_text())["components"]["items"][0]["frame_strip"] is None
-        assert "short of the right edge" not in run.output
-        mask[:, 330:] = 0
-        mask[40:160, 330:380] = 255                      # 19 px short: a cell or more
-        cv2.imwrite("m.png", mask)
-        run = runner.invoke(cli, ["warp", "flag", "in.png", "o.png", "-m", "m.png", "--report", "r.json"])
-        report = json.loads(Path("r.json").read_text())
-        assert report["components"]["items"][0]["frame_strip"] is None and report["warnings"] == []
+        return json.loads(report_file.read_text())
+
+    report = warp()
+    strip = report["components"]["items"][0]["frame_strip"]
+    assert strip["sides"] == ["right"] and strip["off_px"] > 1.0 and strip["cell_px"] == 1.5
+    line, = [w for w in report["warnings"] if "its mask stops just short of the right edge" in w]
+    assert f"its {strip['pixels']} pixels in the frame's outer cells" in line and "--cell 1.5 or finer takes" in line
+    refused = runner.invoke(cli, ["warp", "flag", picture, str(tmp_path / "o2.png"), "-m", mask_file, "--strict"])
+    assert refused.exit_code == 1 and not (tmp_path / "o2.png").exists()
+    report = warp("--cell", "1.5")          # in the feature now (which this bend then does not keep: said)
+    assert report["components"]["items"][0]["frame_strip"] is None
+    assert not any("short of the right edge" in w for w in report["warnings"])
+    mask[:, 330:] = 0
+    mask[40:160, 330:380] = 255                          # 19 px short: a cell or more
+    cv2.imwrite(mask_file, mask)
+    report = warp()
+    assert report["components"]["items"][0]["frame_strip"] is None and report["warnings"] == []
+
+
+def test_a_no_op_says_whether_the_mask_covers_the_warp_or_rigid_holds_it_still():
+    """A QA audit: a disc a fifth of a bulge's area, under --mode rigid, held at scale 1 where the
+    bulge grows it, kept the rest still too, and the warning said the mask covers the region the
+    warp moves. It now names the rigid mode; the similarity mode lets the disc scale."""
+    import cv2
+
+    mask = np.zeros((300, 400), np.uint8)
+    cv2.circle(mask, (200, 150), 52, 255, -1)
+    warper = FeatureWarper(400, 300, mask > 0)
+    bulge = load_warp("bulge")(400, 300, strength=0.3)
+    record = warper.solve(bulge, mode="rigid").record
+    line, = [w for w in record.warnings if "the output is the input" in w]
+    assert line.startswith("the rigid mode holds the features at their size where the warp would scale them")
+    assert "(--mode similarity lets them scale)" in line and record.no_effect
+    record = warper.solve(bulge, mode="similarity").record
+    assert not record.no_effect and record.warnings == []

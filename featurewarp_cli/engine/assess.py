@@ -66,7 +66,7 @@ def assess(state, target, warped, tied, unpinned, warp, record: SolveRecord, not
                                f"{record.guard.drag_step:.0%} of the way from the handles' map to their shapes around "
                                f"{where}; {later} them in full")
     if record.mode != "plain" and not quick:
-        record.warnings.extend(warnings_for(record, state.nodes, target, warped, warp))
+        record.warnings.extend(warnings_for(record, state.nodes, target, warped, warp, state.node_component >= 0))
         if not record.guard.converged:       # fold-free all the same, but not the energy's minimum
             record.warnings.append(f"the fold guard stopped before its energy converged ({record.guard.newton_steps} "
                                    f"Newton steps): the result folds nothing but is not that energy's minimum, so "

@@ -294,12 +294,24 @@ def _around(component: ComponentRecord) -> str:
 LISTED_IN_REPORT = "; the report lists each"
 
 
-def warnings_for(record: "SolveRecord", source, target, warped, warp) -> list[str]:
+def _held_still(record: "SolveRecord", moving, on_feature) -> str:
+    """Why the output is the input though the warp moves pixels: the mask covers most of what it
+    moves, or else the features, kept (in the rigid mode at their size), hold the rest still (a
+    disc a fifth of a bulge's area, held at scale 1 where the bulge grows it by 1.07)."""
+    if on_feature is None or np.mean(on_feature[moving]) >= 0.5:
+        return "the mask covers the region the warp moves"
+    if record.mode == "rigid":
+        return ("the rigid mode holds the features at their size where the warp would scale them, and so holds "
+                "still the region around them that the warp moves (--mode similarity lets them scale)")
+    return "the features, kept at their shape, hold still the region around them that the warp moves"
+
+
+def warnings_for(record: "SolveRecord", source, target, warped, warp, on_feature=None) -> list[str]:
     """One line per compromise the output shows: each feature not kept with its figure and
     why it gave way (the :data:`MOST_LISTED` largest one by one, the others in one line),
     every feature moved towards the plain warp, the canvas's compromises, a no-op. A feature
     that gave way but still keeps its shape (within :data:`KEPT`) shows nothing: the report
-    records it."""
+    records it. ``on_feature``: the nodes of feature quads, for the no-op's cause."""
     lines = []
     if record.guard.plain_blend < 1.0 and not record.guard.degraded_components:
         lines.append(f"every feature moved evenly towards the plain warp (blend {record.guard.plain_blend:.2f}, "
@@ -318,10 +330,10 @@ def warnings_for(record: "SolveRecord", source, target, warped, warp) -> list[st
     for k, c in enumerate(record.components):
         strip = c.frame_strip
         if strip and strip["off_px"] > STRIP_PX:
-            lines.append(f"feature {k} ({c.quads} quads{_around(c)}): its mask stops just short of the "
-                         f"{' and '.join(strip['sides'])} edge{'s' if len(strip['sides']) > 1 else ''}; its {strip['pixels']} pixels in the frame's outer "
-                         f"cells there follow the background, up to {strip['off_px']:.1f} px from its shape "
-                         f"(--cell {strip['cell_px']:g} or finer keeps them in it)")
+            sides = " and ".join(strip["sides"]) + (" edges" if len(strip["sides"]) > 1 else " edge")
+            lines.append(f"feature {k} ({c.quads} quads{_around(c)}): its mask stops just short of the {sides}; its "
+                         f"{strip['pixels']} pixels in the frame's outer cells there follow the background, up to "
+                         f"{strip['off_px']:.1f} px from its shape (--cell {strip['cell_px']:g} or finer takes them into it)")
     lines.extend(canvas_warnings(record))
     if tuple(warp.canvas) == (warp.width, warp.height):
         wanted = np.hypot(*(warped - source).T)
@@ -331,6 +343,6 @@ def warnings_for(record: "SolveRecord", source, target, warped, warp) -> list[st
             asked = float(np.sqrt(np.mean(wanted[moving] ** 2)))
             if moved <= max(NO_OP_OUTPUT, NO_OP_FRACTION * asked):
                 record.output_is_input = True
-                lines.append(f"the mask covers the region the warp moves; the output is the input "
-                             f"(where the warp moves pixels by {asked:.0f} px RMS, they move by {moved:.1f} px)")
+                lines.append(_held_still(record, moving, on_feature) + f"; the output is the input (where the warp "
+                             f"moves pixels by {asked:.0f} px RMS, they move by {moved:.1f} px)")
     return lines
