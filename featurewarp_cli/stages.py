@@ -47,12 +47,18 @@ def forget(listener) -> None:
 quiet = False
 
 
-def notice(text: str) -> None:
-    """Print a one-line notice on stderr (``featurewarp: text``) unless ``-q`` was given."""
+#: Notices given with ``once`` during this command (the command line clears it after each).
+said: set = set()
+
+
+def notice(text: str, once: bool = False) -> None:
+    """Print a one-line notice on stderr (``featurewarp: text``) unless ``-q`` was given; with
+    ``once``, only the first time in a command (a batch's files share an option's notice)."""
     import sys
 
-    if quiet or sys.stderr is None:
+    if quiet or sys.stderr is None or (once and text in said):
         return
+    said.add(text)
     try:
         sys.stderr.write(f"featurewarp: {text}\n")
     except (OSError, ValueError):

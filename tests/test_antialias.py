@@ -185,23 +185,41 @@ def test_minified_render_does_not_depend_on_bands_or_threads(interp, kind):
         np.testing.assert_array_equal(banded, whole)
 
 
-def test_octaves_prepared_ahead_render_the_same_and_are_taken_once():
+def test_octaves_prepared_ahead_render_the_same_and_go_with_their_run():
     """The command line builds the first octaves while the mesh is solved (pyramid.prepare from
-    the decoding thread): the render is the same whether they were ready or not, they are taken
-    by the image they were made of only, once, and another image's render drops them."""
+    the decoding thread, kept by its run's decoding): the render is the same whether they were
+    ready or not; they are taken once, by the image they were made of; another image's render
+    does not take them; they go with their holder (a refused run's); and a prepare that ends
+    after its image's render began keeps nothing (a review found such octaves held after the run)."""
+    import gc
+
+    class SimpleNamespace:                              # a run's decoding: weakly referable
+        pass
+
     image = (np.random.default_rng(3).integers(0, 255, (90, 120, 3))).astype(np.uint8)
     mesh = warp_mesh(120, 90, sx=0.2, sy=0.7, cell=6)
-    plain = render.render(image, *mesh, "cubic", None, threads=1)
-    pyramid.prepare(image)
-    assert len(pyramid._prepared) == 1 and len(pyramid._prepared[0][1]) == pyramid.AHEAD_OCTAVES + 1
+    plain = render.render(image.copy(), *mesh, "cubic", None, threads=1)
+    run = SimpleNamespace()
+    pyramid.prepare(image, run)
+    assert len(run.octaves[1]) == pyramid.AHEAD_OCTAVES + 1
     np.testing.assert_array_equal(render.render(image, *mesh, "cubic", None, threads=1), plain)
-    assert pyramid._prepared == []                      # taken
-    pyramid.prepare(image)
+    assert run.octaves is None                          # taken
+    pyramid.prepare(image, run)
+    np.testing.assert_array_equal(render.render(image.copy(), *mesh, "cubic", None, threads=1), plain)
+    assert run.octaves is None                          # dropped: not its image
+    refused = SimpleNamespace()
+    pyramid.prepare(image, refused)
+    held = pyramid._prepared[0]
+    del refused
+    gc.collect()
+    assert held() is None                               # nothing outlives its run
+    late = SimpleNamespace()
     other = image.copy()
     np.testing.assert_array_equal(render.render(other, *mesh, "cubic", None, threads=1), plain)
-    assert pyramid._prepared == []                      # dropped: not its image
-    pyramid.prepare(np.dstack([image, image[:, :, :1]]))      # alpha: resampled premultiplied, not ahead
-    assert pyramid._prepared == []
+    pyramid.prepare(other, late)                        # its render began without them
+    assert getattr(late, "octaves", None) is None and not any(ref() is late for ref in pyramid._prepared)
+    pyramid.prepare(np.dstack([image, image[:, :, :1]]), late)      # alpha: resampled premultiplied
+    assert getattr(late, "octaves", None) is None
 
 
 def test_pyramid_levels_sit_where_the_filter_expects():

@@ -499,6 +499,11 @@ def test_quality_for_a_format_it_does_not_set_is_noted(runner, tmp_path):
     for name in ("o.jpg", "o.webp"):
         assert "--quality" not in runner("warp", "stretch", image, tmp_path / name, "--sx", "1.2", "--quality",
                                          "50").stderr
+    second = save(tmp_path / "in2.png", textured(SIZE))
+    for each in ("in", "in2"):
+        save(tmp_path / f"{each}_mask.png", np.zeros(SIZE[::-1], np.uint8))
+    run = runner("batch", "stretch", image, second, "--out-dir", tmp_path / "out", "--sx", "1.2", "--quality", "50")
+    assert run.code == 0 and run.stderr.count("--quality does nothing") == 1, run.stderr     # once, not a file
 
 
 def test_an_option_another_overrides_is_noted(runner, tmp_path):

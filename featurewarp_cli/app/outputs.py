@@ -75,7 +75,7 @@ def check_outputs(settings, output: str, *extra: tuple[str | None, str], like: s
 
         name = fmt.upper()
         stages.notice(f"--quality does nothing for a {name} output (it sets the quality of JPEG and WebP; "
-                      f"{name} is {'lossless' if fmt != 'gif' else 'a 256-colour palette'})")
+                      f"{name} is {'lossless' if fmt != 'gif' else 'a 256-colour palette'})", once=True)
     return out_path, fmt
 
 

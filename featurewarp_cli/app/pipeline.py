@@ -230,7 +230,7 @@ class _Decoding:
             finally:
                 self._done.set()
             if ahead and self._error is None:     # the render's first octaves while the main thread solves
-                importlib.import_module("featurewarp_cli.render.pyramid").prepare(self._image)
+                importlib.import_module("featurewarp_cli.render.pyramid").prepare(self._image, self)
 
         self._thread = threading.Thread(target=work, name="featurewarp-decode")
 

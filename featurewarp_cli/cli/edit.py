@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import signal
 import sys
+from dataclasses import replace
 
 import click
 
@@ -44,7 +45,7 @@ def check_files(settings, input: str, mask: str | None, handles: str | None, out
             check_outputs(settings, output, *extra)
             check_distinct([(output, "-o")] + extra, [(input, "INPUT"), (mask, "--mask")])
         elif any(path for path, _ in extra):
-            check_outputs(settings, "unused.png", *extra)
+            check_outputs(replace(settings, quality=None), "unused.png", *extra)    # no image: no --quality
     except WarpError as err:
         if err.param == "OUTPUT":
             err.param = "-o"

@@ -349,6 +349,7 @@ def main(argv=None):
         say(f"featurewarp: error: {message}")
     finally:
         stages.quiet = False               # -q was this run's: a process that goes on (tests, the API) speaks
+        stages.said.clear()
     sys.exit(code if isinstance(code, int) else 0)
 
 

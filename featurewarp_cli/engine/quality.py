@@ -243,8 +243,8 @@ def frame_strip_figures(grid, nodes, target, node_component, n_components: int, 
         Per component, None without such pixels, else ``sides`` (the frame's sides they lie
         along), ``pixels``, ``off_px`` (the farthest any ends from where the component's
         affine fit over its nodes puts it: the piecewise-linear map of the mesh at the pixel
-        against the fit) and ``cell_px`` (a cell at most this wide puts none of them in the
-        outer cells: the nearest one's distance to its edge, + 0.5).
+        against the fit) and ``cell_px`` (the ``--cell`` from which none of them lies in the
+        outer cells: :func:`_cell_past`).
     """
     (sx, sy), (qy, qx) = grid.spacing, grid.quad_shape
     col = np.minimum(((points[:, 0] + 0.5) / sx).astype(int), qx - 1)
@@ -260,12 +260,24 @@ def frame_strip_figures(grid, nodes, target, node_component, n_components: int, 
                                     for k in range(2)], axis=1) for p in (nodes, target))
     fitted = centre_t[labels] + np.einsum("kij,kj->ki", linear[labels], points - centre_s[labels])
     off = np.nan_to_num(np.hypot(*(mapped - fitted).T), nan=0.0)
-    gap = np.minimum.reduce([points[:, 1], grid.height - 1 - points[:, 1], points[:, 0], grid.width - 1 - points[:, 0]])
-    sides = {"top": row == 0, "bottom": row == qy - 1, "left": col == 0, "right": col == qx - 1}
+    sides = {"top": (row == 0, points[:, 1], grid.height), "bottom": (row == qy - 1, grid.height - 1 - points[:, 1],
+                                                                      grid.height),
+             "left": (col == 0, points[:, 0], grid.width), "right": (col == qx - 1, grid.width - 1 - points[:, 0],
+                                                                     grid.width)}
     out = []
     for k in range(n_components):
         mine = labels == k
+        along = {side: (gap[on & mine].min(), length) for side, (on, gap, length) in sides.items() if (on & mine).any()}
         out.append(None if not mine.any() else {
-            "sides": [side for side, along in sides.items() if (along & mine).any()], "pixels": int(mine.sum()),
-            "off_px": round(float(off[mine].max()), 3), "cell_px": float(gap[mine].min()) + 0.5})
+            "sides": list(along), "pixels": int(mine.sum()), "off_px": round(float(off[mine].max()), 3),
+            "cell_px": _cell_past(along.values())})
     return out
+
+
+def _cell_past(gaps) -> float:
+    """The largest ``--cell`` (floored to 0.001 px) whose grid (:meth:`Grid.for_image`: round(L /
+    cell) cells of L / that each) puts a pixel ``gap`` px from its edge out of the outer cell,
+    for every (gap, the side's length L) of ``gaps``: a cell under gap + 0.5, n = floor(L /
+    (gap + 0.5)) + 1 of them (gap + 0.5 itself left the pixel there on a 399 px side)."""
+    cell = min(length / (np.floor(length / (gap + 0.5)) + 1) for gap, length in gaps)
+    return float(np.floor(cell * 1000) / 1000)

@@ -159,8 +159,9 @@ class SolveRecord:
 
     @property
     def features_kept(self) -> bool | None:
-        """Every component kept its shape; None where the result is the plain warp (the plain
-        mode, or no feature in the mask): no shape was kept, nor asked to be."""
+        """Every component kept its shape (in the rigid mode, its size too: :func:`is_kept`); None
+        where the result is the plain warp (the plain mode, or no feature in the mask): no shape
+        was kept, nor asked to be."""
         return None if self.mode == "plain" else all(c.kept for c in self.components)
 
     @property
@@ -309,8 +310,9 @@ def _held_still(record: "SolveRecord", moving, on_feature) -> str:
 def warnings_for(record: "SolveRecord", source, target, warped, warp, on_feature=None) -> list[str]:
     """One line per compromise the output shows: each feature not kept with its figure and
     why it gave way (the :data:`MOST_LISTED` largest one by one, the others in one line),
-    every feature moved towards the plain warp, the canvas's compromises, a no-op. A feature
-    that gave way but still keeps its shape (within :data:`KEPT`) shows nothing: the report
+    every feature moved towards the plain warp, a feature's pixels by the frame that follow the
+    background, the canvas's compromises, a no-op. A feature that gave way but still keeps its
+    shape (within :data:`KEPT`; in the rigid mode, its size too) shows nothing: the report
     records it. ``on_feature``: the nodes of feature quads, for the no-op's cause."""
     lines = []
     if record.guard.plain_blend < 1.0 and not record.guard.degraded_components:
@@ -333,7 +335,8 @@ def warnings_for(record: "SolveRecord", source, target, warped, warp, on_feature
             sides = " and ".join(strip["sides"]) + (" edges" if len(strip["sides"]) > 1 else " edge")
             lines.append(f"feature {k} ({c.quads} quads{_around(c)}): its mask stops just short of the {sides}; its "
                          f"{strip['pixels']} pixels in the frame's outer cells there follow the background, up to "
-                         f"{strip['off_px']:.1f} px from its shape (--cell {strip['cell_px']:g} or finer takes them into it)")
+                         f"{strip['off_px']:.1f} px from its shape (--cell {strip['cell_px']:g} or finer takes them "
+                         f"into it)")
     lines.extend(canvas_warnings(record))
     if tuple(warp.canvas) == (warp.width, warp.height):
         wanted = np.hypot(*(warped - source).T)

@@ -10,6 +10,7 @@ integers, so that every sum is exact and the bytes do not depend on the machine.
 from __future__ import annotations
 
 import threading
+import weakref
 
 import cv2
 import numpy as np
@@ -138,14 +139,17 @@ class Pyramid:
 #: Octaves that :func:`prepare` builds ahead (the halvings: the levels within an octave are
 #: filtered in windows, as the bands need them).
 AHEAD_OCTAVES = 3
-_prepared: list = []            # [(image, octaves)] once prepare() has finished; taken by Pyramid
+_prepared: list = []            # [weak reference to the holder of prepare()'s octaves]; taken by Pyramid
+_started = [None]               # id of the image a Pyramid was made of without them: its prepare() drops them
 _prepared_lock = threading.Lock()
 
 
-def prepare(image: np.ndarray) -> None:
-    """Build the first :data:`AHEAD_OCTAVES` octaves of ``image``'s pyramid now (the command
-    line calls it from the decoding thread, which then has nothing to do while the mesh is
-    solved); the next :class:`Pyramid` made of this very array starts with them. The octaves
+def prepare(image: np.ndarray, holder) -> None:
+    """Build the first :data:`AHEAD_OCTAVES` octaves of ``image``'s pyramid now, kept as
+    ``holder.octaves`` (the command line calls it from the decoding thread, which then has
+    nothing to do while the mesh is solved, with its run's decoding as the holder: they go
+    with it, whether the run renders, is refused or fails); the next :class:`Pyramid` made of
+    this very array starts with them, unless one was made before they were ready. The octaves
     are the same bytes however they are made, so whether they are ready in time changes the
     render's time only (12 MP swirl 180: 0.08 s of its 0.4). Nothing for an image the renderer
     resamples otherwise (alpha: premultiplied; other dtypes)."""
@@ -160,15 +164,24 @@ def prepare(image: np.ndarray) -> None:
     except Exception:                # (memory): only time was at stake, the render builds them
         return
     with _prepared_lock:
-        _prepared[:] = [(image, octaves)]
+        if _started[0] == id(image):             # its render began without them (once: ids are reused)
+            _started[0] = None
+            return
+        holder.octaves = (image, octaves)
+        _prepared[:] = [weakref.ref(holder)]
 
 
 def _ahead(image: np.ndarray) -> list | None:
-    """The octaves :func:`prepare` built for ``image`` (the same array), once (None: none)."""
+    """The octaves :func:`prepare` built for ``image`` (the same array), once (None: none; a
+    prepare() of it still running then drops its own)."""
     with _prepared_lock:
-        if _prepared and _prepared[0][0] is image:
-            return list(_prepared.pop()[1])
-        _prepared.clear()            # another image is rendered: drop them
+        holder = _prepared.pop()() if _prepared else None
+        found = getattr(holder, "octaves", None)
+        if holder is not None:
+            holder.octaves = None
+        if found is not None and found[0] is image:
+            return list(found[1])
+        _started[0] = id(image)
     return None
 
 
