@@ -772,6 +772,31 @@ def test_a_handle_dragged_past_the_pinned_border_warns_of_the_crease_in_every_mo
     assert 0.2 < data["params"]["area_kept"]["min"] < 1.0
 
 
+def test_a_turn_that_does_not_happen_is_measured_and_warned():
+    """A QA audit: a handle with "angle": 90 beside a pin on the same disc turned it -0.08 degrees,
+    and nothing said so (the report had no angle figure). params.handle_ends now gives each
+    turned handle's angle and the turn it got (fitted over its ring); a miss over 5 degrees is
+    warned. A handle free to turn turns as asked and says nothing."""
+    import cv2
+
+    mask = np.zeros((150, 200), np.uint8)
+    cv2.circle(mask, (70, 75), 30, 255, -1)
+    pinned = {"version": 2, "points": [{"from": [70, 75], "to": [70, 75], "angle": 90},
+                                       {"from": [80, 75], "to": [80, 75]}, {"from": [190, 140], "to": [190, 140]}]}
+    deformer = Deformer(200, 150, mask > 0)
+    mesh = deformer.solve(Handles.from_dict(pinned, 200, 150))
+    end = deformer.warp.values["handle_ends"][0]
+    assert end["angle_deg"] == 90.0 and abs(end["angle_ended_deg"]) < 5
+    line, = [w for w in mesh.record.warnings if " turned " in w]
+    assert line.startswith("handle points[0] (70,75 -> 70,75) turned ") and "where its angle asks 90°" in line
+    free = {"version": 2, "points": [{"from": [150, 40], "to": [150, 40], "angle": 90},
+                                     {"from": [10, 140], "to": [10, 140]}]}
+    mesh = deformer.solve(Handles.from_dict(free, 200, 150))
+    assert abs(deformer.warp.values["handle_ends"][0]["angle_ended_deg"] - 90) < 5
+    assert not any(" turned " in w for w in mesh.record.warnings), mesh.record.warnings
+    assert "angle_deg" not in deformer.warp.values["handle_ends"][1]          # a pin without an angle
+
+
 def test_the_fold_note_measures_the_user_s_handles_not_the_carried_feature():
     """Carried 154 px, the note said the handles were held up to 69 px from their targets while
     they landed within 0.07 px: it measured the carried face's nodes (deform trial, finding 5)."""

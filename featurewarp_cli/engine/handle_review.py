@@ -13,7 +13,7 @@ import numpy as np
 from .barrier import SAFE_FRACTION
 from .grid import signed_areas
 from .injectivity import CRUSHED_SHARE
-from .handles import resample
+from .handles import RING_POINTS, resample
 
 #: A point or curve handle may end this far from its target (px) before a warning says so
 #: (it was 2 % of the diagonal, 100 px at 12 MP, before handles were re-aimed until they land).
@@ -27,6 +27,9 @@ NAMED = 5
 CRUSHED = CRUSHED_SHARE * SAFE_FRACTION
 #: Points along a curve handle where it is measured (its target and where it ended).
 CURVE_SAMPLES = 32
+#: A point handle with an ``angle`` may end turned this many degrees off it before a warning
+#: says so (a handle turned 90 degrees beside a pin on the same disc turned it -0.08, in silence).
+ANGLE_SLACK_DEG = 5.0
 
 
 def fold_cause(warp, at=None) -> str:
@@ -126,6 +129,7 @@ def review_points(warp, mesh) -> list[str]:
     warp.values["handle_ends"] = [
         {"given": handles.name(k), "from": _plain(handles.points_from[k]), "to": _plain(handles.points_to[k]),
          "ended": _plain(ends[k], 3), "error_px": round(float(e), 3)} for k, e in enumerate(error)]
+    turns = _turn_misses(warp, mesh, ends)
     aimed = handles.points_to if warp.aimed is None else warp.aimed
     reach = np.hypot(*(warp(handles.points_from) + np.asarray(warp.offset) - aimed).T)
     missed = np.flatnonzero(error > HANDLE_SLACK_PX)
@@ -136,6 +140,38 @@ def review_points(warp, mesh) -> list[str]:
         more = len(missed) - NAMED
         warnings.append(f"and {more} more handle{'s' * (more > 1)} end{'s' * (more == 1)} over "
                         f"{HANDLE_SLACK_PX:g} px from their targets (the report's params.handle_ends lists every handle)")
+    return warnings + turns
+
+
+def turned_by(warp, mesh, points: np.ndarray, ends: np.ndarray, radius: float) -> np.ndarray:
+    """Degrees (clockwise on screen, as a handle's ``angle``) by which ``mesh`` turns the ring of
+    ``radius`` around each of ``points`` (whose centres ended at ``ends``): the rotation that best
+    fits the ring's :data:`handles.RING_POINTS` points as they ended, in (-180, 180]."""
+    around = np.arange(RING_POINTS) * (2.0 * np.pi / RING_POINTS)
+    ring = radius * np.stack([np.cos(around), np.sin(around)], axis=1)
+    ended = warp.mapped(mesh, (points[:, None, :] + ring).reshape(-1, 2)).reshape(len(points), -1, 2) - ends[:, None]
+    cross = (ring[:, 0] * ended[..., 1] - ring[:, 1] * ended[..., 0]).sum(axis=1)
+    return np.degrees(np.arctan2(cross, (ring[:, 0] * ended[..., 0] + ring[:, 1] * ended[..., 1]).sum(axis=1)))
+
+
+def _turn_misses(warp, mesh, ends) -> list[str]:
+    """Each point handle with an ``angle``: how far it turned (``angle_deg`` and
+    ``angle_ended_deg`` in its ``handle_ends`` entry) and a warning where that is more than
+    :data:`ANGLE_SLACK_DEG` off (turns compared modulo a full turn)."""
+    handles = warp.handles
+    turned = np.flatnonzero(np.isfinite(handles.angles))
+    if not turned.size:
+        return []
+    asked = np.degrees(handles.angles[turned])
+    radius = float(warp.values.get("radius") or 0.0) or 1.0          # the discs' radius as solved
+    ended = turned_by(warp, mesh, handles.points_from[turned], ends[turned], radius)
+    off = np.abs((ended - asked + 180.0) % 360.0 - 180.0)
+    warnings = []
+    for k, want, got, miss in zip(turned, asked, ended, off):
+        warp.values["handle_ends"][k].update(angle_deg=round(float(want), 3), angle_ended_deg=round(float(got), 3))
+        if miss > ANGLE_SLACK_DEG:
+            warnings.append(f"handle {handles.name(k)} turned {round(got)}° where its angle asks {round(want)}° ({miss:.0f}° "
+                            f"off): pins, other handles or a feature near it hold the turn (params.handle_ends)")
     return warnings
 
 
