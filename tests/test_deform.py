@@ -686,7 +686,10 @@ def test_pins_and_handles_land_where_dragged_in_the_feature_aware_mode(tmp_path)
                                    "samples/astronaut_mask.png", *pins_and_move, "--report", str(report)])
     assert run.exit_code == 0, run.output
     measured = json.loads(report.read_text())
-    assert measured["params"]["handle_error_px"]["max"] < 0.5 and measured["warnings"] == []
+    assert measured["params"]["handle_error_px"]["max"] < 0.5
+    cut = "which cuts it (--canvas fit shows it whole)"               # the shuttle, moved off an input canvas
+    assert all(cut in w for w in measured["warnings"]) and measured["warnings"][0].startswith("feature 0 (")
+    assert " lies 100 % outside the canvas " in measured["warnings"][0]
     mask = cv2.imread("samples/astronaut_mask.png", cv2.IMREAD_GRAYSCALE) >= 128
     data = {"version": 1, "canvas": "input", "points": [{"from": [60, 470], "to": [60, 470]},
                                                         {"from": [100, 100], "to": [100, 100]},
@@ -797,6 +800,25 @@ def test_a_turn_that_does_not_happen_is_measured_and_warned():
     assert "angle_deg" not in deformer.warp.values["handle_ends"][1]          # a pin without an angle
 
 
+def test_features_an_input_canvas_cuts_are_named():
+    """A QA audit: two discs moved 300 px right on an ``input`` canvas came out cut or gone with no
+    warning (the handles' map, the plain warp here, is cut as much, so the canvas's own figures
+    said nothing). Each feature the canvas cuts is named with its share outside."""
+    import cv2
+
+    mask = np.zeros((150, 200), np.uint8)
+    for centre in ((40, 40), (150, 40), (100, 115)):
+        cv2.circle(mask, centre, 18, 255, -1)
+    moves = [((40, 40), (190, 40)), ((100, 115), (250, 115))]
+    handles = Handles.from_moves(moves, [(10, 145)], 200, 150, "input")
+    mesh = Deformer(200, 150, mask > 0).solve(handles)
+    cut = [w for w in mesh.record.warnings if "which cuts it (--canvas fit shows it whole)" in w]
+    assert [w.split(" (")[0] for w in cut] == ["feature 0", "feature 1", "feature 2"], mesh.record.warnings
+    assert cut[2].startswith("feature 2 (82 quads, around (100, 115)) lies 100 % outside")
+    whole = Deformer(200, 150, mask > 0).solve(Handles.from_moves(moves, [(10, 145)], 200, 150, "fit"))
+    assert not any("outside the canvas" in w for w in whole.record.warnings)
+
+
 def test_the_fold_note_measures_the_user_s_handles_not_the_carried_feature():
     """Carried 154 px, the note said the handles were held up to 69 px from their targets while
     they landed within 0.07 px: it measured the carried face's nodes (deform trial, finding 5)."""
@@ -821,7 +843,9 @@ def test_a_smooth_drag_does_not_warn_of_a_crease():
     mask = cv2.imread("samples/astronaut_mask.png", cv2.IMREAD_GRAYSCALE) >= 128
     handles = Handles.from_moves([((130, 60), (200, 35))], [(60, 470), (450, 470)], 512, 512, "input")
     mesh = Deformer(512, 512, mask).solve(handles)
-    assert mesh.record.warnings == [] and mesh.fold_cause.startswith("handles dragged across")
+    line, = mesh.record.warnings                       # the shuttle, by the right edge, leans a little out of it
+    assert line.startswith("feature 0 (") and "outside the canvas" in line
+    assert mesh.fold_cause.startswith("handles dragged across")
     data = {**handles.as_dict(), "version": 2}
     for point in data["points"][1:]:
         point["angle"] = 0

@@ -38,7 +38,7 @@ from .grid import Grid, grid_for, grid_shape, signed_areas
 from .injectivity import border_crossings
 from .handles import Handles, default_radius, resample
 from .handle_review import (CURVE_SAMPLES, HANDLE_SLACK_PX, carried_scale_notes, crushed, fold_cause, fold_notes,
-                            review_curves, review_points)
+                            off_canvas, review_curves, review_points)
 from . import landing
 from .mesh import Mesh
 from ..plugins import canvas_size, check_canvas_side
@@ -132,7 +132,7 @@ class HandleWarp:
             times = {1: "once", 2: "twice"}.get(mesh.crossings, f"{mesh.crossings} times")
             warnings.append(f"the handles lay the image over itself (its border crosses itself {times}): "
                             f"{mesh.fold_cause}")
-        warnings += review_points(self, mesh) + crushed(self, mesh) + review_curves(self, mesh)
+        warnings += review_points(self, mesh) + crushed(self, mesh) + review_curves(self, mesh) + off_canvas(mesh)
         area = float(np.sum(signed_areas(mesh.target, mesh.triangles)))
         if area < SHRUNK * self.width * self.height:
             warnings.append(f"the handles shrink the image to {100 * area / (self.width * self.height):.1f} % "
