@@ -572,7 +572,8 @@ def test_a_pinned_border_holds_when_a_handle_sits_on_a_feature_that_reaches_it()
     border = np.flatnonzero(np.isin(mesh.source[:, 0], [-0.5, W - 0.5]) | np.isin(mesh.source[:, 1], [-0.5, H - 0.5]))
     placed = mesh.target + np.asarray(deformer.warp.offset)
     assert np.abs(placed[border] - mesh.source[border]).max() < 0.01 and tuple(mesh.canvas) == (W, H)
-    assert any("of the held border: it moves that point" in w for w in mesh.record.warnings)
+    assert any("of the held border: it does not carry the feature (the border stays)" in w
+               for w in mesh.record.warnings)
 
 
 def test_a_handle_the_border_holds_is_reported():
@@ -1029,6 +1030,12 @@ def test_a_miss_far_from_any_feature_is_not_blamed_on_one_beside_it():
     warp = SimpleNamespace(handles=handles, carried=set(), rigid_map=RigidMap(200, 200, mask=mask))
     assert _cause(warp, 0, 0.5).startswith("a feature beside it keeps its shape")
     assert _cause(warp, 1, 0.5).startswith("the features kept in shape hold the ground it is on")
+    on = Handles.from_dict({"version": 1, "points": [{"from": [50, 50], "to": [90, 50]},
+                                                    {"from": [180, 180], "to": [180, 180]}]}, 200, 200)
+    held = SimpleNamespace(handles=on, carried=set(), rigid_map=warp.rigid_map)     # on a feature the border holds
+    assert _cause(held, 0, 0.5).startswith("it sits on a feature that keeps its shape and that the held border holds")
+    carried = SimpleNamespace(handles=on, carried={0}, rigid_map=warp.rigid_map)    # two on one feature, pulling apart
+    assert _cause(carried, 0, 0.5).startswith("the feature it carries keeps its shape, and the other handles")
 
 
 def test_a_fold_cause_without_handles_names_the_warp_not_a_crash():

@@ -226,8 +226,9 @@ class RigidMap:
         if self.labels is not None and len(handles.points_from):
             sources, targets, radii = carried_features(self.labels, self.grid.nodes(), handles, sources, targets,
                                                        radii, band, uncarried, carried)
-        notes = [f"the handle at ({x:g}, {y:g}) sits on a feature within {band:.0f} px of the held border: it moves "
-                 "that point, not the whole feature (the border stays)" for x, y in handles.points_from[uncarried]]
+        notes = [f"the handle at ({x:g}, {y:g}) sits on a feature within {band:.0f} px of the held border: it does not "
+                 "carry the feature (the border stays), and moves its point only as far as the feature gives way"
+                 for x, y in handles.points_from[uncarried]]
         key = (sources.tobytes(), radii.tobytes())
         if key != self._key:
             self.rigid = RigidDeformer(self.grid, sources, radii)

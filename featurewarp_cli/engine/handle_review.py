@@ -77,6 +77,15 @@ def _feature_near(warp, point) -> bool:
     return bool(labels[max(0, y - reach):y + reach + 1, max(0, x - reach):x + reach + 1].any())
 
 
+def _on_feature(warp, point) -> bool:
+    """Whether ``point`` lies on a feature pixel (False where that is unknown)."""
+    if (known := _labels_and_reach(warp)) is None:
+        return False
+    labels = known[0]
+    x, y = np.clip(np.rint(point).astype(int), 0, [labels.shape[1] - 1, labels.shape[0] - 1])
+    return bool(labels[y, x])
+
+
 def _within_band(warp, k: int, at) -> bool:
     """Whether the source point ``at`` lies within four bands of the box of the feature handle
     ``k`` carries; True where that is unknown."""
@@ -176,15 +185,22 @@ def _turn_misses(warp, mesh, ends) -> list[str]:
 
 
 def _cause(warp, k: int, reach: float) -> str:
-    """Why point handle ``k`` missed, ``reach`` px being where the rigid map W itself left it."""
+    """Why point handle ``k`` missed, ``reach`` px being where the rigid map W itself left it: the
+    feature it carries (whatever W did: two handles on one feature pulling apart were told "a
+    feature beside it"), the feature it sits on, which the held border keeps from being carried
+    (it was told "beside it", and the note said the point moves: it did not), a feature beside
+    it, the ground, or other handles."""
+    if k in warp.carried:
+        return ("the feature it carries keeps its shape, and the other handles on that feature (or pins beside "
+                "it) pull it another way")
     if reach <= HANDLE_SLACK_PX:
+        if _on_feature(warp, warp.handles.points_from[k]):
+            return ("it sits on a feature that keeps its shape and that the held border holds, so its point cannot "
+                    "move (the handles' map W reaches the target; --mode plain moves it)")
         if _feature_near(warp, warp.handles.points_from[k]):
             return "a feature beside it keeps its shape and holds it (the handles' map W reaches the target)"
         held = "the held border and " if warp.handles.border != "free" else ""
         return f"{held}the features kept in shape hold the ground it is on (the handles' map W reaches the target)"
-    if k in warp.carried:
-        return ("the feature it carries keeps its shape, and the other handles on that feature (or pins beside "
-                "it) pull it another way")
     border = " or the pinned border" if warp.handles.border != "free" else ""
     return f"other handles{border} pull the same place another way (the handles' map W ends {reach:.0f} px away)"
 
