@@ -510,7 +510,7 @@ def test_a_feature_short_of_the_frame_says_how_far_its_edge_strip_follows_the_ba
     assert strip["sides"] == ["right"] and strip["off_px"] > 1.0 and 1.45 < strip["cell_px"] < 1.5
     line, = [w for w in report["warnings"] if "its mask stops just short of the right edge" in w]
     assert f"its {strip['pixels']} pixels in the frame's outer cells" in line
-    assert f"--cell {strip['cell_px']:g} or finer takes" in line
+    assert f"--cell {strip['cell_px']:g} or finer may take" in line
     refused = runner.invoke(cli, ["warp", "flag", picture, str(tmp_path / "o2.png"), "-m", mask_file, "--strict"])
     assert refused.exit_code == 1 and not (tmp_path / "o2.png").exists()
     report = warp("--cell", str(strip["cell_px"]))      # in the feature (which this bend then does not keep: said)
@@ -539,3 +539,24 @@ def test_a_no_op_says_whether_the_mask_covers_the_warp_or_rigid_holds_it_still()
     assert "(--mode similarity lets them scale)" in line and record.no_effect
     record = warper.solve(bulge, mode="similarity").record
     assert not record.no_effect and record.warnings == []
+
+
+def test_a_frame_strip_is_said_of_a_feature_kept_only():
+    """A false-alarm hunt: a speck merged with a large feature by the grid, not kept (said as
+    such), got a frame-strip line too, its 2 pixels "33.8 px from its shape": the distance from
+    the affine fit of a feature that has no one shape. A kept feature's strip is said."""
+    from types import SimpleNamespace
+
+    from featurewarp_cli.engine.record import ComponentRecord, SolveRecord, warnings_for
+
+    strip = {"sides": ["top"], "pixels": 2, "off_px": 33.8, "cell_px": 3.469}
+    record = SolveRecord("similarity", "exact", "fixed", {})
+    record.components = [ComponentRecord(quads=40, tied=True, unpinned=False, scale=1.0, rotation_deg=0.0,
+                                         distortion=worst, anisotropy_worst=worst, anisotropy_mean=worst,
+                                         plain_distortion=0.5, plain_anisotropy_worst=0.5, area_ratio=1.0,
+                                         kept=worst < 0.02, frame_strip=strip) for worst in (0.0, 4.4)]
+    nodes = np.zeros((4, 2))
+    lines = warnings_for(record, nodes, nodes, nodes, SimpleNamespace(canvas=(10, 10), width=20, height=20))
+    strips = [line for line in lines if "its mask stops just short of the top edge" in line]
+    assert len(strips) == 1 and strips[0].startswith("feature 0 (40 quads)")
+    assert any(line.startswith("feature 1 (40 quads) not kept") for line in lines)

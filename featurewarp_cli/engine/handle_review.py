@@ -119,9 +119,12 @@ def crushed(warp, mesh) -> list[str]:
     if kept.min() >= CRUSHED:
         return []
     share = f"{100 * kept.min():.1f} %" if kept.min() >= 0.001 else "under 0.1 %"
+    cause = fold_cause(warp, weakest)        # a carried feature pressed or turned; else where handles pull
+    if cause.startswith("handles dragged across"):
+        cause = ("handles pull it towards or past a pin, the held border or each other there, or turn a feature "
+                 "against them; drag or turn them less, or move the pin")
     return [f"the handles crush the image into a crease near ({weakest[0]:.0f}, {weakest[1]:.0f}): triangles keep "
-            f"{share} of their area in the input (params.area_kept): handles pull it towards or past "
-            "a pin, the held border or each other there; drag them less far or move the pin"]
+            f"{share} of their area in the input (params.area_kept): {cause}"]
 
 
 def review_points(warp, mesh) -> list[str]:

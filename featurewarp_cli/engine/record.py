@@ -331,12 +331,12 @@ def warnings_for(record: "SolveRecord", source, target, warped, warp, on_feature
                      f"{max(c.quads for c in rest)} quads{LISTED_IN_REPORT})")
     for k, c in enumerate(record.components):
         strip = c.frame_strip
-        if strip and strip["off_px"] > STRIP_PX:
+        if strip and strip["off_px"] > STRIP_PX and c.kept:     # not kept: said above (and off its own fit)
             sides = " and ".join(strip["sides"]) + (" edges" if len(strip["sides"]) > 1 else " edge")
             lines.append(f"feature {k} ({c.quads} quads{_around(c)}): its mask stops just short of the {sides}; its "
                          f"{strip['pixels']} pixels in the frame's outer cells there follow the background, up to "
-                         f"{strip['off_px']:.1f} px from its shape (--cell {strip['cell_px']:g} or finer takes them "
-                         f"into it)")
+                         f"{strip['off_px']:.1f} px from its shape (--cell {strip['cell_px']:g} or finer may take "
+                         f"them into it)")
     lines.extend(canvas_warnings(record))
     if tuple(warp.canvas) == (warp.width, warp.height):
         wanted = np.hypot(*(warped - source).T)
