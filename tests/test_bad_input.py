@@ -9,6 +9,7 @@ Unicode paths) must simply work.
 
 from __future__ import annotations
 
+import json
 import os
 import struct
 import zlib
@@ -370,6 +371,44 @@ def test_gray_alpha_png(runner, tmp_path):
     out = decode.read_image(str(tmp_path / "o.png"))
     assert out.shape == (SIZE[1], SIZE[0], 4) and (out[:, :, 3] == 200).all()
     assert np.abs(out[:, :, 0].astype(int) - gray).max() <= 1
+
+
+def stored_mode(path) -> str:
+    """Pillow's mode of the pixels an image file stores."""
+    from PIL import Image
+
+    with Image.open(path) as image:
+        return image.mode
+
+
+@pytest.mark.parametrize("fmt", ["png", "tiff"])
+def test_gray_alpha_stays_gray_alpha(runner, tmp_path, fmt):
+    """A gray + alpha input was written RGBA (twice the samples, another form than the input's;
+    ImageMagick keeps it). It stays gray + alpha in PNG and TIFF, and so does a gray input whose
+    canvas gains transparency; the report says 2 channels. A coloured background, a format
+    without that form (WebP) or 16 bits (Pillow writes gray + alpha at 8 only) stay BGRA."""
+    gray = textured(channels=1)
+    alpha = np.where(np.arange(SIZE[0]) < 20, 0, 200).astype(np.uint8)[None, :].repeat(SIZE[1], axis=0)
+    src, report = tmp_path / "ga.png", tmp_path / "r.json"
+    src.write_bytes(png_bytes(np.dstack([gray, alpha]), 4))
+    out = tmp_path / f"o.{fmt}"
+    assert runner("warp", "arc", src, out, "--report", report).code == 0
+    assert stored_mode(out) == "LA" and json.loads(report.read_text())["output"]["channels"] == 2
+    plain = tmp_path / "plain.webp"                # the same pixels as BGRA
+    assert runner("warp", "arc", src, plain).code == 0 and stored_mode(plain) == "RGBA"
+    kept, bgra = decode.read_image(str(out)), decode.read_image(str(plain))
+    assert np.array_equal(kept, bgra) and (kept[:, :, 3] == 0).any()
+    assert runner("warp", "arc", src, tmp_path / f"red.{fmt}", "--background", "red").code == 0
+    assert stored_mode(tmp_path / f"red.{fmt}") == "RGBA"
+    gray_src = tmp_path / "g.png"
+    gray_src.write_bytes(png_bytes(gray, 0))
+    assert runner("warp", "arc", gray_src, tmp_path / f"g.{fmt}").code == 0
+    assert stored_mode(tmp_path / f"g.{fmt}") == "LA"
+    deep = tmp_path / "deep.png"
+    deep.write_bytes(png_bytes(np.dstack([gray, alpha]).astype(np.uint16) * 257, 4))
+    assert runner("warp", "arc", deep, tmp_path / "deep-out.png").code == 0
+    assert decode.read_image(str(tmp_path / "deep-out.png")).dtype == np.uint16
+    assert stored_mode(tmp_path / "deep-out.png") == "RGBA"
 
 
 @pytest.mark.parametrize("transparent", [False, True])

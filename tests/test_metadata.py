@@ -186,14 +186,19 @@ def test_jpeg_keeps_chroma_whole_from_quality_90(quality, sampling, exif):
 
 
 def test_gray_profile_on_colour_output_becomes_the_rgb_one_of_its_tone():
-    """A grey photo whose canvas gains transparency is written RGBA: its grey profile was
-    dropped (finding 8). The RGB profile made of it shows R = G = B as the grey one shows grey."""
+    """A grey photo whose canvas gains transparency is written RGBA where the format has no
+    gray + alpha (WebP; 16-bit PNG and TIFF): its grey profile was dropped (finding 8). The RGB
+    profile made of it shows R = G = B as the grey one shows grey. 8-bit PNG and TIFF store gray
+    + alpha, with the grey profile as it is."""
     gray = gray_profile()
     gray_alpha = np.dstack([picture((30, 40, 1)), np.full((30, 40), 200, np.uint8)])
-    for fmt in ("png", "webp", "tiff"):
+    for fmt in ("png", "tiff"):
         with opened(encode.encode_image(gray_alpha, fmt, icc=gray)) as written:
+            assert written.mode == "LA" and written.info["icc_profile"] == gray
+    for fmt, pixels in (("webp", gray_alpha), ("png", gray_alpha.astype(np.uint16) * 257)):
+        with opened(encode.encode_image(pixels, fmt, icc=gray)) as written:
             rgb = written.info["icc_profile"]
-    assert rgb[16:20] == b"RGB " and rgb == profiles.rgb_from_gray(gray)
+        assert rgb[16:20] == b"RGB " and rgb == profiles.rgb_from_gray(gray)
     levels = np.arange(256, dtype=np.uint8).reshape(16, 16)
     target = ImageCms.createProfile("sRGB")
     shown_gray = ImageCms.profileToProfile(Image.fromarray(levels), ImageCms.ImageCmsProfile(io.BytesIO(gray)),

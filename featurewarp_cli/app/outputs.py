@@ -7,6 +7,8 @@ import os
 import stat
 from dataclasses import replace
 
+import numpy as np
+
 from ..io import ImageError, colours, decode, encode, formats, metadata, write
 
 
@@ -213,16 +215,34 @@ def background_colour(text: str | None, fmt: str):
     return rgb
 
 
-def rendered(warper, image, mesh, interp: str, background):
+#: Pillow's modes of 8-bit gray pixels (a header's ``mode``): alone, and with straight or
+#: premultiplied alpha.
+GRAY_MODES = ("L", "LA", "La")
+
+
+def rendered(warper, image, mesh, interp: str, background, header=None):
     """The BGR(A) image through ``mesh``; a translucent (r, g, b, a) background is laid under a
     transparent render. A gray image under a colour that is not gray is rendered in colour (the
-    fill came out as its luma)."""
+    fill came out as its luma). With INPUT's ``header``, a gray + alpha input's result in its
+    own form (:func:`gray_alpha_form`)."""
     if background is not None and len(set(background[:3])) > 1 and image.ndim == 2:
         import cv2
 
         image = cv2.cvtColor(image, cv2.COLOR_GRAY2BGR)
     if background is None or len(background) == 3:
-        return warper.render(image, mesh, interp, background, order="bgr")
+        return gray_alpha_form(warper.render(image, mesh, interp, background, order="bgr"), header)
     from ..render.raster import under_colour
 
-    return under_colour(warper.render(image, mesh, interp, None, order="bgr"), background)
+    return gray_alpha_form(under_colour(warper.render(image, mesh, interp, None, order="bgr"), background), header)
+
+
+def gray_alpha_form(image, header):
+    """A BGRA result as (h, w, 2) gray + alpha where INPUT is gray (its ``header``'s mode,
+    :data:`GRAY_MODES`: decoding made gray + alpha BGRA, and a gray canvas that gains
+    transparency is rendered BGRA) and its three colour channels are equal (not under a coloured
+    ``--background``): the encoder then keeps that form where the format has it
+    (:func:`featurewarp_cli.io.encode.keeps_gray_alpha`), as ImageMagick does. Else ``image``."""
+    if (header is None or header.mode not in GRAY_MODES or image.ndim != 3 or image.shape[2] != 4
+            or not (np.array_equal(image[:, :, 0], image[:, :, 1]) and np.array_equal(image[:, :, 0], image[:, :, 2]))):
+        return image
+    return np.ascontiguousarray(image[:, :, [0, 3]])

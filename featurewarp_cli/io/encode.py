@@ -44,12 +44,19 @@ def flatten(image: np.ndarray, rgb=(255, 255, 255)) -> np.ndarray:
     return np.round(out).astype(image.dtype)
 
 
+def keeps_gray_alpha(image: np.ndarray, fmt: str) -> bool:
+    """Whether :func:`encode_image` writes ``image`` as gray + alpha: 8-bit gray + alpha
+    pixels (C = 2) as PNG or TIFF (by Pillow; it writes that form at 8 bits only, so 16-bit
+    gray + alpha goes out as BGRA, as every other format's does)."""
+    return image.ndim == 3 and image.shape[2] == 2 and image.dtype == np.uint8 and fmt in ("png", "tiff")
+
+
 def stored_form(image: np.ndarray, fmt: str, transparent: bool = False) -> tuple[int, int]:
     """(channels, bits per sample) of ``image`` as :func:`encode_image` stores it as ``fmt``:
-    gray + alpha as BGRA, alpha laid over the background where ``fmt`` has none (a GIF keeps
+    gray + alpha as BGRA where ``fmt`` has no 8-bit gray + alpha form (:func:`keeps_gray_alpha`), alpha laid over the background where ``fmt`` has none (a GIF keeps
     it, cut at half, where ``transparent``: its background None), 8 bits where it holds no more."""
     channels = 1 if image.ndim == 2 else int(image.shape[2])
-    channels = 4 if channels == 2 else channels
+    channels = 4 if channels == 2 and not keeps_gray_alpha(image, fmt) else channels
     if channels == 4 and not FORMATS[fmt].alpha and not (fmt == "gif" and transparent):
         channels = 3
     if channels == 1 and fmt in ("webp", "gif"):       # no gray form: colour (WebP), a palette (GIF)
@@ -79,7 +86,7 @@ def encode_image(image: np.ndarray, fmt: str, background=(255, 255, 255), qualit
     Parameters
     ----------
     image : (h, w) or (h, w, C) ndarray, uint8 or uint16, C in 1..4, BGR(A) channel order
-        Gray + alpha (C = 2) is stored as BGRA.
+        Gray + alpha (C = 2) is stored as such where :func:`keeps_gray_alpha`, else as BGRA.
     fmt : str
     background : (r, g, b) or None
         Colour that alpha is composited over for formats without alpha; None: white, but a GIF's
@@ -113,7 +120,8 @@ def encode_image(image: np.ndarray, fmt: str, background=(255, 255, 255), qualit
         raise ImageError(f"cannot encode {image.dtype} samples as {fmt}")
     if image.ndim == 3 and not 1 <= image.shape[2] <= 4:
         raise ImageError(f"cannot encode {image.shape[2]} channels as {fmt}")
-    image = gray_alpha_to_bgra(image)
+    gray_alpha = keeps_gray_alpha(image, fmt)   # OpenCV writes 1, 3 or 4 channels: Pillow's LA
+    image = image if gray_alpha else gray_alpha_to_bgra(image)
     if not FORMATS[fmt].alpha and not (fmt == "gif" and background is None):     # GIF: 1-bit alpha
         image = flatten(image, background or (255, 255, 255))
     if FORMATS[fmt].eight_bit:
@@ -124,10 +132,10 @@ def encode_image(image: np.ndarray, fmt: str, background=(255, 255, 255), qualit
     exif, xmp, dpi = bytes(exif) if exif else None, bytes(xmp) if xmp else None, dpi or None
     exif = exif and metadata.sized_exif(exif, image.shape[1], image.shape[0])
     given = icc or exif or xmp or dpi
-    icc = profiles.for_pixels(icc, 1 if image.ndim == 2 else image.shape[2])
+    icc = profiles.for_pixels(icc, 1 if image.ndim == 2 or gray_alpha else image.shape[2])
     if fmt == "jpg" and xmp and metadata.jpeg_xmp_unfit(xmp):
         xmp = None                                # said before the work (metadata.unkept)
-    if (given or lossless_alpha) and fmt in METADATA_FORMATS and image.dtype == np.uint8:
+    if (given or lossless_alpha or gray_alpha) and fmt in METADATA_FORMATS and image.dtype == np.uint8:
         data = _pillow_encode(image, fmt, quality, icc, exif, xmp, dpi)
         return metadata.tiff_with_exif_directories(data, exif) if fmt == "tiff" else data
     settings = list(SETTINGS[fmt])
@@ -240,8 +248,8 @@ def gif_picture(image: np.ndarray, transparent: bool = False):
 
 
 def rgb_order(image: np.ndarray) -> np.ndarray:
-    """BGR(A) pixels in Pillow's order, RGB(A); gray as it is."""
-    if image.ndim == 2:
+    """BGR(A) pixels in Pillow's order, RGB(A); gray and gray + alpha as they are."""
+    if image.ndim == 2 or image.shape[2] == 2:
         return image
     return cv2.cvtColor(image, cv2.COLOR_BGRA2RGBA if image.shape[2] == 4 else cv2.COLOR_BGR2RGB)
 
