@@ -479,8 +479,7 @@ def warp_file(settings: Settings, input: str, output: str, mask: str | None = No
     mesh.record.warnings[:0] = warnings + depth_lost(image, fmt)    # the loading's and the depth: said, refused
     check_solution(settings, mesh, partial(refused_report, report, input, out_path, image, warp, mesh, timings, t0,
                                            fmt) if report else None)   # a CI gate reads why: the report, no image
-    result = rendered(warper, image, mesh, settings.interp, background,   # the grid is drawn in colour
-                      None if draw_grid else getattr(pending, "header", None))
+    result = rendered(warper, image, mesh, settings.interp, background, getattr(pending, "header", None))
     if draw_grid:
         from .panel import draw_grid as overlay
         result = overlay(result, mesh)
