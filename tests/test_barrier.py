@@ -461,6 +461,25 @@ def test_the_inverse_entries_match_a_dense_inverse_with_held_and_tied_nodes():
     columns = np.array([grid.nx + 3, 0, 9, 17])
     assert np.allclose(reduced.entries(rows, columns), dense[np.ix_(rows, columns)], atol=1e-10)
     assert np.allclose(reduced.entries(rows, columns)[[0, 4]], 0.0)            # held nodes do not move
+    many = np.concatenate([columns, np.arange(1, n - 2, 3)])                   # more than one part
+    assert np.allclose(reduced.entries(rows, many), dense[np.ix_(rows, many)], atol=1e-10)
+
+
+def test_the_inverse_entries_in_parts_are_the_bits_of_one_back_substitution():
+    """``ReducedSystem.entries`` back-substitutes a simplicial factor's unit forces a few columns
+    at a time (faster than all at once): the same bits as one back-substitution of them all."""
+    from featurewarp_cli.engine import system
+    from featurewarp_cli.engine.solver import ReducedSystem
+
+    grid = Grid.for_image(48, 40, 4.0)
+    n = grid.n_nodes
+    unknown = np.concatenate([[-1], np.arange(n - 2), [-1]])                   # two held nodes
+    reduced = ReducedSystem(system.normal_matrix(grid, np.ones((grid.ny - 1) * (grid.nx - 1))), unknown)
+    rows, columns = np.arange(1, n - 1, 7), np.arange(1, n - 1, 3)[:37]
+    forces = np.zeros((n - 1, columns.size), order="F")
+    forces[reduced._scatter[columns], np.arange(columns.size)] = 1.0
+    whole = reduced._solve(forces[:-1])
+    assert reduced.method == "cholmod" and np.array_equal(reduced.entries(rows, columns), whole[reduced._scatter[rows]])
 
 
 def test_the_woodbury_factor_of_the_inverse_between_held_tied_and_free_nodes_is_exact():
