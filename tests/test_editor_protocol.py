@@ -170,8 +170,8 @@ def test_density_and_the_exact_cell_in_the_printed_command(tmp_path):
 
 
 def test_a_failed_export_leaves_the_handles_file_and_the_output_as_they_were(tmp_path):
-    """Export writes the handles file first (its printed command names it): where the warp then
-    fails (handles that lay the image over itself), that file is put back as it was, or removed."""
+    """Export writes the handles file its printed command names (after the image): where the warp
+    fails (handles that lay the image over itself), it and the output are as they were, or absent."""
     from featurewarp_cli.app.pipeline import WarpError
 
     image, mask = small_astronaut(tmp_path, 40)             # 40 px: 0.35 s an export (64: 0.75 s, 512: 15 s)
@@ -489,3 +489,33 @@ def test_the_editor_names_the_handles_file_in_its_load_warnings(tmp_path):
                                                      {"from": [450, 470], "to": [450, 470]}]}
     session = EditorSession(Settings("deform"), IMAGE, MASK, path, None, data)
     assert f"{path}: ignoring the key 'colour' (unknown to version 1)" in session.state()["warnings"]
+
+
+def test_export_reports_every_warning_deform_prints(tmp_path, monkeypatch):
+    """Export's answer carried only the first three of the run's warnings: a fourth feature not
+    kept, a crease, an unconverged rigid map that deform prints were not in the page's notice."""
+    said = [f"feature {i} not kept" for i in range(4)] + ["the result crushes the image into a crease"]
+
+    def warp_file(settings, input, output, mask, also_read=()):
+        with open(output, "wb") as file:
+            file.write(b"image")
+        return {"seconds": 0.0, "warnings": list(said)}
+
+    monkeypatch.setattr(editor_session, "warp_file", warp_file)
+    session = EditorSession(Settings("deform"), IMAGE, MASK, None, str(tmp_path / "out.png"))
+    answer = session.export(request(0))
+    assert answer["warnings"] == said
+
+
+def test_the_status_line_says_first_that_the_handles_ask_for_a_fold(session):
+    """The page shows the first warning: for two handles dragged across each other it was the
+    preview's "the features are eased ... Export solves them in full" beside "folds 0", and
+    Export then refused the result as laying the image over itself. The count of features kept
+    is marked provisional there (the preview's: Export's differed)."""
+    swap = {"version": 1, "points": PINS + [{"from": [130, 60], "to": [400, 120]},
+                                            {"from": [400, 120], "to": [130, 60]}]}
+    status, _ = session.solve({"handles": swap})
+    assert status["folds"] == 0 and status["provisional"] is True
+    assert status["warnings"][0].startswith("the handles ask for a fold"), status["warnings"]
+    status, _ = session.solve({"handles": {"version": 1, "points": PINS}})
+    assert status["provisional"] is False

@@ -25,6 +25,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from ..engine.handle_review import FOLD_ASK
 from ..io import write
 from .editor_files import (Snapshot, Unconfirmed, decode_mask, handles_json, naming, png,  # noqa: F401
                            texture, write_named)
@@ -166,10 +167,14 @@ class EditorSession:
         warnings = mesh.record.warnings
         if body.get("drag") is True:        # a drag's updates are cut short by design: say so at the release
             warnings = [w for w in warnings if not w.startswith("preview: the rigid map")]
+        # The status line shows the first warning: that the handles ask for a fold (which Export may refuse,
+        # or pay for with features not kept) outranks the preview's notes, beside which it read "folds 0".
+        warnings = sorted(warnings, key=lambda w: not w.startswith(FOLD_ASK))
         status = {"ms": round(1000 * seconds, 1), "folds": mesh.flips() + mesh.crossings,
                   "seq": ticket[1] if ticket else None,
                   "components": len(components), "kept": sum(c.kept for c in components) if mode != "plain" else 0,
                   "canvas": list(mesh.canvas), "warnings": warnings[:3],
+                  "provisional": any(w.startswith((FOLD_ASK, "preview:", "dragging:")) for w in warnings),
                   "ends": [] if ends is None else np.round(ends, 2).tolist(), "turns": turns,
                   "curve_ends": [np.round(ended, 2).tolist() for _, ended in curves], "versions": versions}
         return status, (mesh.target + offset).astype("<f4").tobytes()
@@ -308,7 +313,7 @@ class EditorSession:
         command += options_given(settings)
         return {"exported": self.output_path, "seconds": round(summary["seconds"], 2),
                 "handles_saved": handles_path, "mask_saved": mask if self.painted else None,
-                "warnings": summary["warnings"][:3], "command": " ".join(shlex.quote(c) for c in command)}
+                "warnings": list(summary["warnings"]), "command": " ".join(shlex.quote(c) for c in command)}
 
     def abandon(self) -> str | None:
         """Ctrl-C while an Export runs: put its files back as they were and make it write no

@@ -229,6 +229,10 @@ def review_curves(warp, mesh) -> list[str]:
     return warnings
 
 
+#: How :func:`fold_notes` begins (the editor shows it first: its status line shows one warning).
+FOLD_ASK = "the handles ask for a fold"
+
+
 def fold_notes(warp, handles, held: float) -> list[str]:
     """The note for handles that ask for a fold: how far W leaves the user's handles (points and
     curves) from their targets, or, when they reach them and only a feature they carry is
@@ -240,9 +244,9 @@ def fold_notes(warp, handles, held: float) -> list[str]:
         np.hypot(*(warp(resample(a, CURVE_SAMPLES)) + offset - resample(b, CURVE_SAMPLES)).T) for a, b in handles.curves]
     miss = max((float(m.max()) for m in misses if m.size), default=0.0)
     if miss > HANDLE_SLACK_PX:
-        return [f"the handles ask for a fold; they are held as far as the image can follow without one (up to "
+        return [f"{FOLD_ASK}; they are held as far as the image can follow without one (up to "
                 f"{miss:.0f} px from their targets)"]
-    return [f"the handles ask for a fold: a feature a handle carries is held as far as the image can follow "
+    return [f"{FOLD_ASK}: a feature a handle carries is held as far as the image can follow "
             f"without one (up to {held:.0f} px from where its handle carries it; the handles reach their targets)"]
 
 

@@ -67,7 +67,8 @@ async function solveOnce() {
   app.shown = seq; app.positions = positions; app.status = status;
   app.lastLatency = performance.now() - started;
   growView();
-  const kept = mode() === "plain" ? "plain map (mask ignored)" : `features kept ${status.kept}/${status.components}`;
+  const kept = mode() === "plain" ? "plain map (mask ignored)" : `features kept ${status.kept}/${status.components}` +
+    (status.provisional ? " in the preview (Export decides)" : "");     // a fold asked, or features eased
   setStatus(`solve ${status.ms} ms · folds ${status.folds} · ${kept} · canvas ${status.canvas.join("x")}` +
             (status.warnings.length ? " · " + status.warnings[0] : ""), false);
   scheduleDraw();
