@@ -360,3 +360,69 @@ def test_a_nan_mask_is_refused_and_a_whole_float_max_memory_is_bytes():
         warp(image, mask, "swirl")
     mask[10:20, 10:20] = 1.0
     assert warp(image, mask, "swirl", max_memory=2e9).shape == (40, 50, 3)
+
+
+def test_a_pil_palette_mask_is_read_by_its_colours_not_its_indices():
+    """A palette ("P") mask whose index 0 is white marked the black pixels (its indices 0/1 read
+    as a 0/1 mask): the mask inverted, silently; a path to the same file was read right."""
+    from PIL import Image
+
+    marked = box()
+    palette = Image.fromarray((~marked).astype(np.uint8), mode="P")
+    palette.putpalette([255, 255, 255, 0, 0, 0] + [0] * 762)
+    np.testing.assert_array_equal(arrays.mask_array(palette, marked.shape), marked)
+    np.testing.assert_array_equal(quiet(picture(), palette, "swirl", angle=60),
+                                  quiet(picture(), marked, "swirl", angle=60))
+
+
+def test_big_endian_uint16_is_uint16():
+    """A big-endian uint16 image (">u2" != np.uint16) whose values are all below 256 was read
+    on the 8-bit scale: its added alpha was 255 of 65535 (nearly transparent); a big-endian
+    uint16 mask took the 8-bit threshold (128, not 32896)."""
+    dark = np.random.default_rng(2).integers(0, 200, (24, 32), dtype=np.uint16)
+    native = quiet(dark, box(), "arc", angle=90)
+    swapped = quiet(dark.astype(">u2"), box(), "arc", angle=90)
+    assert swapped.dtype == np.dtype(">u2")
+    np.testing.assert_array_equal(swapped, native)
+    soft = np.where(box(), 65535, 1000).astype(np.uint16)
+    np.testing.assert_array_equal(arrays.mask_array(soft.astype(">u2"), soft.shape), box())
+
+
+@pytest.mark.parametrize("canvas", [(32.5, 24), (0, 0), (-5, 10), (10**6, 24), (32,)])
+def test_a_plugins_bad_canvas_is_named(no_solve, canvas):
+    """A plugin's canvas of (0, 0) failed in the rasterizer ("triangles: buffer sizes do not
+    match"), (32.5, 24) with a TypeError deep in the render, (-5, 10) with numpy's "negative
+    dimensions"; each is a ValueError naming the canvas, before the solve."""
+    class Odd(Warp):
+        name = "odd"
+
+        def _setup(self):
+            self.canvas = canvas
+
+        def forward(self, points):
+            return points.copy()
+
+    with pytest.raises(ValueError, match="odd: canvas must be"):
+        warp(picture(), box(), Odd)
+
+
+def test_a_plugin_that_moves_its_points_in_place_leaves_the_grid_alone():
+    """``forward`` got the grid's own nodes: one that shifted them in place moved the nodes the
+    fidelity check then measured against, which read a stray, took the finest grid and warned."""
+    class Shifting(Warp):
+        name = "shifting"
+
+        def forward(self, points):
+            points[:, 1] += 3.0 * np.sin(points[:, 0] / 10.0)       # in place, as a careless plugin does
+            return points
+
+    class Copying(Shifting):
+        def forward(self, points):
+            return super().forward(points.copy())
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")                               # no stray warned
+        careless, mesh = warp(picture(48, 64), box(48, 64), Shifting, return_mesh=True)
+        careful, expected = warp(picture(48, 64), box(48, 64), Copying, return_mesh=True)
+    np.testing.assert_array_equal(careless, careful)
+    np.testing.assert_array_equal(mesh.source, expected.source)

@@ -142,6 +142,7 @@ def _preset(preset, width: int, height: int, params: dict):
         if (preset.width, preset.height) != (width, height):
             raise ValueError(f"the preset {preset.name} is made for {preset.width}x{preset.height}, "
                              f"the image is {width}x{height}")
+        arrays.check_canvas(preset)
         return preset
     if isinstance(preset, str):
         preset = load_warp(preset)
@@ -155,7 +156,9 @@ def _preset(preset, width: int, height: int, params: dict):
         hint = f" (did you mean {' or '.join(map(repr, near))}?)" if near else ""
         raise ParamError(tuple(unknown), f"neither warp() nor {preset.name} takes it{hint}; warp() takes "
                                          f"{', '.join(OPTIONS)}; {preset.name} takes {', '.join(own) or 'nothing'}")
-    return preset(width, height, **params)
+    made = preset(width, height, **params)
+    arrays.check_canvas(made)                    # a plugin's, before the solve
+    return made
 
 
 def _node_budget(max_memory, width: int, height: int, canvas) -> int | None:

@@ -77,16 +77,34 @@ def check_warp(warp, width: int, height: int, who: str = "FeatureWarper.solve") 
         raise TypeError(f"{who}: warp must be a warp made for the image (a preset's instance), not {what}")
     if (warp.width, warp.height) != (width, height):
         raise ValueError(f"warp is for {warp.width}x{warp.height}, warper for {width}x{height}")
+    check_canvas(warp)
 
 
-def _pil_pixels(image):
+def check_canvas(warp) -> None:
+    """ValueError naming a warp's ``canvas`` unless it is (width, height) of whole pixels, 1 to
+    :data:`featurewarp_cli.plugins.MAX_CANVAS_SIDE` a side (a plugin's (0, 0) failed in the
+    rasterizer with "buffer sizes do not match", (640.5, 480) with a TypeError deep in the render)."""
+    from ..plugins import MAX_CANVAS_SIDE
+
+    canvas, name = warp.canvas, getattr(warp, "name", "") or type(warp).__name__
+    try:
+        sides = tuple(canvas)
+    except TypeError:
+        sides = ()
+    if len(sides) != 2 or not all(isinstance(v, (int, np.integer)) and not isinstance(v, bool)
+                                  and 1 <= v <= MAX_CANVAS_SIDE for v in sides):
+        raise ValueError(f"{name}: canvas must be (width, height), whole pixels from 1 to {MAX_CANVAS_SIDE}, "
+                         f"not {canvas!r} (set it in _setup)")
+
+
+def _pil_pixels(image, what: str = "image"):
     """A PIL image in a mode whose array is its pixels (:data:`PIL_CONVERSIONS`; CMYK by PIL's
     own formula, not a profile); anything else as it is. ValueError for L*a*b*."""
     mode = getattr(image, "mode", None)
     if not (type(image).__module__.startswith("PIL.") and hasattr(image, "convert")):
         return image
     if mode == "LAB":
-        raise ValueError("image is a PIL image in mode LAB: convert it to RGB first (PIL.ImageCms)")
+        raise ValueError(f"{what} is a PIL image in mode LAB: convert it to RGB first (PIL.ImageCms)")
     if mode == "P" and "transparency" in image.info:
         return image.convert("RGBA")
     return image.convert(PIL_CONVERSIONS[mode]) if mode in PIL_CONVERSIONS else image
@@ -109,8 +127,8 @@ def as_array(value, what: str) -> np.ndarray:
     if isinstance(value, (str, bytes, os.PathLike)) and what == "image":
         raise TypeError(f"image must be an array (h, w) or (h, w, C), not a path or text ({value!r}): read it "
                         f"first (PIL.Image.open, cv2.imread, imageio)")
-    if what == "image":
-        value = _pil_pixels(value)
+    if what in ("image", "mask"):         # a palette mask's array is its indices, not its grey
+        value = _pil_pixels(value, what)
     try:
         return np.asarray(value)
     except (ValueError, TypeError) as err:          # ragged lists, objects numpy cannot read
@@ -129,17 +147,18 @@ def prepare(image, background) -> tuple[np.ndarray, tuple | None, np.dtype]:
         raise ValueError(f"image must be (h, w) or (h, w, C) with C in 1..4, not shape {image.shape}{batch}")
     if image.shape[0] < 1 or image.shape[1] < 1:
         raise ValueError(f"image has no pixels (shape {image.shape})")
-    dtype = image.dtype
-    if dtype == bool:
+    dtype = image.dtype                  # returned as given, big-endian included
+    image = native_order(image)          # ">u2" is not np.uint16: 16-bit data below 256 took the 8-bit scale
+    if image.dtype == bool:
         samples = image.astype(np.uint8) * 255
-    elif np.issubdtype(dtype, np.floating):
+    elif np.issubdtype(image.dtype, np.floating):
         if not np.all(np.isfinite(image)) or image.min(initial=0) < 0 or image.max(initial=0) > 1:
             raise ValueError(f"a float image must hold values in [0, 1] (its range is {image.min()}..{image.max()}; "
                              f"divide 0..255 data by 255)")
         samples = np.round(image.astype(np.float64) * 65535.0).astype(np.uint16)   # float16 overflows
-    elif dtype in (np.uint8, np.uint16):
+    elif image.dtype in (np.uint8, np.uint16):
         samples = image
-    elif np.issubdtype(dtype, np.integer):
+    elif np.issubdtype(image.dtype, np.integer):
         low, high = image.min(initial=0), image.max(initial=0)
         if low < 0 or high > 65535:
             raise ValueError(f"{dtype} image values must fit 0..65535 (uint16), not {low}..{high}")
@@ -151,6 +170,11 @@ def prepare(image, background) -> tuple[np.ndarray, tuple | None, np.dtype]:
     if rgb is not None and channels >= 3:
         rgb = rgb[::-1]                  # the renderer puts (r, g, b) into BGR order: undo it for RGB
     return np.ascontiguousarray(samples), rgb, dtype
+
+
+def native_order(array: np.ndarray) -> np.ndarray:
+    """``array`` in the machine's byte order (a big-endian one converted: PIL's ``I;16B``, FITS data)."""
+    return array if array.dtype.isnative else array.astype(array.dtype.newbyteorder("="))
 
 
 def finish(out: np.ndarray, channels: int, dtype: np.dtype, channel_axis: bool = False) -> np.ndarray:
@@ -184,7 +208,7 @@ def mask_array(mask, shape: tuple[int, int]) -> np.ndarray | None:
         return None
     if isinstance(mask, (str, os.PathLike)):
         return mask_file(mask, shape)
-    mask = as_array(mask, "mask")
+    mask = native_order(as_array(mask, "mask"))
     if mask.ndim == 3 and mask.shape[2] == 1:
         mask = mask[..., 0]
     if mask.ndim not in (2, 3) or mask.ndim == 3 and not 2 <= mask.shape[2] <= 4:
