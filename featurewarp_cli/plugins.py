@@ -462,7 +462,11 @@ def load(name: str):
     ------
     UnknownPreset
         If ``name`` is not registered or its module fails to import.
+    TypeError
+        If ``name`` is not a string.
     """
+    if not isinstance(name, str):
+        raise TypeError(f"a preset is named by a string ({', '.join(names())}), not {type(name).__name__}")
     matches = [] if name in BUILTIN else [ep for ep in entry_points() if ep.name == name]
     if name not in BUILTIN and not matches:
         from .styles import style_owners       # it reads the presets' summaries through this module

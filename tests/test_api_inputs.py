@@ -426,3 +426,12 @@ def test_a_plugin_that_moves_its_points_in_place_leaves_the_grid_alone():
         careful, expected = warp(picture(48, 64), box(48, 64), Copying, return_mesh=True)
     np.testing.assert_array_equal(careless, careful)
     np.testing.assert_array_equal(mesh.source, expected.source)
+
+
+def test_load_warp_of_no_name_says_presets_are_named_by_strings():
+    """``load_warp(None)`` failed with "'NoneType' object has no attribute 'lower'" in the
+    style lookup of its hint."""
+    from featurewarp_cli.engine.warper import load_warp
+
+    with pytest.raises(TypeError, match="a preset is named by a string .*swirl.*not NoneType"):
+        load_warp(None)
