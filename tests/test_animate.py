@@ -238,3 +238,13 @@ def test_an_animation_at_rest_is_said_once_not_as_a_frames(files):
     strict = run(*args, "--strict")
     assert strict.code == 1 and "--strict: no frame moves a pixel" in strict.stderr
     assert not (files / "rest_strict.gif").exists()
+
+
+def test_a_frame_written_with_folds_under_allow_folds_is_said(files):
+    """warp --allow-folds says 'N triangles of the mesh fold over'; animate counted a frame's
+    folds and said nothing (not even under -v): a folded animation passed as a clean one."""
+    out = run("swirl", str(files / "in.png"), str(files / "folds.gif"), "-m", str(files / "mask.png"),
+              "--vary", "angle=0:540", "--frames", "3", "--radius", "1", "--cell", "120", "--allow-folds")
+    assert out.code == 0, out.stderr
+    folded = [line for line in out.stderr.splitlines() if "triangles of the mesh fold over" in line]
+    assert folded and all(": frame " in line for line in folded), out.stderr

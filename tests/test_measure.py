@@ -424,3 +424,16 @@ def test_measure_reads_as_warp_does_and_its_check_passes_nothing_it_could_not_se
     assert piped.code == 0 and "OUTPUT - has several frames" in piped.stderr
     quiet = runner("-q", "measure", paths["in"], tmp_path / "anim.png", "-m", paths["mask"])
     assert quiet.code == 0 and quiet.stderr == ""
+
+
+def test_an_image_against_itself_passes_max_distortion_0(runner):
+    """The README: an image measured against itself gives 0. Its SVD read 3e-15, so
+    --max-distortion 0 failed it ("distortion 0.0000, above 0", exit 1) while --json printed
+    0.0 per component and 3.1e-15 as worst_distortion."""
+    shapes, mask = SAMPLES / "shapes.png", SAMPLES / "shapes_mask.png"
+    run = runner("measure", shapes, shapes, "-m", mask, "--max-distortion", "0", "--json")
+    assert run.code == 0, run.stderr
+    report = json.loads(run.stdout)
+    assert report["worst_distortion"] == 0.0
+    assert describe(np.eye(2) * 0.7 @ np.array([[np.cos(1.0), -np.sin(1.0)], [np.sin(1.0), np.cos(1.0)]]))[
+        "distortion"] == 0.0

@@ -226,19 +226,22 @@ def animate_file(settings: Settings, input: str, output: str, mask: str | None, 
     check_frames_fit(settings, frames, canvas)
     if kind != "video":                       # refused before any frame is made, not after
         check_encodable(canvas, formats.format_name(ext) or "png")
-    rendered_frames, flips, said, still = [], 0, [], 0
+    rendered_frames, flips, said, still, folds = [], 0, [], 0, []
     for index, warp in enumerate(warps):
         try:
             mesh = solve_within_budget(warper, warp, settings.mode)
             check_solution(replace(settings, strict=False), mesh)
         except WarpError as err:
             raise WarpError(f"{frame_name(index, per_frame[index], ranges)}: {err}", usage=err.usage) from None
-        flips += mesh.info["flipped_triangles"]
+        flipped = mesh.info["flipped_triangles"]
+        flips += flipped
         lines = [line.replace(LISTED_IN_REPORT, "") for line in mesh.record.warnings]   # no report
         still += any(line.startswith(STILL) for line in lines)      # a frame at rest: said once, for all
         said.extend((index, line) for line in lines if not line.startswith(STILL))
         if settings.strict and said:          # nothing is written before every frame is solved
             raise WarpError(f"--strict: frame {said[0][0]}: {said[0][1]}; nothing written")
+        if flipped:                           # --allow-folds wrote it: said as warp says it (not refused)
+            folds.append((index, f"{flipped} triangles of the mesh fold over; the frame may show folds"))
         frame = to_bgr(rendered(warper, image, mesh, settings.interp, background), alpha, background or ())
         rendered_frames.append(centre_on(frame, canvas, fill_of(background, alpha)))
         if progress:
@@ -249,7 +252,7 @@ def animate_file(settings: Settings, input: str, output: str, mask: str | None, 
     write_frames(output, kind, rendered_frames, fps, settings.quality, kept, transparent=background is None)
     return {"frames": frames, "canvas": canvas, "factorizations": warper.factorizations,
             "flipped_triangles": flips, "seconds": time.perf_counter() - t0,
-            "warnings": warnings + at_rest + frame_lines(said)}
+            "warnings": warnings + at_rest + frame_lines(sorted(said + folds, key=lambda pair: pair[0]))}
 
 
 def frame_lines(said: list[tuple[int, str]]) -> list[str]:

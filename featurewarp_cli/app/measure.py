@@ -230,8 +230,9 @@ def describe(linear: np.ndarray) -> dict:
         u = u.copy()
         u[:, -1] *= -1
     rotation = u @ vt
-    return {
-        "distortion": float(sigma[0] / sigma[1] - 1.0) if sigma[1] > 0 else float("inf"),
+    distortion = float(sigma[0] / sigma[1] - 1.0) if sigma[1] > 0 else float("inf")
+    return {      # below 1e-12: the SVD's rounding (the identity read 3e-15, failing --max-distortion 0)
+        "distortion": 0.0 if distortion < 1e-12 else distortion,
         "scale": float(np.sqrt(abs(np.linalg.det(linear)))),
         "rotation": float(np.degrees(np.arctan2(rotation[1, 0], rotation[0, 0]))),
         "stretches": (float(sigma[0]), float(sigma[1])),
