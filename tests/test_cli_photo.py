@@ -309,3 +309,15 @@ def test_a_style_hint_under_animate_keeps_the_varied_option_and_drops_one_the_pr
     assert kept == ["--vary", "waves=1:3", "--frames", "3"] and yields and not dropped
     kept, dropped, _ = merged(["--vary=strength=-0.2:-0.5"], "--bend -40", table, {})
     assert kept == ["--bend", "-40"] and dropped == ["--vary=strength=-0.2:-0.5"]
+
+
+def test_a_batch_summary_keeps_the_crop_note(runner, tmp_path):
+    """A batch printed --grow-past-edge's crop on stderr but its --summary line had warnings
+    only: a nightly job reading the summary never learnt that its outputs were cropped."""
+    summary = tmp_path / "runs.jsonl"
+    run = runner("batch", "stretch", SAMPLES / "closeup.png", "--out-dir", tmp_path / "out",   # closeup_mask.png
+                 "--sy", "1.5", "--grow-past-edge", "--summary", summary)
+    assert run.code == 0, run.stderr
+    line = json.loads(summary.read_text())
+    assert line["warnings"] == [] and line["notes"] and "cropped there" in line["notes"][0]
+    assert line["notes"][0] in run.stderr

@@ -372,7 +372,7 @@ def summary_record(index: int, job: Job, status: str, seconds: float = 0.0, summ
     status : {'ok', 'failed', 'skipped'}
     seconds : float
     summary : dict, optional
-        :func:`featurewarp_cli.app.report.summary` of a written file (its warnings are kept).
+        :func:`featurewarp_cli.app.report.summary` of a written file (its warnings and notes are kept).
     error : str, optional
     settings : str, optional
         The :func:`featurewarp_cli.app.resume.settings_stamp` its output was (or is known to have
@@ -385,4 +385,4 @@ def summary_record(index: int, job: Job, status: str, seconds: float = 0.0, summ
     """
     return {"job": index, "input": job.input, "mask": job.mask, "output": job.output, "dir": os.getcwd(),
             "status": status, "seconds": round(seconds, 4), "warnings": list(summary["warnings"]) if summary else [],
-            "error": error, "settings": settings}
+            "notes": list(summary.get("notes", [])) if summary else [], "error": error, "settings": settings}
