@@ -215,7 +215,7 @@ def _local_solver(between, unknowns: np.ndarray, triangles: np.ndarray, blocks: 
     if size == 0:
         return lambda r: np.zeros_like(r)
     mapped = [np.flatnonzero(column[:, axis] >= 0) for axis in range(2)]
-    dof = column[triangles].reshape(-1, 6)
+    dof = np.take(column, triangles, axis=0).reshape(-1, 6)
     dof_rows, dof_cols = np.broadcast_to(dof[:, :, None], blocks.shape), np.broadcast_to(dof[:, None, :], blocks.shape)
     keep = (dof_cols >= 0) & (dof_rows >= dof_cols)          # the lower triangle (a tied pair's both)
     lower = sp.csc_matrix((np.concatenate(data + [blocks[keep]]),
@@ -223,13 +223,14 @@ def _local_solver(between, unknowns: np.ndarray, triangles: np.ndarray, blocks: 
                           shape=(size, size))
     solve = spd_solver(lower, lower=True)
 
+    at = [column[mapped[axis], axis] for axis in range(2)]     # the local unknown of each mapped node
+
     def local(r):
-        rhs = sum(np.bincount(column[mapped[axis], axis], r[mapped[axis], axis], minlength=size)
-                  for axis in range(2))
+        rhs = np.bincount(at[0], r[mapped[0], 0], minlength=size) + np.bincount(at[1], r[mapped[1], 1], minlength=size)
         moved = np.asarray(solve(rhs)).reshape(-1)
         z = np.zeros_like(r)
         for axis in range(2):
-            z[mapped[axis], axis] = moved[column[mapped[axis], axis]]
+            z[mapped[axis], axis] = moved[at[axis]]
         return z
     return local
 
@@ -268,7 +269,7 @@ def _newton_direction(move, normal, unknowns, between, points, triangles, blocks
 
     def product(d):
         out = _dot(normal, d)
-        part = np.einsum("kij,kj->ki", blocks, d[triangles].reshape(-1, 6)).reshape(-1, 2)
+        part = np.einsum("kij,kj->ki", blocks, np.take(d, triangles, axis=0).reshape(-1, 6)).reshape(-1, 2)
         for k in range(2):
             out[:, k] += np.bincount(corners, part[:, k], minlength=n)
         return out
