@@ -497,3 +497,20 @@ def test_workers_with_another_featurewarp_version_are_named(tmp_path, cluster, m
     assert warning.startswith("featurewarp: warning: 2 Dask worker(s) run another featurewarp than this "
                               "command's 9.9.9, and may write other bytes: tcp://"), warning
     assert f"({featurewarp_cli.__version__})" in warning
+
+
+def test_outputs_of_workers_with_another_version_are_not_stamped_with_the_commands(tmp_path, cluster, monkeypatch):
+    """A worker of another featurewarp made the file, but --summary recorded the command's settings
+    stamp (which holds the version): --resume then skipped those outputs for good, though an
+    upgrade is documented to warp everything once more."""
+    from featurewarp_cli.app import cluster_run
+
+    monkeypatch.setattr(cluster_run, "__version__", "9.9.9")
+    monkeypatch.setattr(featurewarp_cli, "__version__", "9.9.9")     # the command's; the workers run the real one
+    inputs = make_inputs(tmp_path / "in", 2)
+    args = [*inputs, "--out-dir", tmp_path / "out", "--summary", tmp_path / "s.jsonl"]
+    assert invoke(*args, "--scheduler", cluster.scheduler_address).code == 0
+    again = invoke(*args, "--resume")                               # the command's own version, locally
+    assert again.code == 0
+    assert "warping 2 up-to-date output(s) again" in again.stderr and "(other settings)" in again.stderr
+    assert [line["status"] for line in summary_lines(tmp_path / "s.jsonl")] == ["ok", "ok"]

@@ -250,6 +250,7 @@ class ClusterRun:
         self.futures, self.run_id, self.stopped, self.signals = [], None, False, _Signals()
         self.unfinished: set[int] = set()
         self.warned: set[str] = set()
+        self.made_by: dict = {}                     # task key -> the featurewarp version of the worker that ran it
         self.client = self.cluster = None
         try:
             self.client, self.cluster = connect(self.target, verbose)
@@ -266,6 +267,10 @@ class ClusterRun:
 
     def __next__(self):
         return next(self._results)
+
+    def version_of(self, i: int) -> str | None:
+        """The featurewarp version of the worker that ran job ``i`` (None: not known)."""
+        return self.made_by.get(self.futures[i].key) if i < len(self.futures) else None
 
     def close(self) -> None:
         """Stop the jobs not finished (none writes after this returns) and disconnect."""
@@ -332,6 +337,7 @@ class ClusterRun:
             text = str(err).strip().splitlines()
             return f"the Dask cluster could not run it ({type(err).__name__}: {text[0] if text else ''})", None, 0.0
         self._warn_versions({address: version})
+        self.made_by[future.key] = version
         return error, summary, seconds
 
     def _warn_versions(self, found: dict) -> None:

@@ -22,12 +22,13 @@ UNSTAMPED = ("max_pixels", "max_memory", "warp_factory", "strict")
 PROBES = ((997, 613), (331, 1201))
 
 
-def settings_stamp(settings: Settings) -> str:
+def settings_stamp(settings: Settings, version: str | None = None) -> str:
     """``sha256:`` and 16 hex digits of what makes a batch's outputs what they are: the preset, its
     parameters, the engine and output options (not the limits, nor ``--strict``, which only
     refuses) by their meaning (``jpeg`` as ``jpg``, ``#FFF`` as ``white``, an explicit default as
-    none), and the featurewarp version (an upgrade may change the bytes). Each ``--summary`` line
-    records it, for ``--resume`` to compare (:func:`resume_plan`)."""
+    none), and the featurewarp version (an upgrade may change the bytes): ``version``, that of the
+    Dask worker that made the output, else this one's. Each ``--summary`` line records it, for
+    ``--resume`` to compare (:func:`resume_plan`)."""
     import hashlib
     import json
 
@@ -35,7 +36,7 @@ def settings_stamp(settings: Settings) -> str:
     from ..io.formats import format_name
 
     chosen = {name: value for name, value in vars(settings).items() if name not in UNSTAMPED}
-    chosen.update(params=_meaning(settings.preset, settings.params), version=__version__,
+    chosen.update(params=_meaning(settings.preset, settings.params), version=version or __version__,
                   fmt=settings.fmt and (format_name(settings.fmt) or settings.fmt),
                   background=settings.background and _colour(settings.background))
     text = json.dumps(chosen, sort_keys=True, default=str)

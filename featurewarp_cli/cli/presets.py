@@ -215,6 +215,7 @@ def run_planned(settings, todo, jobs: int, scheduler, summary_path, resume: bool
             _summary_sink(summary_path) as record:
         for i in sorted(skipped):
             record(summary_record(i, todo[i], "skipped", settings=skipped[i]))
+        version_of, stamps = getattr(results, "version_of", lambda k: None), {None: stamp}
         with progress_bar(len(remaining), "warping", quiet) as bar:
             for k, job, error, summary, seconds in results:
                 bar.update(1)
@@ -224,7 +225,11 @@ def run_planned(settings, todo, jobs: int, scheduler, summary_path, resume: bool
                         say(f"featurewarp: error: {failure_line(job.input, error)}")
                 elif summary is not None:
                     report_warnings(summary, quiet, verbose)
-                record(summary_record(numbers[k], job, "failed" if error else "ok", seconds, summary, error, stamp))
+                made = version_of(k)            # a Dask worker's featurewarp, which the stamp holds
+                if made not in stamps:
+                    stamps[made] = settings_stamp(settings, made)
+                record(summary_record(numbers[k], job, "failed" if error else "ok", seconds, summary, error,
+                                      stamps[made]))
     return failed
 
 
