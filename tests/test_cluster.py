@@ -514,3 +514,15 @@ def test_outputs_of_workers_with_another_version_are_not_stamped_with_the_comman
     assert again.code == 0
     assert "warping 2 up-to-date output(s) again" in again.stderr and "(other settings)" in again.stderr
     assert [line["status"] for line in summary_lines(tmp_path / "s.jsonl")] == ["ok", "ok"]
+
+
+def test_a_workers_error_names_the_output_folder_as_given():
+    """An --out-dir the workers could not write was named by the absolute path sent to them
+    ("OUTPUT: directory /abs/roout is not writable"), where the README says messages name paths
+    as given."""
+    from featurewarp_cli.app.batch import Job
+    from featurewarp_cli.app.cluster_run import _renamed
+
+    given, sent = Job("in/a.png", "roout/a.png", None), Job("/w/in/a.png", "/w/roout/a.png", None)
+    error = "OUTPUT: directory /w/roout is not writable (Read-only file system)"
+    assert _renamed((error, None, 0.0), given, sent)[0] == "OUTPUT: directory roout is not writable (Read-only file system)"

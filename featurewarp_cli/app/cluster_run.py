@@ -184,8 +184,9 @@ def _renamed(outcome: tuple, job, sent) -> tuple:
     """(error, summary, seconds) of the job ``sent`` with its paths named as in ``job``."""
     from .remote import named
 
-    paths = {user: given for user, given in zip((job.input, job.mask, job.output), (sent.input, sent.mask, sent.output))
-             if user and user != given}
+    paths = {user: given for user, given in zip((job.input, job.mask, job.output, os.path.dirname(job.output)),
+                                                (sent.input, sent.mask, sent.output, os.path.dirname(sent.output)))
+             if user and user != given}             # the folder: a worker that cannot write it names it
     if not paths:
         return outcome
     error, summary, seconds = outcome
