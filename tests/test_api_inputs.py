@@ -388,7 +388,7 @@ def test_big_endian_uint16_is_uint16():
     np.testing.assert_array_equal(arrays.mask_array(soft.astype(">u2"), soft.shape), box())
 
 
-@pytest.mark.parametrize("canvas", [(32.5, 24), (0, 0), (-5, 10), (10**6, 24), (32,)])
+@pytest.mark.parametrize("canvas", [(32.5, 24), (0, 0), (-5, 10), (32,), (True, 24), "32x24"])
 def test_a_plugins_bad_canvas_is_named(no_solve, canvas):
     """A plugin's canvas of (0, 0) failed in the rasterizer ("triangles: buffer sizes do not
     match"), (32.5, 24) with a TypeError deep in the render, (-5, 10) with numpy's "negative

@@ -125,7 +125,7 @@ def test_after_a_signal_a_job_that_refused_to_write_is_unfinished_not_failed():
     a result, and the stopping command printed it as a failed file (and put it in the summary).
     It is left unfinished, as a job that never ran; a job that failed on its own is still said."""
     run = cluster_run.ClusterRun.__new__(cluster_run.ClusterRun)
-    run.warned = set()
+    run.warned, run.made_by = set(), {}
     run.futures = [_Arrived("a", None), _Arrived("b", NotWritten("RunStopped: the batch was stopped")),
                    _Arrived("c", "c.png: not a picture")]
     run.unfinished = {0, 1, 2}

@@ -81,19 +81,18 @@ def check_warp(warp, width: int, height: int, who: str = "FeatureWarper.solve") 
 
 
 def check_canvas(warp) -> None:
-    """ValueError naming a warp's ``canvas`` unless it is (width, height) of whole pixels, 1 to
-    :data:`featurewarp_cli.plugins.MAX_CANVAS_SIDE` a side (a plugin's (0, 0) failed in the
-    rasterizer with "buffer sizes do not match", (640.5, 480) with a TypeError deep in the render)."""
-    from ..plugins import MAX_CANVAS_SIDE
-
+    """ValueError naming a warp's ``canvas`` unless it is (width, height) of whole pixels, at
+    least 1 a side (a plugin's (0, 0) failed in the rasterizer with "buffer sizes do not match",
+    (640.5, 480) with a TypeError deep in the render). The renderer takes sides beyond OpenCV's
+    limits (it tiles); the memory budget, where one is given, refuses a canvas too large."""
     canvas, name = warp.canvas, getattr(warp, "name", "") or type(warp).__name__
     try:
         sides = tuple(canvas)
     except TypeError:
         sides = ()
     if len(sides) != 2 or not all(isinstance(v, (int, np.integer)) and not isinstance(v, bool)
-                                  and 1 <= v <= MAX_CANVAS_SIDE for v in sides):
-        raise ValueError(f"{name}: canvas must be (width, height), whole pixels from 1 to {MAX_CANVAS_SIDE}, "
+                                  and v >= 1 for v in sides):
+        raise ValueError(f"{name}: canvas must be (width, height), whole pixels of at least 1, "
                          f"not {canvas!r} (set it in _setup)")
 
 
