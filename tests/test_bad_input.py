@@ -393,7 +393,8 @@ def test_gray_alpha_stays_gray_alpha(runner, tmp_path, fmt):
     src.write_bytes(png_bytes(np.dstack([gray, alpha]), 4))
     out = tmp_path / f"o.{fmt}"
     assert runner("warp", "arc", src, out, "--report", report).code == 0
-    assert stored_mode(out) == "LA" and json.loads(report.read_text())["output"]["channels"] == 2
+    figures = json.loads(report.read_text())
+    assert stored_mode(out) == "LA" and figures["input"]["channels"] == figures["output"]["channels"] == 2
     plain = tmp_path / "plain.webp"                # the same pixels as BGRA
     assert runner("warp", "arc", src, plain).code == 0 and stored_mode(plain) == "RGBA"
     kept, bgra = decode.read_image(str(out)), decode.read_image(str(plain))
@@ -409,6 +410,20 @@ def test_gray_alpha_stays_gray_alpha(runner, tmp_path, fmt):
     assert runner("warp", "arc", deep, tmp_path / "deep-out.png").code == 0
     assert decode.read_image(str(tmp_path / "deep-out.png")).dtype == np.uint16
     assert stored_mode(tmp_path / "deep-out.png") == "RGBA"
+
+
+@pytest.mark.parametrize("name", ["bilevel.png", "bilevel.tiff"])
+def test_a_bilevel_input_whose_canvas_gains_transparency_is_gray_alpha(runner, tmp_path, name):
+    """A 1-bit gray input (Pillow's mode "1") is a gray one: its canvas that gains transparency
+    is written gray + alpha as a mode "L" input's is (it was RGBA: GRAY_MODES left "1" out)."""
+    from PIL import Image
+
+    src = tmp_path / name
+    Image.fromarray(textured(channels=1) >= 128).save(src)
+    assert stored_mode(src) == "1"
+    out, report = tmp_path / "out.png", tmp_path / "r.json"
+    assert runner("warp", "arc", src, out, "--report", report).code == 0
+    assert stored_mode(out) == "LA" and json.loads(report.read_text())["output"]["channels"] == 2
 
 
 @pytest.mark.parametrize("transparent", [False, True])

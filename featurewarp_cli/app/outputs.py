@@ -215,25 +215,33 @@ def background_colour(text: str | None, fmt: str):
     return rgb
 
 
-#: Pillow's modes of 8-bit gray pixels (a header's ``mode``): alone, and with straight or
-#: premultiplied alpha.
-GRAY_MODES = ("L", "LA", "La")
+#: Pillow's modes of gray pixels decoded to 8 bits (a header's ``mode``): alone (``1``: bilevel,
+#: decoded as 0/255 gray), and with straight or premultiplied alpha.
+GRAY_MODES = ("1", "L", "LA", "La")
 
 
-def rendered(warper, image, mesh, interp: str, background, header=None):
+def rendered(warper, image, mesh, interp: str, background, header=None, grid: bool = False):
     """The BGR(A) image through ``mesh``; a translucent (r, g, b, a) background is laid under a
     transparent render. A gray image under a colour that is not gray is rendered in colour (the
     fill came out as its luma). With INPUT's ``header``, a gray + alpha input's result in its
-    own form (:func:`gray_alpha_form`)."""
+    own form (:func:`gray_alpha_form`); with ``grid``, the mesh's lines drawn over it
+    (:func:`featurewarp_cli.app.panel.draw_grid`, in colour)."""
     if background is not None and len(set(background[:3])) > 1 and image.ndim == 2:
         import cv2
 
         image = cv2.cvtColor(image, cv2.COLOR_GRAY2BGR)
     if background is None or len(background) == 3:
-        return gray_alpha_form(warper.render(image, mesh, interp, background, order="bgr"), header)
-    from ..render.raster import under_colour
+        result = warper.render(image, mesh, interp, background, order="bgr")
+    else:
+        from ..render.raster import under_colour
 
-    return gray_alpha_form(under_colour(warper.render(image, mesh, interp, None, order="bgr"), background), header)
+        result = under_colour(warper.render(image, mesh, interp, None, order="bgr"), background)
+    result = gray_alpha_form(result, header)
+    if grid:
+        from .panel import draw_grid
+
+        result = draw_grid(result, mesh)
+    return result
 
 
 def gray_alpha_form(image, header):

@@ -18,7 +18,7 @@ from ..engine.defaults import DECAY, FEATURE_WEIGHT, FORMULATION, INTERPOLATION,
 from ..io import ImageError, decode, formats, limits
 from .masks import load_mask, mask_file, masked, uses_alpha
 from .outputs import (background_colour, check_distinct, check_encodable, check_grid_name, check_outputs, depth_lost,
-                      encoded, kept_metadata, rendered, write_all)
+                      encoded, gray_alpha_form, kept_metadata, rendered, write_all)
 from .report import refused_report, report_bytes, summary
 
 #: What :func:`prefetch_engine` imports: the engine (grid, features, fold-over guard,
@@ -464,7 +464,8 @@ def warp_file(settings: Settings, input: str, output: str, mask: str | None = No
     background = background_colour(settings.background, fmt)
     prefetch_engine(solver=masked(settings, mask))
     pending, feature_mask, warnings, (width, height) = start_loading(settings, input, mask, piped)
-    kept = kept_metadata(settings.strip, getattr(pending, "header", None), fmt, warnings)   # --strict sees it
+    header = getattr(pending, "header", None)
+    kept = kept_metadata(settings.strip, header, fmt, warnings)   # --strict sees it
     timings = {"load": time.perf_counter() - t0}
     warp, warper = make_warper(settings, width, height, feature_mask)    # the canvas and the budget, undecoded
     check_encodable(warp.canvas, fmt)
@@ -477,12 +478,10 @@ def warp_file(settings: Settings, input: str, output: str, mask: str | None = No
         timings["load"] += time.perf_counter() - t1
     _check_decoded_size(image, input, width, height)
     mesh.record.warnings[:0] = warnings + depth_lost(image, fmt)    # the loading's and the depth: said, refused
-    check_solution(settings, mesh, partial(refused_report, report, input, out_path, image, warp, mesh, timings, t0,
+    stored = gray_alpha_form(image, header)    # the report's INPUT: gray + alpha as stored, not as decoded (BGRA)
+    check_solution(settings, mesh, partial(refused_report, report, input, out_path, stored, warp, mesh, timings, t0,
                                            fmt) if report else None)   # a CI gate reads why: the report, no image
-    result = rendered(warper, image, mesh, settings.interp, background, getattr(pending, "header", None))
-    if draw_grid:
-        from .panel import draw_grid as overlay
-        result = overlay(result, mesh)
+    result = rendered(warper, image, mesh, settings.interp, background, header, draw_grid)
     timings.update(mesh.info["timings"])
     stages.enter("write")
     t1 = time.perf_counter()
@@ -491,7 +490,7 @@ def warp_file(settings: Settings, input: str, output: str, mask: str | None = No
     if save_grid:
         outputs.append((save_grid, mesh.to_obj() if save_grid.lower().endswith(".obj") else mesh.to_npz()))
     if report:
-        outputs.append((report, report_bytes(input, out_path, image, result, warp, mesh, timings, t0, fmt,
+        outputs.append((report, report_bytes(input, out_path, stored, result, warp, mesh, timings, t0, fmt,
                                              transparent=background is None)))
     write_all(outputs)
     return summary(settings.preset, mesh.record.mode, input, out_path, (width, height), mesh, t0,

@@ -53,8 +53,9 @@ def keeps_gray_alpha(image: np.ndarray, fmt: str) -> bool:
 
 def stored_form(image: np.ndarray, fmt: str, transparent: bool = False) -> tuple[int, int]:
     """(channels, bits per sample) of ``image`` as :func:`encode_image` stores it as ``fmt``:
-    gray + alpha as BGRA where ``fmt`` has no 8-bit gray + alpha form (:func:`keeps_gray_alpha`), alpha laid over the background where ``fmt`` has none (a GIF keeps
-    it, cut at half, where ``transparent``: its background None), 8 bits where it holds no more."""
+    gray + alpha as BGRA where ``fmt`` has no 8-bit gray + alpha form (:func:`keeps_gray_alpha`),
+    alpha laid over the background where ``fmt`` has none (a GIF keeps it, cut at half, where
+    ``transparent``: its background None), 8 bits where it holds no more."""
     channels = 1 if image.ndim == 2 else int(image.shape[2])
     channels = 4 if channels == 2 and not keeps_gray_alpha(image, fmt) else channels
     if channels == 4 and not FORMATS[fmt].alpha and not (fmt == "gif" and transparent):
