@@ -380,9 +380,8 @@ def test_a_release_stops_on_its_path_of_minima_where_one_ulp_does_not_move_it():
     floor = barrier.SAFE_FRACTION * signed_areas(warp(base.source), base.triangles)
     thinnest = (signed_areas(base.target, base.triangles) / floor).min()
     assert thinnest >= injectivity.CRUSHED_SHARE * (1 - 1e-9)     # the path's stopping rule holds
-    for pattern in ("up", "alternate"):
-        nudged = FeatureWarper(size, size, mask).solve(Nudged(warp, pattern), "similarity")
-        assert np.abs(nudged.target - base.target).max() < 1e-4, pattern
+    nudged = FeatureWarper(size, size, mask).solve(Nudged(warp, "alternate"), "similarity")   # "up": stability.py
+    assert np.abs(nudged.target - base.target).max() < 1e-4
 
 
 def _squashed(width, height, sx, trial_steps, warp_wrapper=lambda warp: warp):
