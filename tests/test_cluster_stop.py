@@ -201,3 +201,14 @@ def test_a_signal_stops_the_cluster_jobs_and_the_summary_keeps_what_finished(tmp
     lines = summary_lines(tmp_path / "s.jsonl")
     assert sorted(os.path.basename(line["output"]) for line in lines) == at_exit
     assert {line["status"] for line in lines} == {"ok"}
+
+
+def test_a_file_found_on_disk_after_a_stop_is_stamped_unknown_where_another_version_ran():
+    """A file whose result never came back (found on disk after a stop) took the command's
+    version in its --summary stamp even where a worker of another featurewarp had run: --resume
+    would then keep it for good. Its version is ``unknown`` there (the stamp matches nothing)."""
+    run = cluster_run.ClusterRun.__new__(cluster_run.ClusterRun)
+    run.futures, run.made_by, run.warned = [_Arrived("a", None), _Arrived("b", None)], {"a": "9.9.9"}, set()
+    assert (run.version_of(0), run.version_of(1)) == ("9.9.9", None)       # no other version seen: this one's
+    run.warned = {"tcp://worker"}
+    assert (run.version_of(0), run.version_of(1)) == ("9.9.9", "unknown")

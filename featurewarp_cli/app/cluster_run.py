@@ -270,8 +270,12 @@ class ClusterRun:
         return next(self._results)
 
     def version_of(self, i: int) -> str | None:
-        """The featurewarp version of the worker that ran job ``i`` (None: not known)."""
-        return self.made_by.get(self.futures[i].key) if i < len(self.futures) else None
+        """The featurewarp version of the worker that ran job ``i``: None where it is this command's
+        or not known with every worker on it; ``unknown`` for a file found on disk after a stop
+        (its result never came back) while a worker of another version was seen, so that its
+        --summary stamp matches no settings and --resume warps it again."""
+        made = self.made_by.get(self.futures[i].key) if i < len(self.futures) else None
+        return made if made is not None or not self.warned else "unknown"
 
     def close(self) -> None:
         """Stop the jobs not finished (none writes after this returns) and disconnect."""
