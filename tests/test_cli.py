@@ -520,3 +520,15 @@ def test_an_option_another_overrides_is_noted(runner, tmp_path):
     assert "--width does nothing with --size" in run.stderr       # --sx is not named against --width, which loses too
     for alone in (("--width", "100"), ("--sx", "2", "--height", "50")):
         assert "does nothing" not in runner("warp", "stretch", image, tmp_path / "o.png", *alone).stderr
+
+
+@pytest.mark.parametrize("command", ["warp", "compare"])
+def test_a_strict_refusal_names_the_input(runner, tmp_path, command):
+    """'featurewarp -q warp ... --strict' refused with a line naming no file: under make -j it could
+    not be told from its neighbours' (warnings, decode errors and batch name the file)."""
+    image, mask = tmp_path / "in.png", tmp_path / "empty.png"
+    save(image, textured())
+    save(mask, np.zeros(SIZE[::-1], np.uint8))                       # marks nothing: a warning
+    run = runner("-q", command, "swirl", image, tmp_path / "o.png", "-m", mask, "--strict")
+    assert run.code == 1 and not (tmp_path / "o.png").exists()
+    assert run.stderr.startswith(f"featurewarp: error: {image}: --strict: ") and run.stderr.count("\n") == 1, run.stderr

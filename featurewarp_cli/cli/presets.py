@@ -24,13 +24,14 @@ from .options import (FPS, FRAMES, JOBS, MASK_HELP, PANEL_WIDTH, engine_options,
 from .progress import progress_line, say
 
 
-def click_error(err) -> click.ClickException:
+def click_error(err, input: str | None = None) -> click.ClickException:
     """The click exception for a :class:`featurewarp_cli.app.pipeline.WarpError` (usage: exit 2, else 1)."""
     if err.usage:
         if err.param:
             return click.BadParameter(err.message, param_hint=f"'{err.param}'")
         return click.UsageError(err.message)
-    return click.ClickException(str(err))
+    refused = input is not None and "nothing written" in err.message     # --strict, folds: name the file
+    return click.ClickException(failure_line("stdin" if input == "-" else input, str(err)) if refused else str(err))
 
 
 def summary_line(s: dict) -> str:
@@ -188,7 +189,7 @@ def warp_one(settings, quiet: bool, verbose: bool, *files, **options) -> None:
         with progress_line(quiet):
             summary = warp_file(settings, *files, **options)
     except WarpError as err:
-        raise click_error(err) from err
+        raise click_error(err, files[0]) from err
     report_warnings(summary, quiet, verbose)
 
 
@@ -389,7 +390,7 @@ def compare_command(preset) -> click.Command:
             with progress_line(quiet):
                 summary = compare_file(settings, input, output, mask, draw_grid, panel_width)
         except WarpError as err:
-            raise click_error(err) from err
+            raise click_error(err, input) from err
         report_warnings(summary, quiet, verbose)
 
     intro = (f"Write one labelled panel: input with the mask tinted | plain | rigid | similarity "
@@ -423,7 +424,7 @@ def animate_command(preset) -> click.Command:
             with progress_bar(frames, "frames", quiet) as bar:
                 summary = animate_file(settings, input, output, mask, ranges, frames, fps, bar.update)
         except WarpError as err:
-            raise click_error(err) from err
+            raise click_error(err, input) from err
         if not quiet:
             for warning in summary["warnings"]:
                 say(f"featurewarp: warning: {input}: {warning}")

@@ -8,13 +8,11 @@ so every file that existed stays as it was (all or nothing).
 Where an output goes, by what its path is now:
 
 - a regular file, or nothing yet: replaced atomically. The bytes wait in an unnamed file
-  (``O_TMPFILE``) in the target's folder, so an interrupted run leaves nothing behind, even
-  under SIGKILL; at commit it gets a hidden name and is renamed over the target. Without
-  ``O_TMPFILE``, or with more than :data:`OPEN_STAGED` outputs, a hidden temporary file is
-  used, removed on failure, SIGTERM and SIGINT. A file that already holds these bytes is left
-  as it is (inode, owner, mtime: make and rsync see no change); one with no write permission
-  for anyone (``chmod a-w``) is refused, even for root.
-- a symbolic link: followed, so its target is replaced as above and the link stays.
+  (``O_TMPFILE``) beside the target, so an interrupted run leaves nothing, even under SIGKILL;
+  at commit it gets a hidden name and is renamed over the target (else, or beyond
+  :data:`OPEN_STAGED` outputs, a hidden file removed on failure, SIGTERM and SIGINT). A file
+  holding these bytes stays (inode, owner; its time set to now); one nobody may write (``chmod
+  a-w``) is refused, even for root. A symbolic link is followed: its target is replaced.
 - ``/dev/stdout``, ``/dev/stderr``, ``/dev/fd/N``, ``/proc/self/fd/N``: this process's own
   descriptor, written where it stands (a shell's ``>> log`` appends, ``> file`` is not
   truncated again): it is never opened anew, which would truncate or replace the file the
@@ -160,8 +158,7 @@ def stage(path: str, data: bytes, named: bool = False) -> Staged:
 
 
 def stage_delay() -> float:
-    """The test hook's delay (:data:`STAGE_DELAY_VARIABLE`) in seconds; 0 where it is unset or
-    unusable (``abc``, ``-1``, ``inf`` and ``nan`` turned every run into an internal error)."""
+    """The test hook's delay (:data:`STAGE_DELAY_VARIABLE`) in seconds; 0 where unset or unusable."""
     try:
         delay = float(os.environ.get(STAGE_DELAY_VARIABLE, "") or 0.0)
     except ValueError:
@@ -223,14 +220,19 @@ def _replaced(path: str) -> str:
 
 
 def commit(outputs: list[Staged]) -> None:
-    """Put every staged output in place (OSError naming the file on failure; the rest are
-    discarded). Streams (devices, FIFOs, stdout) are written first, files linked into place
-    last, so a device that fails (``/dev/full``) leaves every file as it was."""
+    """Put every staged output in place (OSError naming the file on failure; the rest are discarded):
+    streams (devices, FIFOs, stdout) first, files last, so ``/dev/full`` leaves every file as it was;
+    SIGINT and SIGTERM wait while files are linked (one between two left an image new, its report old)."""
+    held = None
     try:
-        for output in sorted(outputs, key=lambda o: o.kind not in ("direct", "stdout", "descriptor")):
+        for output in sorted(outputs, key=lambda o: o.kind == "file"):
+            if output.kind == "file" and held is None:
+                held = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
             _commit_one(output)
     finally:
         discard(outputs)
+        if held is not None:
+            signal.pthread_sigmask(signal.SIG_SETMASK, held)
 
 
 def _write_stdout(data: bytes) -> None:
