@@ -53,11 +53,53 @@ def load_mask(settings, mask: str | None, size: tuple[int, int], header=None, im
         raise WarpError(f"mask is {feature_mask.shape[1]}x{feature_mask.shape[0]} but the "
                         f"image is {width}x{height}{turned}", "--mask", usage=True)
     if feature_mask.any():
-        return feature_mask, []
+        for hint in inverted(feature_mask):      # a question, not a compromise: --strict passes it
+            stages.notice(f"notice: {mask}: {hint}")
+        return feature_mask, dropped_colour(pixels, feature_mask)
     brightest, colour = decode.brightest_gray(pixels)
+    top = np.iinfo(pixels.dtype).max
+    if top > 255 and pixels.max(initial=0) <= 255:      # 0..255 values in a 16-bit file: not 0
+        brightest = f"{int(pixels.max(initial=0))} of {top}, as a 16-bit mask is read on its own scale (a feature: 32896 or more)"
+    elif pixels.ndim == 3 and pixels.shape[2] == 4 and bool((pixels[:, :, 3] >= 128 * top / 255).any()):
+        brightest = f"{brightest}: its opaque pixels are dark, and its transparent ones count as black"
     return feature_mask, [f"the mask marks no feature (a feature is gray 128 or more, or a 1 of a 0/1 mask; its "
                           f"brightest pixel is {brightest}{', as colour is read as its gray: pure red is 76' * colour})"
                           f": plain warp"]
+
+
+def dropped_colour(pixels: np.ndarray, feature_mask: np.ndarray) -> list[str]:
+    """A warning where strokes of a strong colour are read as no feature (their gray, over black,
+    is under 128: a red or blue brush) while other pixels are features: they drop out in silence.
+    Strong: the brightest channel (over black, by alpha) 128 or more, the channels 64 or more apart."""
+    if pixels.ndim != 3 or pixels.shape[2] < 3:
+        return []
+    top = np.iinfo(pixels.dtype).max
+    colour = pixels[:, :, :3]
+    brightest = np.maximum(np.maximum(colour[:, :, 0], colour[:, :, 1]), colour[:, :, 2])   # 4x a max(axis=2)
+    if brightest.max(initial=0) <= 1:                   # a 0/1 mask in colour: its own rule
+        return []
+    at = np.flatnonzero((brightest >= 128 * top / 255) & ~feature_mask)     # in integers: few are left
+    samples = colour.reshape(-1, 3)[at].astype(np.float32)
+    if pixels.shape[2] == 4:
+        samples *= pixels[:, :, 3].reshape(-1)[at, None] / np.float32(top)
+    strong = (samples.max(axis=1) >= 128 * top / 255) & (np.ptp(samples, axis=1) >= 64 * top / 255)
+    dropped = int(np.count_nonzero(strong))
+    if dropped < max(16, feature_mask.sum() // 100):
+        return []
+    return [f"{dropped} pixels of the mask are painted in a colour whose gray is under 128 (pure red is 76, "
+            "pure blue 29) and mark no feature; paint features white"]
+
+
+def inverted(feature_mask: np.ndarray) -> list[str]:
+    """A hint where the mask looks inverted: it marks most of the image and (nearly) all of the
+    frame's border, as a mask of the background does (:func:`load_mask` says it as a notice)."""
+    border = np.concatenate([feature_mask[0], feature_mask[-1], feature_mask[1:-1, 0], feature_mask[1:-1, -1]])
+    share = feature_mask.mean()
+    if share <= 0.5 or border.mean() < 0.9 or feature_mask.all():     # all: "covers" says it
+        return []
+    return [f"the mask marks {share:.0%} of the image and {border.mean():.0%} of its border: is it inverted? "
+            "(features are white, gray 128 or more; a mask of the background holds it still and lets the "
+            "subject bend)"]
 
 
 def alpha_mask(image: np.ndarray, named: bool = True) -> tuple[np.ndarray, list[str]]:
