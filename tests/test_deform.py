@@ -132,7 +132,7 @@ def test_fit_canvas_holds_the_deformed_image():
     assert np.all(corners.max(axis=0) <= np.array(warp.canvas) - 0.5 + 1e-6)
 
 
-@settings(max_examples=25, deadline=None, derandomize=True)
+@settings(max_examples=12, deadline=None, derandomize=True)   # 25: 4 s of the suite, the same outcome
 @given(st.lists(st.tuples(st.floats(0, 119), st.floats(0, 89), st.floats(-150, 150), st.floats(-150, 150)),
                 min_size=1, max_size=6))
 def test_random_handles_never_fold_and_never_crash(points):
