@@ -57,9 +57,9 @@ def load_mask(settings, mask: str | None, size: tuple[int, int], header=None, im
             stages.notice(f"notice: {mask}: {hint}")
         return feature_mask, dropped_colour(pixels, feature_mask)
     brightest, colour = decode.brightest_gray(pixels)
-    top = np.iinfo(pixels.dtype).max
-    if top > 255 and pixels.max(initial=0) <= 255:      # 0..255 values in a 16-bit file: not 0
-        brightest = f"{int(pixels.max(initial=0))} of {top}, as a 16-bit mask is read on its own scale (a feature: 32896 or more)"
+    top, most = np.iinfo(pixels.dtype).max, int(pixels.max(initial=0))
+    if top > 255 and most <= 255:                       # 0..255 values in a 16-bit file: not 0
+        brightest = f"{most} of {top}, as a 16-bit mask is read on its own scale (a feature: 32896 or more)"
     elif pixels.ndim == 3 and pixels.shape[2] == 4 and bool((pixels[:, :, 3] >= 128 * top / 255).any()):
         brightest = f"{brightest}: its opaque pixels are dark, and its transparent ones count as black"
     return feature_mask, [f"the mask marks no feature (a feature is gray 128 or more, or a 1 of a 0/1 mask; its "

@@ -98,6 +98,7 @@ def warp(image, mask, preset, *, mode=MODE, cell=None, feature_weight=FEATURE_WE
     _check_options(mode=mode, interp=interp, grow_past_edge=grow_past_edge, injective=injective,
                    antialias=antialias, strict=strict, return_mesh=return_mesh)
     w = _preset(preset, width, height, params)
+    arrays.check_canvas(w)                       # a plugin's, before the budget reads it and the solve
     try:
         warper = FeatureWarper(width, height, marked, cell=cell, feature_weight=feature_weight, decay=decay,
                                formulation=formulation, injective=injective, boundary=boundary,
@@ -142,7 +143,6 @@ def _preset(preset, width: int, height: int, params: dict):
         if (preset.width, preset.height) != (width, height):
             raise ValueError(f"the preset {preset.name} is made for {preset.width}x{preset.height}, "
                              f"the image is {width}x{height}")
-        arrays.check_canvas(preset)
         return preset
     if isinstance(preset, str):
         preset = load_warp(preset)
@@ -156,9 +156,7 @@ def _preset(preset, width: int, height: int, params: dict):
         hint = f" (did you mean {' or '.join(map(repr, near))}?)" if near else ""
         raise ParamError(tuple(unknown), f"neither warp() nor {preset.name} takes it{hint}; warp() takes "
                                          f"{', '.join(OPTIONS)}; {preset.name} takes {', '.join(own) or 'nothing'}")
-    made = preset(width, height, **params)
-    arrays.check_canvas(made)                    # a plugin's, before the solve
-    return made
+    return preset(width, height, **params)
 
 
 def _node_budget(max_memory, width: int, height: int, canvas) -> int | None:
